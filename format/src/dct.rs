@@ -1,0 +1,122 @@
+//! The 8×8 orthonormal DCT-II that decorrelates every plane in space before quantisation.
+//! Separable, f32, with a fixed summation order so that encoder and decoder agree bit for bit.
+
+use std::sync::OnceLock;
+
+pub const N: usize = 8;
+
+fn table() -> &'static [[f32; N]; N] {
+    static T: OnceLock<[[f32; N]; N]> = OnceLock::new();
+    T.get_or_init(|| {
+        let mut t = [[0f32; N]; N];
+        for (k, row) in t.iter_mut().enumerate() {
+            let a = if k == 0 {
+                (1.0 / N as f64).sqrt()
+            } else {
+                (2.0 / N as f64).sqrt()
+            };
+            for (n, v) in row.iter_mut().enumerate() {
+                *v = (a
+                    * (std::f64::consts::PI * (2 * n + 1) as f64 * k as f64 / (2 * N) as f64).cos())
+                    as f32;
+            }
+        }
+        t
+    })
+}
+
+/// Forward transform of one block (row-major 8×8), in place.
+pub fn forward(block: &mut [f32; N * N]) {
+    let t = table();
+    let mut tmp = [0f32; N * N];
+    for y in 0..N {
+        for k in 0..N {
+            let mut s = 0.0;
+            for n in 0..N {
+                s += t[k][n] * block[y * N + n];
+            }
+            tmp[y * N + k] = s;
+        }
+    }
+    for x in 0..N {
+        for k in 0..N {
+            let mut s = 0.0;
+            for n in 0..N {
+                s += t[k][n] * tmp[n * N + x];
+            }
+            block[k * N + x] = s;
+        }
+    }
+}
+
+/// Inverse transform of one block of coefficients, in place.
+pub fn inverse(block: &mut [f32; N * N]) {
+    let t = table();
+    let mut tmp = [0f32; N * N];
+    for x in 0..N {
+        for n in 0..N {
+            let mut s = 0.0;
+            for k in 0..N {
+                s += t[k][n] * block[k * N + x];
+            }
+            tmp[n * N + x] = s;
+        }
+    }
+    for y in 0..N {
+        for n in 0..N {
+            let mut s = 0.0;
+            for k in 0..N {
+                s += t[k][n] * tmp[y * N + k];
+            }
+            block[y * N + n] = s;
+        }
+    }
+}
+
+/// Zig-zag scan order: coefficient positions from low to high frequency.
+pub fn zigzag() -> &'static [usize; N * N] {
+    static Z: OnceLock<[usize; N * N]> = OnceLock::new();
+    Z.get_or_init(|| {
+        let mut z = [0usize; N * N];
+        let mut i = 0;
+        for s in 0..(2 * N - 1) {
+            let range: Vec<usize> = (0..N).filter(|&y| s >= y && s - y < N).collect();
+            let ys: Vec<usize> = if s % 2 == 0 {
+                range.into_iter().rev().collect()
+            } else {
+                range
+            };
+            for y in ys {
+                z[i] = y * N + (s - y);
+                i += 1;
+            }
+        }
+        z
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip() {
+        let mut b = [0f32; 64];
+        for (i, v) in b.iter_mut().enumerate() {
+            *v = ((i * 37) % 11) as f32 - 3.0;
+        }
+        let orig = b;
+        forward(&mut b);
+        inverse(&mut b);
+        for (a, o) in b.iter().zip(orig) {
+            assert!((a - o).abs() < 1e-4);
+        }
+        let z = zigzag();
+        let mut seen = [false; 64];
+        for &p in z.iter() {
+            seen[p] = true;
+        }
+        assert!(seen.iter().all(|&s| s));
+        assert_eq!(&z[..4], &[0, 1, 8, 16]);
+    }
+}

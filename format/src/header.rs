@@ -1,0 +1,390 @@
+//! The fixed-size file header (`docs/FORMAT.md`, section "Header").
+
+use crate::checksum::xxh3;
+use crate::limits::{MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FRAMES};
+use crate::{FormatError, Result};
+
+/// `«VBIM»\r\n`: a non-ASCII first byte catches 7-bit transfers, CR LF catches newline
+/// conversion (the same trick as PNG and KTX2).
+pub const MAGIC: [u8; 8] = [0xAB, b'V', b'B', b'I', b'M', 0xBB, 0x0D, 0x0A];
+pub const VERSION_MAJOR: u16 = 1;
+pub const VERSION_MINOR: u16 = 0;
+/// Bytes of a version 1.0 header. Later minor versions may append fields; readers skip them.
+pub const HEADER_SIZE: usize = 192;
+/// Number of (read rate, read-ahead) points of the buffer model.
+pub const READ_AHEAD_POINTS: usize = 4;
+
+/// How texel values are represented in the file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColorEncoding {
+    /// Linear light, HDR (the bake's EXR output). Coded through [`Transfer::LogToe`].
+    LinearHdr = 0,
+    /// 8-bit sRGB input (PNG). Coded as sRGB code values in [0, 1].
+    Srgb8 = 1,
+}
+
+/// The curve between linear light and the domain the model is fitted and quantised in
+/// (see [`crate::curve`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Transfer {
+    /// Coded value = sRGB code value / 255.
+    Srgb,
+    /// Coded value = log2(1 + v / v0): relative precision above `v0`, absolute below.
+    LogToe { v0: f32 },
+}
+
+/// One point of the buffer model: reading at `rate` bytes per second from the start of the
+/// file, a player needs `bytes` of read-ahead (ring capacity) and must buffer for
+/// `preroll_ticks` nanoseconds before starting, so that no chunk arrives after the moment
+/// it is needed. Computed by the encoder like a video codec's leaky-bucket model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct ReadAhead {
+    pub rate: u64,
+    pub bytes: u64,
+    pub preroll_ns: u64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Header {
+    pub version_minor: u16,
+    pub width: u32,
+    pub height: u32,
+    /// 3 (RGB) or 1 (Y).
+    pub channels: u8,
+    pub color: ColorEncoding,
+    pub looping: bool,
+    pub frame_count: u32,
+    /// Media frame rate, frames per second, as `rate_num / rate_den`.
+    pub rate_num: u32,
+    pub rate_den: u32,
+    pub tile_size: u16,
+    pub max_degree: u8,
+    pub transfer: Transfer,
+    pub segment_count: u32,
+    pub keyframe_count: u32,
+    /// Largest distance in frames between two independently decodable keyframes.
+    pub intra_interval: u32,
+    pub chunk_count: u32,
+    pub index_offset: u64,
+    pub file_size: u64,
+    pub read_ahead: [ReadAhead; READ_AHEAD_POINTS],
+    pub index_checksum: u64,
+}
+
+impl Header {
+    pub fn tiles_x(&self) -> u32 {
+        self.width.div_ceil(self.tile_size as u32)
+    }
+    pub fn tiles_y(&self) -> u32 {
+        self.height.div_ceil(self.tile_size as u32)
+    }
+    pub fn tile_count(&self) -> usize {
+        self.tiles_x() as usize * self.tiles_y() as usize
+    }
+    pub fn texel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+    /// Frames per second as a float, for display only (time itself is kept in integers).
+    pub fn fps(&self) -> f64 {
+        self.rate_num as f64 / self.rate_den as f64
+    }
+
+    /// The smallest read-ahead that suffices at `rate` bytes per second: the buffer model's
+    /// point at the highest tabulated rate not above `rate`. `None` below the slowest point
+    /// (the model makes no promise there).
+    pub fn read_ahead_at(&self, rate: u64) -> Option<ReadAhead> {
+        self.read_ahead
+            .iter()
+            .filter(|p| p.rate > 0 && p.rate <= rate)
+            .max_by_key(|p| p.rate)
+            .copied()
+    }
+
+    pub fn to_bytes(&self) -> [u8; HEADER_SIZE] {
+        let mut b = [0u8; HEADER_SIZE];
+        let mut w = Cursor {
+            buf: &mut b,
+            pos: 0,
+        };
+        w.put(&MAGIC);
+        w.put(&VERSION_MAJOR.to_le_bytes());
+        w.put(&self.version_minor.to_le_bytes());
+        w.put(&(HEADER_SIZE as u32).to_le_bytes());
+        w.put(&self.width.to_le_bytes());
+        w.put(&self.height.to_le_bytes());
+        w.put(&[self.channels, self.color as u8]);
+        w.put(&(self.looping as u16).to_le_bytes());
+        w.put(&self.frame_count.to_le_bytes());
+        w.put(&self.rate_num.to_le_bytes());
+        w.put(&self.rate_den.to_le_bytes());
+        w.put(&self.tile_size.to_le_bytes());
+        w.put(&[self.max_degree]);
+        let (tid, tparam) = match self.transfer {
+            Transfer::Srgb => (0u8, 0f32),
+            Transfer::LogToe { v0 } => (1u8, v0),
+        };
+        w.put(&[tid]);
+        w.put(&tparam.to_le_bytes());
+        w.put(&self.segment_count.to_le_bytes());
+        w.put(&self.keyframe_count.to_le_bytes());
+        w.put(&self.intra_interval.to_le_bytes());
+        w.put(&self.chunk_count.to_le_bytes());
+        w.put(&self.index_offset.to_le_bytes());
+        w.put(&self.file_size.to_le_bytes());
+        for p in &self.read_ahead {
+            w.put(&p.rate.to_le_bytes());
+            w.put(&p.bytes.to_le_bytes());
+            w.put(&p.preroll_ns.to_le_bytes());
+        }
+        w.put(&self.index_checksum.to_le_bytes());
+        debug_assert_eq!(w.pos, HEADER_SIZE - 8);
+        let sum = xxh3(&b[..HEADER_SIZE - 8]);
+        b[HEADER_SIZE - 8..].copy_from_slice(&sum.to_le_bytes());
+        b
+    }
+
+    /// Parses and validates a header. `bytes` must hold at least [`HEADER_SIZE`] bytes; the
+    /// caller reads `header_size` from offset 12 first when it wants to skip extensions.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Header> {
+        if bytes.len() < 16 {
+            return Err(FormatError::Truncated(format!(
+                "{} bytes, shorter than the 16-byte file signature",
+                bytes.len()
+            )));
+        }
+        if bytes[..8] != MAGIC {
+            return Err(FormatError::BadMagic);
+        }
+        let major = u16::from_le_bytes([bytes[8], bytes[9]]);
+        if major != VERSION_MAJOR {
+            return Err(FormatError::UnsupportedVersion {
+                found: major,
+                known: VERSION_MAJOR,
+            });
+        }
+        let header_size = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        if header_size < HEADER_SIZE || header_size > 1 << 16 {
+            return Err(FormatError::InvalidHeader(format!(
+                "header size {header_size} (expected {HEADER_SIZE} to 65536)"
+            )));
+        }
+        if bytes.len() < header_size {
+            return Err(FormatError::Truncated(format!(
+                "{} bytes, shorter than the {header_size}-byte header",
+                bytes.len()
+            )));
+        }
+        let stored = u64::from_le_bytes(bytes[header_size - 8..header_size].try_into().unwrap());
+        if xxh3(&bytes[..header_size - 8]) != stored {
+            return Err(FormatError::HeaderChecksum);
+        }
+        let mut r = Reader {
+            buf: bytes,
+            pos: 10,
+        };
+        let version_minor = r.u16();
+        let _size = r.u32();
+        let width = r.u32();
+        let height = r.u32();
+        let channels = r.u8();
+        let color = match r.u8() {
+            0 => ColorEncoding::LinearHdr,
+            1 => ColorEncoding::Srgb8,
+            c => {
+                return Err(FormatError::InvalidHeader(format!(
+                    "unknown colour encoding {c}"
+                )))
+            }
+        };
+        let flags = r.u16();
+        let frame_count = r.u32();
+        let rate_num = r.u32();
+        let rate_den = r.u32();
+        let tile_size = r.u16();
+        let max_degree = r.u8();
+        let tid = r.u8();
+        let tparam = f32::from_le_bytes(r.take(4).try_into().unwrap());
+        let transfer = match tid {
+            0 => Transfer::Srgb,
+            1 => Transfer::LogToe { v0: tparam },
+            t => {
+                return Err(FormatError::InvalidHeader(format!(
+                    "unknown transfer curve {t}"
+                )))
+            }
+        };
+        let segment_count = r.u32();
+        let keyframe_count = r.u32();
+        let intra_interval = r.u32();
+        let chunk_count = r.u32();
+        let index_offset = r.u64();
+        let file_size = r.u64();
+        let mut read_ahead = [ReadAhead::default(); READ_AHEAD_POINTS];
+        for p in &mut read_ahead {
+            p.rate = r.u64();
+            p.bytes = r.u64();
+            p.preroll_ns = r.u64();
+        }
+        let index_checksum = r.u64();
+        let h = Header {
+            version_minor,
+            width,
+            height,
+            channels,
+            color,
+            looping: flags & 1 != 0,
+            frame_count,
+            rate_num,
+            rate_den,
+            tile_size,
+            max_degree,
+            transfer,
+            segment_count,
+            keyframe_count,
+            intra_interval,
+            chunk_count,
+            index_offset,
+            file_size,
+            read_ahead,
+            index_checksum,
+        };
+        h.validate(header_size as u64)?;
+        Ok(h)
+    }
+
+    /// Checks every size, count and offset against the format's limits, so that nothing a
+    /// header says can cause a huge allocation or an endless loop later.
+    pub fn validate(&self, header_size: u64) -> Result<()> {
+        let bad = |m: String| Err(FormatError::InvalidHeader(m));
+        if self.width == 0
+            || self.height == 0
+            || self.width > MAX_DIMENSION
+            || self.height > MAX_DIMENSION
+        {
+            return bad(format!(
+                "size {}×{} (each side must be 1 to {MAX_DIMENSION})",
+                self.width, self.height
+            ));
+        }
+        if self.channels != 1 && self.channels != 3 {
+            return bad(format!("{} channels (must be 1 or 3)", self.channels));
+        }
+        if self.frame_count == 0 || self.frame_count > MAX_FRAMES {
+            return bad(format!(
+                "frame count {} (must be 1 to {MAX_FRAMES})",
+                self.frame_count
+            ));
+        }
+        if self.rate_num == 0 || self.rate_den == 0 {
+            return bad(format!("frame rate {}/{}", self.rate_num, self.rate_den));
+        }
+        if !(8..=256).contains(&self.tile_size) || self.tile_size % 8 != 0 {
+            return bad(format!(
+                "tile size {} (must be a multiple of 8 from 8 to 256)",
+                self.tile_size
+            ));
+        }
+        if self.max_degree == 0 || self.max_degree > MAX_DEGREE {
+            return bad(format!(
+                "maximum degree {} (must be 1 to {MAX_DEGREE})",
+                self.max_degree
+            ));
+        }
+        if let Transfer::LogToe { v0 } = self.transfer {
+            if !(v0.is_finite() && v0 > 0.0) {
+                return bad(format!(
+                    "log curve parameter {v0} (must be positive and finite)"
+                ));
+            }
+        }
+        if self.color == ColorEncoding::Srgb8 && self.transfer != Transfer::Srgb {
+            return bad("8-bit sRGB data must use the sRGB transfer".into());
+        }
+        // Boundaries are 0 = b_0 < … < b_S = F (looping) or F − 1 (not looping).
+        let steps = if self.looping {
+            self.frame_count
+        } else {
+            self.frame_count - 1
+        };
+        if self.segment_count > steps || (self.segment_count == 0 && steps > 0) {
+            return bad(format!(
+                "{} segments for {} frames ({})",
+                self.segment_count,
+                self.frame_count,
+                if self.looping {
+                    "looping"
+                } else {
+                    "not looping"
+                }
+            ));
+        }
+        let expect_keys = if self.looping {
+            self.segment_count
+        } else {
+            self.segment_count + 1
+        };
+        if self.keyframe_count != expect_keys {
+            return bad(format!(
+                "{} keyframes for {} segments (expected {expect_keys})",
+                self.keyframe_count, self.segment_count
+            ));
+        }
+        if self.chunk_count == 0 || self.chunk_count > crate::limits::MAX_CHUNKS {
+            return bad(format!(
+                "chunk count {} (must be 1 to {MAX_CHUNKS})",
+                self.chunk_count
+            ));
+        }
+        if self.intra_interval == 0 {
+            return bad("intra interval 0".into());
+        }
+        let index_len = self.chunk_count as u64 * crate::index::ENTRY_SIZE as u64;
+        if self.index_offset < header_size
+            || self
+                .index_offset
+                .checked_add(index_len)
+                .is_none_or(|end| end > self.file_size)
+        {
+            return bad(format!(
+                "index at byte {} ({} entries) does not fit in a {}-byte file",
+                self.index_offset, self.chunk_count, self.file_size
+            ));
+        }
+        Ok(())
+    }
+}
+
+struct Cursor<'a> {
+    buf: &'a mut [u8],
+    pos: usize,
+}
+impl Cursor<'_> {
+    fn put(&mut self, b: &[u8]) {
+        self.buf[self.pos..self.pos + b.len()].copy_from_slice(b);
+        self.pos += b.len();
+    }
+}
+
+struct Reader<'a> {
+    buf: &'a [u8],
+    pos: usize,
+}
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> &'a [u8] {
+        let s = &self.buf[self.pos..self.pos + n];
+        self.pos += n;
+        s
+    }
+    fn u8(&mut self) -> u8 {
+        self.take(1)[0]
+    }
+    fn u16(&mut self) -> u16 {
+        u16::from_le_bytes(self.take(2).try_into().unwrap())
+    }
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes(self.take(4).try_into().unwrap())
+    }
+    fn u64(&mut self) -> u64 {
+        u64::from_le_bytes(self.take(8).try_into().unwrap())
+    }
+}

@@ -1,0 +1,173 @@
+//! Planes of coded values and how their quantised DCT coefficients are packed.
+//!
+//! A plane is padded to whole tiles (edge texels repeated by the encoder). Its 8×8 blocks are
+//! transformed ([`crate::dct`]) and quantised with one step per plane; the integers are then
+//! written frequency-major — all blocks' DC terms (each as the difference from the previous
+//! block's), then every block's first AC term in zig-zag order, and so on — as zig-zag
+//! varints, which groups similar magnitudes together for zstd.
+
+use crate::dct::{self, N};
+use crate::varint;
+use crate::Result;
+
+/// One plane of f32 values, row-major, `w × h` with both multiples of 8.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plane {
+    pub w: usize,
+    pub h: usize,
+    pub data: Vec<f32>,
+}
+
+impl Plane {
+    pub fn zeros(w: usize, h: usize) -> Plane {
+        Plane {
+            w,
+            h,
+            data: vec![0.0; w * h],
+        }
+    }
+
+    pub fn read_block(&self, bx: usize, by: usize) -> [f32; N * N] {
+        let mut b = [0f32; N * N];
+        for y in 0..N {
+            let row = (by * N + y) * self.w + bx * N;
+            b[y * N..y * N + N].copy_from_slice(&self.data[row..row + N]);
+        }
+        b
+    }
+
+    pub fn write_block(&mut self, bx: usize, by: usize, b: &[f32; N * N]) {
+        for y in 0..N {
+            let row = (by * N + y) * self.w + bx * N;
+            self.data[row..row + N].copy_from_slice(&b[y * N..y * N + N]);
+        }
+    }
+
+    /// Adds a block into the plane (used by predicted keyframes).
+    pub fn add_block(&mut self, bx: usize, by: usize, b: &[f32; N * N]) {
+        for y in 0..N {
+            let row = (by * N + y) * self.w + bx * N;
+            for x in 0..N {
+                self.data[row + x] += b[y * N + x];
+            }
+        }
+    }
+}
+
+/// Block origins (in block units) of the blocks covering tile `t` of a plane, row by row.
+pub fn tile_blocks(
+    t: usize,
+    tiles_x: usize,
+    tile_size: usize,
+) -> impl Iterator<Item = (usize, usize)> {
+    let per = tile_size / N;
+    let (tx, ty) = (t % tiles_x, t / tiles_x);
+    (0..per).flat_map(move |y| (0..per).map(move |x| (tx * per + x, ty * per + y)))
+}
+
+/// Block origins of a whole plane, row by row.
+pub fn all_blocks(p: &Plane) -> impl Iterator<Item = (usize, usize)> {
+    let (bw, bh) = (p.w / N, p.h / N);
+    (0..bh).flat_map(move |y| (0..bw).map(move |x| (x, y)))
+}
+
+/// Writes quantised blocks (each 64 integers in zig-zag order) frequency-major.
+pub fn write_coefficients(blocks: &[[i32; N * N]], out: &mut Vec<u8>) {
+    let mut prev_dc = 0i32;
+    for b in blocks {
+        varint::put_i32(out, b[0].wrapping_sub(prev_dc));
+        prev_dc = b[0];
+    }
+    for f in 1..N * N {
+        for b in blocks {
+            varint::put_i32(out, b[f]);
+        }
+    }
+}
+
+/// Reads `n` blocks written by [`write_coefficients`].
+pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i32; N * N]>> {
+    // Each coefficient takes at least one byte: refuse before allocating for a short stream.
+    if buf.len().saturating_sub(*pos) < n * N * N {
+        return Err(crate::FormatError::Invalid(format!(
+            "coefficient stream too short for {n} blocks"
+        )));
+    }
+    let mut blocks = vec![[0i32; N * N]; n];
+    let mut prev_dc = 0i32;
+    for b in blocks.iter_mut() {
+        prev_dc = prev_dc.wrapping_add(varint::get_i32(buf, pos)?);
+        b[0] = prev_dc;
+    }
+    for f in 1..N * N {
+        for b in blocks.iter_mut() {
+            b[f] = varint::get_i32(buf, pos)?;
+        }
+    }
+    Ok(blocks)
+}
+
+/// Quantised zig-zag integers → spatial block: dequantise with `step`, inverse DCT.
+pub fn dequantize_block(q: &[i32; N * N], step: f32) -> [f32; N * N] {
+    let z = dct::zigzag();
+    let mut b = [0f32; N * N];
+    for (i, &pos) in z.iter().enumerate() {
+        b[pos] = q[i] as f32 * step;
+    }
+    dct::inverse(&mut b);
+    b
+}
+
+/// Spatial block → quantised zig-zag integers, with a dead zone: a coefficient rounds away
+/// from zero only past `(0.5 + deadzone) · step`. Used by the encoder; here so that its
+/// rounding rule sits beside the decoder's inverse.
+pub fn quantize_block(block: &[f32; N * N], step: f32, deadzone: f32) -> [i32; N * N] {
+    let mut b = *block;
+    dct::forward(&mut b);
+    let z = dct::zigzag();
+    let mut q = [0i32; N * N];
+    for (i, &pos) in z.iter().enumerate() {
+        let a = b[pos].abs() / step;
+        let dz = if i == 0 { 0.0 } else { deadzone };
+        let m = if a < 0.5 + dz { 0.0 } else { (a - dz).round() };
+        q[i] = (m.min(1e9) as i32) * if b[pos] < 0.0 { -1 } else { 1 };
+    }
+    q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coefficients_round_trip() {
+        let blocks: Vec<[i32; 64]> = (0..5)
+            .map(|i| {
+                let mut b = [0i32; 64];
+                for (j, v) in b.iter_mut().enumerate() {
+                    *v = ((i * 64 + j) as i32 * 7919) % 201 - 100;
+                }
+                b
+            })
+            .collect();
+        let mut buf = Vec::new();
+        write_coefficients(&blocks, &mut buf);
+        let mut pos = 0;
+        assert_eq!(read_coefficients(&buf, &mut pos, 5).unwrap(), blocks);
+        assert_eq!(pos, buf.len());
+        assert!(read_coefficients(&buf[..buf.len() - 1], &mut 0, 5).is_err());
+    }
+
+    #[test]
+    fn quantisation_error_is_bounded_by_the_step() {
+        let mut b = [0f32; 64];
+        for (i, v) in b.iter_mut().enumerate() {
+            *v = (i as f32 * 0.37).sin() * 3.0;
+        }
+        let step = 0.01;
+        let r = dequantize_block(&quantize_block(&b, step, 0.0), step);
+        for (a, o) in r.iter().zip(b) {
+            assert!((a - o).abs() < step * 8.0 * 0.5 + 1e-4);
+        }
+    }
+}

@@ -1,0 +1,379 @@
+//! Container tests: round trips, truncation at every byte, a flipped bit in every chunk,
+//! and hostile headers refused before allocation.
+
+use std::io::Cursor;
+
+use vbim_format::chunk::{self, TileMap, MODE_INTRA, MODE_PREDICTED};
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::header::{ReadAhead, HEADER_SIZE, READ_AHEAD_POINTS};
+use vbim_format::index::{FLAG_INTRA, FLAG_OPTIONAL};
+use vbim_format::plane::{self, Plane};
+use vbim_format::{ChunkKind, ColorEncoding, FormatError, Header, Reader, Transfer, Writer};
+
+fn header(frames: u32, segments: u32, looping: bool) -> Header {
+    Header {
+        version_minor: 0,
+        width: 20,
+        height: 12,
+        channels: 3,
+        color: ColorEncoding::LinearHdr,
+        looping,
+        frame_count: frames,
+        rate_num: 24,
+        rate_den: 1,
+        tile_size: 16,
+        max_degree: 3,
+        transfer: Transfer::LogToe { v0: 1e-3 },
+        segment_count: segments,
+        keyframe_count: if looping { segments } else { segments + 1 },
+        intra_interval: 4,
+        chunk_count: 0,
+        index_offset: 0,
+        file_size: 0,
+        read_ahead: [ReadAhead::default(); READ_AHEAD_POINTS],
+        index_checksum: 0,
+    }
+}
+
+fn planes_with(h: &Header, f: impl Fn(usize, usize, usize) -> f32) -> Vec<Plane> {
+    let (w, ht) = chunk::padded_size(h);
+    (0..3)
+        .map(|p| {
+            let mut pl = Plane::zeros(w, ht);
+            for y in 0..ht {
+                for x in 0..w {
+                    pl.data[y * w + x] = f(p, x, y);
+                }
+            }
+            pl
+        })
+        .collect()
+}
+
+fn quantize(planes: &[Plane], step: f32) -> Vec<Vec<[i32; 64]>> {
+    planes
+        .iter()
+        .map(|p| {
+            plane::all_blocks(p)
+                .map(|(bx, by)| plane::quantize_block(&p.read_block(bx, by), step, 0.0))
+                .collect()
+        })
+        .collect()
+}
+
+fn z(raw: &[u8]) -> Vec<u8> {
+    zstd::bulk::compress(raw, 3).unwrap()
+}
+
+/// A small looping file: 9 frames, boundaries 0, 4, 9; keyframe 1 predicted; degree-3 tiles
+/// in segment 0; a metadata chunk and an optional chunk of an unknown kind.
+fn sample_file() -> Vec<u8> {
+    let mut h = header(9, 2, true);
+    h.chunk_count = 1 + 1 + 2 + 1 + 2 + 1;
+    let step = 0.01;
+    let k0 = planes_with(&h, |p, x, y| {
+        2.0 + 0.05 * x as f32 - 0.03 * y as f32 + p as f32 * 0.1
+    });
+    let k1 = planes_with(&h, |p, x, y| 3.0 + 0.02 * (x + y) as f32 - p as f32 * 0.05);
+    let diff: Vec<Plane> = k0
+        .iter()
+        .zip(&k1)
+        .map(|(a, b)| Plane {
+            w: a.w,
+            h: a.h,
+            data: a.data.iter().zip(&b.data).map(|(x, y)| y - x).collect(),
+        })
+        .collect();
+    let mut w = Writer::new(Cursor::new(Vec::new()), h.clone()).unwrap();
+    w.write_chunk(
+        ChunkKind::Metadata,
+        FLAG_OPTIONAL,
+        0,
+        (0, 0),
+        br#"{"sky":[0.2,0.3,0.5]}"#,
+    )
+    .unwrap();
+    let kf0 = z(&chunk::write_keyframe(
+        MODE_INTRA,
+        &[step; 3],
+        &quantize(&k0, step),
+    ));
+    w.write_chunk(ChunkKind::Keyframe, FLAG_INTRA, 0, (0, 0), &kf0)
+        .unwrap();
+    let kf1 = z(&chunk::write_keyframe(
+        MODE_PREDICTED,
+        &[step; 3],
+        &quantize(&diff, step),
+    ));
+    w.write_chunk(ChunkKind::Keyframe, 0, 1, (4, 4), &kf1)
+        .unwrap();
+    let tiles_n = h.tile_count();
+    let t0 = TileMap {
+        luma: vec![3; tiles_n],
+        chroma: vec![2; tiles_n],
+    };
+    w.write_chunk(
+        ChunkKind::TileMap,
+        0,
+        0,
+        (0, 4),
+        &z(&chunk::write_tilemap(&t0)),
+    )
+    .unwrap();
+    let bub = planes_with(&h, |p, x, _| if p == 0 { 0.2 } else { 0.01 * x as f32 });
+    let mut blocks = Vec::new();
+    let mut steps = Vec::new();
+    for k in 2..=3u8 {
+        for p in 0..3 {
+            let d = t0.degree(p, 0);
+            steps.push(step);
+            blocks.push(if d >= k {
+                quantize(&bub[p..p + 1], step).remove(0)
+            } else {
+                Vec::new()
+            });
+        }
+    }
+    w.write_chunk(
+        ChunkKind::Coefficients,
+        0,
+        0,
+        (0, 4),
+        &z(&chunk::write_coeffs(3, &steps, &blocks)),
+    )
+    .unwrap();
+    w.write_chunk(ChunkKind::Unknown(77), FLAG_OPTIONAL, 0, (4, 4), b"future")
+        .unwrap();
+    let t1 = TileMap {
+        luma: vec![1; tiles_n],
+        chroma: vec![1; tiles_n],
+    };
+    w.write_chunk(
+        ChunkKind::TileMap,
+        0,
+        1,
+        (4, 9),
+        &z(&chunk::write_tilemap(&t1)),
+    )
+    .unwrap();
+    w.write_chunk(
+        ChunkKind::Coefficients,
+        0,
+        1,
+        (4, 9),
+        &z(&chunk::write_coeffs(1, &[], &[])),
+    )
+    .unwrap();
+    let (_, cur) = w.finish().unwrap();
+    cur.into_inner()
+}
+
+fn decode_all(bytes: &[u8]) -> Result<Vec<Vec<f32>>, FormatError> {
+    let reader = Reader::open(Cursor::new(bytes))?;
+    let h = reader.header().clone();
+    let mut d = Decoder::new(reader);
+    let mut frames = Vec::new();
+    for f in 0..h.frame_count {
+        let mut out = vec![0f32; h.texel_count() * 3];
+        d.frame(f as f64, Output::Linear, &mut out)?;
+        frames.push(out);
+    }
+    d.reader().metadata()?;
+    Ok(frames)
+}
+
+#[test]
+fn round_trip_header_index_and_frames() {
+    let bytes = sample_file();
+    let r = Reader::open(Cursor::new(&bytes)).unwrap();
+    let h = r.header();
+    assert_eq!(
+        (h.width, h.height, h.frame_count, h.segment_count),
+        (20, 12, 9, 2)
+    );
+    assert!(h.looping);
+    assert_eq!(h.file_size as usize, bytes.len());
+    assert_eq!(r.layout().boundaries, vec![0, 4, 9]);
+    assert!(h.read_ahead.iter().all(|p| p.rate > 0 && p.bytes > 0));
+    let frames = decode_all(&bytes).unwrap();
+    // Frame 0 is keyframe 0: R = G = B ≈ decode(2 + …) in the coded domain, within quantisation.
+    let t = Transfer::LogToe { v0: 1e-3 };
+    let expect = |c: f32| t.decode_linear(c);
+    let y0 = 2.0f32;
+    let rgb = vbim_format::color::ycocg_to_rgb([y0, y0 + 0.1, y0 + 0.2]);
+    for c in 0..3 {
+        let got = frames[0][c];
+        let want = expect(rgb[c]);
+        assert!(
+            (got - want).abs() <= 0.02 * want + 1e-6,
+            "channel {c}: {got} vs {want}"
+        );
+    }
+    // Mid-segment frames carry the bubble term: the luma bubble raises frame 2 above the
+    // straight line between the keyframes.
+    assert!(frames.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+    let mut reader = Reader::open(Cursor::new(&bytes)).unwrap();
+    assert_eq!(
+        reader.metadata().unwrap().unwrap(),
+        r#"{"sky":[0.2,0.3,0.5]}"#
+    );
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    let bytes = sample_file();
+    for n in 0..bytes.len() {
+        let res = decode_all(&bytes[..n]);
+        assert!(res.is_err(), "truncated to {n} bytes decoded without error");
+    }
+}
+
+#[test]
+fn a_flipped_bit_in_any_chunk_is_detected() {
+    let bytes = sample_file();
+    let r = Reader::open(Cursor::new(&bytes)).unwrap();
+    let entries = r.entries().to_vec();
+    for (i, e) in entries.iter().enumerate() {
+        for bit in [0, 3, 7] {
+            for at in [e.offset, e.offset + e.length / 2, e.offset + e.length - 1] {
+                let mut bad = bytes.clone();
+                bad[at as usize] ^= 1 << bit;
+                let mut reader = Reader::open(Cursor::new(&bad)).unwrap();
+                match reader.read_chunk(i) {
+                    Err(FormatError::ChunkChecksum { chunk, first, last }) => {
+                        assert_eq!((chunk, first, last), (i, e.first_frame, e.last_frame));
+                        let msg = FormatError::ChunkChecksum { chunk, first, last }.to_string();
+                        assert!(
+                            msg.contains(&format!("chunk {i}"))
+                                && msg.contains("checksum mismatch")
+                        );
+                    }
+                    other => panic!("chunk {i} byte {at} bit {bit}: {other:?}"),
+                }
+                assert!(decode_all(&bad).is_err() || e.kind == ChunkKind::Unknown(77));
+            }
+        }
+    }
+    // And a flipped bit in the header or the index.
+    for at in [20usize, HEADER_SIZE - 1, HEADER_SIZE + 5] {
+        let mut bad = bytes.clone();
+        bad[at] ^= 0x10;
+        assert!(Reader::open(Cursor::new(&bad)).is_err(), "byte {at}");
+    }
+}
+
+/// Rewrites header fields and re-seals the header checksum, as an attacker would.
+fn hostile(edit: impl Fn(&mut Header)) -> Result<(), FormatError> {
+    let bytes = sample_file();
+    let mut h = Reader::open(Cursor::new(&bytes)).unwrap().header().clone();
+    edit(&mut h);
+    let mut bad = bytes.clone();
+    bad[..HEADER_SIZE].copy_from_slice(&h.to_bytes());
+    decode_all(&bad).map(|_| ())
+}
+
+#[test]
+fn hostile_headers_are_refused_before_allocation() {
+    let cases: Vec<(&str, Box<dyn Fn(&mut Header)>)> = vec![
+        ("width 2^31", Box::new(|h| h.width = 1 << 31)),
+        ("height 0", Box::new(|h| h.height = 0)),
+        ("frames 2^32-1", Box::new(|h| h.frame_count = u32::MAX)),
+        ("chunks 2^32-1", Box::new(|h| h.chunk_count = u32::MAX)),
+        ("chunks +1", Box::new(|h| h.chunk_count += 1)),
+        (
+            "index past end",
+            Box::new(|h| h.index_offset = h.file_size - 10),
+        ),
+        ("file size huge", Box::new(|h| h.file_size = u64::MAX)),
+        ("rate 0", Box::new(|h| h.rate_den = 0)),
+        ("tile 7", Box::new(|h| h.tile_size = 7)),
+        ("degree 200", Box::new(|h| h.max_degree = 200)),
+        ("segments > frames", Box::new(|h| h.segment_count = 1000)),
+        ("keyframes off", Box::new(|h| h.keyframe_count = 5)),
+        (
+            "log v0 NaN",
+            Box::new(|h| h.transfer = Transfer::LogToe { v0: f32::NAN }),
+        ),
+        ("channels 4", Box::new(|h| h.channels = 4)),
+    ];
+    for (name, edit) in cases {
+        let res = hostile(edit);
+        assert!(res.is_err(), "{name}: accepted");
+    }
+}
+
+#[test]
+fn hostile_index_entries_are_refused() {
+    let bytes = sample_file();
+    let r = Reader::open(Cursor::new(&bytes)).unwrap();
+    let h = r.header().clone();
+    let n = h.chunk_count as usize;
+    for i in 0..n {
+        for field in 0..4 {
+            let mut e = r.entries().to_vec();
+            match field {
+                0 => e[i].length = u64::MAX - 3,
+                1 => e[i].offset = 0,
+                2 => e[i].offset = e[(i + 1) % n].offset,
+                _ => e[i].last_frame = u32::MAX,
+            }
+            let mut raw = Vec::new();
+            for x in &e {
+                x.write(&mut raw);
+            }
+            let mut hh = h.clone();
+            hh.index_checksum = vbim_format::checksum::xxh3(&raw);
+            let mut bad = bytes.clone();
+            bad[..HEADER_SIZE].copy_from_slice(&hh.to_bytes());
+            bad[HEADER_SIZE..HEADER_SIZE + raw.len()].copy_from_slice(&raw);
+            let ok = Reader::open(Cursor::new(&bad)).is_ok();
+            assert!(!ok, "entry {i} field {field} accepted");
+        }
+    }
+}
+
+#[test]
+fn unknown_major_version_and_bad_magic() {
+    let mut bytes = sample_file();
+    bytes[8] = 2;
+    match Reader::open(Cursor::new(&bytes)) {
+        Err(FormatError::UnsupportedVersion { found: 2, .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    bytes[0] = b'X';
+    assert!(matches!(
+        Reader::open(Cursor::new(&bytes)),
+        Err(FormatError::BadMagic)
+    ));
+}
+
+#[test]
+fn a_compression_bomb_is_refused() {
+    // A keyframe chunk whose zstd frame claims a gigabyte.
+    let h = header(1, 0, false);
+    let bomb = zstd::bulk::compress(&vec![0u8; 8 << 20], 19).unwrap();
+    assert!(chunk::read_keyframe(&h, &bomb, None).is_err());
+}
+
+#[test]
+fn single_frame_sequence() {
+    let mut h = header(1, 0, false);
+    h.chunk_count = 1;
+    let k0 = planes_with(&h, |_, x, _| 1.0 + x as f32 * 0.01);
+    let mut w = Writer::new(Cursor::new(Vec::new()), h).unwrap();
+    w.write_chunk(
+        ChunkKind::Keyframe,
+        FLAG_INTRA,
+        0,
+        (0, 0),
+        &z(&chunk::write_keyframe(
+            MODE_INTRA,
+            &[0.01; 3],
+            &quantize(&k0, 0.01),
+        )),
+    )
+    .unwrap();
+    let (_, cur) = w.finish().unwrap();
+    let frames = decode_all(&cur.into_inner()).unwrap();
+    assert_eq!(frames.len(), 1);
+}
