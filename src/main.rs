@@ -1,1 +1,27 @@
-fn main() {}
+//! `vbim`: bake, encode, inspect, decode and compare video-based illumination maps.
+//! A thin command line over the crates; each subcommand lives in its own module.
+
+mod cli;
+mod cmd_bake;
+mod cmd_inspect;
+mod progress;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    let res = match args.command {
+        cli::Command::Bake(a) => cmd_bake::run(a),
+        cli::Command::Inspect(a) => cmd_inspect::run(a),
+    };
+    match res {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line naming the culprit; exit status 1 for a user error (PROTOCOL.md).
+            eprintln!("vbim: error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,134 @@
+//! The precomputed maps (normals, horizons, sky visibility, obscurance) cached beside the
+//! output, keyed by a hash of everything they depend on: the height field's bytes and
+//! sidecar, the resolution, the number of azimuths and the obscurance settings.
+
+use std::io::{Read, Write};
+use std::path::Path;
+
+use crate::horizon::HorizonMap;
+use crate::light::Precomputed;
+use crate::scene::Scene;
+use crate::sky::{SkyVisibility, SECTORS};
+use crate::BakeError;
+
+const MAGIC: &[u8; 8] = b"VBIMPRE2";
+
+fn fnv(h: &mut u64, bytes: &[u8]) {
+    for &b in bytes {
+        *h ^= b as u64;
+        *h = h.wrapping_mul(0x100_0000_01b3);
+    }
+}
+
+pub fn key(scene: &Scene) -> Result<u64, BakeError> {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let hf = std::fs::read(&scene.heightfield)
+        .map_err(|e| BakeError::Input(format!("{}: {e}", scene.heightfield.display())))?;
+    fnv(&mut h, &hf);
+    if let Ok(side) = std::fs::read(scene.heightfield.with_extension("json")) {
+        fnv(&mut h, &side);
+    }
+    let o = &scene.obscurance;
+    let params = format!(
+        "{} {} {} {} {:?}",
+        scene.size, scene.azimuths, o.enabled, o.l_max_cells, o.tau_cells
+    );
+    fnv(&mut h, params.as_bytes());
+    Ok(h)
+}
+
+fn path(dir: &Path, key: u64) -> std::path::PathBuf {
+    dir.join(format!("pre-{key:016x}.bin"))
+}
+
+fn put(out: &mut Vec<u8>, v: &[f32]) {
+    for x in v {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+}
+
+pub fn store(dir: &Path, key: u64, pre: &Precomputed) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let hf = &pre.hf;
+    let mut out = Vec::new();
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&key.to_le_bytes());
+    for v in [hf.w as u64, hf.h as u64, pre.horizons.azimuths as u64] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(&hf.cell_x.to_le_bytes());
+    out.extend_from_slice(&hf.cell_y.to_le_bytes());
+    put(&mut out, &hf.z);
+    put(&mut out, &pre.normals.concat());
+    put(&mut out, &pre.horizons.angles);
+    put(&mut out, &pre.sky.coef);
+    put(&mut out, &pre.sky.total);
+    put(&mut out, &pre.obscurance);
+    let final_path = path(dir, key);
+    let tmp = final_path.with_extension("tmp");
+    std::fs::File::create(&tmp)?.write_all(&out)?;
+    std::fs::rename(tmp, final_path)
+}
+
+/// Loads the cached maps for `key`, or `None` when absent or unreadable (then the caller
+/// recomputes them).
+pub fn load(dir: &Path, key: u64, scene: &Scene) -> Option<Precomputed> {
+    let mut bytes = Vec::new();
+    std::fs::File::open(path(dir, key))
+        .ok()?
+        .read_to_end(&mut bytes)
+        .ok()?;
+    if bytes.len() < 56 || &bytes[..8] != MAGIC || bytes[8..16] != key.to_le_bytes() {
+        return None;
+    }
+    let u = |i: usize| u64::from_le_bytes(bytes[i..i + 8].try_into().unwrap()) as usize;
+    let (w, h, az) = (u(16), u(24), u(32));
+    if w != scene.size || h != scene.size || az != scene.azimuths {
+        return None;
+    }
+    let cell_x = f64::from_le_bytes(bytes[40..48].try_into().unwrap());
+    let cell_y = f64::from_le_bytes(bytes[48..56].try_into().unwrap());
+    let t = w * h;
+    let need = 56 + 4 * (t + 3 * t + az * t + SECTORS * t + t + t);
+    if bytes.len() != need {
+        return None;
+    }
+    let mut pos = 56;
+    let mut take = |n: usize| {
+        let v: Vec<f32> = bytes[pos..pos + 4 * n]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        pos += 4 * n;
+        v
+    };
+    let z = take(t);
+    let normals = take(3 * t)
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    let angles = take(az * t);
+    let coef = take(SECTORS * t);
+    let total = take(t);
+    let obscurance = take(t);
+    let hf = crate::HeightField {
+        w,
+        h,
+        cell_x,
+        cell_y,
+        z,
+    };
+    let clouds = Precomputed::clouds_for(&hf, scene);
+    Some(Precomputed {
+        hf,
+        normals,
+        horizons: HorizonMap {
+            azimuths: az,
+            texels: t,
+            angles,
+        },
+        sky: SkyVisibility { coef, total },
+        obscurance,
+        clouds,
+    })
+}

@@ -1,0 +1,208 @@
+//! Writing a bake: frames (EXR half RGB, or PNG), the manifest and the contact sheet. Every
+//! file is written under a temporary name and renamed, so an interrupted bake never leaves
+//! a truncated file under a final name.
+
+use std::path::{Path, PathBuf};
+
+use half::f16;
+use serde::Serialize;
+use vbim_format::curve::export_curve;
+
+use crate::light::{self, FrameInfo, Precomputed};
+use crate::scene::Scene;
+use crate::{out_err, BakeError};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FrameFormat {
+    /// Half-float RGB OpenEXR, linear.
+    Exr,
+    /// 8-bit sRGB PNG through the protocol's export curve.
+    Png8,
+    /// 16-bit PNG of the linear value times the manifest's `png16_scale`.
+    Png16,
+}
+
+impl std::str::FromStr for FrameFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "exr" => Ok(FrameFormat::Exr),
+            "png8" => Ok(FrameFormat::Png8),
+            "png16" => Ok(FrameFormat::Png16),
+            _ => Err(format!("unknown format {s:?} (exr, png8 or png16)")),
+        }
+    }
+}
+
+pub fn frame_name(i: usize, f: FrameFormat) -> String {
+    match f {
+        FrameFormat::Exr => format!("frame_{i:04}.exr"),
+        FrameFormat::Png8 | FrameFormat::Png16 => format!("frame_{i:04}.png"),
+    }
+}
+
+/// Writes `path` through a temporary file beside it, renamed on success.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), BakeError> {
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("out");
+    // Keep the extension last: the image writers pick the format from it.
+    let tmp = path.with_file_name(format!(".tmp-{}-{name}", std::process::id()));
+    match write(&tmp) {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| out_err(path, e)),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(out_err(path, e))
+        }
+    }
+}
+
+/// The protocol's 8-bit export of a linear RGB buffer.
+pub fn to_png8(rgb: &[f32], exposure: f32) -> Vec<u8> {
+    rgb.iter()
+        .map(|&v| {
+            (export_curve(v, exposure) * 255.0)
+                .round()
+                .clamp(0.0, 255.0) as u8
+        })
+        .collect()
+}
+
+pub fn write_frame(
+    path: &Path,
+    w: usize,
+    h: usize,
+    rgb: &[f32],
+    format: FrameFormat,
+    exposure: Option<f32>,
+    png16_scale: Option<f32>,
+) -> Result<(), BakeError> {
+    write_atomic(path, |tmp| match format {
+        FrameFormat::Exr => exr::prelude::write_rgb_file(tmp, w, h, |x, y| {
+            let i = (y * w + x) * 3;
+            (
+                f16::from_f32(rgb[i]),
+                f16::from_f32(rgb[i + 1]),
+                f16::from_f32(rgb[i + 2]),
+            )
+        })
+        .map_err(|e| e.to_string()),
+        FrameFormat::Png8 => {
+            let px = to_png8(rgb, exposure.unwrap_or(1.0));
+            image::RgbImage::from_raw(w as u32, h as u32, px)
+                .expect("buffer size matches")
+                .save(tmp)
+                .map_err(|e| e.to_string())
+        }
+        FrameFormat::Png16 => {
+            let s = png16_scale.unwrap_or(1.0);
+            let px: Vec<u16> = rgb
+                .iter()
+                .map(|&v| (v * s).round().clamp(0.0, 65535.0) as u16)
+                .collect();
+            image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, px)
+                .expect("buffer size matches")
+                .save(tmp)
+                .map_err(|e| e.to_string())
+        }
+    })
+}
+
+#[derive(Serialize)]
+struct Manifest<'a> {
+    generator: &'static str,
+    scene: &'a Scene,
+    width: usize,
+    height: usize,
+    frames: usize,
+    fps: &'a str,
+    looping: bool,
+    format: FrameFormat,
+    /// What a texel holds (../shared/PROTOCOL.md).
+    units: &'static str,
+    /// The 8-bit export curve's exposure e = 1.5 / median of per-frame max green.
+    exposure: f32,
+    png16_scale: Option<f32>,
+    files: Vec<String>,
+    per_frame: &'a [FrameInfo],
+}
+
+pub fn write_manifest(
+    out: &Path,
+    scene: &Scene,
+    format: FrameFormat,
+    exposure: f32,
+    png16_scale: Option<f32>,
+    infos: &[FrameInfo],
+) -> Result<PathBuf, BakeError> {
+    let m = Manifest {
+        generator: concat!("vbim-bake ", env!("CARGO_PKG_VERSION")),
+        scene,
+        width: scene.size,
+        height: scene.size,
+        frames: scene.frames,
+        fps: &scene.fps,
+        looping: true,
+        format,
+        units: "linear irradiance / π, RGB; noon sun on a flat open surface ≈ 1",
+        exposure,
+        png16_scale,
+        files: (0..scene.frames).map(|i| frame_name(i, format)).collect(),
+        per_frame: infos,
+    };
+    let path = out.join("manifest.json");
+    let text = serde_json::to_string_pretty(&m).expect("manifest serialises");
+    write_atomic(&path, |tmp| {
+        std::fs::write(tmp, text).map_err(|e| e.to_string())
+    })?;
+    Ok(path)
+}
+
+/// A 4 × 3 grid of 12 moments of the day (every 2 hours from midnight), each tile a
+/// downscaled frame through the 8-bit export curve, separated by thin dark lines.
+pub fn contact_sheet(
+    pre: &Precomputed,
+    scene: &Scene,
+    exposure: f32,
+    path: &Path,
+) -> Result<(), BakeError> {
+    let n = scene.size;
+    let tile = 160usize.min(n);
+    let gap = 2;
+    let (cols, rows) = (4usize, 3usize);
+    let (w, h) = (
+        cols * tile + (cols + 1) * gap,
+        rows * tile + (rows + 1) * gap,
+    );
+    let mut img = image::RgbImage::from_pixel(w as u32, h as u32, image::Rgb([24, 24, 28]));
+    let mut buf = vec![0f32; n * n * 3];
+    for k in 0..12 {
+        let i = (k * scene.frames) / 12;
+        light::light_frame(pre, scene, i, &mut buf);
+        let (ox, oy) = (
+            gap + (k % cols) * (tile + gap),
+            gap + (k / cols) * (tile + gap),
+        );
+        for ty in 0..tile {
+            for tx in 0..tile {
+                // Box filter over the source texels this tile pixel covers.
+                let (x0, x1) = (tx * n / tile, ((tx + 1) * n / tile).max(tx * n / tile + 1));
+                let (y0, y1) = (ty * n / tile, ((ty + 1) * n / tile).max(ty * n / tile + 1));
+                let mut acc = [0f32; 3];
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        for c in 0..3 {
+                            acc[c] += buf[(y * n + x) * 3 + c];
+                        }
+                    }
+                }
+                let cnt = ((x1 - x0) * (y1 - y0)) as f32;
+                let px = acc.map(|a| (export_curve(a / cnt, exposure) * 255.0).round() as u8);
+                img.put_pixel((ox + tx) as u32, (oy + ty) as u32, image::Rgb(px));
+            }
+        }
+    }
+    write_atomic(path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
+}
