@@ -20,6 +20,7 @@ pub mod decode;
 mod error;
 pub mod header;
 pub mod index;
+pub mod metrics;
 pub mod plane;
 pub mod reader;
 pub mod varint;

@@ -1,0 +1,126 @@
+//! The protocol's error metrics (`../shared/PROTOCOL.md`, "Error metrics").
+//!
+//! 8-bit sequences: PSNR over all RGB values on the 0–255 scale after rounding the decoded
+//! values to 8 bits. HDR sequences: the same PSNR on the 8-bit export curve applied to both
+//! sides (peak 1, no rounding), plus the largest relative error over texels brighter than
+//! 1% of the exposure's white (the value the exposure maps to x = 1). Mean PSNR pools the
+//! squared error of all frames; identical frames count as 99 dB.
+
+use crate::curve::export_curve;
+
+/// How values are compared.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Metric {
+    /// Values are sRGB code values / 255 (decoded ones are rounded to 8 bits).
+    Srgb8,
+    /// Values are linear light, compared through the export curve with this exposure.
+    Hdr { exposure: f32 },
+}
+
+pub const IDENTICAL_DB: f64 = 99.0;
+
+pub fn psnr(mse: f64) -> f64 {
+    if mse <= 0.0 {
+        IDENTICAL_DB
+    } else {
+        (10.0 * (1.0 / mse).log10()).min(IDENTICAL_DB)
+    }
+}
+
+/// One frame's comparison.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameError {
+    pub sse: f64,
+    pub count: u64,
+    /// Largest absolute error on the metric's 0–1 scale.
+    pub max_abs: f64,
+    /// HDR only: largest relative error over texels brighter than 1% of white.
+    pub max_rel: f64,
+}
+
+impl FrameError {
+    pub fn psnr(&self) -> f64 {
+        psnr(self.sse / self.count.max(1) as f64)
+    }
+}
+
+impl Metric {
+    /// The value on the metric's 0–1 scale.
+    #[inline]
+    pub fn display(self, v: f32, decoded: bool) -> f64 {
+        match self {
+            Metric::Srgb8 => {
+                let c = v.clamp(0.0, 1.0) as f64;
+                if decoded {
+                    (c * 255.0).round() / 255.0
+                } else {
+                    c
+                }
+            }
+            Metric::Hdr { exposure } => export_curve(v, exposure) as f64,
+        }
+    }
+
+    pub fn compare(self, src: &[f32], dec: &[f32]) -> FrameError {
+        assert_eq!(src.len(), dec.len());
+        let mut e = FrameError { count: src.len() as u64, ..Default::default() };
+        let bright = match self {
+            Metric::Hdr { exposure } => 0.01 / exposure,
+            Metric::Srgb8 => f32::INFINITY,
+        };
+        for (&s, &d) in src.iter().zip(dec) {
+            let diff = self.display(s, false) - self.display(d, true);
+            e.sse += diff * diff;
+            e.max_abs = e.max_abs.max(diff.abs());
+            if s > bright {
+                e.max_rel = e.max_rel.max(((d - s) / s).abs() as f64);
+            }
+        }
+        e
+    }
+}
+
+/// Pooled statistics over a sequence.
+#[derive(Clone, Debug, Default)]
+pub struct SequenceError {
+    pub frames: Vec<FrameError>,
+}
+
+impl SequenceError {
+    pub fn push(&mut self, f: FrameError) {
+        self.frames.push(f);
+    }
+    pub fn mean_psnr(&self) -> f64 {
+        let sse: f64 = self.frames.iter().map(|f| f.sse).sum();
+        let n: u64 = self.frames.iter().map(|f| f.count).sum();
+        psnr(sse / n.max(1) as f64)
+    }
+    /// Lowest per-frame PSNR and its frame.
+    pub fn worst(&self) -> (usize, f64) {
+        self.frames
+            .iter()
+            .enumerate()
+            .map(|(i, f)| (i, f.psnr()))
+            .fold((0, IDENTICAL_DB), |a, b| if b.1 < a.1 { b } else { a })
+    }
+    pub fn max_abs(&self) -> f64 {
+        self.frames.iter().map(|f| f.max_abs).fold(0.0, f64::max)
+    }
+    pub fn max_rel(&self) -> f64 {
+        self.frames.iter().map(|f| f.max_rel).fold(0.0, f64::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identical_is_99_db_and_one_code_value_is_48() {
+        let a = vec![128.0f32 / 255.0; 300];
+        let m = Metric::Srgb8;
+        assert_eq!(m.compare(&a, &a).psnr(), IDENTICAL_DB);
+        let b: Vec<f32> = a.iter().map(|v| v + 1.0 / 255.0).collect();
+        assert!((m.compare(&a, &b).psnr() - 48.13).abs() < 0.01);
+    }
+}
