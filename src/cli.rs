@@ -19,8 +19,91 @@ pub struct Cli {
 pub enum Command {
     /// Bake a day of terrain lightmaps from a scene file (samples/*.toml).
     Bake(BakeArgs),
+    /// Encode a sequence of EXR/PNG frames into a .vbim file.
+    Encode(EncodeArgs),
     /// Print a .vbim file's header, chunk index and model summary.
     Inspect(InspectArgs),
+    /// Decode every frame of a .vbim file with the CPU reference decoder.
+    Decode(DecodeArgs),
+    /// Compare two sequences (directories, patterns or .vbim files) with the protocol's metrics.
+    Compare(CompareArgs),
+}
+
+#[derive(Args)]
+pub struct EncodeArgs {
+    /// Input frames: a directory, a glob (`frames/*.exr`) or a printf pattern (`frames/%04d.exr`).
+    pub input: String,
+    /// Output .vbim file (written under a temporary name, renamed when complete).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Error budget: target mean PSNR in dB of the protocol's metric [default: 45].
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Highest polynomial degree in time, 1–8 (1 = keyframe interpolation) [default: preset's, 4].
+    #[arg(long)]
+    pub max_degree: Option<usize>,
+    /// Segment length: `auto` (adaptive, up to the preset's maximum), `auto:N` (adaptive up to N frames) or N frames.
+    #[arg(long)]
+    pub segment: Option<String>,
+    /// zstd level, 1–22 [default: preset's, 9].
+    #[arg(long)]
+    pub zstd_level: Option<i32>,
+    /// Worker threads; 0 = one per core. The output is identical for any value [default: 0].
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Largest distance between independently decodable keyframes, media time (`4s`, `500ms`, `2min`) [default: 4s].
+    #[arg(long)]
+    pub intra_interval: Option<String>,
+    /// Media frame rate, frames per second as a rational (`24/1`, `1/6`) [default: the manifest's fps, else 24/1].
+    #[arg(long)]
+    pub fps: Option<String>,
+    /// Whether the sequence loops (frame N−1 is followed by frame 0) [default: true].
+    #[arg(long)]
+    pub looping: Option<bool>,
+    /// JSON file stored in the metadata chunk [default: manifest.json beside the frames, if any].
+    #[arg(long)]
+    pub meta: Option<PathBuf>,
+    /// Tile size in texels (multiple of 8) [default: 16].
+    #[arg(long)]
+    pub tile: Option<usize>,
+    /// Preset: smaller search, degree ≤ 3, zstd 3.
+    #[arg(long, conflicts_with = "best")]
+    pub fast: bool,
+    /// Preset: wider search, degree ≤ 6, zstd 19.
+    #[arg(long)]
+    pub best: bool,
+    /// Skip decoding the result to measure its error.
+    #[arg(long)]
+    pub no_verify: bool,
+    /// Also write the report as JSON to this file.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub struct DecodeArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Output directory (created if missing).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Frame format: exr (linear half RGB), png8 (8-bit: sRGB files as stored, HDR through the protocol's export curve) or png16 (linear × scale).
+    #[arg(long, default_value = "exr")]
+    pub format: String,
+}
+
+#[derive(Args)]
+pub struct CompareArgs {
+    /// Reference sequence: directory, pattern, or .vbim file.
+    pub a: String,
+    /// Sequence to measure: directory, pattern, or .vbim file.
+    pub b: String,
+    /// Write per-frame figures as CSV to this file (`-` for standard output).
+    #[arg(long)]
+    pub csv: Option<String>,
+    /// Exposure of the HDR metric [default: from the reference, 1.5 / median of per-frame max green].
+    #[arg(long)]
+    pub exposure: Option<f32>,
 }
 
 #[derive(Args)]

@@ -63,11 +63,21 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
         status.push(st);
     }
     let seg_lens: Vec<u32> = layout.boundaries.windows(2).map(|w| w[1] - w[0]).collect();
-    let intra = layout.keyframes.iter().filter(|&&k| entries[k].is_intra()).count();
+    let intra = layout
+        .keyframes
+        .iter()
+        .filter(|&&k| entries[k].is_intra())
+        .count();
     let duration = h.frame_count as f64 / h.fps();
     let bpp = h.file_size as f64 * 8.0 / (h.texel_count() as f64 * h.frame_count as f64);
-    let raw_bytes = h.texel_count() as f64 * h.frame_count as f64 * h.channels as f64
-        * if h.color == ColorEncoding::Srgb8 { 1.0 } else { 2.0 };
+    let raw_bytes = h.texel_count() as f64
+        * h.frame_count as f64
+        * h.channels as f64
+        * if h.color == ColorEncoding::Srgb8 {
+            1.0
+        } else {
+            2.0
+        };
     let transfer = match h.transfer {
         Transfer::Srgb => "srgb".to_string(),
         Transfer::LogToe { v0 } => format!("log2(1 + v / {v0:e})"),
@@ -113,8 +123,16 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
         });
         println!("{}", serde_json::to_string_pretty(&v).unwrap());
     } else {
-        println!("{name}: .vbim {}.{}, {} bytes", vbim_format::VERSION_MAJOR, h.version_minor, h.file_size);
-        println!("  size        {}×{}, {} channel(s), {color}", h.width, h.height, h.channels);
+        println!(
+            "{name}: .vbim {}.{}, {} bytes",
+            vbim_format::VERSION_MAJOR,
+            h.version_minor,
+            h.file_size
+        );
+        println!(
+            "  size        {}×{}, {} channel(s), {color}",
+            h.width, h.height, h.channels
+        );
         println!(
             "  frames      {} at {}/{} fps ({:.1} s){}",
             h.frame_count,
@@ -123,7 +141,10 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
             duration,
             if h.looping { ", looping" } else { "" }
         );
-        println!("  model       tiles {0}×{0}, degree ≤ {1}, coded as {transfer}", h.tile_size, h.max_degree);
+        println!(
+            "  model       tiles {0}×{0}, degree ≤ {1}, coded as {transfer}",
+            h.tile_size, h.max_degree
+        );
         println!(
             "  segments    {} (lengths {}–{} frames), keyframes {} ({} intra, every ≤ {} frames)",
             h.segment_count,
@@ -133,7 +154,10 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
             intra,
             h.intra_interval
         );
-        println!("  rate        {bpp:.4} bpp, {:.1}× smaller than raw", raw_bytes / h.file_size as f64);
+        println!(
+            "  rate        {bpp:.4} bpp, {:.1}× smaller than raw",
+            raw_bytes / h.file_size as f64
+        );
         for p in &h.read_ahead {
             println!(
                 "  read-ahead  at {:>10.3} MB/s: ring {:>10} bytes, preroll {:.3} s",
@@ -143,7 +167,10 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
             );
         }
         println!("  chunks      {}:", h.chunk_count);
-        println!("    {:>5}  {:<9} {:>5}  {:>13}  {:>9}  status", "#", "kind", "no.", "frames", "bytes");
+        println!(
+            "    {:>5}  {:<9} {:>5}  {:>13}  {:>9}  status",
+            "#", "kind", "no.", "frames", "bytes"
+        );
         for (i, (e, st)) in entries.iter().zip(&status).enumerate() {
             let kind = match (e.kind, e.is_intra()) {
                 (ChunkKind::Keyframe, true) => "key/intra".to_string(),

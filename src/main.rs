@@ -3,8 +3,13 @@
 
 mod cli;
 mod cmd_bake;
+mod cmd_compare;
+mod cmd_decode;
+mod cmd_encode;
 mod cmd_inspect;
 mod progress;
+mod sequence;
+mod units;
 
 use std::process::ExitCode;
 
@@ -14,7 +19,10 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     let res = match args.command {
         cli::Command::Bake(a) => cmd_bake::run(a),
+        cli::Command::Encode(a) => cmd_encode::run(a),
         cli::Command::Inspect(a) => cmd_inspect::run(a),
+        cli::Command::Decode(a) => cmd_decode::run(a),
+        cli::Command::Compare(a) => cmd_compare::run(a),
     };
     match res {
         Ok(()) => ExitCode::SUCCESS,

@@ -66,6 +66,11 @@ pub struct Projector {
     pinv: Vec<f64>,
     /// Bubble values at the interior frames, `(len − 1) × bubbles`, for evaluating fits.
     pub design: Vec<f64>,
+    /// The QR factors of `design`: Q (`(len − 1) × bubbles`, orthonormal columns) and R
+    /// (`bubbles × bubbles`, upper triangular). Gram–Schmidt keeps spans nested, so the
+    /// fit with the first d bubbles is the projection on Q's first d columns.
+    pub q: Vec<f64>,
+    pub r: Vec<f64>,
 }
 
 impl Projector {
@@ -115,6 +120,8 @@ impl Projector {
             bubbles: n,
             pinv,
             design,
+            q,
+            r,
         }
     }
 
@@ -125,6 +132,21 @@ impl Projector {
         for (k, o) in out.iter_mut().enumerate().take(self.bubbles) {
             let row = &self.pinv[k * m..k * m + m];
             *o = row.iter().zip(r).map(|(a, b)| a * b).sum();
+        }
+    }
+}
+
+impl Projector {
+    /// Bubble coefficients of the least-squares fit with the first `d` bubbles, from
+    /// `z = Qᵀ r` (back substitution on R's leading d × d block).
+    pub fn coeffs_from_qt(&self, z: &[f64], d: usize, out: &mut [f64]) {
+        let n = self.bubbles;
+        for k in (0..d).rev() {
+            let mut v = z[k];
+            for i in k + 1..d {
+                v -= self.r[k * n + i] * out[i];
+            }
+            out[k] = v / self.r[k * n + k];
         }
     }
 }

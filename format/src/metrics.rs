@@ -63,7 +63,10 @@ impl Metric {
 
     pub fn compare(self, src: &[f32], dec: &[f32]) -> FrameError {
         assert_eq!(src.len(), dec.len());
-        let mut e = FrameError { count: src.len() as u64, ..Default::default() };
+        let mut e = FrameError {
+            count: src.len() as u64,
+            ..Default::default()
+        };
         let bright = match self {
             Metric::Hdr { exposure } => 0.01 / exposure,
             Metric::Srgb8 => f32::INFINITY,

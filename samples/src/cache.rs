@@ -11,7 +11,8 @@ use crate::scene::Scene;
 use crate::sky::{SkyVisibility, SECTORS};
 use crate::BakeError;
 
-const MAGIC: &[u8; 8] = b"VBIMPRE2";
+/// Bump when the precomputation changes, so that stale caches are recomputed.
+const MAGIC: &[u8; 8] = b"VBIMPRE3";
 
 fn fnv(h: &mut u64, bytes: &[u8]) {
     for &b in bytes {
@@ -22,6 +23,7 @@ fn fnv(h: &mut u64, bytes: &[u8]) {
 
 pub fn key(scene: &Scene) -> Result<u64, BakeError> {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
+    fnv(&mut h, MAGIC);
     let hf = std::fs::read(&scene.heightfield)
         .map_err(|e| BakeError::Input(format!("{}: {e}", scene.heightfield.display())))?;
     fnv(&mut h, &hf);

@@ -1,0 +1,293 @@
+//! Input frames: a directory, a glob or a printf pattern (`frames/%04d.exr`) of EXR (half
+//! or float; RGB, RGBA or Y) or PNG (8- or 16-bit) files. Every frame is validated — same
+//! size and channels, finite, non-negative — with errors naming the file and texel.
+
+use std::path::{Path, PathBuf};
+
+use crate::EncodeError;
+
+/// How the input's values are represented.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputKind {
+    /// Linear light: EXR, or 16-bit PNG divided by its scale.
+    Hdr,
+    /// 8-bit PNG: sRGB code values / 255.
+    Srgb8,
+}
+
+#[derive(Clone, Debug)]
+pub struct FrameSet {
+    pub paths: Vec<PathBuf>,
+    pub kind: InputKind,
+    pub width: usize,
+    pub height: usize,
+    /// 1 (Y) or 3 (RGB).
+    pub channels: usize,
+    /// 16-bit PNG: stored value = linear × scale (from the bake's manifest; else 65535).
+    pub png16_scale: f32,
+    /// The bake's manifest found beside the frames, if any.
+    pub manifest: Option<PathBuf>,
+    /// Files skipped (not images), for the user to see.
+    pub notes: Vec<String>,
+}
+
+fn is_image(p: &Path) -> bool {
+    matches!(
+        p.extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref(),
+        Some("exr") | Some("png")
+    )
+}
+
+/// Expands a directory, glob or printf pattern into the ordered list of frame files.
+pub fn list(spec: &str) -> Result<(Vec<PathBuf>, Vec<String>, PathBuf), EncodeError> {
+    let p = Path::new(spec);
+    let mut notes = Vec::new();
+    if p.is_dir() {
+        let mut files = Vec::new();
+        let rd = std::fs::read_dir(p).map_err(|e| EncodeError::Input(format!("{spec}: {e}")))?;
+        for entry in rd {
+            let path = entry
+                .map_err(|e| EncodeError::Input(format!("{spec}: {e}")))?
+                .path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            // Frames are numbered image files; anything else (a contact sheet, notes) is
+            // skipped with a note, hidden files and the manifest silently.
+            let numbered = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .is_some_and(|s| s.ends_with(|c: char| c.is_ascii_digit()));
+            if path.is_file() && is_image(&path) && numbered && !name.starts_with('.') {
+                files.push(path);
+            } else if path.is_file() && !name.starts_with('.') && name != "manifest.json" {
+                notes.push(format!(
+                    "ignored {} (not a numbered EXR or PNG frame)",
+                    path.display()
+                ));
+            }
+        }
+        files.sort();
+        if files.is_empty() {
+            return Err(EncodeError::Input(format!(
+                "{spec}: no .exr or .png frames in this directory"
+            )));
+        }
+        return Ok((files, notes, p.to_path_buf()));
+    }
+    let dir = p
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
+    if let Some(files) = printf_pattern(spec)? {
+        return Ok((files, notes, dir));
+    }
+    if spec.contains(['*', '?', '[']) {
+        let mut files: Vec<PathBuf> = glob::glob(spec)
+            .map_err(|e| EncodeError::Input(format!("{spec}: {e}")))?
+            .filter_map(Result::ok)
+            .filter(|p| p.is_file() && is_image(p))
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            return Err(EncodeError::Input(format!(
+                "{spec}: the pattern matches no .exr or .png file"
+            )));
+        }
+        return Ok((files, notes, dir));
+    }
+    if p.is_file() && is_image(p) {
+        return Ok((vec![p.to_path_buf()], notes, dir));
+    }
+    Err(EncodeError::Input(format!(
+        "{spec}: no such directory, file or pattern"
+    )))
+}
+
+/// `frames/%04d.exr`: frames from 0 (or 1) upwards until the first missing number.
+fn printf_pattern(spec: &str) -> Result<Option<Vec<PathBuf>>, EncodeError> {
+    let Some(start) = spec.find('%') else {
+        return Ok(None);
+    };
+    let rest = &spec[start + 1..];
+    let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
+    if !rest[digits.len()..].starts_with('d') {
+        return Ok(None);
+    }
+    let width: usize = digits.trim_start_matches('0').parse().unwrap_or(0);
+    let (head, tail) = (&spec[..start], &rest[digits.len() + 1..]);
+    let name = |i: usize| PathBuf::from(format!("{head}{i:0width$}{tail}"));
+    let first = if name(0).is_file() { 0 } else { 1 };
+    let files: Vec<PathBuf> = (first..).map(name).take_while(|p| p.is_file()).collect();
+    if files.is_empty() {
+        return Err(EncodeError::Input(format!(
+            "{spec}: no frame matches (tried {})",
+            name(0).display()
+        )));
+    }
+    Ok(Some(files))
+}
+
+/// One decoded input frame: interleaved channels, linear (HDR) or code / 255 (8-bit).
+pub struct Frame {
+    pub width: usize,
+    pub height: usize,
+    pub channels: usize,
+    pub kind: InputKind,
+    pub data: Vec<f32>,
+}
+
+/// Reads one frame file, whatever its format.
+pub fn read_file(path: &Path, png16_scale: f32) -> Result<Frame, EncodeError> {
+    let err = |m: String| EncodeError::Input(format!("{}: {m}", path.display()));
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext == "exr" {
+        use exr::prelude::*;
+        let img = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(path)
+            .map_err(|e| err(e.to_string()))?;
+        let layer = &img.layer_data;
+        let (w, h) = (layer.size.width(), layer.size.height());
+        let find = |name: &str| layer.channel_data.list.iter().find(|c| c.name.eq(name));
+        let chans: Vec<&AnyChannel<FlatSamples>> =
+            match (find("R"), find("G"), find("B"), find("Y")) {
+                (Some(r), Some(g), Some(b), _) => vec![r, g, b],
+                (_, _, _, Some(y)) => vec![y],
+                _ => return Err(err("no R, G, B or Y channel".into())),
+            };
+        let planes: Vec<Vec<f32>> = chans
+            .iter()
+            .map(|c| c.sample_data.values_as_f32().collect())
+            .collect();
+        let n = chans.len();
+        let mut data = vec![0f32; w * h * n];
+        for (c, p) in planes.iter().enumerate() {
+            if p.len() != w * h {
+                return Err(err(format!("channel has {} samples for {w}×{h}", p.len())));
+            }
+            for (i, v) in p.iter().enumerate() {
+                data[i * n + c] = *v;
+            }
+        }
+        return Ok(Frame {
+            width: w,
+            height: h,
+            channels: n,
+            kind: InputKind::Hdr,
+            data,
+        });
+    }
+    let img = image::open(path).map_err(|e| err(e.to_string()))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    use image::DynamicImage as D;
+    let (kind, channels, data) = match img {
+        D::ImageLuma8(b) => (
+            InputKind::Srgb8,
+            1,
+            b.into_raw().iter().map(|&v| v as f32 / 255.0).collect(),
+        ),
+        D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => (
+            InputKind::Srgb8,
+            3,
+            img.to_rgb8()
+                .into_raw()
+                .iter()
+                .map(|&v| v as f32 / 255.0)
+                .collect(),
+        ),
+        D::ImageLuma16(b) => (
+            InputKind::Hdr,
+            1,
+            b.into_raw()
+                .iter()
+                .map(|&v| v as f32 / png16_scale)
+                .collect(),
+        ),
+        D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => (
+            InputKind::Hdr,
+            3,
+            img.to_rgb16()
+                .into_raw()
+                .iter()
+                .map(|&v| v as f32 / png16_scale)
+                .collect(),
+        ),
+        _ => return Err(err("unsupported PNG pixel format".into())),
+    };
+    Ok(Frame {
+        width: w,
+        height: h,
+        channels,
+        kind,
+        data,
+    })
+}
+
+impl FrameSet {
+    /// Lists the frames and reads the first to learn the sequence's shape.
+    pub fn open(spec: &str) -> Result<FrameSet, EncodeError> {
+        let (paths, notes, dir) = list(spec)?;
+        let manifest = Some(dir.join("manifest.json")).filter(|m| m.is_file());
+        let png16_scale = manifest
+            .as_ref()
+            .and_then(|m| std::fs::read_to_string(m).ok())
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v.get("png16_scale").and_then(|s| s.as_f64()))
+            .map_or(65535.0, |s| s as f32);
+        let first = read_file(&paths[0], png16_scale)?;
+        Ok(FrameSet {
+            kind: first.kind,
+            width: first.width,
+            height: first.height,
+            channels: first.channels,
+            paths,
+            png16_scale,
+            manifest,
+            notes,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.paths.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.paths.is_empty()
+    }
+
+    /// Reads frame `i` and checks it against the sequence: shape, finite, non-negative.
+    pub fn read(&self, i: usize) -> Result<Frame, EncodeError> {
+        let path = &self.paths[i];
+        let f = read_file(path, self.png16_scale)?;
+        let name = path.display();
+        if (f.width, f.height, f.channels, f.kind)
+            != (self.width, self.height, self.channels, self.kind)
+        {
+            return Err(EncodeError::Input(format!(
+                "{name}: frame {i} is {}×{} with {} channel(s) ({:?}), the sequence is {}×{} with {} ({:?})",
+                f.width, f.height, f.channels, f.kind, self.width, self.height, self.channels, self.kind
+            )));
+        }
+        if let Some(k) = f.data.iter().position(|v| !v.is_finite() || *v < 0.0) {
+            let t = k / f.channels;
+            return Err(EncodeError::Input(format!(
+                "{name}: frame {i}, texel ({}, {}) channel {}: value {} (must be finite and ≥ 0)",
+                t % f.width,
+                t / f.width,
+                k % f.channels,
+                f.data[k]
+            )));
+        }
+        Ok(f)
+    }
+}

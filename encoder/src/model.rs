@@ -1,0 +1,329 @@
+//! The model of one segment (`docs/MODEL.md`): given the decoded keyframes at its ends and
+//! the source frames inside, choose each tile's degree (luma and chroma apart) as the
+//! fewest terms that meet the error budget, and quantise the bubble-coefficient planes.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use vbim_format::basis::Projector;
+use vbim_format::chunk::{self, TileMap};
+use vbim_format::dct::N;
+use vbim_format::plane::{self, Plane};
+
+use crate::domain::Domain;
+
+/// A source frame in the coded domain with its per-texel sensitivity.
+pub struct CodedFrame {
+    pub planes: Vec<Plane>,
+    pub sens: Vec<f32>,
+}
+
+/// Per-plane weight of squared coded error in the mean RGB squared error: a luma error
+/// moves all three channels, a Co error two of them by the same amount, a Cg error all.
+pub const PLANE_WEIGHT: [f64; 3] = [1.0, 2.0 / 3.0, 1.0];
+
+/// Projectors by (segment length, max degree), built once.
+#[derive(Default)]
+pub struct Projectors {
+    map: HashMap<(u32, usize), Arc<Projector>>,
+}
+
+impl Projectors {
+    pub fn get(&mut self, len: u32, max_degree: usize) -> Arc<Projector> {
+        self.map
+            .entry((len, max_degree))
+            .or_insert_with(|| Arc::new(Projector::new(len, max_degree)))
+            .clone()
+    }
+}
+
+/// Weighted squared fit error of one tile for each number of bubbles 0..=nb, summed over
+/// its texels and interior frames, per plane group (luma, chroma). Optionally keeps
+/// z = Qᵀr per texel and plane (for the coefficients).
+#[allow(clippy::too_many_arguments)]
+fn tile_errors(
+    dom: &Domain,
+    tile: (usize, usize),
+    ts: usize,
+    stride: usize,
+    k0: &[Plane],
+    k1: &[Plane],
+    inner: &[&CodedFrame],
+    p: &Projector,
+    mut keep_z: Option<&mut Vec<f64>>,
+) -> ([Vec<f64>; 2], usize) {
+    let m = inner.len();
+    let nb = p.bubbles;
+    let len = (m + 1) as f64;
+    let mut err = [vec![0.0; nb + 1], vec![0.0; nb + 1]];
+    let mut r = vec![0.0f64; m];
+    let mut e = vec![0.0f64; m];
+    let mut z = vec![0.0f64; nb];
+    let mut count = 0;
+    let pw = dom.pw;
+    for ty in (0..ts).step_by(stride) {
+        for tx in (0..ts).step_by(stride) {
+            let i = (tile.1 * ts + ty) * pw + tile.0 * ts + tx;
+            count += 1;
+            for pl in 0..dom.channels {
+                let (a, b) = (k0[pl].data[i] as f64, k1[pl].data[i] as f64);
+                for (j, f) in inner.iter().enumerate() {
+                    let u = (j + 1) as f64 / len;
+                    r[j] = f.planes[pl].data[i] as f64 - (a * (1.0 - u) + b * u);
+                }
+                for (k, zk) in z.iter_mut().enumerate() {
+                    *zk = (0..m).map(|j| p.q[j * nb + k] * r[j]).sum();
+                }
+                let g = if pl == 0 { 0 } else { 1 };
+                let w = PLANE_WEIGHT[pl];
+                let mut acc = |e: &[f64], slot: usize| {
+                    let s: f64 = e
+                        .iter()
+                        .zip(inner)
+                        .map(|(v, f)| (v * f.sens[i] as f64).powi(2))
+                        .sum();
+                    err[g][slot] += w * s;
+                };
+                e.copy_from_slice(&r);
+                acc(&e, 0);
+                for k in 0..nb {
+                    for j in 0..m {
+                        e[j] -= z[k] * p.q[j * nb + k];
+                    }
+                    acc(&e, k + 1);
+                }
+                if let Some(zs) = keep_z.as_deref_mut() {
+                    zs.extend_from_slice(&z);
+                }
+            }
+        }
+    }
+    (err, count)
+}
+
+/// The largest per-tile RMS fit error (metric units) of a candidate segment fitted with
+/// `p` (all its bubbles), on every `stride`-th texel. Used to choose segment lengths.
+pub fn max_tile_error(
+    dom: &Domain,
+    ts: usize,
+    stride: usize,
+    frames: &[&CodedFrame],
+    p: &Projector,
+) -> f64 {
+    let (tx, ty) = (dom.pw / ts, dom.ph / ts);
+    let (k0, k1) = (&frames[0].planes, &frames[frames.len() - 1].planes);
+    let inner = &frames[1..frames.len() - 1];
+    (0..tx * ty)
+        .into_par_iter()
+        .map(|t| {
+            let (err, count) =
+                tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, p, None);
+            let n = (count * inner.len().max(1)) as f64;
+            ((err[0][p.bubbles] + err[1][p.bubbles]) / n).sqrt()
+        })
+        .reduce(|| 0.0, f64::max)
+}
+
+/// One coded segment: its tile map and compressed chunk payloads.
+pub struct SegmentCode {
+    pub tiles: TileMap,
+    pub tilemap_bytes: Vec<u8>,
+    pub coeff_bytes: Vec<u8>,
+}
+
+pub struct SegmentParams {
+    pub max_degree: usize,
+    /// Budget of the fit, RMS in metric units per tile.
+    pub fit_budget: f64,
+    /// Budget of coefficient quantisation, RMS in metric units.
+    pub quant_budget: f64,
+    pub chroma_step_factor: f32,
+    pub deadzone: f32,
+    pub zstd_level: i32,
+}
+
+/// Chooses degrees and codes the bubble planes of the segment between decoded keyframes
+/// `k0` and `k1` with source frames `inner` strictly between them.
+pub fn code_segment(
+    dom: &Domain,
+    ts: usize,
+    k0: &[Plane],
+    k1: &[Plane],
+    inner: &[&CodedFrame],
+    projectors: &mut Projectors,
+    sp: &SegmentParams,
+) -> SegmentCode {
+    let (tx, ty) = (dom.pw / ts, dom.ph / ts);
+    let ntiles = tx * ty;
+    let planes = dom.channels;
+    let len = inner.len() as u32 + 1;
+    let p = projectors.get(len, sp.max_degree);
+    let nb = p.bubbles;
+    // Per tile: degrees and z = Qᵀr for every texel and plane.
+    let per_tile: Vec<(u8, u8, Vec<f64>)> = (0..ntiles)
+        .into_par_iter()
+        .map(|t| {
+            let mut zs = Vec::with_capacity(ts * ts * planes * nb);
+            let (err, count) = tile_errors(
+                dom,
+                (t % tx, t / tx),
+                ts,
+                1,
+                k0,
+                k1,
+                inner,
+                &p,
+                Some(&mut zs),
+            );
+            let n = (count * inner.len().max(1)) as f64;
+            let budget = sp.fit_budget * sp.fit_budget * n;
+            // The cheapest (luma, chroma) pair within budget: each bubble costs one plane
+            // for luma and two for chroma.
+            let mut best = (nb + 1, nb + 1, usize::MAX);
+            for dl in 0..=nb {
+                for dc in 0..=dl {
+                    let e = err[0][dl] + if planes == 3 { err[1][dc] } else { 0.0 };
+                    let cost = dl + 2 * dc;
+                    if e <= budget && cost < best.2 {
+                        best = (dl, dc, cost);
+                    }
+                }
+            }
+            if best.2 == usize::MAX {
+                best = (nb, if planes == 3 { nb } else { 0 }, 0);
+            }
+            let dc = if planes == 3 { best.1 } else { 0 };
+            ((best.0 + 1) as u8, (dc + 1) as u8, zs)
+        })
+        .collect();
+    let tiles = TileMap {
+        luma: per_tile.iter().map(|t| t.0).collect(),
+        chroma: per_tile.iter().map(|t| t.1).collect(),
+    };
+    let dmax = tiles.max_degree() as usize;
+    // Bubble planes: coefficients of the chosen fit for each texel.
+    let mut bubbles: Vec<Vec<Plane>> = (2..=dmax)
+        .map(|_| vec![Plane::zeros(dom.pw, dom.ph); planes])
+        .collect();
+    for (t, (dl, dc, zs)) in per_tile.iter().enumerate() {
+        let (ox, oy) = ((t % tx) * ts, (t / tx) * ts);
+        let mut c = vec![0.0f64; nb];
+        let mut idx = 0;
+        for ty_ in 0..ts {
+            for tx_ in 0..ts {
+                let i = (oy + ty_) * dom.pw + ox + tx_;
+                for (pl, _) in (0..planes).enumerate() {
+                    let d = if pl == 0 { *dl } else { *dc } as usize - 1;
+                    let z = &zs[idx * nb..idx * nb + nb];
+                    idx += 1;
+                    p.coeffs_from_qt(z, d, &mut c);
+                    for k in 0..d {
+                        bubbles[k][pl].data[i] = c[k] as f32;
+                    }
+                }
+            }
+        }
+    }
+    // Quantiser steps: a coefficient error δ costs about rms(B_k)·δ in value, and the
+    // segment's RMS sensitivity turns that into metric units.
+    let sens_rms = {
+        let s: f64 = inner
+            .iter()
+            .map(|f| f.sens.iter().map(|v| (*v as f64).powi(2)).sum::<f64>())
+            .sum();
+        (s / (inner.len().max(1) * dom.pw * dom.ph) as f64)
+            .sqrt()
+            .max(1e-9)
+    };
+    let mut steps = Vec::new();
+    let mut blocks = Vec::new();
+    for k in 2..=dmax {
+        let brms = (1..len)
+            .map(|j| vbim_format::basis::bubble(k, j as f64 / len as f64).powi(2))
+            .sum::<f64>()
+            .max(1e-12)
+            / (len as f64 - 1.0).max(1.0);
+        let base = ((12.0f64).sqrt() * sp.quant_budget
+            / (sens_rms * brms.sqrt() * (dmax as f64 - 1.0).sqrt())) as f32;
+        for pl in 0..planes {
+            let step = if pl == 0 {
+                base
+            } else {
+                base * sp.chroma_step_factor
+            };
+            steps.push(step);
+            let members: Vec<usize> = (0..ntiles)
+                .filter(|&t| tiles.degree(pl, t) as usize >= k)
+                .collect();
+            let src = &bubbles[k - 2][pl];
+            let q: Vec<[i32; N * N]> = members
+                .par_iter()
+                .flat_map_iter(|&t| plane::tile_blocks(t, tx, ts).collect::<Vec<_>>())
+                .map(|(bx, by)| plane::quantize_block(&src.read_block(bx, by), step, sp.deadzone))
+                .collect();
+            blocks.push(q);
+        }
+    }
+    let raw = chunk::write_coeffs(dmax as u8, &steps, &blocks);
+    SegmentCode {
+        tilemap_bytes: zstd::bulk::compress(&chunk::write_tilemap(&tiles), sp.zstd_level)
+            .expect("zstd"),
+        coeff_bytes: zstd::bulk::compress(&raw, sp.zstd_level).expect("zstd"),
+        tiles,
+    }
+}
+
+/// Codes a keyframe: intra, or as the difference from the previous decoded keyframe.
+/// Returns the payload; the caller decodes it with the reference decoder (closed loop).
+pub fn code_keyframe(
+    dom: &Domain,
+    src: &CodedFrame,
+    prev: Option<&[Plane]>,
+    budget: f64,
+    chroma_step_factor: f32,
+    deadzone: f32,
+    zstd_level: i32,
+) -> Vec<u8> {
+    let sens_rms = (src.sens.iter().map(|v| (*v as f64).powi(2)).sum::<f64>()
+        / src.sens.len() as f64)
+        .sqrt()
+        .max(1e-9);
+    let base = ((12.0f64).sqrt() * budget / sens_rms) as f32;
+    let mut steps = Vec::new();
+    let mut blocks = Vec::new();
+    for (pl, plane_src) in src.planes.iter().enumerate() {
+        let step = if pl == 0 {
+            base
+        } else {
+            base * chroma_step_factor
+        };
+        steps.push(step);
+        let target: Plane = match prev {
+            Some(p) => Plane {
+                w: plane_src.w,
+                h: plane_src.h,
+                data: plane_src
+                    .data
+                    .iter()
+                    .zip(&p[pl].data)
+                    .map(|(a, b)| a - b)
+                    .collect(),
+            },
+            None => plane_src.clone(),
+        };
+        let origins: Vec<(usize, usize)> = plane::all_blocks(&target).collect();
+        let q: Vec<[i32; N * N]> = origins
+            .par_iter()
+            .map(|&(bx, by)| plane::quantize_block(&target.read_block(bx, by), step, deadzone))
+            .collect();
+        blocks.push(q);
+    }
+    let mode = if prev.is_some() {
+        chunk::MODE_PREDICTED
+    } else {
+        chunk::MODE_INTRA
+    };
+    let _ = dom;
+    zstd::bulk::compress(&chunk::write_keyframe(mode, &steps, &blocks), zstd_level).expect("zstd")
+}

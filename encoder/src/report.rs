@@ -1,0 +1,266 @@
+//! What an encode did: size, rate, timing, how the terms were spent, and — measured by
+//! decoding the file with the reference decoder — the error against the input.
+
+use std::path::Path;
+
+use serde::Serialize;
+use vbim_format::chunk::TileMap;
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::metrics::{Metric, SequenceError};
+use vbim_format::{ColorEncoding, Header, Reader};
+
+use crate::{EncodeError, EncoderConfig, FrameSet, Progress};
+
+#[derive(Clone, Debug, Serialize)]
+pub struct EncodeReport {
+    pub frames: usize,
+    pub width: usize,
+    pub height: usize,
+    pub bytes: u64,
+    pub bpp: f64,
+    /// Raw size (8-bit: 1 byte per value; HDR: half floats) over the file's size.
+    pub ratio_to_raw: f64,
+    pub encode_s: f64,
+    pub total_s: f64,
+    /// Texel-frames encoded per second of encode time.
+    pub texel_frames_per_s: f64,
+    pub tolerance_db: f64,
+    pub max_degree: usize,
+    /// Tiles × segments per luma degree (index = degree).
+    pub degree_histogram: Vec<u64>,
+    pub chroma_degree_histogram: Vec<u64>,
+    /// Share of tiles with curvature (luma degree > 1) whose chroma is linear (LRGB).
+    pub lrgb_share: f64,
+    pub segment_lengths: Vec<u32>,
+    pub keyframes: u32,
+    pub intra_keyframes: usize,
+    /// Filled by [`EncodeReport::verify`].
+    pub mean_psnr: Option<f64>,
+    pub worst_psnr: Option<f64>,
+    pub worst_frame: Option<usize>,
+    /// Largest error on the metric's 0–1 scale.
+    pub max_abs_error: Option<f64>,
+    /// HDR: largest relative error over texels brighter than 1% of white.
+    pub max_rel_error: Option<f64>,
+    /// Per-frame PSNR.
+    pub frame_psnr: Vec<f64>,
+    #[serde(skip)]
+    pub metric: Metric,
+}
+
+impl EncodeReport {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        fs: &FrameSet,
+        cfg: &EncoderConfig,
+        h: &Header,
+        boundaries: &[u32],
+        tilemaps: &[TileMap],
+        encode_s: f64,
+        total_s: f64,
+        metric: Metric,
+    ) -> EncodeReport {
+        let texel_frames = (fs.width * fs.height * fs.len()) as f64;
+        let raw = texel_frames
+            * fs.channels as f64
+            * if h.color == ColorEncoding::Srgb8 {
+                1.0
+            } else {
+                2.0
+            };
+        let mut hist = vec![0u64; cfg.max_degree + 1];
+        let mut chist = vec![0u64; cfg.max_degree + 1];
+        let (mut curved, mut lrgb) = (0u64, 0u64);
+        for t in tilemaps {
+            for (l, c) in t.luma.iter().zip(&t.chroma) {
+                hist[*l as usize] += 1;
+                chist[*c as usize] += 1;
+                if *l > 1 {
+                    curved += 1;
+                    if *c == 1 && fs.channels == 3 {
+                        lrgb += 1;
+                    }
+                }
+            }
+        }
+        EncodeReport {
+            frames: fs.len(),
+            width: fs.width,
+            height: fs.height,
+            bytes: h.file_size,
+            bpp: h.file_size as f64 * 8.0 / texel_frames,
+            ratio_to_raw: raw / h.file_size as f64,
+            encode_s,
+            total_s,
+            texel_frames_per_s: texel_frames / encode_s.max(1e-9),
+            tolerance_db: cfg.tolerance_db,
+            max_degree: cfg.max_degree,
+            degree_histogram: hist,
+            chroma_degree_histogram: chist,
+            lrgb_share: if curved > 0 {
+                lrgb as f64 / curved as f64
+            } else {
+                0.0
+            },
+            segment_lengths: boundaries.windows(2).map(|w| w[1] - w[0]).collect(),
+            keyframes: h.keyframe_count,
+            intra_keyframes: 0,
+            mean_psnr: None,
+            worst_psnr: None,
+            worst_frame: None,
+            max_abs_error: None,
+            max_rel_error: None,
+            frame_psnr: Vec::new(),
+            metric,
+        }
+    }
+
+    /// Decodes `file` with the reference decoder and measures it against the input.
+    pub fn verify(
+        &mut self,
+        fs: &FrameSet,
+        file: &Path,
+        progress: Progress,
+    ) -> Result<(), EncodeError> {
+        let seq = measure(fs, file, self.metric, progress)?;
+        let (wf, wp) = seq.worst();
+        self.mean_psnr = Some(seq.mean_psnr());
+        self.worst_psnr = Some(wp);
+        self.worst_frame = Some(wf);
+        self.max_abs_error = Some(seq.max_abs());
+        self.max_rel_error = matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel());
+        self.frame_psnr = seq.frames.iter().map(|f| f.psnr()).collect();
+        let r = Reader::open(std::io::BufReader::new(
+            std::fs::File::open(file)
+                .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?,
+        ))?;
+        self.intra_keyframes = r
+            .layout()
+            .keyframes
+            .iter()
+            .filter(|&&k| r.entries()[k].is_intra())
+            .count();
+        Ok(())
+    }
+}
+
+/// Decodes every frame of `file` and compares it with the source frames.
+pub fn measure(
+    fs: &FrameSet,
+    file: &Path,
+    metric: Metric,
+    progress: Progress,
+) -> Result<SequenceError, EncodeError> {
+    let f = std::fs::File::open(file)
+        .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
+    let reader = Reader::open(std::io::BufReader::new(f))
+        .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
+    let h = reader.header().clone();
+    if h.frame_count as usize != fs.len()
+        || h.width as usize != fs.width
+        || h.height as usize != fs.height
+    {
+        return Err(EncodeError::Input(format!(
+            "{}: {}×{}×{} frames, the input is {}×{}×{}",
+            file.display(),
+            h.width,
+            h.height,
+            h.frame_count,
+            fs.width,
+            fs.height,
+            fs.len()
+        )));
+    }
+    let mut dec = Decoder::new(reader);
+    let mut seq = SequenceError::default();
+    let mut out = vec![0f32; h.texel_count() * h.channels as usize];
+    for i in 0..fs.len() {
+        dec.frame(i as f64, Output::Stored, &mut out)
+            .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
+        let src = fs.read(i)?;
+        seq.push(metric.compare(&src.data, &out));
+        progress("verify", i as u64 + 1, fs.len() as u64);
+    }
+    Ok(seq)
+}
+
+impl std::fmt::Display for EncodeReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "size        {} bytes, {:.4} bpp, {:.1}× smaller than raw",
+            self.bytes, self.bpp, self.ratio_to_raw
+        )?;
+        if let (Some(m), Some(w), Some(wf)) = (self.mean_psnr, self.worst_psnr, self.worst_frame) {
+            write!(f, "error       mean PSNR {m:.2} dB, worst frame {w:.2} dB (frame {wf}), largest error {:.4}", self.max_abs_error.unwrap_or(0.0))?;
+            if let Some(r) = self.max_rel_error {
+                write!(
+                    f,
+                    ", largest relative error {:.2}% (texels > 1% of white)",
+                    r * 100.0
+                )?;
+            }
+            writeln!(f)?;
+        }
+        writeln!(
+            f,
+            "time        encode {:.2} s ({:.2} M texel-frames/s), total {:.2} s",
+            self.encode_s,
+            self.texel_frames_per_s / 1e6,
+            self.total_s
+        )?;
+        let total: u64 = self.degree_histogram.iter().sum();
+        let hist: Vec<String> = self
+            .degree_histogram
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(d, n)| format!("{d}: {:.1}%", 100.0 * *n as f64 / total.max(1) as f64))
+            .collect();
+        writeln!(
+            f,
+            "degrees     luma, share of tiles × segments: {}",
+            hist.join("  ")
+        )?;
+        writeln!(
+            f,
+            "colour      LRGB (one luma curve + chroma from keyframes) on {:.1}% of curved tiles",
+            self.lrgb_share * 100.0
+        )?;
+        let (mn, mx) = (
+            self.segment_lengths.iter().min().unwrap_or(&0),
+            self.segment_lengths.iter().max().unwrap_or(&0),
+        );
+        let mut lens: BTreeCount = BTreeCount::default();
+        for l in &self.segment_lengths {
+            lens.add(*l);
+        }
+        writeln!(
+            f,
+            "segments    {} ({}–{} frames; length×count {})",
+            self.segment_lengths.len(),
+            mn,
+            mx,
+            lens
+        )?;
+        write!(
+            f,
+            "keyframes   {} ({} intra)",
+            self.keyframes, self.intra_keyframes
+        )
+    }
+}
+
+#[derive(Default)]
+struct BTreeCount(std::collections::BTreeMap<u32, u32>);
+impl BTreeCount {
+    fn add(&mut self, k: u32) {
+        *self.0.entry(k).or_default() += 1;
+    }
+}
+impl std::fmt::Display for BTreeCount {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v: Vec<String> = self.0.iter().map(|(k, n)| format!("{k}×{n}")).collect();
+        write!(f, "{}", v.join(" "))
+    }
+}

@@ -1,0 +1,104 @@
+//! `vbim encode INPUT --out FILE.vbim`
+
+use vbim_encoder::{encode, EncoderConfig, FrameSet, Preset, SegmentMode};
+
+use crate::cli::EncodeArgs;
+use crate::progress::Stages;
+use crate::units::{parse_duration, parse_rate};
+
+pub fn run(a: EncodeArgs) -> Result<(), String> {
+    let frames = FrameSet::open(&a.input).map_err(|e| e.to_string())?;
+    for note in &frames.notes {
+        eprintln!("note: {note}");
+    }
+    let preset = if a.fast {
+        Preset::Fast
+    } else if a.best {
+        Preset::Best
+    } else {
+        Preset::Default
+    };
+    let mut cfg = EncoderConfig::preset(preset);
+    // The bake's manifest supplies the frame rate and the metadata unless told otherwise.
+    let manifest_text = match (&a.meta, &frames.manifest) {
+        (Some(p), _) => {
+            Some(std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?)
+        }
+        (None, Some(p)) => std::fs::read_to_string(p).ok(),
+        (None, None) => None,
+    };
+    let manifest: Option<serde_json::Value> = match &manifest_text {
+        Some(t) => Some(serde_json::from_str(t).map_err(|e| format!("metadata JSON: {e}"))?),
+        None => None,
+    };
+    cfg.metadata = manifest_text;
+    cfg.rate = match (
+        &a.fps,
+        manifest
+            .as_ref()
+            .and_then(|m| m.get("fps"))
+            .and_then(|v| v.as_str()),
+    ) {
+        (Some(f), _) => parse_rate(f)?,
+        (None, Some(f)) => parse_rate(f)?,
+        (None, None) => (24, 1),
+    };
+    if let Some(t) = a.tolerance {
+        cfg.tolerance_db = t;
+    }
+    if let Some(d) = a.max_degree {
+        cfg.max_degree = d;
+    }
+    if let Some(s) = &a.segment {
+        cfg.segment = parse_segment(s, cfg.segment)?;
+    }
+    if let Some(z) = a.zstd_level {
+        cfg.zstd_level = z;
+    }
+    if let Some(i) = &a.intra_interval {
+        cfg.intra_interval_s = parse_duration(i)?;
+    }
+    if let Some(l) = a.looping {
+        cfg.looping = l;
+    }
+    if let Some(t) = a.tile {
+        cfg.tile_size = t;
+    }
+    cfg.threads = a.threads;
+    let stages = Stages::new();
+    let rep = encode(&frames, &cfg, &a.out, !a.no_verify, &|s, d, t| {
+        stages.report(s, d, t)
+    })
+    .map_err(|e| e.to_string())?;
+    stages.finish();
+    println!(
+        "encoded {} frames of {}×{} into {}",
+        rep.frames,
+        rep.width,
+        rep.height,
+        a.out.display()
+    );
+    println!("{rep}");
+    if let Some(p) = &a.report {
+        std::fs::write(p, serde_json::to_string_pretty(&rep).unwrap())
+            .map_err(|e| format!("{}: {e}", p.display()))?;
+    }
+    Ok(())
+}
+
+fn parse_segment(s: &str, current: SegmentMode) -> Result<SegmentMode, String> {
+    let bad = || format!("--segment {s:?} (expected auto, auto:N or a number of frames)");
+    if s == "auto" {
+        return Ok(match current {
+            SegmentMode::Auto { max } => SegmentMode::Auto { max },
+            SegmentMode::Fixed(_) => SegmentMode::Auto { max: 48 },
+        });
+    }
+    if let Some(n) = s.strip_prefix("auto:") {
+        return n
+            .parse()
+            .map(|max| SegmentMode::Auto { max })
+            .map_err(|_| bad());
+    }
+    s.parse().map(SegmentMode::Fixed).map_err(|_| bad())
+}
