@@ -27,6 +27,34 @@ pub enum Command {
     Decode(DecodeArgs),
     /// Compare two sequences (directories, patterns or .vbim files) with the protocol's metrics.
     Compare(CompareArgs),
+    /// Benchmarks (results go in BENCHMARKS.md).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand)]
+pub enum BenchCommand {
+    /// Time the baker: precomputation, per-frame lighting and file writing, apart.
+    Bake(BenchBakeArgs),
+}
+
+#[derive(Args)]
+pub struct BenchBakeArgs {
+    /// Scene file [default: samples/jacksboro.toml].
+    #[arg(default_value = "samples/jacksboro.toml")]
+    pub scene: PathBuf,
+    /// Bake resolution, texels per side [default: 512].
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Frames per day [default: 240].
+    #[arg(long, default_value_t = 240)]
+    pub frames: usize,
+    /// Repetitions; the median and the spread are reported [default: 5].
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Moving clouds on or off [default: off].
+    #[arg(long, default_value_t = false)]
+    pub clouds: bool,
 }
 
 #[derive(Args)]

@@ -3,6 +3,7 @@
 
 mod cli;
 mod cmd_bake;
+mod cmd_bench;
 mod cmd_compare;
 mod cmd_decode;
 mod cmd_encode;
@@ -23,6 +24,7 @@ fn main() -> ExitCode {
         cli::Command::Inspect(a) => cmd_inspect::run(a),
         cli::Command::Decode(a) => cmd_decode::run(a),
         cli::Command::Compare(a) => cmd_compare::run(a),
+        cli::Command::Bench(b) => cmd_bench::run(b),
     };
     match res {
         Ok(()) => ExitCode::SUCCESS,

@@ -102,27 +102,30 @@ fn tile_errors(
     (err, count)
 }
 
-/// The largest per-tile RMS fit error (metric units) of a candidate segment fitted with
-/// `p` (all its bubbles), on every `stride`-th texel. Used to choose segment lengths.
-pub fn max_tile_error(
+/// The RMS over all tiles and the largest per-tile RMS of the fit error (metric units) of
+/// a candidate segment fitted with `p` (all its bubbles), on every `stride`-th texel.
+/// Used to choose segment lengths.
+pub fn fit_error(
     dom: &Domain,
     ts: usize,
     stride: usize,
     frames: &[&CodedFrame],
     p: &Projector,
-) -> f64 {
+) -> (f64, f64) {
     let (tx, ty) = (dom.pw / ts, dom.ph / ts);
     let (k0, k1) = (&frames[0].planes, &frames[frames.len() - 1].planes);
     let inner = &frames[1..frames.len() - 1];
-    (0..tx * ty)
+    let sum_max = (0..tx * ty)
         .into_par_iter()
         .map(|t| {
             let (err, count) =
                 tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, p, None);
             let n = (count * inner.len().max(1)) as f64;
-            ((err[0][p.bubbles] + err[1][p.bubbles]) / n).sqrt()
+            let ms = (err[0][p.bubbles] + err[1][p.bubbles]) / n;
+            (ms, ms)
         })
-        .reduce(|| 0.0, f64::max)
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)));
+    ((sum_max.0 / (tx * ty) as f64).sqrt(), sum_max.1.sqrt())
 }
 
 /// One coded segment: its tile map and compressed chunk payloads.

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::heightfield::HeightField;
 use crate::horizon::azimuth;
-use crate::sky::visible;
+use crate::sky::Sector;
 
 #[derive(Clone, Copy, Debug)]
 pub struct ObscuranceParams {
@@ -27,10 +27,10 @@ pub struct ObscuranceParams {
 pub fn compute(hf: &HeightField, normals: &[[f32; 3]], p: ObscuranceParams) -> Vec<f32> {
     let n = p.azimuths;
     let half = std::f64::consts::PI / n as f64;
-    let dirs: Vec<(f64, f64, f64)> = (0..n)
+    let dirs: Vec<(Sector, f64, f64)> = (0..n)
         .map(|a| {
             let phi = azimuth(a, n);
-            (phi, phi.cos(), phi.sin())
+            (Sector::new(phi - half, phi + half), phi.cos(), phi.sin())
         })
         .collect();
     let rho = |l: f64| {
@@ -47,11 +47,11 @@ pub fn compute(hf: &HeightField, normals: &[[f32; 3]], p: ObscuranceParams) -> V
             let nrm = &normals[i];
             let z0 = hf.at(x, y) as f64;
             let mut w = 0.0;
-            for &(phi, dx, dy) in &dirs {
-                let (a1, a2) = (phi - half, phi + half);
+            for (sector, dx, dy) in &dirs {
+                let (dx, dy) = (*dx, *dy);
                 // Start at the tangent plane's elevation in this direction.
                 let mut beta = (-(nrm[0] as f64 * dx + nrm[1] as f64 * dy) / nrm[2] as f64).atan();
-                let mut prev_vis = visible(nrm, a1, a2, beta);
+                let mut prev_vis = sector.visible(nrm, beta);
                 let mut k = 1.0;
                 loop {
                     let (sx, sy) = (x as f64 + dx * k, y as f64 + dy * k);
@@ -66,7 +66,7 @@ pub fn compute(hf: &HeightField, normals: &[[f32; 3]], p: ObscuranceParams) -> V
                     }
                     let b = ((hf.sample(sx as f32, sy as f32) as f64 - z0) / d).atan();
                     if b > beta {
-                        let vis = visible(nrm, a1, a2, b);
+                        let vis = sector.visible(nrm, b);
                         w += rho(d) * (prev_vis - vis);
                         prev_vis = vis;
                         beta = b;

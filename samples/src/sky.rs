@@ -7,6 +7,8 @@
 //! and this is exactly Eq. 4). N·V(φ) is the sector's share of I(p) = ∫_D N·v dΩ; a flat
 //! open plane gets I = π.
 
+use rayon::prelude::*;
+
 use crate::horizon::{azimuth, HorizonMap};
 
 /// Number of sky sectors whose radiance can differ (the sun-side glow is per sector).
@@ -22,12 +24,38 @@ pub fn sector_vector(a1: f64, a2: f64, phi: f64) -> [f64; 3] {
     ]
 }
 
-/// N·V for the horizon elevation `beta` (radians above the horizontal) of a sub-sector.
+/// A sector's constant factors of Eq. 4: Δsin, Δcos and its width.
+#[derive(Clone, Copy, Debug)]
+pub struct Sector {
+    pub dsin: f64,
+    pub dcos: f64,
+    pub width: f64,
+}
+
+impl Sector {
+    pub fn new(a1: f64, a2: f64) -> Sector {
+        Sector {
+            dsin: a2.sin() - a1.sin(),
+            dcos: a1.cos() - a2.cos(),
+            width: a2 - a1,
+        }
+    }
+
+    /// N·V for the horizon elevation `beta` (radians above the horizontal): with
+    /// φ = π/2 − β, φ − sin 2φ / 2 = π/2 − β − sin 2β / 2 and sin²φ = cos²β.
+    #[inline]
+    pub fn visible(&self, n: &[f32; 3], beta: f64) -> f64 {
+        let b = beta.clamp(-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
+        let (sb, cb) = b.sin_cos();
+        let t = std::f64::consts::FRAC_PI_2 - b - sb * cb;
+        let v = [t * self.dsin, t * self.dcos, self.width * cb * cb];
+        0.5 * (n[0] as f64 * v[0] + n[1] as f64 * v[1] + n[2] as f64 * v[2])
+    }
+}
+
+/// N·V for the horizon elevation `beta` of the sector [a1, a2].
 pub fn visible(normal: &[f32; 3], a1: f64, a2: f64, beta: f64) -> f64 {
-    let phi = std::f64::consts::FRAC_PI_2
-        - beta.clamp(-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
-    let v = sector_vector(a1, a2, phi);
-    normal[0] as f64 * v[0] + normal[1] as f64 * v[1] + normal[2] as f64 * v[2]
+    Sector::new(a1, a2).visible(normal, beta)
 }
 
 /// Per-texel sky coefficients: `coef[s * texels + i]` is sector s's share of I(p) (so that a
@@ -47,26 +75,31 @@ impl SkyVisibility {
             "azimuth count must be a multiple of {SECTORS}"
         );
         let half = std::f64::consts::PI / n as f64;
+        let sectors: Vec<Sector> = (0..n)
+            .map(|a| Sector::new(azimuth(a, n) - half, azimuth(a, n) + half))
+            .collect();
+        let per_texel: Vec<([f32; SECTORS], f32)> = (0..texels)
+            .into_par_iter()
+            .map(|i| {
+                let mut c = [0f32; SECTORS];
+                let mut sum = 0.0;
+                for (s, cs) in c.iter_mut().enumerate() {
+                    let v: f64 = (s * per..(s + 1) * per)
+                        .map(|a| sectors[a].visible(&normals[i], horizons.plane(a)[i] as f64))
+                        .sum();
+                    *cs = v.max(0.0) as f32;
+                    sum += v.max(0.0);
+                }
+                (c, sum.clamp(0.0, std::f64::consts::PI) as f32)
+            })
+            .collect();
         let mut coef = vec![0f32; SECTORS * texels];
         let mut total = vec![0f32; texels];
-        for i in 0..texels {
-            let mut sum = 0.0;
+        for (i, (c, t)) in per_texel.iter().enumerate() {
             for s in 0..SECTORS {
-                let mut c = 0.0;
-                for a in s * per..(s + 1) * per {
-                    let phi = azimuth(a, n);
-                    c += visible(
-                        &normals[i],
-                        phi - half,
-                        phi + half,
-                        horizons.plane(a)[i] as f64,
-                    );
-                }
-                let c = c.max(0.0);
-                coef[s * texels + i] = c as f32;
-                sum += c;
+                coef[s * texels + i] = c[s];
             }
-            total[i] = sum.clamp(0.0, std::f64::consts::PI) as f32;
+            total[i] = *t;
         }
         SkyVisibility { coef, total }
     }
