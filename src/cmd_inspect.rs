@@ -160,8 +160,8 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
         );
         for p in &h.read_ahead {
             println!(
-                "  read-ahead  at {:>10.3} MB/s: ring {:>10} bytes, preroll {:.3} s",
-                p.rate as f64 / 1e6,
+                "  read-ahead  at {:>12}: ring {:>10} bytes, preroll {:.3} s",
+                rate_text(p.rate),
                 p.bytes,
                 p.preroll_ns as f64 * 1e-9
             );
@@ -206,4 +206,18 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
         return Err(format!("{name}: {damaged} damaged chunk(s)"));
     }
     Ok(())
+}
+
+/// A rate in SI units (PROTOCOL.md): B/s, kB/s, MB/s or GB/s.
+fn rate_text(r: u64) -> String {
+    let r = r as f64;
+    if r >= 1e9 {
+        format!("{:.2} GB/s", r / 1e9)
+    } else if r >= 1e6 {
+        format!("{:.2} MB/s", r / 1e6)
+    } else if r >= 1e3 {
+        format!("{:.2} kB/s", r / 1e3)
+    } else {
+        format!("{r:.0} B/s")
+    }
 }

@@ -17,6 +17,12 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // Die quietly when the reader of our output goes away (`vbim inspect F | head`), as
+    // Unix tools do, instead of panicking on a failed print.
+    #[cfg(unix)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let args = cli::Cli::parse();
     let res = match args.command {
         cli::Command::Bake(a) => cmd_bake::run(a),

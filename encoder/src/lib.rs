@@ -141,7 +141,7 @@ impl EncoderConfig {
         if !(1..=22).contains(&self.zstd_level) {
             return bad(format!("--zstd-level {} (1 to 22)", self.zstd_level));
         }
-        if !(self.intra_interval_s > 0.0) {
+        if self.intra_interval_s.is_nan() || self.intra_interval_s <= 0.0 {
             return bad(format!(
                 "--intra-interval {} s (must be positive)",
                 self.intra_interval_s

@@ -87,9 +87,9 @@ fn tile_errors(
                 };
                 e.copy_from_slice(&r);
                 acc(&e, 0);
-                for k in 0..nb {
-                    for j in 0..m {
-                        e[j] -= z[k] * p.q[j * nb + k];
+                for (k, zk) in z.iter().enumerate() {
+                    for (j, ej) in e.iter_mut().enumerate() {
+                        *ej -= zk * p.q[j * nb + k];
                     }
                     acc(&e, k + 1);
                 }
@@ -249,7 +249,7 @@ pub fn code_segment(
             / (len as f64 - 1.0).max(1.0);
         let base = ((12.0f64).sqrt() * sp.quant_budget
             / (sens_rms * brms.sqrt() * (dmax as f64 - 1.0).sqrt())) as f32;
-        for pl in 0..planes {
+        for (pl, src) in bubbles[k - 2].iter().enumerate() {
             let step = if pl == 0 {
                 base
             } else {
@@ -259,7 +259,6 @@ pub fn code_segment(
             let members: Vec<usize> = (0..ntiles)
                 .filter(|&t| tiles.degree(pl, t) as usize >= k)
                 .collect();
-            let src = &bubbles[k - 2][pl];
             let q: Vec<[i32; N * N]> = members
                 .par_iter()
                 .flat_map_iter(|&t| plane::tile_blocks(t, tx, ts).collect::<Vec<_>>())

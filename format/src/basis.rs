@@ -142,11 +142,8 @@ impl Projector {
     pub fn coeffs_from_qt(&self, z: &[f64], d: usize, out: &mut [f64]) {
         let n = self.bubbles;
         for k in (0..d).rev() {
-            let mut v = z[k];
-            for i in k + 1..d {
-                v -= self.r[k * n + i] * out[i];
-            }
-            out[k] = v / self.r[k * n + k];
+            let tail: f64 = (k + 1..d).map(|i| self.r[k * n + i] * out[i]).sum();
+            out[k] = (z[k] - tail) / self.r[k * n + k];
         }
     }
 }

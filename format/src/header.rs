@@ -163,7 +163,7 @@ impl Header {
             });
         }
         let header_size = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-        if header_size < HEADER_SIZE || header_size > 1 << 16 {
+        if !(HEADER_SIZE..=1 << 16).contains(&header_size) {
             return Err(FormatError::InvalidHeader(format!(
                 "header size {header_size} (expected {HEADER_SIZE} to 65536)"
             )));

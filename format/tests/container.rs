@@ -274,7 +274,8 @@ fn hostile(edit: impl Fn(&mut Header)) -> Result<(), FormatError> {
 
 #[test]
 fn hostile_headers_are_refused_before_allocation() {
-    let cases: Vec<(&str, Box<dyn Fn(&mut Header)>)> = vec![
+    type Edit = Box<dyn Fn(&mut Header)>;
+    let cases: Vec<(&str, Edit)> = vec![
         ("width 2^31", Box::new(|h| h.width = 1 << 31)),
         ("height 0", Box::new(|h| h.height = 0)),
         ("frames 2^32-1", Box::new(|h| h.frame_count = u32::MAX)),

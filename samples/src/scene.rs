@@ -198,7 +198,7 @@ impl Scene {
                 self.sun.angular_diameter_deg
             ));
         }
-        if !(self.obscurance.l_max_cells >= 1.0) {
+        if self.obscurance.l_max_cells.is_nan() || self.obscurance.l_max_cells < 1.0 {
             return Err(format!(
                 "obscurance.l_max_cells = {}",
                 self.obscurance.l_max_cells
