@@ -14,8 +14,15 @@ fn vbim(args: &[&str]) -> Output {
 
 fn ok(args: &[&str]) -> String {
     let o = vbim(args);
-    let (out, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "vbim {args:?} failed ({:?}):\n{out}\n{err}", o.status);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(
+        o.status.success(),
+        "vbim {args:?} failed ({:?}):\n{out}\n{err}",
+        o.status
+    );
     out.into_owned()
 }
 
@@ -27,25 +34,56 @@ fn s(p: &Path) -> &str {
 fn bake_encode_inspect_decode_compare() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("frames");
-    let out = ok(&["bake", "samples/jacksboro.toml", "--out", s(&frames), "--size", "48", "--frames", "12"]);
+    let out = ok(&[
+        "bake",
+        "samples/jacksboro.toml",
+        "--out",
+        s(&frames),
+        "--size",
+        "48",
+        "--frames",
+        "12",
+    ]);
     assert!(out.contains("baked 12 frames"), "{out}");
     assert!(frames.join("frame_0011.exr").is_file());
     assert!(frames.join("manifest.json").is_file() && frames.join("contact_sheet.png").is_file());
 
     let file = dir.path().join("seq.vbim");
     let report = dir.path().join("report.json");
-    let out = ok(&["encode", s(&frames), "-o", s(&file), "--fps", "24/1", "--report", s(&report)]);
+    let out = ok(&[
+        "encode",
+        s(&frames),
+        "-o",
+        s(&file),
+        "--fps",
+        "24/1",
+        "--report",
+        s(&report),
+    ]);
     assert!(out.contains("mean PSNR"), "{out}");
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let psnr = rep["mean_psnr"].as_f64().unwrap();
     assert!(psnr > 40.0, "mean PSNR {psnr}");
 
     let out = ok(&["inspect", s(&file)]);
-    assert!(out.contains("48×48") && out.contains("12 at 24/1 fps") && out.contains("key/intra"), "{out}");
-    let json: serde_json::Value = serde_json::from_str(&ok(&["inspect", s(&file), "--json"])).unwrap();
+    assert!(
+        out.contains("48×48") && out.contains("12 at 24/1 fps") && out.contains("key/intra"),
+        "{out}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", s(&file), "--json"])).unwrap();
     assert_eq!(json["header"]["frames"], 12);
-    assert!(json["chunks"].as_array().unwrap().iter().all(|c| c["status"] == "ok"));
-    assert_eq!(json["metadata_bytes"].as_u64().is_some(), true, "the bake's manifest is stored");
+    assert!(json["chunks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|c| c["status"] == "ok"));
+    assert_eq!(
+        json["metadata_bytes"].as_u64().is_some(),
+        true,
+        "the bake's manifest is stored"
+    );
 
     let decoded = dir.path().join("decoded");
     ok(&["decode", s(&file), "-o", s(&decoded)]);
@@ -55,7 +93,13 @@ fn bake_encode_inspect_decode_compare() {
     assert!(png.join("frame_0000.png").is_file());
 
     let out = ok(&["compare", s(&frames), s(&decoded), "--csv", "-"]);
-    assert!(out.lines().filter(|l| l.starts_with(char::is_numeric)).count() == 12, "{out}");
+    assert!(
+        out.lines()
+            .filter(|l| l.starts_with(char::is_numeric))
+            .count()
+            == 12,
+        "{out}"
+    );
     let mean: f64 = out
         .lines()
         .find(|l| l.starts_with("mean PSNR"))
@@ -63,17 +107,34 @@ fn bake_encode_inspect_decode_compare() {
         .and_then(|v| v.parse().ok())
         .unwrap();
     // The decoded EXRs are half floats: the same figure as the encoder's, within rounding.
-    assert!((mean - psnr).abs() < 0.5, "compare says {mean}, encode said {psnr}");
+    assert!(
+        (mean - psnr).abs() < 0.5,
+        "compare says {mean}, encode said {psnr}"
+    );
     // Comparing the .vbim directly gives the encoder's figure.
     let out = ok(&["compare", s(&frames), s(&file)]);
-    assert!(out.contains(&format!("{psnr:.3}")) || out.contains("mean PSNR"), "{out}");
+    assert!(
+        out.contains(&format!("{psnr:.3}")) || out.contains("mean PSNR"),
+        "{out}"
+    );
 }
 
 #[test]
 fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("f");
-    ok(&["bake", "samples/jacksboro.toml", "--out", s(&frames), "--size", "16", "--frames", "4", "--format", "png8"]);
+    ok(&[
+        "bake",
+        "samples/jacksboro.toml",
+        "--out",
+        s(&frames),
+        "--size",
+        "16",
+        "--frames",
+        "4",
+        "--format",
+        "png8",
+    ]);
     let file = dir.path().join("a.vbim");
     ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
     // Flip a byte in the last chunk: inspect reports that chunk, exit status 1.
@@ -85,20 +146,36 @@ fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
     let o = vbim(&["inspect", s(&bad)]);
     assert_eq!(o.status.code(), Some(1));
     let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-    assert!(text.contains("checksum mismatch") && text.contains("damaged chunk"), "{text}");
+    assert!(
+        text.contains("checksum mismatch") && text.contains("damaged chunk"),
+        "{text}"
+    );
     // A truncated file.
     std::fs::write(&bad, &bytes[..n / 2]).unwrap();
     let o = vbim(&["decode", s(&bad), "-o", s(&dir.path().join("x"))]);
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("truncated"));
     // A frame of another size in the input.
-    image::RgbImage::new(8, 8).save(frames.join("frame_0004.png")).unwrap();
+    image::RgbImage::new(8, 8)
+        .save(frames.join("frame_0004.png"))
+        .unwrap();
     let o = vbim(&["encode", s(&frames), "-o", s(&dir.path().join("b.vbim"))]);
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("frame_0004.png") && err.contains("8×8"), "{err}");
-    assert!(!dir.path().join("b.vbim").exists(), "no output file after a failed encode");
+    assert!(
+        err.contains("frame_0004.png") && err.contains("8×8"),
+        "{err}"
+    );
+    assert!(
+        !dir.path().join("b.vbim").exists(),
+        "no output file after a failed encode"
+    );
     // Bad arguments: exit status 2.
     assert_eq!(vbim(&["encode"]).status.code(), Some(2));
-    assert_eq!(vbim(&["encode", s(&frames), "-o", "x.vbim", "--tolerance", "abc"]).status.code(), Some(2));
+    assert_eq!(
+        vbim(&["encode", s(&frames), "-o", "x.vbim", "--tolerance", "abc"])
+            .status
+            .code(),
+        Some(2)
+    );
 }

@@ -269,25 +269,93 @@ impl FrameSet {
     pub fn read(&self, i: usize) -> Result<Frame, EncodeError> {
         let path = &self.paths[i];
         let f = read_file(path, self.png16_scale)?;
-        let name = path.display();
-        if (f.width, f.height, f.channels, f.kind)
-            != (self.width, self.height, self.channels, self.kind)
-        {
-            return Err(EncodeError::Input(format!(
-                "{name}: frame {i} is {}×{} with {} channel(s) ({:?}), the sequence is {}×{} with {} ({:?})",
-                f.width, f.height, f.channels, f.kind, self.width, self.height, self.channels, self.kind
-            )));
-        }
-        if let Some(k) = f.data.iter().position(|v| !v.is_finite() || *v < 0.0) {
-            let t = k / f.channels;
-            return Err(EncodeError::Input(format!(
-                "{name}: frame {i}, texel ({}, {}) channel {}: value {} (must be finite and ≥ 0)",
-                t % f.width,
-                t / f.width,
-                k % f.channels,
-                f.data[k]
-            )));
-        }
+        check(&self.info(), &path.display().to_string(), i, &f)?;
         Ok(f)
     }
+}
+
+/// The shape of a sequence.
+#[derive(Clone, Debug)]
+pub struct SourceInfo {
+    pub width: usize,
+    pub height: usize,
+    pub channels: usize,
+    pub kind: InputKind,
+    pub frames: usize,
+    /// What to call the sequence in messages.
+    pub name: String,
+}
+
+/// Anything the encoder can read frames from: files ([`FrameSet`]) or memory.
+pub trait FrameSource: Sync {
+    fn info(&self) -> SourceInfo;
+    /// Frame `i`, interleaved; implementations check it with [`check`].
+    fn read(&self, i: usize) -> Result<Frame, EncodeError>;
+}
+
+impl FrameSource for FrameSet {
+    fn info(&self) -> SourceInfo {
+        SourceInfo {
+            width: self.width,
+            height: self.height,
+            channels: self.channels,
+            kind: self.kind,
+            frames: self.paths.len(),
+            name: self
+                .paths
+                .first()
+                .and_then(|p| p.parent())
+                .map_or(String::new(), |p| p.display().to_string()),
+        }
+    }
+    fn read(&self, i: usize) -> Result<Frame, EncodeError> {
+        FrameSet::read(self, i)
+    }
+}
+
+/// Frames held in memory (synthetic sequences, tests, other front ends).
+pub struct MemorySource {
+    pub info: SourceInfo,
+    pub frames: Vec<Vec<f32>>,
+}
+
+impl FrameSource for MemorySource {
+    fn info(&self) -> SourceInfo {
+        self.info.clone()
+    }
+    fn read(&self, i: usize) -> Result<Frame, EncodeError> {
+        let f = Frame {
+            width: self.info.width,
+            height: self.info.height,
+            channels: self.info.channels,
+            kind: self.info.kind,
+            data: self.frames[i].clone(),
+        };
+        check(&self.info, &self.info.name, i, &f)?;
+        Ok(f)
+    }
+}
+
+/// Checks frame `i` (from `name`) against the sequence: shape, finite, non-negative.
+pub fn check(info: &SourceInfo, name: &str, i: usize, f: &Frame) -> Result<(), EncodeError> {
+    let (width, height, channels, kind) = (info.width, info.height, info.channels, info.kind);
+    if (f.width, f.height, f.channels, f.kind) != (width, height, channels, kind)
+        || f.data.len() != width * height * channels
+    {
+        return Err(EncodeError::Input(format!(
+            "{name}: frame {i} is {}×{} with {} channel(s) ({:?}), the sequence is {width}×{height} with {channels} ({kind:?})",
+            f.width, f.height, f.channels, f.kind
+        )));
+    }
+    if let Some(k) = f.data.iter().position(|v| !v.is_finite() || *v < 0.0) {
+        let t = k / f.channels;
+        return Err(EncodeError::Input(format!(
+            "{name}: frame {i}, texel ({}, {}) channel {}: value {} (must be finite and ≥ 0)",
+            t % f.width,
+            t / f.width,
+            k % f.channels,
+            f.data[k]
+        )));
+    }
+    Ok(())
 }

@@ -25,7 +25,7 @@ use vbim_format::metrics::Metric;
 use vbim_format::plane::Plane;
 use vbim_format::{ChunkKind, ColorEncoding, Header, Transfer, Writer};
 
-pub use input::{FrameSet, InputKind};
+pub use input::{FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
 use model::{CodedFrame, Projectors, SegmentParams};
 pub use report::EncodeReport;
 
@@ -190,7 +190,7 @@ struct PendingChunk {
 /// Encodes `frames` into `out` (written atomically) and verifies the result against the
 /// input unless `verify` is false.
 pub fn encode(
-    frames: &FrameSet,
+    src: &dyn FrameSource,
     cfg: &EncoderConfig,
     out: &Path,
     verify: bool,
@@ -201,32 +201,31 @@ pub fn encode(
         .num_threads(cfg.threads)
         .build()
         .map_err(|e| EncodeError::Config(e.to_string()))?;
-    pool.install(|| encode_in_pool(frames, cfg, out, verify, progress))
+    pool.install(|| encode_in_pool(src, cfg, out, verify, progress))
 }
 
 fn encode_in_pool(
-    fs: &FrameSet,
+    src: &dyn FrameSource,
     cfg: &EncoderConfig,
     out: &Path,
     verify: bool,
     progress: Progress,
 ) -> Result<EncodeReport, EncodeError> {
     let t_start = Instant::now();
-    let n = fs.len();
+    let info = src.info();
+    let n = info.frames;
     if n > vbim_format::limits::MAX_FRAMES as usize {
         return Err(EncodeError::Input(format!(
             "{n} frames (at most {})",
             vbim_format::limits::MAX_FRAMES
         )));
     }
-    if fs.width > vbim_format::limits::MAX_DIMENSION as usize
-        || fs.height > vbim_format::limits::MAX_DIMENSION as usize
+    if info.width > vbim_format::limits::MAX_DIMENSION as usize
+        || info.height > vbim_format::limits::MAX_DIMENSION as usize
     {
         return Err(EncodeError::Input(format!(
             "{}: {}×{} is larger than 16384²",
-            fs.paths[0].display(),
-            fs.width,
-            fs.height
+            info.name, info.width, info.height
         )));
     }
     // Pass 1: validate every frame before any work, and learn the exposure.
@@ -234,7 +233,7 @@ fn encode_in_pool(
     let greens: Vec<f32> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let f = fs.read(i)?;
+            let f = src.read(i)?;
             progress(
                 "validate",
                 done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
@@ -249,7 +248,7 @@ fn encode_in_pool(
                 .fold(0.0, f32::max))
         })
         .collect::<Result<_, EncodeError>>()?;
-    let (color, transfer, metric) = match fs.kind {
+    let (color, transfer, metric) = match info.kind {
         InputKind::Srgb8 => (ColorEncoding::Srgb8, Transfer::Srgb, Metric::Srgb8),
         InputKind::Hdr => {
             let e = exposure_from_max_greens(&greens);
@@ -263,7 +262,7 @@ fn encode_in_pool(
         }
     };
     let ts = cfg.tile_size;
-    let dom = domain::Domain::new(transfer, metric, fs.channels, fs.width, fs.height, ts);
+    let dom = domain::Domain::new(transfer, metric, info.channels, info.width, info.height, ts);
     let eps = 10f64.powf(-cfg.tolerance_db / 20.0);
     let sp = SegmentParams {
         max_degree: cfg.max_degree,
@@ -288,7 +287,7 @@ fn encode_in_pool(
             let fresh: Vec<(u32, CodedFrame)> = missing
                 .par_iter()
                 .map(|&i| {
-                    let f = fs.read(i as usize % n)?;
+                    let f = src.read(i as usize % n)?;
                     let (planes, sens) = dom.code(&f.data);
                     Ok((i, CodedFrame { planes, sens }))
                 })
@@ -309,7 +308,7 @@ fn encode_in_pool(
         });
     }
     load(&mut window, 0)?;
-    let header0 = header_for(fs, cfg, color, transfer, 0, 0, 1);
+    let header0 = header_for(src, cfg, color, transfer, 0, 0, 1);
     let key_bytes = model::code_keyframe(
         &dom,
         &window[&0],
@@ -404,7 +403,7 @@ fn encode_in_pool(
     let segments = boundaries.len() as u32 - 1;
     let keyframes = if looping { segments } else { segments + 1 };
     let header = header_for(
-        fs,
+        src,
         cfg,
         color,
         transfer,
@@ -416,7 +415,7 @@ fn encode_in_pool(
     let encode_s = t_encode.elapsed().as_secs_f64();
     let total_s = t_start.elapsed().as_secs_f64();
     let mut rep = report::EncodeReport::new(
-        fs,
+        src,
         cfg,
         &final_header,
         &boundaries,
@@ -426,7 +425,7 @@ fn encode_in_pool(
         metric,
     );
     if verify {
-        rep.verify(fs, out, progress)?;
+        rep.verify(src, out, progress)?;
     }
     Ok(rep)
 }
@@ -483,7 +482,7 @@ fn choose_length(
 }
 
 fn header_for(
-    fs: &FrameSet,
+    src: &dyn FrameSource,
     cfg: &EncoderConfig,
     color: ColorEncoding,
     transfer: Transfer,
@@ -491,14 +490,15 @@ fn header_for(
     keyframes: u32,
     chunks: u32,
 ) -> Header {
+    let info = src.info();
     Header {
         version_minor: vbim_format::VERSION_MINOR,
-        width: fs.width as u32,
-        height: fs.height as u32,
-        channels: fs.channels as u8,
+        width: info.width as u32,
+        height: info.height as u32,
+        channels: info.channels as u8,
         color,
         looping: cfg.looping,
-        frame_count: fs.len() as u32,
+        frame_count: info.frames as u32,
         rate_num: cfg.rate.0,
         rate_den: cfg.rate.1,
         tile_size: cfg.tile_size as u16,

@@ -269,8 +269,11 @@ pub fn code_segment(
     }
     let raw = chunk::write_coeffs(dmax as u8, &steps, &blocks);
     SegmentCode {
-        tilemap_bytes: zstd::bulk::compress(&chunk::write_tilemap(&tiles), sp.zstd_level)
-            .expect("zstd"),
+        tilemap_bytes: zstd::bulk::compress(
+            &chunk::write_tilemap(&tiles, planes as u8),
+            sp.zstd_level,
+        )
+        .expect("zstd"),
         coeff_bytes: zstd::bulk::compress(&raw, sp.zstd_level).expect("zstd"),
         tiles,
     }

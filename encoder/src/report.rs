@@ -9,7 +9,7 @@ use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::{Metric, SequenceError};
 use vbim_format::{ColorEncoding, Header, Reader};
 
-use crate::{EncodeError, EncoderConfig, FrameSet, Progress};
+use crate::{EncodeError, EncoderConfig, FrameSource, Progress};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct EncodeReport {
@@ -51,7 +51,7 @@ pub struct EncodeReport {
 impl EncodeReport {
     #[allow(clippy::too_many_arguments)]
     pub fn new(
-        fs: &FrameSet,
+        src: &dyn FrameSource,
         cfg: &EncoderConfig,
         h: &Header,
         boundaries: &[u32],
@@ -60,9 +60,10 @@ impl EncodeReport {
         total_s: f64,
         metric: Metric,
     ) -> EncodeReport {
-        let texel_frames = (fs.width * fs.height * fs.len()) as f64;
+        let info = src.info();
+        let texel_frames = (info.width * info.height * info.frames) as f64;
         let raw = texel_frames
-            * fs.channels as f64
+            * info.channels as f64
             * if h.color == ColorEncoding::Srgb8 {
                 1.0
             } else {
@@ -77,16 +78,16 @@ impl EncodeReport {
                 chist[*c as usize] += 1;
                 if *l > 1 {
                     curved += 1;
-                    if *c == 1 && fs.channels == 3 {
+                    if *c == 1 && info.channels == 3 {
                         lrgb += 1;
                     }
                 }
             }
         }
         EncodeReport {
-            frames: fs.len(),
-            width: fs.width,
-            height: fs.height,
+            frames: info.frames,
+            width: info.width,
+            height: info.height,
             bytes: h.file_size,
             bpp: h.file_size as f64 * 8.0 / texel_frames,
             ratio_to_raw: raw / h.file_size as f64,
@@ -118,11 +119,11 @@ impl EncodeReport {
     /// Decodes `file` with the reference decoder and measures it against the input.
     pub fn verify(
         &mut self,
-        fs: &FrameSet,
+        src: &dyn FrameSource,
         file: &Path,
         progress: Progress,
     ) -> Result<(), EncodeError> {
-        let seq = measure(fs, file, self.metric, progress)?;
+        let seq = measure(src, file, self.metric, progress)?;
         let (wf, wp) = seq.worst();
         self.mean_psnr = Some(seq.mean_psnr());
         self.worst_psnr = Some(wp);
@@ -146,19 +147,20 @@ impl EncodeReport {
 
 /// Decodes every frame of `file` and compares it with the source frames.
 pub fn measure(
-    fs: &FrameSet,
+    src: &dyn FrameSource,
     file: &Path,
     metric: Metric,
     progress: Progress,
 ) -> Result<SequenceError, EncodeError> {
+    let info = src.info();
     let f = std::fs::File::open(file)
         .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
     let reader = Reader::open(std::io::BufReader::new(f))
         .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
     let h = reader.header().clone();
-    if h.frame_count as usize != fs.len()
-        || h.width as usize != fs.width
-        || h.height as usize != fs.height
+    if h.frame_count as usize != info.frames
+        || h.width as usize != info.width
+        || h.height as usize != info.height
     {
         return Err(EncodeError::Input(format!(
             "{}: {}×{}×{} frames, the input is {}×{}×{}",
@@ -166,20 +168,20 @@ pub fn measure(
             h.width,
             h.height,
             h.frame_count,
-            fs.width,
-            fs.height,
-            fs.len()
+            info.width,
+            info.height,
+            info.frames
         )));
     }
     let mut dec = Decoder::new(reader);
     let mut seq = SequenceError::default();
     let mut out = vec![0f32; h.texel_count() * h.channels as usize];
-    for i in 0..fs.len() {
+    for i in 0..info.frames {
         dec.frame(i as f64, Output::Stored, &mut out)
             .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
-        let src = fs.read(i)?;
+        let src = src.read(i)?;
         seq.push(metric.compare(&src.data, &out));
-        progress("verify", i as u64 + 1, fs.len() as u64);
+        progress("verify", i as u64 + 1, info.frames as u64);
     }
     Ok(seq)
 }

@@ -138,10 +138,12 @@ impl TileMap {
     }
 }
 
-pub fn write_tilemap(t: &TileMap) -> Vec<u8> {
-    let mut out = Vec::with_capacity(t.luma.len() * 2);
-    out.extend_from_slice(&t.luma);
-    out.extend_from_slice(&t.chroma);
+/// Raw tile-map payload: luma degrees, then chroma degrees when there are 3 channels.
+pub fn write_tilemap(t: &TileMap, channels: u8) -> Vec<u8> {
+    let mut out = t.luma.clone();
+    if channels == 3 {
+        out.extend_from_slice(&t.chroma);
+    }
     out
 }
 

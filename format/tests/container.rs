@@ -117,7 +117,7 @@ fn sample_file() -> Vec<u8> {
         0,
         0,
         (0, 4),
-        &z(&chunk::write_tilemap(&t0)),
+        &z(&chunk::write_tilemap(&t0, 3)),
     )
     .unwrap();
     let bub = planes_with(&h, |p, x, _| if p == 0 { 0.2 } else { 0.01 * x as f32 });
@@ -153,7 +153,7 @@ fn sample_file() -> Vec<u8> {
         0,
         1,
         (4, 9),
-        &z(&chunk::write_tilemap(&t1)),
+        &z(&chunk::write_tilemap(&t1, 3)),
     )
     .unwrap();
     w.write_chunk(

@@ -165,7 +165,12 @@ pub fn bake(
     let manifest =
         output::write_manifest(&opts.out, scene, opts.format, exposure, png16_scale, &infos)?;
     let contact_sheet = opts.out.join("contact_sheet.png");
-    output::contact_sheet(&pre, scene, exposure, &contact_sheet)?;
+    // The sheet is for people: expose so that the brightest frame's peak maps to x = 1
+    // (mid-tone highlights), rather than the protocol's export exposure, which is set by the
+    // median frame and whitens the whole day.
+    let peak = greens.iter().copied().fold(0.0, f32::max);
+    let sheet_exposure = if peak > 0.0 { 1.0 / peak } else { exposure };
+    output::contact_sheet(&pre, scene, sheet_exposure, &contact_sheet)?;
     Ok(BakeSummary {
         frames: n,
         size: scene.size,
