@@ -79,7 +79,10 @@ fn bake_encode_inspect_decode_compare() {
         .unwrap()
         .iter()
         .all(|c| c["status"] == "ok"));
-    assert!(json["metadata_bytes"].as_u64().is_some(), "the bake's manifest is stored");
+    assert!(
+        json["metadata_bytes"].as_u64().is_some(),
+        "the bake's manifest is stored"
+    );
 
     let decoded = dir.path().join("decoded");
     ok(&["decode", s(&file), "-o", s(&decoded)]);

@@ -178,6 +178,10 @@ const BUBBLE_SHARE: f64 = 0.45;
 /// How far above the fit budget a single tile may be when choosing a segment's length
 /// (the metric pools all texels; a worst frame of 38 dB allows local peaks).
 const WORST_TILE_FACTOR: f64 = 3.0;
+/// How far above the fit budget a single frame of a segment may be: keeps the error even
+/// in time, so that fast transitions (sunrise, sunset, a loop seam there) are not where
+/// the worst frames gather.
+const WORST_FRAME_FACTOR: f64 = 1.25;
 
 struct PendingChunk {
     kind: ChunkKind,
@@ -450,8 +454,11 @@ fn choose_length(
         }
         let frames: Vec<&CodedFrame> = (b..=b + len).map(|i| window[&i].as_ref()).collect();
         let p = projectors.get(len, cfg.max_degree);
-        let (rms, worst) = model::fit_error(dom, ts, cfg.search_stride, &frames, &p);
-        rms <= sp.fit_budget && worst <= WORST_TILE_FACTOR * sp.fit_budget
+        let (rms, worst_tile, worst_frame) =
+            model::fit_error(dom, ts, cfg.search_stride, &frames, &p);
+        rms <= sp.fit_budget
+            && worst_tile <= WORST_TILE_FACTOR * sp.fit_budget
+            && worst_frame <= WORST_FRAME_FACTOR * sp.fit_budget
     };
     let (mut good, mut bad) = (1u32, None);
     let mut l = 2u32;

@@ -52,6 +52,7 @@ fn tile_errors(
     inner: &[&CodedFrame],
     p: &Projector,
     mut keep_z: Option<&mut Vec<f64>>,
+    mut per_frame: Option<&mut [f64]>,
 ) -> ([Vec<f64>; 2], usize) {
     let m = inner.len();
     let nb = p.bubbles;
@@ -78,12 +79,17 @@ fn tile_errors(
                 let g = if pl == 0 { 0 } else { 1 };
                 let w = PLANE_WEIGHT[pl];
                 let mut acc = |e: &[f64], slot: usize| {
-                    let s: f64 = e
-                        .iter()
-                        .zip(inner)
-                        .map(|(v, f)| (v * f.sens[i] as f64).powi(2))
-                        .sum();
-                    err[g][slot] += w * s;
+                    let mut s = 0.0;
+                    for (j, (v, f)) in e.iter().zip(inner).enumerate() {
+                        let q = w * (v * f.sens[i] as f64).powi(2);
+                        s += q;
+                        if slot == nb {
+                            if let Some(pf) = per_frame.as_deref_mut() {
+                                pf[j] += q;
+                            }
+                        }
+                    }
+                    err[g][slot] += s;
                 };
                 e.copy_from_slice(&r);
                 acc(&e, 0);
@@ -102,30 +108,57 @@ fn tile_errors(
     (err, count)
 }
 
-/// The RMS over all tiles and the largest per-tile RMS of the fit error (metric units) of
-/// a candidate segment fitted with `p` (all its bubbles), on every `stride`-th texel.
-/// Used to choose segment lengths.
+/// The fit error (metric units) of a candidate segment fitted with `p` (all its bubbles),
+/// on every `stride`-th texel: RMS over everything, the largest per-tile RMS and the
+/// largest per-frame RMS. Used to choose segment lengths.
 pub fn fit_error(
     dom: &Domain,
     ts: usize,
     stride: usize,
     frames: &[&CodedFrame],
     p: &Projector,
-) -> (f64, f64) {
+) -> (f64, f64, f64) {
     let (tx, ty) = (dom.pw / ts, dom.ph / ts);
     let (k0, k1) = (&frames[0].planes, &frames[frames.len() - 1].planes);
     let inner = &frames[1..frames.len() - 1];
-    let sum_max = (0..tx * ty)
+    let m = inner.len();
+    let (sum, max, frames_sq, count) = (0..tx * ty)
         .into_par_iter()
         .map(|t| {
-            let (err, count) =
-                tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, p, None);
-            let n = (count * inner.len().max(1)) as f64;
+            let mut pf = vec![0.0; m];
+            let (err, count) = tile_errors(
+                dom,
+                (t % tx, t / tx),
+                ts,
+                stride,
+                k0,
+                k1,
+                inner,
+                p,
+                None,
+                Some(&mut pf),
+            );
+            let n = (count * m.max(1)) as f64;
             let ms = (err[0][p.bubbles] + err[1][p.bubbles]) / n;
-            (ms, ms)
+            (ms, ms, pf, count)
         })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)));
-    ((sum_max.0 / (tx * ty) as f64).sqrt(), sum_max.1.sqrt())
+        .reduce(
+            || (0.0, 0.0, vec![0.0; m], 0),
+            |a, b| {
+                (
+                    a.0 + b.0,
+                    a.1.max(b.1),
+                    a.2.iter().zip(&b.2).map(|(x, y)| x + y).collect(),
+                    a.3 + b.3,
+                )
+            },
+        );
+    let worst_frame = frames_sq.iter().copied().fold(0.0, f64::max) / count.max(1) as f64;
+    (
+        (sum / (tx * ty) as f64).sqrt(),
+        max.sqrt(),
+        worst_frame.sqrt(),
+    )
 }
 
 /// One coded segment: its tile map and compressed chunk payloads.
@@ -178,6 +211,7 @@ pub fn code_segment(
                 inner,
                 &p,
                 Some(&mut zs),
+                None,
             );
             let n = (count * inner.len().max(1)) as f64;
             let budget = sp.fit_budget * sp.fit_budget * n;

@@ -1,0 +1,266 @@
+//! The decoder: takes chunks from the ring, verifies them, keeps the keyframe chain, and
+//! when a segment's keyframes, tile map and coefficients are all there decodes it into a
+//! staging buffer laid out for upload (one RGBA f32 layer per term).
+//!
+//! A damaged chunk (checksum mismatch, or the source failed) is reported and makes what
+//! depends on it undecodable: a keyframe breaks the predicted chain until the next intra
+//! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
+//! first segment whose parts are all good.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use vbim_format::chunk::{self, TileMap};
+use vbim_format::index::Layout;
+use vbim_format::plane::Plane;
+use vbim_format::reader::verify_chunk;
+use vbim_format::{ChunkKind, Header, IndexEntry};
+
+/// A decoded segment, ready to upload: `layers` RGBA f32 layers of width × height texels
+/// (layer 0 = K_s, 1 = K_{s+1}, 2.. = bubble coefficients), in the coded YCoCg domain.
+pub struct SegmentData {
+    pub generation: u32,
+    /// The loop pass of the reader that delivered it (0 for the first play-through).
+    pub pass: u32,
+    pub index: usize,
+    pub start: u32,
+    pub end: u32,
+    pub layers: usize,
+    pub data: Vec<f32>,
+    /// Nanoseconds the decoder spent on this segment and its closing keyframe.
+    pub decode_ns: u64,
+}
+
+impl SegmentData {
+    pub fn with_capacity(h: &Header) -> SegmentData {
+        let layers = h.max_degree as usize + 1;
+        SegmentData {
+            generation: 0,
+            pass: 0,
+            index: 0,
+            start: 0,
+            end: 0,
+            layers: 0,
+            data: Vec::with_capacity(layers * h.texel_count() * 4),
+            decode_ns: 0,
+        }
+    }
+}
+
+/// What the decoder made of one chunk.
+pub enum Event {
+    Nothing,
+    /// Segment `index` can be decoded now (call [`DecoderCore::fill`]).
+    Ready(usize),
+    /// A chunk was damaged: a message naming it.
+    Damaged(String),
+}
+
+pub struct DecoderCore {
+    pub header: Header,
+    layout: Layout,
+    entries: Vec<IndexEntry>,
+    /// Decoded keyframes still needed: by keyframe number.
+    keys: Vec<Option<Arc<Vec<Plane>>>>,
+    tiles: Vec<Option<TileMap>>,
+    coeffs: Vec<Option<Vec<u8>>>,
+    /// The last keyframe decoded, for the predicted chain.
+    chain: Option<(usize, Arc<Vec<Plane>>)>,
+    /// Keyframe decoding time not yet charged to a segment.
+    key_ns: u64,
+}
+
+impl DecoderCore {
+    pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
+        let k = layout.keyframes.len();
+        let s = layout.segments.len();
+        DecoderCore {
+            header,
+            layout,
+            entries,
+            keys: vec![None; k],
+            tiles: vec![None; s],
+            coeffs: vec![None; s],
+            chain: None,
+            key_ns: 0,
+        }
+    }
+
+    /// Forgets everything (after a seek).
+    pub fn reset(&mut self) {
+        self.keys.iter_mut().for_each(|k| *k = None);
+        self.tiles.iter_mut().for_each(|k| *k = None);
+        self.coeffs.iter_mut().for_each(|k| *k = None);
+        self.chain = None;
+    }
+
+    fn damaged(&self, i: usize, what: &str) -> Event {
+        let e = self.entries[i];
+        Event::Damaged(format!(
+            "chunk {i}, frames {}–{}: {what}",
+            e.first_frame, e.last_frame
+        ))
+    }
+
+    /// Takes chunk `i` (its bytes, or `None` if the source failed to deliver it).
+    pub fn take(&mut self, i: usize, bytes: Option<&[u8]>) -> Event {
+        let Some(&e) = self.entries.get(i) else {
+            return Event::Nothing;
+        };
+        let Some(bytes) = bytes else {
+            return self.fail(i, "the source failed to deliver it");
+        };
+        if verify_chunk(i, &e, bytes).is_err() {
+            return self.fail(i, "checksum mismatch");
+        }
+        let n = e.number as usize;
+        match e.kind {
+            ChunkKind::Keyframe => {
+                let prev = match &self.chain {
+                    Some((k, p)) if *k + 1 == n => Some(p.clone()),
+                    _ => None,
+                };
+                if !e.is_intra() && prev.is_none() {
+                    // The chain is broken (damage, or we started mid-stream): wait for intra.
+                    self.keys[n] = None;
+                    return Event::Nothing;
+                }
+                let t = Instant::now();
+                match chunk::read_keyframe(&self.header, bytes, prev.as_deref().map(|v| &v[..])) {
+                    Ok(planes) => {
+                        self.key_ns += t.elapsed().as_nanos() as u64;
+                        let planes = Arc::new(planes);
+                        self.keys[n] = Some(planes.clone());
+                        self.chain = Some((n, planes));
+                        // Drop keyframes no segment ahead needs (keyframe 0 stays for a loop).
+                        for k in 1..n.saturating_sub(1) {
+                            self.keys[k] = None;
+                        }
+                        self.ready_after_key(n)
+                    }
+                    Err(err) => self.fail(i, &err.to_string()),
+                }
+            }
+            ChunkKind::TileMap => {
+                let len = e.last_frame - e.first_frame;
+                match chunk::read_tilemap(&self.header, bytes, len) {
+                    Ok(t) => {
+                        self.tiles[n] = Some(t);
+                        Event::Nothing
+                    }
+                    Err(err) => self.fail(i, &err.to_string()),
+                }
+            }
+            ChunkKind::Coefficients => {
+                self.coeffs[n] = Some(bytes.to_vec());
+                if self.complete(n) {
+                    Event::Ready(n)
+                } else {
+                    Event::Nothing
+                }
+            }
+            _ => Event::Nothing,
+        }
+    }
+
+    fn ready_after_key(&self, k: usize) -> Event {
+        // A keyframe can complete the segment it closes (the last of a looping file is
+        // closed by keyframe 0, which arrives first).
+        if k > 0 && self.complete(k - 1) {
+            return Event::Ready(k - 1);
+        }
+        Event::Nothing
+    }
+
+    fn fail(&mut self, i: usize, what: &str) -> Event {
+        let e = self.entries[i];
+        let n = e.number as usize;
+        match e.kind {
+            ChunkKind::Keyframe => {
+                self.keys[n] = None;
+                if self.chain.as_ref().is_some_and(|(k, _)| *k + 1 == n) {
+                    self.chain = None;
+                }
+            }
+            ChunkKind::TileMap => self.tiles[n] = None,
+            ChunkKind::Coefficients => self.coeffs[n] = None,
+            _ => {}
+        }
+        self.damaged(i, what)
+    }
+
+    fn complete(&self, s: usize) -> bool {
+        let k1 = self.layout.keyframe_of_boundary(s + 1);
+        self.keys[s].is_some()
+            && self.keys[k1].is_some()
+            && self.tiles[s].is_some()
+            && self.coeffs[s].is_some()
+    }
+
+    /// Decodes segment `s` into `out`. Its coefficient bytes are consumed.
+    pub fn fill(
+        &mut self,
+        s: usize,
+        generation: u32,
+        pass: u32,
+        out: &mut SegmentData,
+    ) -> Result<(), String> {
+        let t0 = Instant::now();
+        let h = &self.header;
+        let k0 = self.keys[s].clone().ok_or("keyframe missing")?;
+        let k1 = self.keys[self.layout.keyframe_of_boundary(s + 1)]
+            .clone()
+            .ok_or("keyframe missing")?;
+        let tiles = self.tiles[s].take().ok_or("tile map missing")?;
+        let bytes = self.coeffs[s].take().ok_or("coefficients missing")?;
+        let bubbles = chunk::read_coeffs(h, &bytes, &tiles).map_err(|e| {
+            let (_, ci) = self.layout.segments[s];
+            let en = self.entries[ci];
+            format!(
+                "chunk {ci}, frames {}–{}: {e}",
+                en.first_frame, en.last_frame
+            )
+        })?;
+        let (w, ht) = (h.width as usize, h.height as usize);
+        let ch = h.channels as usize;
+        let layers = 2 + bubbles.len();
+        out.data.clear();
+        out.data.resize(layers * w * ht * 4, 0.0);
+        let mut put = |layer: usize, planes: &[Plane]| {
+            let base = layer * w * ht * 4;
+            let pw = planes[0].w;
+            for y in 0..ht {
+                for x in 0..w {
+                    let o = base + (y * w + x) * 4;
+                    for (c, p) in planes.iter().enumerate().take(ch) {
+                        out.data[o + c] = p.data[y * pw + x];
+                    }
+                }
+            }
+        };
+        put(0, &k0);
+        put(1, &k1);
+        for (k, b) in bubbles.iter().enumerate() {
+            put(2 + k, b);
+        }
+        out.generation = generation;
+        out.pass = pass;
+        out.index = s;
+        out.start = self.layout.boundaries[s];
+        out.end = self.layout.boundaries[s + 1];
+        out.layers = layers;
+        out.decode_ns = t0.elapsed().as_nanos() as u64 + std::mem::take(&mut self.key_ns);
+        // Keyframe s is no longer needed unless it is keyframe 0 (a loop's end).
+        if s > 0 {
+            self.keys[s] = None;
+        }
+        Ok(())
+    }
+
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+    pub fn entries(&self) -> &[IndexEntry] {
+        &self.entries
+    }
+}

@@ -1,0 +1,352 @@
+//! The GPU side: two slots of term textures (double buffering: the slot being displayed is
+//! never written), the display texture the renderer samples, a held copy for catch-up
+//! blending, and the compute pass that evaluates the basis per texel.
+
+use wgpu::util::DeviceExt;
+
+use crate::assemble::SegmentData;
+
+/// Finds an adapter and opens a device without a window. With no adapter, the error says
+/// what to install.
+pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .map_err(|e| {
+                format!(
+            "no GPU adapter found ({e}). On a machine without a GPU install a software one: \
+             `apt-get install -y libvulkan1 mesa-vulkan-drivers` (Vulkan, lavapipe) or \
+             `libegl1 libegl-mesa0 libgl1-mesa-dri` (OpenGL, llvmpipe)"
+        )
+            })?;
+    let info = adapter.get_info();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("vbim"),
+        required_features: wgpu::Features::empty(),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .map_err(|e| {
+        format!(
+            "{} ({:?}): cannot open a device: {e}",
+            info.name, info.backend
+        )
+    })?;
+    Ok((device, queue, info))
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Params {
+    pub w: [f32; 12],
+    pub size: [u32; 2],
+    pub layers: u32,
+    pub transfer: u32,
+    pub v0: f32,
+    pub alpha: f32,
+    pub channels: u32,
+    pub blend: u32,
+}
+
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pipeline: wgpu::ComputePipeline,
+    params: wgpu::Buffer,
+    slots: [wgpu::Texture; 2],
+    display: wgpu::Texture,
+    pub display_view: wgpu::TextureView,
+    held: wgpu::Texture,
+    bind_groups: [wgpu::BindGroup; 2],
+    pub width: u32,
+    pub height: u32,
+    pub max_layers: u32,
+}
+
+impl Gpu {
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        width: u32,
+        height: u32,
+        max_layers: u32,
+    ) -> Gpu {
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let slot = |i: usize| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(if i == 0 {
+                    "vbim terms A"
+                } else {
+                    "vbim terms B"
+                }),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: max_layers,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        };
+        let slots = [slot(0), slot(1)];
+        let image = |label: &str, usage: wgpu::TextureUsages| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba16Float,
+                usage,
+                view_formats: &[],
+            })
+        };
+        use wgpu::TextureUsages as U;
+        let display = image(
+            "vbim lightmap",
+            U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
+        );
+        let held = image("vbim held", U::TEXTURE_BINDING | U::COPY_DST);
+        let display_view = display.create_view(&Default::default());
+        let held_view = held.create_view(&Default::default());
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vbim params"),
+            contents: bytemuck::bytes_of(&Params::zeroed_params()),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vbim reconstruct"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("reconstruct.wgsl").into()),
+        });
+        let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty,
+            count: None,
+        };
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim"),
+            entries: &[
+                entry(
+                    0,
+                    wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                ),
+                entry(
+                    1,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                ),
+                entry(
+                    2,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                ),
+                entry(
+                    3,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::Rgba16Float,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                ),
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("vbim"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("vbim reconstruct"),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let bind = |t: &wgpu::Texture| {
+            let v = t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            });
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vbim"),
+                layout: &bgl,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: params.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&v),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(&held_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::TextureView(&display_view),
+                    },
+                ],
+            })
+        };
+        let bind_groups = [bind(&slots[0]), bind(&slots[1])];
+        Gpu {
+            device: device.clone(),
+            queue: queue.clone(),
+            pipeline,
+            params,
+            slots,
+            display,
+            display_view,
+            held,
+            bind_groups,
+            width,
+            height,
+            max_layers,
+        }
+    }
+
+    /// Copies a decoded segment into slot `slot`; returns the bytes uploaded.
+    pub fn upload(&self, slot: usize, seg: &SegmentData) -> u64 {
+        let (w, h) = (self.width, self.height);
+        let layer_bytes = (w * h * 16) as usize;
+        let bytes: &[u8] = bytemuck::cast_slice(&seg.data);
+        for l in 0..seg.layers.min(self.max_layers as usize) {
+            self.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.slots[slot],
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: l as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                &bytes[l * layer_bytes..(l + 1) * layer_bytes],
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(w * 16),
+                    rows_per_image: Some(h),
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        (seg.layers * layer_bytes) as u64
+    }
+
+    /// Keeps what is on screen for blending (at the start of a catch-up).
+    pub fn hold(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.copy_texture_to_texture(
+            self.display.as_image_copy(),
+            self.held.as_image_copy(),
+            wgpu::Extent3d {
+                width: self.width,
+                height: self.height,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+
+    /// Records and submits the reconstruction from slot `slot` with `params`.
+    pub fn evaluate(&self, slot: usize, params: &Params, hold_first: bool) {
+        self.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        if hold_first {
+            self.hold(&mut enc);
+        }
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_groups[slot], &[]);
+            pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+        }
+        self.queue.submit(Some(enc.finish()));
+    }
+
+    /// Reads the display texture back (RGBA, f32). For tests and error measurement.
+    pub fn read_display(&self) -> Vec<f32> {
+        let (w, h) = (self.width, self.height);
+        let row = (w * 8).div_ceil(256) * 256;
+        let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim readback"),
+            size: (row * h) as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            self.display.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buf,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(h),
+                },
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+        );
+        self.queue.submit(Some(enc.finish()));
+        let slice = buf.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+        let data = slice
+            .get_mapped_range()
+            .expect("the readback buffer is mapped");
+        let mut out = Vec::with_capacity((w * h * 4) as usize);
+        for y in 0..h as usize {
+            let r: &[half::f16] =
+                bytemuck::cast_slice(&data[y * row as usize..y * row as usize + w as usize * 8]);
+            out.extend(r.iter().map(|v| v.to_f32()));
+        }
+        out
+    }
+
+    /// Waits for the GPU to finish what was submitted.
+    pub fn wait(&self) {
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+}
+
+impl Params {
+    pub fn zeroed_params() -> Params {
+        bytemuck::Zeroable::zeroed()
+    }
+}

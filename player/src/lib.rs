@@ -1,0 +1,37 @@
+//! vbim-player: the run-time half of vbim — what a game ships.
+//!
+//! Open a `.vbim` stream (any `Read + Seek`) with a `wgpu::Device` and `Queue`, call
+//! [`Player::advance`] once per displayed frame with the frame's time step in integer
+//! nanoseconds, and sample [`Player::view`] — the reconstructed lightmap, linear RGB in an
+//! `Rgba16Float` texture the player owns. Reading and decoding run on two threads of their
+//! own (paper 001's figure 13): a reader pulls chunks into a bounded ring of compressed
+//! bytes, reading ahead and wrapping at the loop point; a decoder turns them into one of two
+//! staging buffers; the render thread only uploads into the GPU slot it is not sampling and
+//! evaluates the time basis in a compute shader. When data is late the chosen [`Policy`]
+//! decides what is shown, and every frame's [`FrameRecord`] says how bandwidth turned into
+//! drift.
+//!
+//! The player depends on `vbim-format` only, never on the encoder.
+
+pub mod assemble;
+pub mod clock;
+pub mod gpu;
+mod player;
+pub mod stream;
+pub mod throttle;
+pub mod time;
+
+pub use clock::{Clock, SimClock, SystemClock};
+pub use gpu::headless_device;
+pub use player::{frame_ns, FrameRecord, FrameState, Player, PlayerConfig, Policy, Totals};
+pub use throttle::Throttle;
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlayerError {
+    #[error("{0}")]
+    Format(#[from] vbim_format::FormatError),
+    #[error("{0}")]
+    Unsupported(String),
+    #[error("{0}")]
+    Thread(String),
+}

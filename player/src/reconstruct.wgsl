@@ -1,0 +1,65 @@
+// Reconstructs the lightmap at one moment: per texel, the segment's terms weighted by the
+// basis at the current normalised time (computed once per frame on the CPU, in f32, the
+// same weights the reference decoder uses), then YCoCg → RGB, clamp, inverse transfer.
+// While catching up after a stall, the result is blended with the image held on screen.
+
+struct Params {
+    // Basis weights w0..w8 (hats, then bubbles), packed four to a vector.
+    w: array<vec4<f32>, 3>,
+    size: vec2<u32>,
+    layers: u32,
+    // 0 = sRGB code values, 1 = log toe v = v0 (2^c − 1).
+    transfer: u32,
+    v0: f32,
+    alpha: f32,
+    channels: u32,
+    blend: u32,
+}
+
+@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(1) var terms: texture_2d_array<f32>;
+@group(0) @binding(2) var held: texture_2d<f32>;
+@group(0) @binding(3) var out_tex: texture_storage_2d<rgba16float, write>;
+
+fn weight(k: u32) -> f32 {
+    return p.w[k / 4u][k % 4u];
+}
+
+fn srgb_to_linear(c: f32) -> f32 {
+    if (c <= 0.04045) {
+        return c / 12.92;
+    }
+    return pow((c + 0.055) / 1.055, 2.4);
+}
+
+fn decode(c: f32) -> f32 {
+    if (p.transfer == 0u) {
+        return srgb_to_linear(clamp(c, 0.0, 1.0));
+    }
+    return p.v0 * (exp2(clamp(c, 0.0, 120.0)) - 1.0);
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= p.size.x || id.y >= p.size.y) {
+        return;
+    }
+    let xy = vec2<i32>(id.xy);
+    // Same order as the reference decoder: w0·K0 + w1·K1, then each bubble.
+    var c = weight(0u) * textureLoad(terms, xy, 0, 0).xyz + weight(1u) * textureLoad(terms, xy, 1, 0).xyz;
+    for (var k = 2u; k < p.layers; k = k + 1u) {
+        c = c + weight(k) * textureLoad(terms, xy, i32(k), 0).xyz;
+    }
+    var rgb: vec3<f32>;
+    if (p.channels == 3u) {
+        let t = c.x - c.z;
+        rgb = vec3<f32>(decode(t + c.y), decode(c.x + c.z), decode(t - c.y));
+    } else {
+        let v = decode(c.x);
+        rgb = vec3<f32>(v, v, v);
+    }
+    if (p.blend == 1u) {
+        rgb = mix(textureLoad(held, xy, 0).xyz, rgb, p.alpha);
+    }
+    textureStore(out_tex, xy, vec4<f32>(rgb, 1.0));
+}

@@ -1,0 +1,473 @@
+//! The player on a real wgpu adapter (lavapipe or llvmpipe on machines without a GPU):
+//! GPU reconstruction against the CPU reference decoder, stalls, loops, damage, threads.
+
+use std::io::Cursor;
+use std::sync::Arc;
+use std::time::Duration;
+
+use vbim_encoder::{
+    encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode, SourceInfo,
+};
+use vbim_format::curve::linear_to_srgb;
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::Reader;
+use vbim_player::{headless_device, FrameState, Player, PlayerConfig, Policy, Throttle};
+
+fn device() -> (wgpu::Device, wgpu::Queue) {
+    match headless_device() {
+        Ok((d, q, info)) => {
+            eprintln!("adapter: {} ({:?})", info.name, info.backend);
+            (d, q)
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// A small day-like sequence: a moving soft shadow edge over a gradient, bright by day.
+fn sequence(w: usize, h: usize, n: usize, kind: InputKind) -> MemorySource {
+    let frames = (0..n)
+        .map(|t| {
+            let day = (std::f32::consts::PI * t as f32 / n as f32).sin().max(0.0);
+            (0..w * h)
+                .flat_map(|i| {
+                    let (x, y) = ((i % w) as f32, (i / w) as f32);
+                    let edge = 1.0 / (1.0 + (-(x - w as f32 * t as f32 / n as f32) * 0.5).exp());
+                    let v = 0.02 + day * (0.3 + 0.6 * edge) * (0.8 + 0.2 * (y * 0.2).sin());
+                    let v = if kind == InputKind::Srgb8 {
+                        (linear_to_srgb(v.min(1.0)) * 255.0).round() / 255.0
+                    } else {
+                        v
+                    };
+                    [v, v * 0.9, v * 0.75]
+                })
+                .collect()
+        })
+        .collect();
+    MemorySource {
+        info: SourceInfo {
+            width: w,
+            height: h,
+            channels: 3,
+            kind,
+            frames: n,
+            name: "test".into(),
+        },
+        frames,
+    }
+}
+
+/// Noisy content: every frame costs bits, so the ring holds little of the file.
+fn noisy(w: usize, h: usize, n: usize) -> MemorySource {
+    let mut src = sequence(w, h, n, InputKind::Hdr);
+    let mut seed = 12345u32;
+    for f in &mut src.frames {
+        for v in f.iter_mut() {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            *v *= 0.7 + 0.6 * (seed >> 8) as f32 / (1 << 24) as f32;
+        }
+    }
+    src
+}
+
+fn encode_bytes(src: &MemorySource, cfg: &EncoderConfig) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t.vbim");
+    encode(src, cfg, &out, false, &|_, _, _| {}).unwrap();
+    std::fs::read(out).unwrap()
+}
+
+fn config(segment: SegmentMode) -> EncoderConfig {
+    EncoderConfig {
+        segment,
+        rate: (24, 1),
+        tolerance_db: 45.0,
+        ..EncoderConfig::preset(Preset::Default)
+    }
+}
+
+fn inline(policy: Policy, throttle: Throttle) -> PlayerConfig {
+    PlayerConfig {
+        policy,
+        throttle,
+        threaded: false,
+        ..Default::default()
+    }
+}
+
+/// 1/60 s in ns; 60 Hz display over 24 fps media.
+const DISPLAY: u64 = 16_666_667;
+
+#[test]
+fn gpu_reconstruction_matches_the_reference_decoder() {
+    let (device, queue) = device();
+    for kind in [InputKind::Hdr, InputKind::Srgb8] {
+        let bytes = encode_bytes(
+            &sequence(40, 24, 30, kind),
+            &config(SegmentMode::Auto { max: 12 }),
+        );
+        let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+        let mut player = Player::open(
+            &device,
+            &queue,
+            Cursor::new(bytes),
+            inline(Policy::Interpolate, Throttle::UNLIMITED),
+        )
+        .unwrap();
+        let mut cpu = vec![0f32; 40 * 24 * 3];
+        let mut checked = 0;
+        for _ in 0..90 {
+            let r = player.advance(DISPLAY);
+            assert_eq!(r.state, FrameState::Exact, "unthrottled playback is exact");
+            if r.index % 7 != 0 {
+                continue;
+            }
+            let gpu = player.gpu().read_display();
+            let t = r.shown % 30.0;
+            let mode = if kind == InputKind::Srgb8 {
+                Output::Stored
+            } else {
+                Output::Linear
+            };
+            reference.frame(t, mode, &mut cpu).unwrap();
+            for i in 0..40 * 24 {
+                for c in 0..3 {
+                    let (g, want) = (gpu[i * 4 + c], cpu[i * 3 + c]);
+                    match kind {
+                        // Within 0.5/255 on the 8-bit scale.
+                        InputKind::Srgb8 => {
+                            let d = (linear_to_srgb(g) - want).abs() * 255.0;
+                            assert!(d <= 0.5, "frame {t:.3} texel {i} channel {c}: {g} vs code {want} ({d} codes)");
+                        }
+                        // Within 2^-10 relative, or 1e-6 absolute below 1e-3.
+                        InputKind::Hdr => {
+                            let ok = if want < 1e-3 {
+                                (g - want).abs() <= 1e-6 + want * 2f32.powi(-10)
+                            } else {
+                                (g - want).abs() <= want * 2f32.powi(-10)
+                            };
+                            assert!(
+                                ok,
+                                "frame {t:.3} texel {i} channel {c}: GPU {g} vs CPU {want}"
+                            );
+                        }
+                    }
+                }
+            }
+            checked += 1;
+        }
+        assert!(checked >= 10);
+    }
+}
+
+#[test]
+fn a_stall_longer_than_the_read_ahead_holds_then_catches_up_without_black_frames() {
+    let (device, queue) = device();
+    let bytes = encode_bytes(&noisy(64, 32, 96), &config(SegmentMode::Fixed(6)));
+    let header = Reader::open(Cursor::new(bytes.clone()))
+        .unwrap()
+        .header()
+        .clone();
+    let mean_rate = header.file_size as f64 / (96.0 / 24.0);
+    // 3× the mean rate, with a 1.5 s stall every 6 s of playback: far longer than what the
+    // ring (the header's read-ahead at that rate) holds.
+    let rate = (mean_rate * 3.0) as u64;
+    let ahead = header.read_ahead_at(rate).unwrap().bytes as f64;
+    assert!(1.5 > ahead / mean_rate, "the stall outlasts the read-ahead");
+    let throttle = Throttle {
+        rate: Some(rate),
+        stall: Some((1_500_000_000, 6_000_000_000)),
+    };
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, throttle),
+    )
+    .unwrap();
+    let mut states = Vec::new();
+    let mut drift_after = Vec::new();
+    for k in 0..1500 {
+        let r = player.advance(DISPLAY);
+        states.push(r.state);
+        if r.state == FrameState::Waiting {
+            assert!(
+                !states.contains(&FrameState::Exact),
+                "waiting only before the first frame (pre-roll)"
+            );
+            continue;
+        }
+        let img = player.gpu().read_display();
+        let mean: f32 = img.chunks(4).map(|p| p[1]).sum::<f32>() / (img.len() / 4) as f32;
+        assert!(
+            mean > 1e-3,
+            "frame {k}: black ({mean}) in state {:?}",
+            r.state
+        );
+        assert!(r.drift >= -1e-6, "frame {k}: negative drift {}", r.drift);
+        if k > 0 && states[k - 1] == FrameState::CatchingUp && r.state == FrameState::Exact {
+            drift_after.push(r.drift);
+        }
+    }
+    assert!(states.contains(&FrameState::Held), "the stall was felt");
+    assert!(
+        states.contains(&FrameState::CatchingUp),
+        "and caught up smoothly"
+    );
+    assert!(
+        !drift_after.is_empty() && drift_after.iter().all(|d| d.abs() < 1e-6),
+        "drift returns to zero: {drift_after:?}"
+    );
+}
+
+#[test]
+fn loops_are_seamless_and_100_hours_land_on_the_exact_frame() {
+    let (device, queue) = device();
+    let bytes = encode_bytes(
+        &sequence(16, 8, 24, InputKind::Hdr),
+        &config(SegmentMode::Auto { max: 8 }),
+    );
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, Throttle::UNLIMITED),
+    )
+    .unwrap();
+    // Across three loop seams at 60 Hz, every frame is exact.
+    for _ in 0..(3 * 60 + 10) {
+        let r = player.advance(DISPLAY);
+        assert_eq!(r.state, FrameState::Exact, "frame at {:.3}", r.target);
+    }
+    // 100 hours later, in steps of a little over an hour (integer ticks, no float drift).
+    let step = 3_600_000_000_000u64 + 7;
+    let target_ticks = 100 * 3_600_000_000_000u64 + 1_234_567_891;
+    let mut t = player.ticks();
+    while t + step < target_ticks {
+        player.advance(step);
+        t += step;
+    }
+    let mut r = player.advance(target_ticks - t);
+    assert_eq!(player.ticks(), target_ticks);
+    // The reader re-synchronised; within the catch-up window the display is exact again.
+    for _ in 0..120 {
+        if r.state == FrameState::Exact {
+            break;
+        }
+        r = player.advance(DISPLAY);
+    }
+    assert_eq!(r.state, FrameState::Exact);
+    // 24 frames per second, 24-frame loop: the position is the ticks' fraction of a second.
+    let expect = (player.ticks() % 1_000_000_000) as f64 * 24.0 / 1e9;
+    assert!(
+        (r.shown % 24.0 - expect).abs() < 1e-6,
+        "shown {} expected {expect}",
+        r.shown % 24.0
+    );
+    let gpu = player.gpu().read_display();
+    let mut cpu = vec![0f32; 16 * 8 * 3];
+    reference.frame(expect, Output::Linear, &mut cpu).unwrap();
+    for i in 0..16 * 8 {
+        assert!((gpu[i * 4 + 1] - cpu[i * 3 + 1]).abs() <= cpu[i * 3 + 1] * 2f32.powi(-10) + 1e-6);
+    }
+}
+
+#[test]
+fn a_damaged_chunk_mid_stream_is_reported_and_playback_recovers() {
+    let (device, queue) = device();
+    let mut cfg = config(SegmentMode::Fixed(4));
+    cfg.intra_interval_s = 0.5;
+    let mut bytes = encode_bytes(&sequence(32, 16, 48, InputKind::Hdr), &cfg);
+    let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
+    // Damage the coefficients of a segment in the middle.
+    let (_, ci) = r.layout().segments[5];
+    let e = r.entries()[ci];
+    bytes[(e.offset + e.length / 2) as usize] ^= 0xff;
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, Throttle::UNLIMITED),
+    )
+    .unwrap();
+    let mut saw_hold = false;
+    for _ in 0..200 {
+        let rec = player.advance(DISPLAY);
+        saw_hold |= rec.state != FrameState::Exact;
+        let img = player.gpu().read_display();
+        assert!(img.iter().all(|v| v.is_finite()));
+    }
+    let t = player.totals();
+    assert!(t.damaged >= 1, "damage reported");
+    let msg = t.last_error.clone().unwrap();
+    assert!(
+        msg.contains(&format!("chunk {ci}")) && msg.contains("checksum mismatch"),
+        "{msg}"
+    );
+    assert!(saw_hold, "the damaged segment was held over");
+}
+
+#[test]
+fn threads_stop_and_join_mid_stream() {
+    let (device, queue) = device();
+    let bytes = encode_bytes(
+        &sequence(32, 16, 48, InputKind::Hdr),
+        &config(SegmentMode::Fixed(6)),
+    );
+    let cfg = PlayerConfig {
+        throttle: Throttle {
+            rate: Some(20_000),
+            stall: None,
+        },
+        clock: Arc::new(vbim_player::SystemClock::new()),
+        ..Default::default()
+    };
+    let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
+    for _ in 0..5 {
+        player.advance(DISPLAY);
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    // A generous deadline that fails with a message, not a timing assertion.
+    player
+        .stop(Duration::from_secs(10))
+        .expect("threads joined");
+}
+
+#[test]
+fn wait_and_skip_policies() {
+    let (device, queue) = device();
+    let bytes = encode_bytes(
+        &sequence(32, 16, 48, InputKind::Hdr),
+        &config(SegmentMode::Fixed(6)),
+    );
+    let header = Reader::open(Cursor::new(bytes.clone()))
+        .unwrap()
+        .header()
+        .clone();
+    let rate = (header.file_size as f64 / 2.0 * 0.5) as u64; // half the mean rate: always late
+    for policy in [Policy::Wait, Policy::Skip] {
+        let mut player = Player::open(
+            &device,
+            &queue,
+            Cursor::new(bytes.clone()),
+            inline(
+                policy,
+                Throttle {
+                    rate: Some(rate),
+                    stall: None,
+                },
+            ),
+        )
+        .unwrap();
+        let mut last = None;
+        let mut max_drift = 0f64;
+        for _ in 0..300 {
+            let r = player.advance(DISPLAY);
+            if r.state == FrameState::Waiting && last.is_none() {
+                continue; // pre-roll
+            }
+            max_drift = max_drift.max(r.drift);
+            if policy == Policy::Wait {
+                assert!(r.state != FrameState::CatchingUp && r.state != FrameState::Held);
+                if let Some(prev) = last {
+                    assert!(r.shown >= prev, "wait never goes back");
+                }
+            } else {
+                assert!(r.state != FrameState::CatchingUp && r.state != FrameState::Waiting);
+            }
+            last = Some(r.shown);
+        }
+        assert!(
+            max_drift > 1.0,
+            "{policy:?}: at half the bit rate the display falls behind"
+        );
+    }
+}
+
+#[test]
+fn the_loop_seam_in_a_sunrise_adds_no_error() {
+    let (device, queue) = device();
+    // A day rotated so that frame 0 is the middle of a sunrise: the seam falls where the
+    // light changes fastest.
+    let (w, h, n) = (32, 16, 48);
+    let mut src = sequence(w, h, n, InputKind::Hdr);
+    let frames: Vec<Vec<f32>> = (0..n)
+        .map(|t| {
+            let ramp = 1.0
+                / (1.0 + (-((t as f32 + n as f32 / 2.0) % n as f32 - n as f32 / 2.0) * 0.8).exp());
+            src.frames[t].iter().map(|v| v * (0.05 + ramp)).collect()
+        })
+        .collect();
+    src.frames = frames.clone();
+    let bytes = encode_bytes(&src, &config(SegmentMode::Auto { max: 12 }));
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, Throttle::UNLIMITED),
+    )
+    .unwrap();
+    let greens: Vec<f32> = frames
+        .iter()
+        .map(|f| f.iter().skip(1).step_by(3).copied().fold(0.0, f32::max))
+        .collect();
+    let metric = vbim_format::metrics::Metric::Hdr {
+        exposure: vbim_format::curve::exposure_from_max_greens(&greens),
+    };
+    // Per media frame: MSE of the displayed frame against the source, and the largest
+    // difference against the reference decoder (what the player itself adds).
+    let mut mse = vec![Vec::new(); n];
+    let mut added = vec![0f32; n];
+    let mut cpu = vec![0f32; w * h * 3];
+    let mut render_ns = vec![0u64; n];
+    // Two loops at 60 Hz; every media frame is shown exactly at least once in 5 display frames.
+    for _ in 0..(2 * n * 5 / 2 + 1) {
+        let r = player.advance(DISPLAY);
+        assert_eq!(
+            r.state,
+            FrameState::Exact,
+            "no stall at the seam ({:.2})",
+            r.target
+        );
+        let f = r.shown % n as f64;
+        let k = (f.floor() as usize) % n;
+        render_ns[k] = render_ns[k].max(r.render_ns);
+        let gpu = player.gpu().read_display();
+        let rgb: Vec<f32> = gpu.chunks(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        reference.frame(f, Output::Linear, &mut cpu).unwrap();
+        let d = rgb
+            .iter()
+            .zip(&cpu)
+            .map(|(a, b)| (a - b).abs() / b.max(1e-3))
+            .fold(0.0, f32::max);
+        added[k] = added[k].max(d);
+        if (f - f.round()).abs() < 1e-6 {
+            let e = metric.compare(&frames[f.round() as usize % n], &rgb);
+            mse[f.round() as usize % n].push(e.sse / e.count as f64);
+        }
+    }
+    let seam = [n - 2, n - 1, 0, 1, 2];
+    // The player adds nothing measurable anywhere, the seam included.
+    for (k, a) in added.iter().enumerate() {
+        assert!(
+            *a <= 2f32.powi(-10),
+            "frame {k}: the GPU differs from the reference by {a}"
+        );
+    }
+    // Against the source, every frame by the seam meets the encoder's error budget (45 dB):
+    // per-frame errors along a day vary twentyfold, so "no more than the mean" would test
+    // the content, not the seam; a broken seam (a wrong closing keyframe, a wrong pass)
+    // costs orders of magnitude more.
+    let budget = 10f64.powf(-45.0 / 10.0);
+    let all: Vec<f64> = mse.iter().flatten().copied().collect();
+    let mean = all.iter().sum::<f64>() / all.len() as f64;
+    for k in seam {
+        for m in &mse[k] {
+            assert!(
+                *m <= budget,
+                "frame {k} by the seam: MSE {m:e} over the 45 dB budget {budget:e} (mean {mean:e})"
+            );
+        }
+    }
+}
