@@ -23,7 +23,7 @@ pub mod time;
 
 pub use clock::{Clock, SimClock, SystemClock};
 pub use gpu::headless_device;
-pub use player::{frame_ns, FrameRecord, FrameState, Player, PlayerConfig, Policy, Totals};
+pub use player::{frame_ns, Frame, FrameRecord, FrameState, Player, PlayerConfig, Policy, Totals};
 pub use throttle::Throttle;
 
 #[derive(Debug, thiserror::Error)]

@@ -129,6 +129,13 @@ pub struct FrameRecord {
     pub u: f64,
 }
 
+/// A planned frame: its record and the reconstruction to run (slot, parameters, whether
+/// to keep the current image for blending first).
+pub struct Frame {
+    pub record: FrameRecord,
+    pub eval: Option<(usize, Params, bool)>,
+}
+
 /// Running totals.
 #[derive(Clone, Debug, Default)]
 pub struct Totals {
@@ -188,6 +195,8 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     recycle: Sender<Box<SegmentData>>,
     /// The box received but not yet uploaded.
     incoming: Option<Box<SegmentData>>,
+    /// A box planned for upload into a slot this frame.
+    to_upload: Option<(usize, Box<SegmentData>)>,
     slots: [Option<Resident>; 2],
     shown_slot: Option<usize>,
     ticks: u64,
@@ -305,6 +314,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             pipeline,
             recycle: recycle_tx,
             incoming: None,
+            to_upload: None,
             slots: [None, None],
             shown_slot: None,
             ticks: 0,
@@ -471,10 +481,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         } else if self.slots[free]
             .is_none_or(|old| old.end <= pos || r.start <= pos || old.start > r.start)
         {
-            *uploaded = self.gpu.upload(free, &b);
+            *uploaded = (b.data.len() * 4) as u64;
             self.slots[free] = Some(r);
             self.totals.segments_uploaded += 1;
-            self.give_back(b);
+            // Copied to the GPU in `render`, after which the box goes back to the decoder.
+            self.to_upload = Some((free, b));
         } else {
             self.incoming = Some(b);
         }
@@ -484,8 +495,35 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         r.is_some_and(|r| r.start <= p && p < r.end)
     }
 
-    /// Advances playback by `dt` ns and renders the lightmap for the new time.
+    /// Advances playback by `dt` ns and renders the lightmap for the new time: [`plan`]
+    /// then [`render`].
+    ///
+    /// [`plan`]: Player::plan
+    /// [`render`]: Player::render
     pub fn advance(&mut self, dt: u64) -> FrameRecord {
+        let t0 = Instant::now();
+        let frame = self.plan(dt);
+        self.render(&frame);
+        let mut r = frame.record;
+        r.render_ns = t0.elapsed().as_nanos() as u64;
+        r
+    }
+
+    /// Records the GPU work of a planned frame: the upload of a newly arrived segment into
+    /// the slot not on screen, and the reconstruction, in one submission.
+    pub fn render(&mut self, frame: &Frame) {
+        if let Some((slot, b)) = self.to_upload.take() {
+            self.gpu.upload(slot, &b);
+            self.give_back(b);
+        }
+        if let Some((slot, params, hold_first)) = &frame.eval {
+            self.gpu.evaluate(*slot, params, *hold_first);
+        }
+    }
+
+    /// The CPU side of a frame, allocation-free: takes what the reader and decoder
+    /// produced, decides what is shown under the policy, and computes the shader's weights.
+    pub fn plan(&mut self, dt: u64) -> Frame {
         let t0 = Instant::now();
         self.ticks += dt;
         let decode_ns = self.pump();
@@ -548,7 +586,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 uploaded,
                 decode_ns,
             );
-            return record;
+            return Frame { record, eval: None };
         }
         self.started = true;
         if missing {
@@ -597,6 +635,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.was_missing = missing;
         // Evaluate the shown slot at the (clamped) time.
         let (mut seg, mut u) = (0, 0.0);
+        let mut eval = None;
         if let Some(s) = self.shown_slot {
             if let Some(r) = self.slots[s] {
                 let t = if missing {
@@ -624,11 +663,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 if hold_first {
                     params.alpha = 1e-3;
                 }
-                self.gpu.evaluate(s, &params, hold_first);
+                eval = Some((s, params, hold_first));
             }
         }
         self.last_shown = shown;
-        self.record(t0, wall, shown, state, alpha, seg, u, uploaded, decode_ns)
+        let record = self.record(t0, wall, shown, state, alpha, seg, u, uploaded, decode_ns);
+        Frame { record, eval }
     }
 
     #[allow(clippy::too_many_arguments)]

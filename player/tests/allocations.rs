@@ -1,0 +1,119 @@
+//! A counting allocator: no allocation on the render thread over 1000 steady-state frames,
+//! and no growth in what the other threads hold.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::io::Cursor;
+use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
+
+use vbim_encoder::{
+    encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode, SourceInfo,
+};
+use vbim_player::{headless_device, FrameState, Player, PlayerConfig};
+
+struct Counting;
+
+thread_local! {
+    static COUNT_HERE: Cell<bool> = const { Cell::new(false) };
+}
+static HERE: AtomicU64 = AtomicU64::new(0);
+static LIVE: AtomicI64 = AtomicI64::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        if COUNT_HERE.try_with(|c| c.get()).unwrap_or(false) {
+            HERE.fetch_add(1, Ordering::Relaxed);
+        }
+        LIVE.fetch_add(l.size() as i64, Ordering::Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        LIVE.fetch_sub(l.size() as i64, Ordering::Relaxed);
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        if COUNT_HERE.try_with(|c| c.get()).unwrap_or(false) {
+            HERE.fetch_add(1, Ordering::Relaxed);
+        }
+        LIVE.fetch_add(new as i64 - l.size() as i64, Ordering::Relaxed);
+        unsafe { System.realloc(p, l, new) }
+    }
+}
+
+#[global_allocator]
+static A: Counting = Counting;
+
+#[test]
+fn steady_state_frames_do_not_allocate() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (w, h, n) = (64, 32, 96);
+    let frames = (0..n)
+        .map(|t| {
+            (0..w * h)
+                .flat_map(|i| {
+                    let v =
+                        0.1 + 0.5 * ((i % w) as f32 / w as f32) * (1.0 + (t as f32 * 0.1).sin());
+                    [v, v, v]
+                })
+                .collect()
+        })
+        .collect();
+    let src = MemorySource {
+        info: SourceInfo {
+            width: w,
+            height: h,
+            channels: 3,
+            kind: InputKind::Hdr,
+            frames: n,
+            name: "m".into(),
+        },
+        frames,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a.vbim");
+    let cfg = EncoderConfig {
+        segment: SegmentMode::Fixed(8),
+        rate: (24, 1),
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    encode(&src, &cfg, &path, false, &|_, _, _| {}).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let mut player =
+        Player::open(&device, &queue, Cursor::new(bytes), PlayerConfig::default()).unwrap();
+    // Warm up: every segment has gone through both slots once.
+    let dt = 16_666_667;
+    for _ in 0..600 {
+        player.advance(dt);
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
+    let live_before = LIVE.load(Ordering::Relaxed);
+    let mut exact = 0;
+    let (mut ours, mut wgpu) = (0, 0);
+    for _ in 0..1000 {
+        // The player's own work on the render thread (`plan`), then wgpu's (`render`:
+        // write_texture, write_buffer, a command encoder and a submit), counted apart.
+        HERE.store(0, Ordering::Relaxed);
+        COUNT_HERE.with(|c| c.set(true));
+        let frame = player.plan(dt);
+        COUNT_HERE.with(|c| c.set(false));
+        ours += HERE.swap(0, Ordering::Relaxed);
+        COUNT_HERE.with(|c| c.set(true));
+        player.render(&frame);
+        COUNT_HERE.with(|c| c.set(false));
+        wgpu += HERE.swap(0, Ordering::Relaxed);
+        exact += (frame.record.state == FrameState::Exact) as u32;
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
+    let growth = LIVE.load(Ordering::Relaxed) - live_before;
+    eprintln!(
+        "over 1000 frames: {ours} allocations by the player on the render thread, {wgpu} inside wgpu's \
+         recording and submit ({:.1} per frame); live-heap growth {growth} bytes; exact frames {exact}",
+        wgpu as f64 / 1000.0
+    );
+    assert_eq!(
+        ours, 0,
+        "the player allocated {ours} times on the render thread in 1000 steady-state frames"
+    );
+    assert!(exact > 900, "steady state: {exact} exact frames");
+    assert!(growth.abs() < 1 << 20, "live heap grew by {growth} bytes");
+}
