@@ -27,15 +27,72 @@ pub enum Command {
     Decode(DecodeArgs),
     /// Compare two sequences (directories, patterns or .vbim files) with the protocol's metrics.
     Compare(CompareArgs),
+    /// Play a .vbim file through the GPU player: headless (simulated or real time) with a
+    /// summary of drift against bandwidth, or in a terrain scene (`--scene`).
+    Play(PlayArgs),
     /// Benchmarks (results go in BENCHMARKS.md).
     #[command(subcommand)]
     Bench(BenchCommand),
+}
+
+#[derive(Args, Clone)]
+pub struct PlayArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Run without a window and print the summary.
+    #[arg(long)]
+    pub headless: bool,
+    /// Playback duration (`60s`, `2min`, `500ms`) [default: 60s].
+    #[arg(long, default_value = "60s")]
+    pub duration: String,
+    /// Display refresh rate in Hz [default: 60].
+    #[arg(long, default_value_t = 60)]
+    pub display_hz: u32,
+    /// Cap the reader: SI bytes per second (`2MB/s`, `500kB/s`) or a multiple of the stream's mean bit rate (`1.2x`) [default: unlimited].
+    #[arg(long)]
+    pub bandwidth: Option<String>,
+    /// Stall the reader periodically: `300ms@5s` = 300 ms every 5 s of playback [default: none].
+    #[arg(long)]
+    pub stall: Option<String>,
+    /// What to show when data is late: interpolate (hold, then blend), wait (pause the clock) or skip (hold, then jump) [default: interpolate].
+    #[arg(long, default_value = "interpolate")]
+    pub policy: String,
+    /// Catch-up window of the interpolate policy [default: 500ms].
+    #[arg(long, default_value = "500ms")]
+    pub catch_up: String,
+    /// Ring capacity in bytes [default: the header's read-ahead at the read rate].
+    #[arg(long)]
+    pub ring: Option<usize>,
+    /// Run in real time with the reader and decoder on their own threads (default: simulated time, stepped deterministically, as fast as the machine goes).
+    #[arg(long)]
+    pub realtime: bool,
+    /// Per-frame records as CSV.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Measure the shown frame against the reference decoder every N displayed frames (0 = never) [default: 30].
+    #[arg(long, default_value_t = 30)]
+    pub check_every: u64,
+    /// Summary as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
 pub enum BenchCommand {
     /// Time the baker: precomputation, per-frame lighting and file writing, apart.
     Bake(BenchBakeArgs),
+    /// Time the player's decoder on a file: zstd alone, and the full decode (keyframes,
+    /// coefficient planes, staging layout), as a share of one core at the file's frame rate.
+    Decode(BenchDecodeArgs),
+}
+
+#[derive(Args)]
+pub struct BenchDecodeArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Repetitions; the median and the spread are reported [default: 5].
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
 }
 
 #[derive(Args)]

@@ -11,6 +11,7 @@ use crate::cli::{BenchBakeArgs, BenchCommand};
 pub fn run(c: BenchCommand) -> Result<(), String> {
     match c {
         BenchCommand::Bake(a) => bench_bake(a),
+        BenchCommand::Decode(a) => bench_decode(a),
     }
 }
 
@@ -102,5 +103,59 @@ fn bench_bake(a: BenchBakeArgs) -> Result<(), String> {
         w0 * 1e3,
         w1 * 1e3
     );
+    Ok(())
+}
+
+fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
+    use vbim_format::chunk;
+    use vbim_format::{ChunkKind, Reader};
+    use vbim_player::assemble::{DecoderCore, Event, SegmentData};
+    let name = a.file.display().to_string();
+    let bytes = std::fs::read(&a.file).map_err(|e| format!("{name}: {e}"))?;
+    let r = Reader::open(std::io::Cursor::new(&bytes)).map_err(|e| format!("{name}: {e}"))?;
+    let h = r.header().clone();
+    let entries = r.entries().to_vec();
+    let layout = r.layout().clone();
+    let chunks: Vec<&[u8]> = entries
+        .iter()
+        .map(|e| &bytes[e.offset as usize..(e.offset + e.length) as usize])
+        .collect();
+    let duration = h.frame_count as f64 / h.fps();
+    let (mut zstd_t, mut full_t) = (Vec::new(), Vec::new());
+    for _ in 0..a.runs.max(1) {
+        // zstd alone: every keyframe, tile map and coefficient chunk decompressed.
+        let t = Instant::now();
+        let mut total = 0usize;
+        for (e, c) in entries.iter().zip(&chunks) {
+            if matches!(
+                e.kind,
+                ChunkKind::Keyframe | ChunkKind::TileMap | ChunkKind::Coefficients
+            ) {
+                total += chunk::decompress(c, vbim_format::limits::MAX_CHUNK_DECODED as usize)
+                    .map_err(|e| e.to_string())?
+                    .len();
+            }
+        }
+        zstd_t.push(t.elapsed().as_secs_f64());
+        std::hint::black_box(total);
+        // The player's decoder: every chunk in playback order, every segment into staging.
+        let t = Instant::now();
+        let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
+        let mut staging = SegmentData::with_capacity(&h);
+        for (i, c) in chunks.iter().enumerate() {
+            if let Event::Ready(s) = dec.take(i, Some(c)) {
+                dec.fill(s, 0, 0, &mut staging)?;
+            }
+        }
+        full_t.push(t.elapsed().as_secs_f64());
+    }
+    let (zm, z0, z1) = stats(&mut zstd_t);
+    let (fm, f0, f1) = stats(&mut full_t);
+    println!(
+        "decode benchmark: {name}, {}×{}, {} frames at {}/{} fps ({duration:.1} s), {} segments, {} runs",
+        h.width, h.height, h.frame_count, h.rate_num, h.rate_den, h.segment_count, a.runs
+    );
+    println!("zstd alone      median {:.3} s (min {z0:.3}, max {z1:.3}) = {:.2}% of one core in real time", zm, 100.0 * zm / duration);
+    println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);
     Ok(())
 }

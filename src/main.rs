@@ -8,6 +8,7 @@ mod cmd_compare;
 mod cmd_decode;
 mod cmd_encode;
 mod cmd_inspect;
+mod cmd_play;
 mod progress;
 mod sequence;
 mod units;
@@ -30,6 +31,7 @@ fn main() -> ExitCode {
         cli::Command::Inspect(a) => cmd_inspect::run(a),
         cli::Command::Decode(a) => cmd_decode::run(a),
         cli::Command::Compare(a) => cmd_compare::run(a),
+        cli::Command::Play(a) => cmd_play::run(a),
         cli::Command::Bench(b) => cmd_bench::run(b),
     };
     match res {

@@ -24,6 +24,59 @@ pub fn parse_rate(s: &str) -> Result<(u32, u32), String> {
     vbim_bake::scene::parse_rate(s)
 }
 
+/// A read rate: `2MB/s`, `500kB/s`, `1GB/s`, `800B/s` (SI), or `1.2x` (times the
+/// stream's mean bit rate, resolved by the caller).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Bandwidth {
+    BytesPerSecond(f64),
+    TimesMean(f64),
+}
+
+pub fn parse_bandwidth(s: &str) -> Result<Bandwidth, String> {
+    let t = s.trim();
+    let bad = || format!("bandwidth {s:?} (expected e.g. 2MB/s, 500kB/s or 1.2x)");
+    if let Some(x) = t.strip_suffix('x') {
+        return x
+            .parse::<f64>()
+            .ok()
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .map(Bandwidth::TimesMean)
+            .ok_or_else(bad);
+    }
+    let body = t.strip_suffix("/s").ok_or_else(bad)?;
+    let (num, scale) = if let Some(n) = body.strip_suffix("GB") {
+        (n, 1e9)
+    } else if let Some(n) = body.strip_suffix("MB") {
+        (n, 1e6)
+    } else if let Some(n) = body.strip_suffix("kB") {
+        (n, 1e3)
+    } else if let Some(n) = body.strip_suffix('B') {
+        (n, 1.0)
+    } else {
+        return Err(bad());
+    };
+    num.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .map(|v| Bandwidth::BytesPerSecond(v * scale))
+        .ok_or_else(bad)
+}
+
+/// `300ms@5s`: a stall of 300 ms every 5 s → (stall ns, period ns).
+pub fn parse_stall(s: &str) -> Result<(u64, u64), String> {
+    let (d, p) = s
+        .split_once('@')
+        .ok_or_else(|| format!("stall {s:?} (expected DURATION@PERIOD, e.g. 300ms@5s)"))?;
+    let (d, p) = (parse_duration(d)?, parse_duration(p)?);
+    if d >= p || p <= 0.0 {
+        return Err(format!(
+            "stall {s:?}: the stall must be shorter than its period"
+        ));
+    }
+    Ok(((d * 1e9).round() as u64, (p * 1e9).round() as u64))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -35,5 +88,24 @@ mod tests {
         assert_eq!(parse_duration("2min").unwrap(), 120.0);
         assert!(parse_duration("-1s").is_err());
         assert!(parse_duration("fast").is_err());
+    }
+
+    #[test]
+    fn bandwidths_and_stalls() {
+        assert_eq!(
+            parse_bandwidth("2MB/s").unwrap(),
+            Bandwidth::BytesPerSecond(2e6)
+        );
+        assert_eq!(
+            parse_bandwidth("500kB/s").unwrap(),
+            Bandwidth::BytesPerSecond(5e5)
+        );
+        assert_eq!(parse_bandwidth("1.2x").unwrap(), Bandwidth::TimesMean(1.2));
+        assert!(parse_bandwidth("2MiB").is_err());
+        assert_eq!(
+            parse_stall("300ms@5s").unwrap(),
+            (300_000_000, 5_000_000_000)
+        );
+        assert!(parse_stall("5s@1s").is_err());
     }
 }

@@ -100,8 +100,10 @@ pub fn read_keyframe(h: &Header, bytes: &[u8], prev: Option<&[Plane]>) -> Result
     let mut pos = r.pos;
     for (p, step) in steps.iter().enumerate() {
         let q = plane::read_coefficients(&raw, &mut pos, nblocks)?;
-        for ((bx, by), qb) in plane::all_blocks(&out[p].clone()).zip(&q) {
-            out[p].add_block(bx, by, &plane::dequantize_block(qb, *step));
+        let (bw, bh) = (w / N, ht / N);
+        let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+        for ((bx, by), qb) in origins.zip(&q) {
+            plane::add_dequantized(&mut out[p], bx, by, qb, *step);
         }
     }
     if pos != raw.len() {
@@ -240,7 +242,7 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
                 .iter()
                 .flat_map(|&t| plane::tile_blocks(t, tiles_x, ts));
             for ((bx, by), qb) in origins.zip(&q) {
-                plane.write_block(bx, by, &plane::dequantize_block(qb, step));
+                plane::add_dequantized(&mut plane, bx, by, qb, step);
             }
             planes_k.push(plane);
         }

@@ -5,6 +5,11 @@ use std::sync::OnceLock;
 
 pub const N: usize = 8;
 
+/// The orthonormal DCT-II basis: `basis()[k][n]` is frequency k at sample n.
+pub fn basis() -> &'static [[f32; N]; N] {
+    table()
+}
+
 fn table() -> &'static [[f32; N]; N] {
     static T: OnceLock<[[f32; N]; N]> = OnceLock::new();
     T.get_or_init(|| {
@@ -49,27 +54,35 @@ pub fn forward(block: &mut [f32; N * N]) {
     }
 }
 
-/// Inverse transform of one block of coefficients, in place.
+/// Inverse transform of one block of coefficients, in place. Zero coefficients are
+/// skipped: adding an exact zero never changes a float sum, so the result is the same as
+/// the dense loops' (most blocks of a coefficient plane are nearly empty).
 pub fn inverse(block: &mut [f32; N * N]) {
     let t = table();
     let mut tmp = [0f32; N * N];
     for x in 0..N {
-        for n in 0..N {
-            let mut s = 0.0;
-            for k in 0..N {
-                s += t[k][n] * block[k * N + x];
+        for k in 0..N {
+            let c = block[k * N + x];
+            if c == 0.0 {
+                continue;
             }
-            tmp[n * N + x] = s;
+            for n in 0..N {
+                tmp[n * N + x] += t[k][n] * c;
+            }
         }
     }
     for y in 0..N {
-        for n in 0..N {
-            let mut s = 0.0;
-            for k in 0..N {
-                s += t[k][n] * tmp[y * N + k];
+        let row = &tmp[y * N..y * N + N];
+        let mut out = [0f32; N];
+        for (k, &c) in row.iter().enumerate() {
+            if c == 0.0 {
+                continue;
             }
-            block[y * N + n] = s;
+            for n in 0..N {
+                out[n] += t[k][n] * c;
+            }
         }
+        block[y * N..y * N + N].copy_from_slice(&out);
     }
 }
 

@@ -71,38 +71,82 @@ pub fn all_blocks(p: &Plane) -> impl Iterator<Item = (usize, usize)> {
     (0..bh).flat_map(move |y| (0..bw).map(move |x| (x, y)))
 }
 
-/// Writes quantised blocks (each 64 integers in zig-zag order) frequency-major.
+/// Writes quantised blocks (each 64 integers in zig-zag order) frequency-major — the DC
+/// terms as differences from the previous block's, then each AC position across all
+/// blocks — as (zero run, value) pairs: a LEB128 count of zeros, then a zig-zag varint
+/// of the non-zero value; a final run reaches the end. Coefficient planes are mostly
+/// zeros, so this is both smaller before zstd and far faster to decode than one varint
+/// per coefficient.
 pub fn write_coefficients(blocks: &[[i32; N * N]], out: &mut Vec<u8>) {
+    let mut run = 0u32;
+    let mut emit = |v: i32, out: &mut Vec<u8>| {
+        if v == 0 {
+            run += 1;
+        } else {
+            varint::put_u32(out, run);
+            varint::put_i32(out, v);
+            run = 0;
+        }
+    };
     let mut prev_dc = 0i32;
     for b in blocks {
-        varint::put_i32(out, b[0].wrapping_sub(prev_dc));
+        emit(b[0].wrapping_sub(prev_dc), out);
         prev_dc = b[0];
     }
     for f in 1..N * N {
         for b in blocks {
-            varint::put_i32(out, b[f]);
+            emit(b[f], out);
         }
     }
+    varint::put_u32(out, run);
 }
 
 /// Reads `n` blocks written by [`write_coefficients`].
 pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i32; N * N]>> {
-    // Each coefficient takes at least one byte: refuse before allocating for a short stream.
-    if buf.len().saturating_sub(*pos) < n * N * N {
+    let total = n * N * N;
+    // Every pair takes at least two bytes: refuse a count the stream cannot hold before
+    // allocating for it (zero runs make the blocks themselves cheap to describe).
+    if n > 0 && buf.len() <= *pos {
         return Err(crate::FormatError::Invalid(format!(
-            "coefficient stream too short for {n} blocks"
+            "coefficient stream empty for {n} blocks"
+        )));
+    }
+    if n > crate::limits::MAX_CHUNK_DECODED as usize / (N * N) {
+        return Err(crate::FormatError::Invalid(format!(
+            "{n} blocks in one stream"
         )));
     }
     let mut blocks = vec![[0i32; N * N]; n];
-    let mut prev_dc = 0i32;
-    for b in blocks.iter_mut() {
-        prev_dc = prev_dc.wrapping_add(varint::get_i32(buf, pos)?);
-        b[0] = prev_dc;
-    }
-    for f in 1..N * N {
-        for b in blocks.iter_mut() {
-            b[f] = varint::get_i32(buf, pos)?;
+    let mut idx = 0usize;
+    loop {
+        let run = varint::get_u32(buf, pos)? as usize;
+        idx = idx
+            .checked_add(run)
+            .filter(|&i| i <= total)
+            .ok_or_else(|| {
+                crate::FormatError::Invalid(format!("zero run past the end of {n} blocks"))
+            })?;
+        if idx == total {
+            break;
         }
+        let v = varint::get_i32(buf, pos)?;
+        // Frequency-major: position idx is frequency idx / n of block idx % n.
+        blocks[idx % n][idx / n] = v;
+        idx += 1;
+        if idx == total {
+            // The writer always ends with a run, possibly empty.
+            let tail = varint::get_u32(buf, pos)?;
+            if tail != 0 {
+                return Err(crate::FormatError::Invalid("zero run past the end".into()));
+            }
+            break;
+        }
+    }
+    // Undo the DC prediction.
+    let mut prev = 0i32;
+    for b in blocks.iter_mut() {
+        prev = prev.wrapping_add(b[0]);
+        b[0] = prev;
     }
     Ok(blocks)
 }
@@ -117,6 +161,43 @@ pub fn dequantize_block(q: &[i32; N * N], step: f32) -> [f32; N * N] {
     dct::inverse(&mut b);
     b
 }
+
+/// Adds a dequantised block into the plane at block (bx, by). This is the decoder's
+/// definition of a block's contribution (the encoder reconstructs through it too, so both
+/// sides agree bit for bit): an all-zero block adds nothing; a block with at most
+/// [`SPARSE_MAX`] non-zero coefficients adds each one's basis image directly (64
+/// multiply-adds apiece); denser blocks go through the separable inverse DCT.
+pub fn add_dequantized(p: &mut Plane, bx: usize, by: usize, q: &[i32; N * N], step: f32) {
+    let nonzero = q.iter().filter(|&&v| v != 0).count();
+    if nonzero == 0 {
+        return;
+    }
+    if nonzero > SPARSE_MAX {
+        p.add_block(bx, by, &dequantize_block(q, step));
+        return;
+    }
+    let t = dct::basis();
+    let z = dct::zigzag();
+    let w = p.w;
+    for (i, &v) in q.iter().enumerate() {
+        if v == 0 {
+            continue;
+        }
+        let (ky, kx) = (z[i] / N, z[i] % N);
+        let c = v as f32 * step;
+        for y in 0..N {
+            let a = c * t[ky][y];
+            let row = &mut p.data[(by * N + y) * w + bx * N..(by * N + y) * w + bx * N + N];
+            for (x, o) in row.iter_mut().enumerate() {
+                *o += a * t[kx][x];
+            }
+        }
+    }
+}
+
+/// Blocks with at most this many non-zero coefficients are added coefficient by
+/// coefficient instead of through the full inverse transform.
+pub const SPARSE_MAX: usize = 6;
 
 /// Spatial block → quantised zig-zag integers, with a dead zone: a coefficient rounds away
 /// from zero only past `(0.5 + deadzone) · step`. Used by the encoder; here so that its
@@ -156,6 +237,18 @@ mod tests {
         assert_eq!(read_coefficients(&buf, &mut pos, 5).unwrap(), blocks);
         assert_eq!(pos, buf.len());
         assert!(read_coefficients(&buf[..buf.len() - 1], &mut 0, 5).is_err());
+        // Sparse blocks, and all-zero ones.
+        let mut sparse = vec![[0i32; 64]; 7];
+        sparse[3][10] = -4;
+        sparse[6][63] = 9;
+        sparse[0][0] = 2;
+        for bl in [sparse, vec![[0i32; 64]; 4]] {
+            let mut buf = Vec::new();
+            write_coefficients(&bl, &mut buf);
+            let mut pos = 0;
+            assert_eq!(read_coefficients(&buf, &mut pos, bl.len()).unwrap(), bl);
+            assert_eq!(pos, buf.len());
+        }
     }
 
     #[test]

@@ -3,7 +3,11 @@
 use crate::{FormatError, Result};
 
 pub fn put_i32(out: &mut Vec<u8>, v: i32) {
-    let mut u = ((v << 1) ^ (v >> 31)) as u32;
+    put_u32(out, ((v << 1) ^ (v >> 31)) as u32);
+}
+
+/// Plain LEB128 (for counts such as zero runs).
+pub fn put_u32(out: &mut Vec<u8>, mut u: u32) {
     while u >= 0x80 {
         out.push((u as u8) | 0x80);
         u >>= 7;
@@ -11,8 +15,21 @@ pub fn put_i32(out: &mut Vec<u8>, v: i32) {
     out.push(u as u8);
 }
 
-/// Reads one zig-zag varint at `*pos`, advancing it. Fails on a truncated or over-long value.
-pub fn get_i32(buf: &[u8], pos: &mut usize) -> Result<i32> {
+/// Reads one plain LEB128 value at `*pos`.
+#[inline]
+pub fn get_u32(buf: &[u8], pos: &mut usize) -> Result<u32> {
+    let z = get_i32_raw(buf, pos)?;
+    Ok(z)
+}
+
+#[inline]
+fn get_i32_raw(buf: &[u8], pos: &mut usize) -> Result<u32> {
+    if let Some(&b) = buf.get(*pos) {
+        if b & 0x80 == 0 {
+            *pos += 1;
+            return Ok(b as u32);
+        }
+    }
     let mut u: u32 = 0;
     for shift in (0..35).step_by(7) {
         let b = *buf
@@ -20,16 +37,21 @@ pub fn get_i32(buf: &[u8], pos: &mut usize) -> Result<i32> {
             .ok_or_else(|| FormatError::Invalid("coefficient stream ends early".into()))?;
         *pos += 1;
         if shift == 28 && b > 0x0f {
-            return Err(FormatError::Invalid(
-                "coefficient varint overflows 32 bits".into(),
-            ));
+            return Err(FormatError::Invalid("varint overflows 32 bits".into()));
         }
         u |= ((b & 0x7f) as u32) << shift;
         if b & 0x80 == 0 {
-            return Ok(((u >> 1) as i32) ^ -((u & 1) as i32));
+            return Ok(u);
         }
     }
     unreachable!("the loop returns or fails by the fifth byte")
+}
+
+/// Reads one zig-zag varint at `*pos`, advancing it. Fails on a truncated or over-long value.
+#[inline]
+pub fn get_i32(buf: &[u8], pos: &mut usize) -> Result<i32> {
+    let u = get_i32_raw(buf, pos)?;
+    Ok(((u >> 1) as i32) ^ -((u & 1) as i32))
 }
 
 #[cfg(test)]

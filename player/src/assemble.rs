@@ -225,24 +225,33 @@ impl DecoderCore {
         let ch = h.channels as usize;
         let layers = 2 + bubbles.len();
         out.data.clear();
-        out.data.resize(layers * w * ht * 4, 0.0);
-        let mut put = |layer: usize, planes: &[Plane]| {
-            let base = layer * w * ht * 4;
+        // Appended texel by texel (RGBA, alpha 0): every value written once, no zero-fill.
+        let put = |data: &mut Vec<f32>, planes: &[Plane]| {
             let pw = planes[0].w;
             for y in 0..ht {
-                for x in 0..w {
-                    let o = base + (y * w + x) * 4;
-                    for (c, p) in planes.iter().enumerate().take(ch) {
-                        out.data[o + c] = p.data[y * pw + x];
+                let r = y * pw..y * pw + w;
+                if ch == 3 {
+                    let (a, b, c) = (
+                        &planes[0].data[r.clone()],
+                        &planes[1].data[r.clone()],
+                        &planes[2].data[r],
+                    );
+                    for ((&a, &b), &c) in a.iter().zip(b).zip(c) {
+                        data.extend_from_slice(&[a, b, c, 0.0]);
+                    }
+                } else {
+                    for &a in &planes[0].data[r] {
+                        data.extend_from_slice(&[a, 0.0, 0.0, 0.0]);
                     }
                 }
             }
         };
-        put(0, &k0);
-        put(1, &k1);
-        for (k, b) in bubbles.iter().enumerate() {
-            put(2 + k, b);
+        put(&mut out.data, &k0);
+        put(&mut out.data, &k1);
+        for b in &bubbles {
+            put(&mut out.data, b);
         }
+        debug_assert_eq!(out.data.len(), layers * w * ht * 4);
         out.generation = generation;
         out.pass = pass;
         out.index = s;

@@ -17,6 +17,7 @@ pub mod assemble;
 pub mod clock;
 pub mod gpu;
 mod player;
+pub mod stats;
 pub mod stream;
 pub mod throttle;
 pub mod time;

@@ -1,0 +1,299 @@
+//! `vbim play FILE --headless …`: plays a stream through the GPU player and reports how
+//! bandwidth turned into drift, and how far what was shown is from the true state.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use vbim_format::curve::{exposure_from_max_greens, linear_to_srgb};
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::metrics::{Metric, SequenceError};
+use vbim_format::{ColorEncoding, Header, Reader};
+use vbim_player::stats::{csv, Summary};
+use vbim_player::{headless_device, FrameRecord, Player, PlayerConfig, Policy, Throttle};
+
+use crate::cli::PlayArgs;
+use crate::units::{parse_bandwidth, parse_duration, parse_stall, Bandwidth};
+
+/// Everything one playback session needs.
+pub struct Session {
+    pub file: std::path::PathBuf,
+    pub policy: Policy,
+    pub throttle: Throttle,
+    pub catch_up_ns: u64,
+    pub ring: Option<usize>,
+    pub realtime: bool,
+    pub duration_ns: u64,
+    pub display_hz: u32,
+    pub check_every: u64,
+}
+
+/// What a session measured.
+#[derive(Serialize, Clone, Debug)]
+pub struct Outcome {
+    pub adapter: String,
+    pub policy: String,
+    pub read_rate: Option<u64>,
+    pub mean_rate: f64,
+    pub ring_bytes: usize,
+    pub frames: usize,
+    pub mean_drift: f64,
+    pub p99_drift: f64,
+    pub max_drift: f64,
+    pub late_frames: usize,
+    pub stalls: usize,
+    pub bytes_read_per_s: f64,
+    pub bytes_uploaded_per_s: f64,
+    pub mean_render_ms: f64,
+    pub p99_render_ms: f64,
+    pub decode_core_share: f64,
+    /// PSNR of what was shown against the true state at the target time (protocol metric).
+    pub shown_mean_psnr: Option<f64>,
+    pub shown_worst_psnr: Option<f64>,
+    pub damaged_chunks: u64,
+    pub last_error: Option<String>,
+    #[serde(skip)]
+    pub records: Vec<FrameRecord>,
+}
+
+pub fn mean_rate(h: &Header) -> f64 {
+    h.file_size as f64 / (h.frame_count as f64 / h.fps())
+}
+
+/// The metric for comparing shown frames with true ones.
+pub fn metric_for(dec: &mut Decoder<BufReader<File>>) -> Result<Metric, String> {
+    let h = dec.header().clone();
+    if h.color == ColorEncoding::Srgb8 {
+        return Ok(Metric::Srgb8);
+    }
+    let meta = dec.reader().metadata().ok().flatten();
+    if let Some(e) = meta
+        .and_then(|m| serde_json::from_str::<serde_json::Value>(&m).ok())
+        .and_then(|v| v.get("exposure").and_then(|e| e.as_f64()))
+    {
+        return Ok(Metric::Hdr { exposure: e as f32 });
+    }
+    let n = h.frame_count as usize;
+    let mut buf = vec![0f32; h.texel_count() * h.channels as usize];
+    let mut greens = Vec::new();
+    for k in (0..n).step_by((n / 48).max(1)) {
+        dec.frame(k as f64, Output::Linear, &mut buf)
+            .map_err(|e| e.to_string())?;
+        let g = if h.channels == 3 { 1 } else { 0 };
+        greens.push(
+            buf.iter()
+                .skip(g)
+                .step_by(h.channels as usize)
+                .copied()
+                .fold(0.0, f32::max),
+        );
+    }
+    Ok(Metric::Hdr {
+        exposure: exposure_from_max_greens(&greens),
+    })
+}
+
+pub fn open_reference(file: &Path) -> Result<Decoder<BufReader<File>>, String> {
+    let name = file.display();
+    let f = File::open(file).map_err(|e| format!("{name}: {e}"))?;
+    Ok(Decoder::new(
+        Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?,
+    ))
+}
+
+pub fn play(
+    s: &Session,
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    adapter: &str,
+) -> Result<Outcome, String> {
+    let name = s.file.display().to_string();
+    let f = File::open(&s.file).map_err(|e| format!("{name}: {e}"))?;
+    let cfg = PlayerConfig {
+        policy: s.policy,
+        catch_up_ns: s.catch_up_ns,
+        throttle: s.throttle,
+        ring_bytes: s.ring,
+        threaded: s.realtime,
+        ..Default::default()
+    };
+    let mut player =
+        Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))?;
+    let h = player.header().clone();
+    let mut reference = open_reference(&s.file)?;
+    let metric = if s.check_every > 0 {
+        Some(metric_for(&mut reference)?)
+    } else {
+        None
+    };
+    let frames = s.duration_ns * s.display_hz as u64 / 1_000_000_000;
+    let mut records = Vec::with_capacity(frames as usize);
+    let mut err = SequenceError::default();
+    let mut truth = vec![0f32; h.texel_count() * h.channels as usize];
+    let (n, ch) = (h.frame_count as f64, h.channels as usize);
+    let start = Instant::now();
+    let mut prev_t = 0u64;
+    for k in 1..=frames {
+        // Exact integer ticks per display frame: t_k = ⌊k · 10⁹ / hz⌋, no accumulated error.
+        let t = k * 1_000_000_000 / s.display_hz as u64;
+        if s.realtime {
+            let wall = start.elapsed().as_nanos() as u64;
+            if t > wall {
+                std::thread::sleep(Duration::from_nanos(t - wall));
+            }
+        }
+        let r = player.advance(t - prev_t);
+        prev_t = t;
+        if let Some(m) = metric {
+            if r.index % s.check_every == 0 && r.state != vbim_player::FrameState::Waiting {
+                let target = if h.looping {
+                    r.target % n
+                } else {
+                    r.target.min(n - 1.0)
+                };
+                reference
+                    .frame(target, Output::Linear, &mut truth)
+                    .map_err(|e| format!("{name}: {e}"))?;
+                let shown = player.gpu().read_display();
+                let mut a = Vec::with_capacity(truth.len());
+                let mut b = Vec::with_capacity(truth.len());
+                for i in 0..h.texel_count() {
+                    for c in 0..ch {
+                        let (x, y) = (truth[i * ch + c], shown[i * 4 + c]);
+                        if m == Metric::Srgb8 {
+                            a.push(linear_to_srgb(x));
+                            b.push(linear_to_srgb(y));
+                        } else {
+                            a.push(x);
+                            b.push(y);
+                        }
+                    }
+                }
+                err.push(m.compare(&a, &b));
+            }
+        }
+        records.push(r);
+    }
+    let totals = player.totals().clone();
+    let ring = player.ring_bytes();
+    player
+        .stop(Duration::from_secs(10))
+        .map_err(|e| e.to_string())?;
+    let sum = Summary::of(&records);
+    Ok(Outcome {
+        adapter: adapter.to_string(),
+        policy: format!("{:?}", s.policy).to_lowercase(),
+        read_rate: s.throttle.rate,
+        mean_rate: mean_rate(&h),
+        ring_bytes: ring,
+        frames: sum.frames,
+        mean_drift: sum.mean_drift,
+        p99_drift: sum.p99_drift,
+        max_drift: sum.max_drift,
+        late_frames: sum.late_frames,
+        stalls: sum.stalls,
+        bytes_read_per_s: sum.bytes_read_per_s,
+        bytes_uploaded_per_s: sum.bytes_uploaded_per_s,
+        mean_render_ms: sum.mean_render_ms,
+        p99_render_ms: sum.p99_render_ms,
+        decode_core_share: sum.decode_core_share,
+        shown_mean_psnr: (!err.frames.is_empty()).then(|| err.mean_psnr()),
+        shown_worst_psnr: (!err.frames.is_empty()).then(|| err.worst().1),
+        damaged_chunks: totals.damaged,
+        last_error: totals.last_error,
+        records,
+    })
+}
+
+/// Builds the session from the command line.
+pub fn session(a: &PlayArgs) -> Result<Session, String> {
+    let h = open_reference(&a.file)?.header().clone();
+    let rate = match a.bandwidth.as_deref().map(parse_bandwidth).transpose()? {
+        None => None,
+        Some(Bandwidth::BytesPerSecond(b)) => Some(b.round() as u64),
+        Some(Bandwidth::TimesMean(x)) => Some((x * mean_rate(&h)).round().max(1.0) as u64),
+    };
+    let stall = a.stall.as_deref().map(parse_stall).transpose()?;
+    if a.display_hz == 0 {
+        return Err("--display-hz must be positive".into());
+    }
+    Ok(Session {
+        file: a.file.clone(),
+        policy: a.policy.parse()?,
+        throttle: Throttle { rate, stall },
+        catch_up_ns: (parse_duration(&a.catch_up)? * 1e9) as u64,
+        ring: a.ring,
+        realtime: a.realtime,
+        duration_ns: (parse_duration(&a.duration)? * 1e9) as u64,
+        display_hz: a.display_hz,
+        check_every: a.check_every,
+    })
+}
+
+pub fn print(o: &Outcome, s: &Session) {
+    let fmt_rate = |r: f64| format!("{:.1} kB/s", r / 1e3);
+    println!(
+        "played {} frames ({:.1} s at {} Hz, {} time) on {}, policy {}",
+        o.frames,
+        s.duration_ns as f64 * 1e-9,
+        s.display_hz,
+        if s.realtime { "real" } else { "simulated" },
+        o.adapter,
+        o.policy
+    );
+    println!(
+        "read        {} (cap {}, stream mean {}), ring {} bytes",
+        fmt_rate(o.bytes_read_per_s),
+        o.read_rate
+            .map_or("none".to_string(), |r| fmt_rate(r as f64)),
+        fmt_rate(o.mean_rate),
+        o.ring_bytes
+    );
+    println!("uploaded    {:.2} MB/s", o.bytes_uploaded_per_s / 1e6);
+    println!(
+        "drift       mean {:.3}, p99 {:.3}, max {:.3} media frames; {} frames late by > 1; {} stalls",
+        o.mean_drift, o.p99_drift, o.max_drift, o.late_frames, o.stalls
+    );
+    println!(
+        "render      {:.3} ms mean, {:.3} ms p99 per frame (render thread, CPU); decoder {:.2}% of a core",
+        o.mean_render_ms,
+        o.p99_render_ms,
+        o.decode_core_share * 100.0
+    );
+    if let (Some(m), Some(w)) = (o.shown_mean_psnr, o.shown_worst_psnr) {
+        println!(
+            "shown       {m:.2} dB mean PSNR against the true state, worst checked frame {w:.2} dB"
+        );
+    }
+    if o.damaged_chunks > 0 {
+        println!(
+            "damaged     {} chunk(s); last: {}",
+            o.damaged_chunks,
+            o.last_error.as_deref().unwrap_or("")
+        );
+    }
+}
+
+pub fn run(a: PlayArgs) -> Result<(), String> {
+    if !a.headless {
+        return Err(
+            "only --headless playback is available in this build (the windowed scene is issue 6)"
+                .into(),
+        );
+    }
+    let s = session(&a)?;
+    let (device, queue, info) = headless_device()?;
+    let adapter = format!("{} ({:?})", info.name, info.backend);
+    let o = play(&s, &device, &queue, &adapter)?;
+    print(&o, &s);
+    if let Some(p) = &a.stats {
+        std::fs::write(p, csv(&o.records)).map_err(|e| format!("{}: {e}", p.display()))?;
+    }
+    if let Some(p) = &a.json {
+        std::fs::write(p, serde_json::to_string_pretty(&o).unwrap())
+            .map_err(|e| format!("{}: {e}", p.display()))?;
+    }
+    Ok(())
+}
