@@ -75,7 +75,16 @@ pub fn read_keyframe(h: &Header, bytes: &[u8], prev: Option<&[Plane]>) -> Result
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
     let raw = decompress(bytes, stream_limit(nblocks * planes, planes))?;
-    let mut r = Bytes { b: &raw, pos: 0 };
+    read_keyframe_raw(h, &raw, prev)
+}
+
+/// Decodes an uncompressed keyframe payload (what [`write_keyframe`] returns). The encoder
+/// uses it to measure candidate quantisers exactly as a player will decode them.
+pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Result<Vec<Plane>> {
+    let (w, ht) = padded_size(h);
+    let planes = h.channels as usize;
+    let nblocks = (w / N) * (ht / N);
+    let mut r = Bytes { b: raw, pos: 0 };
     let head = r.take(4)?;
     let (mode, np) = (head[0], head[1] as usize);
     if np != planes {
@@ -99,7 +108,7 @@ pub fn read_keyframe(h: &Header, bytes: &[u8], prev: Option<&[Plane]>) -> Result
     let mut out = base;
     let mut pos = r.pos;
     for (p, step) in steps.iter().enumerate() {
-        let q = plane::read_coefficients(&raw, &mut pos, nblocks)?;
+        let q = plane::read_coefficients(raw, &mut pos, nblocks)?;
         let (bw, bh) = (w / N, ht / N);
         let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
         for ((bx, by), qb) in origins.zip(&q) {
