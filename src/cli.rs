@@ -75,6 +75,21 @@ pub struct PlayArgs {
     /// Summary as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Render the lightmap on the sample's terrain (scene file, e.g. samples/jacksboro.toml).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// With --scene --headless: directory for the rendered PNG frames and the animated preview (preview.gif).
+    #[arg(short, long)]
+    pub out: Option<PathBuf>,
+    /// With --scene --headless: frames to capture, evenly spread over the duration [default: 120].
+    #[arg(long, default_value_t = 120)]
+    pub frames: usize,
+    /// Rendered width in pixels [default: 960].
+    #[arg(long, default_value_t = 960)]
+    pub width: u32,
+    /// Rendered height in pixels [default: 540].
+    #[arg(long, default_value_t = 540)]
+    pub height: u32,
 }
 
 #[derive(Subcommand)]

@@ -277,13 +277,36 @@ pub fn print(o: &Outcome, s: &Session) {
 }
 
 pub fn run(a: PlayArgs) -> Result<(), String> {
-    if !a.headless {
-        return Err(
-            "only --headless playback is available in this build (the windowed scene is issue 6)"
-                .into(),
-        );
-    }
     let s = session(&a)?;
+    if let Some(scene) = &a.scene {
+        if !a.headless {
+            return crate::window::run(&s, scene, (a.width, a.height));
+        }
+        let out = a
+            .out
+            .clone()
+            .ok_or("--scene --headless needs --out DIR for the frames")?;
+        let stages = crate::progress::Stages::new();
+        let c = capture_scene(&s, scene, &out, a.frames, (a.width, a.height), &|d, t| {
+            stages.report("render", d, t)
+        })?;
+        stages.finish();
+        print(&c.outcome, &s);
+        println!(
+            "frames      {} PNG in {}, preview {}",
+            c.frames.len(),
+            out.display(),
+            c.preview.display()
+        );
+        if let Some(p) = &a.stats {
+            std::fs::write(p, csv(&c.outcome.records))
+                .map_err(|e| format!("{}: {e}", p.display()))?;
+        }
+        return Ok(());
+    }
+    if !a.headless {
+        return Err("playback without --scene is headless only: add --headless".into());
+    }
     let (device, queue, info) = headless_device()?;
     let adapter = format!("{} ({:?})", info.name, info.backend);
     let o = play(&s, &device, &queue, &adapter)?;
@@ -296,4 +319,162 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
             .map_err(|e| format!("{}: {e}", p.display()))?;
     }
     Ok(())
+}
+
+/// What a scene capture produced.
+pub struct Capture {
+    pub frames: Vec<std::path::PathBuf>,
+    pub preview: std::path::PathBuf,
+    pub outcome: Outcome,
+}
+
+/// Plays `s` while rendering the terrain scene, capturing `n` frames evenly over the
+/// duration into `out` (PNG) plus an animated preview (GIF).
+pub fn capture_scene(
+    s: &Session,
+    scene_file: &Path,
+    out: &Path,
+    n: usize,
+    size: (u32, u32),
+    progress: &dyn Fn(u64, u64),
+) -> Result<Capture, String> {
+    use crate::scene::{orbit, Mesh, SceneRenderer, SkyTrack, View, FORMAT};
+    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
+    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
+    let mesh = Mesh::new(
+        &hf,
+        256,
+        scene.view.vertical_exaggeration as f32,
+        scene.view.snow_line as f32,
+    );
+    let (device, queue, info) = headless_device()?;
+    let name = s.file.display().to_string();
+    let f = File::open(&s.file).map_err(|e| format!("{name}: {e}"))?;
+    let cfg = PlayerConfig {
+        policy: s.policy,
+        catch_up_ns: s.catch_up_ns,
+        throttle: s.throttle,
+        ring_bytes: s.ring,
+        threaded: s.realtime,
+        ..Default::default()
+    };
+    let mut player = Player::open(&device, &queue, BufReader::new(f), cfg)
+        .map_err(|e| format!("{name}: {e}"))?;
+    let h = player.header().clone();
+    if (h.width, h.height) != (hf.w as u32, hf.h as u32) {
+        eprintln!(
+            "note: the lightmap is {}×{}, the terrain {}×{}: the lightmap is stretched over it",
+            h.width, h.height, hf.w, hf.h
+        );
+    }
+    let mut reference = open_reference(&s.file)?;
+    let exposure = match metric_for(&mut reference)? {
+        Metric::Hdr { exposure } => exposure,
+        Metric::Srgb8 => 1.0,
+    };
+    let meta = reference.reader().metadata().ok().flatten();
+    let sky = SkyTrack::from_metadata(meta.as_deref());
+    let renderer = SceneRenderer::new(
+        &device,
+        &queue,
+        &mesh,
+        player.view(),
+        size.0,
+        size.1,
+        FORMAT,
+    );
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let total = s.duration_ns * s.display_hz as u64 / 1_000_000_000;
+    let n = n.max(1) as u64;
+    let mut records = Vec::with_capacity(total as usize);
+    let mut frames = Vec::new();
+    let mut gif_frames = Vec::new();
+    let (gw, gh) = (size.0 / 3, size.1 / 3);
+    let mut prev_t = 0;
+    let mut next_capture = 0u64;
+    let mut captured = 0u64;
+    for k in 1..=total {
+        let t = k * 1_000_000_000 / s.display_hz as u64;
+        let r = player.advance(t - prev_t);
+        prev_t = t;
+        records.push(r);
+        if k >= next_capture && captured < n {
+            let (eye, target) = orbit(captured as f32 / n as f32 * 0.5, &mesh);
+            let (zen, hor) = sky.at(r.shown);
+            let v = View {
+                eye,
+                target,
+                fovy: 0.75,
+                exposure,
+                sky_zenith: zen,
+                sky_horizon: hor,
+                detail: 0.5,
+            };
+            renderer.render(&v, None);
+            let px = renderer.read();
+            let img = image::RgbaImage::from_raw(size.0, size.1, px).expect("size");
+            let path = out.join(format!("frame_{captured:04}.png"));
+            vbim_bake::output::write_atomic(&path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
+                .map_err(|e| e.to_string())?;
+            gif_frames.push(image::imageops::resize(
+                &img,
+                gw,
+                gh,
+                image::imageops::FilterType::Triangle,
+            ));
+            frames.push(path);
+            captured += 1;
+            next_capture = captured * total / n;
+            progress(captured, n);
+        }
+    }
+    let preview = out.join("preview.gif");
+    let delay = image::Delay::from_numer_denom_ms(1000, 15);
+    vbim_bake::output::write_atomic(&preview, |tmp| {
+        let file = File::create(tmp).map_err(|e| e.to_string())?;
+        let mut enc =
+            image::codecs::gif::GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);
+        enc.set_repeat(image::codecs::gif::Repeat::Infinite)
+            .map_err(|e| e.to_string())?;
+        for f in gif_frames {
+            enc.encode_frame(image::Frame::from_parts(f, 0, 0, delay))
+                .map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    })
+    .map_err(|e| e.to_string())?;
+    let totals = player.totals().clone();
+    let ring = player.ring_bytes();
+    player
+        .stop(Duration::from_secs(10))
+        .map_err(|e| e.to_string())?;
+    let sum = Summary::of(&records);
+    let outcome = Outcome {
+        adapter: format!("{} ({:?})", info.name, info.backend),
+        policy: format!("{:?}", s.policy).to_lowercase(),
+        read_rate: s.throttle.rate,
+        mean_rate: mean_rate(&h),
+        ring_bytes: ring,
+        frames: sum.frames,
+        mean_drift: sum.mean_drift,
+        p99_drift: sum.p99_drift,
+        max_drift: sum.max_drift,
+        late_frames: sum.late_frames,
+        stalls: sum.stalls,
+        bytes_read_per_s: sum.bytes_read_per_s,
+        bytes_uploaded_per_s: sum.bytes_uploaded_per_s,
+        mean_render_ms: sum.mean_render_ms,
+        p99_render_ms: sum.p99_render_ms,
+        decode_core_share: sum.decode_core_share,
+        shown_mean_psnr: None,
+        shown_worst_psnr: None,
+        damaged_chunks: totals.damaged,
+        last_error: totals.last_error,
+        records,
+    };
+    Ok(Capture {
+        frames,
+        preview,
+        outcome,
+    })
 }

@@ -10,8 +10,10 @@ mod cmd_encode;
 mod cmd_inspect;
 mod cmd_play;
 mod progress;
+mod scene;
 mod sequence;
 mod units;
+mod window;
 
 use std::process::ExitCode;
 

@@ -43,6 +43,26 @@ pub struct Scene {
     pub obscurance: ObscuranceParams,
     #[serde(default)]
     pub clouds: CloudParams,
+    /// How `vbim play --scene` shows the terrain (not used by the bake).
+    #[serde(default)]
+    pub view: ViewParams,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ViewParams {
+    /// Vertical exaggeration of the terrain mesh.
+    pub vertical_exaggeration: f64,
+    /// Normalised elevation (0–1) above which flat ground is snow; above 1: no snow.
+    pub snow_line: f64,
+}
+impl Default for ViewParams {
+    fn default() -> Self {
+        ViewParams {
+            vertical_exaggeration: 2.0,
+            snow_line: 1.1,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
