@@ -30,6 +30,9 @@ pub enum Command {
     /// Play a .vbim file through the GPU player: headless (simulated or real time) with a
     /// summary of drift against bandwidth, or in a terrain scene (`--scene`).
     Play(PlayArgs),
+    /// The whole job on the shipped sample: bake a day, encode it, play it in the terrain
+    /// scene under a bandwidth cap with stalls, and write frames, a preview, plots and a report.
+    Demo(DemoArgs),
     /// Benchmarks (results go in BENCHMARKS.md).
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -90,6 +93,37 @@ pub struct PlayArgs {
     /// Rendered height in pixels [default: 540].
     #[arg(long, default_value_t = 540)]
     pub height: u32,
+}
+
+#[derive(Args)]
+pub struct DemoArgs {
+    /// Scene file [default: samples/jacksboro.toml].
+    #[arg(default_value = "samples/jacksboro.toml")]
+    pub scene: PathBuf,
+    /// Output directory [default: out/demo].
+    #[arg(short, long, default_value = "out/demo")]
+    pub out: PathBuf,
+    /// Bake resolution, texels per side [default: 512].
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Frames per day [default: 240].
+    #[arg(long, default_value_t = 240)]
+    pub frames: usize,
+    /// Media frame rate of the demo stream: the day plays in frames / fps seconds [default: 24/1].
+    #[arg(long, default_value = "24/1")]
+    pub fps: String,
+    /// Reader cap during playback, SI rate or multiple of the stream's mean [default: 1.2x].
+    #[arg(long, default_value = "1.2x")]
+    pub bandwidth: String,
+    /// Reader stalls during playback [default: 500ms@4s].
+    #[arg(long, default_value = "500ms@4s")]
+    pub stall: String,
+    /// Frames rendered in the terrain scene [default: 120].
+    #[arg(long, default_value_t = 120)]
+    pub render_frames: usize,
+    /// Moving cloud shadows in the bake [default: the scene's].
+    #[arg(long)]
+    pub clouds: Option<bool>,
 }
 
 #[derive(Subcommand)]

@@ -6,9 +6,11 @@ mod cmd_bake;
 mod cmd_bench;
 mod cmd_compare;
 mod cmd_decode;
+mod cmd_demo;
 mod cmd_encode;
 mod cmd_inspect;
 mod cmd_play;
+mod plot;
 mod progress;
 mod scene;
 mod sequence;
@@ -34,6 +36,7 @@ fn main() -> ExitCode {
         cli::Command::Decode(a) => cmd_decode::run(a),
         cli::Command::Compare(a) => cmd_compare::run(a),
         cli::Command::Play(a) => cmd_play::run(a),
+        cli::Command::Demo(a) => cmd_demo::run(a),
         cli::Command::Bench(b) => cmd_bench::run(b),
     };
     match res {

@@ -63,6 +63,9 @@ pub struct PlayerConfig {
     pub threaded: bool,
     /// The clock that paces the reader thread (threaded mode).
     pub clock: Arc<dyn Clock>,
+    /// How long to buffer before the first frame; `None`: the header's buffer model at the
+    /// throttle's rate (no wait when unthrottled).
+    pub preroll_ns: Option<u64>,
 }
 
 impl Default for PlayerConfig {
@@ -74,6 +77,7 @@ impl Default for PlayerConfig {
             ring_bytes: None,
             threaded: true,
             clock: Arc::new(SystemClock::new()),
+            preroll_ns: None,
         }
     }
 }
@@ -212,6 +216,8 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     frame: u64,
     totals: Totals,
     ring_bytes: usize,
+    /// Buffering before the first frame, ns.
+    preroll: u64,
 }
 
 fn ring_capacity(h: &Header, entries: &[vbim_format::IndexEntry], cfg: &PlayerConfig) -> usize {
@@ -246,6 +252,21 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             ));
         }
         let ring_bytes = ring_capacity(&header, &entries, &cfg);
+        let preroll = cfg.preroll_ns.unwrap_or_else(|| {
+            cfg.throttle.rate.map_or(0, |r| {
+                header.read_ahead_at(r).map_or_else(
+                    || {
+                        header
+                            .read_ahead
+                            .iter()
+                            .map(|p| p.preroll_ns)
+                            .max()
+                            .unwrap_or(0)
+                    },
+                    |p| p.preroll_ns,
+                )
+            })
+        });
         let (prod, cons) = HeapRb::<u8>::new(ring_bytes).split();
         let mut reader_core = ReaderCore::new(src, entries.clone(), header.looping, cfg.throttle);
         let player_entries = entries.clone();
@@ -330,6 +351,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             frame: 0,
             totals: Totals::default(),
             ring_bytes,
+            preroll,
         })
     }
 
@@ -570,9 +592,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let mut shown = pos;
         let mut alpha = 1.0f32;
         let mut hold_first = false;
-        if missing && !self.started {
-            // Start-up (pre-roll): nothing to show yet, so the clock waits for the first
-            // segment whatever the policy; the frame is reported as waiting.
+        if !self.started && (missing || self.ticks < self.preroll) {
+            // Start-up (pre-roll): the buffer model's pre-roll, and at least the first
+            // segment, before the clock starts, whatever the policy; reported as waiting.
             self.startup = self.ticks;
             self.was_missing = false;
             let record = self.record(

@@ -346,19 +346,18 @@ fn wait_and_skip_policies() {
         .clone();
     let rate = (header.file_size as f64 / 2.0 * 0.5) as u64; // half the mean rate: always late
     for policy in [Policy::Wait, Policy::Skip] {
-        let mut player = Player::open(
-            &device,
-            &queue,
-            Cursor::new(bytes.clone()),
-            inline(
+        // No pre-roll: start as soon as the first segment is in, and fall behind.
+        let cfg = PlayerConfig {
+            preroll_ns: Some(0),
+            ..inline(
                 policy,
                 Throttle {
                     rate: Some(rate),
                     stall: None,
                 },
-            ),
-        )
-        .unwrap();
+            )
+        };
+        let mut player = Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg).unwrap();
         let mut last = None;
         let mut max_drift = 0f64;
         for _ in 0..300 {

@@ -15,10 +15,8 @@ pub struct Vertex {
 pub struct Mesh {
     pub vertices: Vec<Vertex>,
     pub indices: Vec<u32>,
-    /// Half the larger horizontal extent, in scene units (the map spans [−1, 1] on its
-    /// longer side), and the height range.
+    /// Half the map's width and depth in scene units (its longer side spans [−1, 1]).
     pub extent: (f32, f32),
-    pub height_range: (f32, f32),
 }
 
 /// Base colour (linear albedo) from normalised elevation `e` (0–1) and slope (1 − n_z).
@@ -95,7 +93,6 @@ impl Mesh {
             vertices,
             indices,
             extent: (width_m / half * 0.5, depth_m / half * 0.5),
-            height_range: (lo, hi),
         }
     }
 }

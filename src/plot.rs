@@ -1,0 +1,118 @@
+//! Plots people would rather see than read: rate–distortion curves, drift over time, drift
+//! and shown error against bandwidth (PNG, drawn with plotters and an embedded font).
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::prelude::*;
+
+static FONT: Once = Once::new();
+
+fn font() {
+    FONT.call_once(|| {
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+const COLORS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+/// A named series of (x, y) points.
+pub struct Series {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+fn range(series: &[Series], f: impl Fn(&(f64, f64)) -> f64, log: bool) -> (f64, f64) {
+    let vals: Vec<f64> = series
+        .iter()
+        .flat_map(|s| s.points.iter().map(&f))
+        .filter(|v| v.is_finite() && (!log || *v > 0.0))
+        .collect();
+    let (lo, hi) = vals
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    if vals.is_empty() {
+        return (0.0, 1.0);
+    }
+    if log {
+        (lo / 1.3, hi * 1.3)
+    } else {
+        let pad = ((hi - lo) * 0.08).max(1e-3);
+        (lo - pad, hi + pad)
+    }
+}
+
+/// Line-and-point plot of several series; `log_x` for rates.
+pub fn lines(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    log_x: bool,
+) -> Result<(), String> {
+    font();
+    let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let (x0, x1) = range(series, |p| p.0, log_x);
+    let (y0, y1) = range(series, |p| p.1, false);
+    let mut chart = ChartBuilder::on(&root);
+    chart
+        .caption(title, ("sans-serif", 22))
+        .margin(16)
+        .x_label_area_size(44)
+        .y_label_area_size(60);
+    macro_rules! draw {
+        ($c:expr) => {{
+            let mut c = $c.map_err(|e| e.to_string())?;
+            c.configure_mesh()
+                .x_desc(x_label)
+                .y_desc(y_label)
+                .label_style(("sans-serif", 14))
+                .draw()
+                .map_err(|e| e.to_string())?;
+            for (i, s) in series.iter().enumerate() {
+                let col = COLORS[i % COLORS.len()];
+                let pts: Vec<(f64, f64)> = s
+                    .points
+                    .iter()
+                    .copied()
+                    .filter(|p| p.0.is_finite() && p.1.is_finite())
+                    .collect();
+                c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
+                    .map_err(|e| e.to_string())?
+                    .label(s.name.clone())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 18, y)], col.stroke_width(2))
+                    });
+                c.draw_series(pts.iter().map(|&p| Circle::new(p, 3, col.filled())))
+                    .map_err(|e| e.to_string())?;
+            }
+            c.configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 14))
+                .position(SeriesLabelPosition::LowerRight)
+                .draw()
+                .map_err(|e| e.to_string())?;
+        }};
+    }
+    if log_x {
+        draw!(chart.build_cartesian_2d((x0..x1).log_scale(), y0..y1));
+    } else {
+        draw!(chart.build_cartesian_2d(x0..x1, y0..y1));
+    }
+    root.present()
+        .map_err(|e| format!("{}: {e}", path.display()))
+}
