@@ -338,7 +338,7 @@ pub fn capture_scene(
     size: (u32, u32),
     progress: &dyn Fn(u64, u64),
 ) -> Result<Capture, String> {
-    use crate::scene::{orbit, Mesh, SceneRenderer, SkyTrack, View, FORMAT};
+    use vbim_scene::{orbit, Mesh, SceneRenderer, SkyTrack, View, FORMAT};
     let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
     let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
     let mesh = Mesh::new(

@@ -12,7 +12,6 @@ mod cmd_inspect;
 mod cmd_play;
 mod plot;
 mod progress;
-mod scene;
 mod sequence;
 mod units;
 mod window;

@@ -1,4 +1,4 @@
-//! The terrain scene: the sample's height field as a mesh, lit by the streamed lightmap,
+//! vbim-scene — the terrain scene: the sample's height field as a mesh, lit by the streamed lightmap,
 //! under a sky whose colour follows the time of day (from the bake's manifest in the file's
 //! metadata chunk), seen from a camera orbiting the map (`vbim play --scene`).
 

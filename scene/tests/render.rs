@@ -1,0 +1,191 @@
+//! Rendering tests of the terrain scene on a real adapter (lavapipe/llvmpipe without a GPU).
+
+use glam::Vec3;
+use vbim_bake::light::light_frame;
+use vbim_bake::{load_terrain, HeightField, Precomputed, Scene};
+use vbim_scene::{mesh::base_colour, Mesh, SceneRenderer, View, FORMAT};
+
+fn device() -> (wgpu::Device, wgpu::Queue) {
+    let (d, q, info) = vbim_player::headless_device().unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("adapter: {} ({:?})", info.name, info.backend);
+    (d, q)
+}
+
+/// A lightmap texture (Rgba16Float, as the player's) from linear RGB.
+fn lightmap(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    w: u32,
+    h: u32,
+    rgb: &[f32],
+) -> wgpu::TextureView {
+    use wgpu::util::DeviceExt;
+    let data: Vec<u8> = rgb
+        .chunks(3)
+        .flat_map(|p| [p[0], p[1], p[2], 1.0])
+        .flat_map(|v| half::f16::from_f32(v).to_le_bytes())
+        .collect();
+    device
+        .create_texture_with_data(
+            queue,
+            &wgpu::TextureDescriptor {
+                label: None,
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba16Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            &data,
+        )
+        .create_view(&Default::default())
+}
+
+fn view(eye: Vec3, exposure: f32) -> View {
+    View {
+        eye,
+        target: Vec3::ZERO,
+        fovy: 0.8,
+        exposure,
+        sky_zenith: [0.1, 0.15, 0.3],
+        sky_horizon: [0.2, 0.2, 0.25],
+        detail: 0.0,
+    }
+}
+
+fn srgb8(x: f32) -> f32 {
+    (vbim_format::curve::linear_to_srgb(x) * 255.0).round()
+}
+
+#[test]
+fn a_flat_terrain_under_a_constant_lightmap_renders_the_expected_colour() {
+    let (device, queue) = device();
+    let hf = HeightField {
+        w: 32,
+        h: 32,
+        cell_x: 30.0,
+        cell_y: 30.0,
+        z: vec![100.0; 32 * 32],
+    };
+    let mesh = Mesh::new(&hf, 32, 1.0, 1.1);
+    let light = [0.8f32, 0.7, 0.5];
+    let lm = lightmap(&device, &queue, 32, 32, &light.repeat(32 * 32));
+    let r = SceneRenderer::new(&device, &queue, &mesh, &lm, 64, 64, FORMAT);
+    let exposure = 2.0;
+    // Straight down at the centre of the map.
+    r.render(&view(Vec3::new(0.0, 1.5, 0.001), exposure), None);
+    let px = r.read();
+    let base = base_colour(0.0, 0.0, 1.1);
+    let centre = (32 * 64 + 32) * 4;
+    for c in 0..3 {
+        let x = base[c] * light[c] * exposure;
+        let want = srgb8(x / (1.0 + x));
+        let got = px[centre + c] as f32;
+        assert!((got - want).abs() <= 1.0, "channel {c}: {got} vs {want}");
+    }
+}
+
+fn real(size: usize) -> (Scene, Precomputed) {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples/jacksboro.toml");
+    let mut s = Scene::load(&root).unwrap();
+    s.size = size;
+    s.frames = 24;
+    let pre = Precomputed::compute(load_terrain(&s).unwrap(), &s);
+    (s, pre)
+}
+
+fn luminance(px: &[u8]) -> f64 {
+    let lin = |v: u8| vbim_format::curve::srgb_to_linear(v as f32 / 255.0) as f64;
+    px.chunks(4)
+        .map(|p| 0.2126 * lin(p[0]) + 0.7152 * lin(p[1]) + 0.0722 * lin(p[2]))
+        .sum::<f64>()
+        / (px.len() / 4) as f64
+}
+
+fn render_frame(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    s: &Scene,
+    pre: &Precomputed,
+    frame: usize,
+    size: (u32, u32),
+) -> Vec<u8> {
+    let n = s.size;
+    let mut buf = vec![0f32; n * n * 3];
+    light_frame(pre, s, frame, &mut buf);
+    let lm = lightmap(device, queue, n as u32, n as u32, &buf);
+    let mesh = Mesh::new(
+        &pre.hf,
+        64,
+        s.view.vertical_exaggeration as f32,
+        s.view.snow_line as f32,
+    );
+    let r = SceneRenderer::new(device, queue, &mesh, &lm, size.0, size.1, FORMAT);
+    let (eye, target) = vbim_scene::orbit(0.1, &mesh);
+    let mut v = view(eye, 3.0);
+    v.target = target;
+    v.detail = 0.5;
+    // The sky of that moment, from the bake's sky model.
+    let sun = vbim_bake::light::sun_for_frame(s, frame);
+    let model = vbim_bake::light::sky_model(s);
+    let (base, glow) = (model.base(sun.elevation), model.glow(sun.elevation));
+    v.sky_zenith = base.map(|c| c as f32);
+    v.sky_horizon = [0, 1, 2].map(|c| (base[c] + glow[c]) as f32);
+    r.render(&v, None);
+    r.read()
+}
+
+#[test]
+fn noon_and_night_differ_as_the_lightmaps_say() {
+    let (device, queue) = device();
+    let (s, pre) = real(48);
+    let noon = luminance(&render_frame(&device, &queue, &s, &pre, 12, (96, 54)));
+    let night = luminance(&render_frame(&device, &queue, &s, &pre, 0, (96, 54)));
+    assert!(night < noon / 10.0, "night {night} vs noon {noon}");
+}
+
+#[test]
+fn a_rendered_frame_of_the_sample_matches_its_reference_image() {
+    let (device, queue) = device();
+    let (s, pre) = real(64);
+    let (w, h) = (160u32, 90u32);
+    // Frame 9 of 24: 9 h, a low morning sun with long shadows.
+    let px = render_frame(&device, &queue, &s, &pre, 9, (w, h));
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/reference/jacksboro_morning.png");
+    if std::env::var("VBIM_UPDATE_REFERENCE").is_ok() {
+        image::RgbaImage::from_raw(w, h, px.clone())
+            .unwrap()
+            .save(&path)
+            .unwrap();
+    }
+    let reference = image::open(&path)
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (VBIM_UPDATE_REFERENCE=1 writes it)",
+                path.display()
+            )
+        })
+        .to_rgba8();
+    assert_eq!(reference.dimensions(), (w, h));
+    let mse: f64 = px
+        .chunks(4)
+        .zip(reference.as_raw().chunks(4))
+        .map(|(a, b)| {
+            (0..3)
+                .map(|c| (a[c] as f64 - b[c] as f64).powi(2))
+                .sum::<f64>()
+                / 3.0
+        })
+        .sum::<f64>()
+        / (w * h) as f64;
+    let psnr = 10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10();
+    assert!(psnr >= 40.0, "rendered frame vs reference: {psnr:.2} dB");
+}
