@@ -93,6 +93,9 @@ pub struct PlayArgs {
     /// Rendered height in pixels [default: 540].
     #[arg(long, default_value_t = 540)]
     pub height: u32,
+    /// With a window: close it after this many frames (for scripted runs) [default: never].
+    #[arg(long)]
+    pub exit_after: Option<u64>,
 }
 
 #[derive(Args)]
@@ -133,6 +136,59 @@ pub enum BenchCommand {
     /// Time the player's decoder on a file: zstd alone, and the full decode (keyframes,
     /// coefficient planes, staging layout), as a share of one core at the file's frame rate.
     Decode(BenchDecodeArgs),
+    /// Bytes of the protocol's lossless baseline: every frame's half-float RGB through zstd.
+    Lossless(BenchLosslessArgs),
+    /// Draw a rate–distortion CSV (method,setting,bytes,bpp,mean_psnr,…) as a PNG plot.
+    PlotRd(BenchPlotArgs),
+    /// Sweep bandwidth caps from 0.25× to 2× the stream's mean rate under a stall pattern,
+    /// for each policy; drift and shown error against bandwidth (CSV + PNG).
+    Drift(BenchDriftArgs),
+}
+
+#[derive(Args)]
+pub struct BenchLosslessArgs {
+    /// Frames (directory, glob or pattern).
+    pub input: String,
+    /// zstd level [default: 3].
+    #[arg(long, default_value_t = 3)]
+    pub level: i32,
+}
+
+#[derive(Args)]
+pub struct BenchPlotArgs {
+    /// The CSV written by scripts/rd_bench.sh.
+    pub csv: PathBuf,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Plot title.
+    #[arg(long, default_value = "Rate against distortion")]
+    pub title: String,
+}
+
+#[derive(Args)]
+pub struct BenchDriftArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Output directory for drift.csv and drift.png [default: out/bench-drift].
+    #[arg(short, long, default_value = "out/bench-drift")]
+    pub out: PathBuf,
+    /// Stall pattern [default: 500ms@10s].
+    #[arg(long, default_value = "500ms@10s")]
+    pub stall: String,
+    /// Playback per point [default: 60s].
+    #[arg(long, default_value = "60s")]
+    pub duration: String,
+    /// Multiples of the mean bit rate to sweep [default: 0.25,0.5,0.75,1,1.2,1.5,2].
+    #[arg(
+        long,
+        default_value = "0.25,0.5,0.75,1,1.2,1.5,2",
+        value_delimiter = ','
+    )]
+    pub factors: Vec<f64>,
+    /// Measure shown error every N frames [default: 30].
+    #[arg(long, default_value_t = 30)]
+    pub check_every: u64,
 }
 
 #[derive(Args)]

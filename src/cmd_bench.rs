@@ -12,6 +12,9 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
     match c {
         BenchCommand::Bake(a) => bench_bake(a),
         BenchCommand::Decode(a) => bench_decode(a),
+        BenchCommand::Lossless(a) => bench_lossless(a),
+        BenchCommand::PlotRd(a) => plot_rd(a),
+        BenchCommand::Drift(a) => bench_drift(a),
     }
 }
 
@@ -157,5 +160,161 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
     );
     println!("zstd alone      median {:.3} s (min {z0:.3}, max {z1:.3}) = {:.2}% of one core in real time", zm, 100.0 * zm / duration);
     println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);
+    Ok(())
+}
+
+fn bench_lossless(a: crate::cli::BenchLosslessArgs) -> Result<(), String> {
+    use vbim_encoder::{FrameSet, FrameSource};
+    let fs = FrameSet::open(&a.input).map_err(|e| e.to_string())?;
+    let info = fs.info();
+    let sizes: Vec<u64> = (0..fs.len())
+        .into_par_iter()
+        .map(|i| {
+            let f = fs.read(i).map_err(|e| e.to_string())?;
+            let bytes: Vec<u8> = if info.kind == vbim_encoder::InputKind::Srgb8 {
+                f.data.iter().map(|v| (v * 255.0).round() as u8).collect()
+            } else {
+                f.data
+                    .iter()
+                    .flat_map(|v| half::f16::from_f32(*v).to_le_bytes())
+                    .collect()
+            };
+            Ok(zstd::bulk::compress(&bytes, a.level)
+                .map_err(|e| e.to_string())?
+                .len() as u64)
+        })
+        .collect::<Result<_, String>>()?;
+    let total: u64 = sizes.iter().sum();
+    let bpp = total as f64 * 8.0 / (info.width * info.height * info.frames) as f64;
+    println!(
+        "{total} bytes, {bpp:.4} bpp (zstd level {} per frame)",
+        a.level
+    );
+    Ok(())
+}
+
+fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
+    let text = std::fs::read_to_string(&a.csv).map_err(|e| format!("{}: {e}", a.csv.display()))?;
+    let mut series: Vec<crate::plot::Series> = Vec::new();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() < 5 {
+            continue;
+        }
+        let (bpp, psnr): (f64, f64) = (
+            f[3].parse().map_err(|_| format!("bad bpp in {line}"))?,
+            f[4].parse().map_err(|_| format!("bad PSNR in {line}"))?,
+        );
+        match series.iter_mut().find(|s| s.name == f[0]) {
+            Some(s) => s.points.push((bpp, psnr)),
+            None => series.push(crate::plot::Series {
+                name: f[0].to_string(),
+                points: vec![(bpp, psnr)],
+            }),
+        }
+    }
+    for s in &mut series {
+        s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    crate::plot::lines(
+        &a.out,
+        &a.title,
+        "bits per texel per frame (log)",
+        "mean PSNR, dB (protocol metric)",
+        &series,
+        true,
+    )?;
+    println!("wrote {}", a.out.display());
+    Ok(())
+}
+
+fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
+    use crate::cmd_play::{play, session};
+    std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
+    let (device, queue, info) = vbim_player::headless_device()?;
+    let adapter = format!("{} ({:?})", info.name, info.backend);
+    let mut csv = String::from("policy,factor,read_rate,ring_bytes,mean_drift,p99_drift,max_drift,late_frames,stalls,shown_mean_psnr,shown_worst_psnr\n");
+    let mut drift_series = Vec::new();
+    let mut psnr_series = Vec::new();
+    for policy in ["interpolate", "wait", "skip"] {
+        let (mut dp, mut pp) = (Vec::new(), Vec::new());
+        for &f in &a.factors {
+            let args = crate::cli::PlayArgs {
+                file: a.file.clone(),
+                headless: true,
+                duration: a.duration.clone(),
+                display_hz: 60,
+                bandwidth: Some(format!("{f}x")),
+                stall: Some(a.stall.clone()),
+                policy: policy.into(),
+                catch_up: "500ms".into(),
+                ring: None,
+                realtime: false,
+                stats: None,
+                check_every: a.check_every,
+                json: None,
+                scene: None,
+                out: None,
+                frames: 0,
+                width: 0,
+                height: 0,
+                exit_after: None,
+            };
+            let s = session(&args)?;
+            let o = play(&s, &device, &queue, &adapter)?;
+            eprintln!(
+                "{policy:>11} {f:>5}×: mean drift {:.3}, max {:.3}, late {}, shown {:.2} dB",
+                o.mean_drift,
+                o.max_drift,
+                o.late_frames,
+                o.shown_mean_psnr.unwrap_or(99.0)
+            );
+            csv += &format!(
+                "{policy},{f},{},{},{:.4},{:.4},{:.4},{},{},{:.3},{:.3}\n",
+                o.read_rate.unwrap_or(0),
+                o.ring_bytes,
+                o.mean_drift,
+                o.p99_drift,
+                o.max_drift,
+                o.late_frames,
+                o.stalls,
+                o.shown_mean_psnr.unwrap_or(99.0),
+                o.shown_worst_psnr.unwrap_or(99.0)
+            );
+            dp.push((f, o.mean_drift));
+            pp.push((f, o.shown_mean_psnr.unwrap_or(99.0)));
+        }
+        drift_series.push(crate::plot::Series {
+            name: policy.into(),
+            points: dp,
+        });
+        psnr_series.push(crate::plot::Series {
+            name: policy.into(),
+            points: pp,
+        });
+    }
+    std::fs::write(a.out.join("drift.csv"), &csv).map_err(|e| e.to_string())?;
+    let name = a.file.display().to_string();
+    crate::plot::lines(
+        &a.out.join("drift.png"),
+        &format!("Mean drift against bandwidth, stalls {} ({name})", a.stall),
+        "read rate / stream mean rate",
+        "mean drift, media frames",
+        &drift_series,
+        false,
+    )?;
+    crate::plot::lines(
+        &a.out.join("shown_error.png"),
+        &format!("What was shown against the true state, stalls {}", a.stall),
+        "read rate / stream mean rate",
+        "mean PSNR of shown frames, dB",
+        &psnr_series,
+        false,
+    )?;
+    print!("{csv}");
+    println!(
+        "wrote {}/drift.csv, drift.png, shown_error.png",
+        a.out.display()
+    );
     Ok(())
 }

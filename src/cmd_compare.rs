@@ -14,7 +14,11 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
     let mut sb = Sequence::open(&a.b)?;
     let (wa, ha, ca, srgb_a) = sa.shape();
     let (wb, hb, cb, srgb_b) = sb.shape();
-    if (wa, ha) != (wb, hb) || sa.len() != sb.len() || srgb_a != srgb_b {
+    // An HDR reference against an 8-bit sequence compares the reference's 8-bit export
+    // (unrounded) with the 8-bit values: how the protocol scores the anchor codecs, which
+    // encode the PNG export.
+    let export_b = !srgb_a && srgb_b;
+    if (wa, ha) != (wb, hb) || sa.len() != sb.len() || (srgb_a && !srgb_b) {
         return Err(format!(
             "{} is {wa}×{ha}×{} frames ({}), {} is {wb}×{hb}×{} frames ({}): not comparable",
             a.a,
@@ -46,9 +50,18 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
     };
     let mut seq = SequenceError::default();
     for i in 0..n {
-        let x = to_rgb(&sa.read(i)?, ca);
+        let mut x = to_rgb(&sa.read(i)?, ca);
         let y = to_rgb(&sb.read(i)?, cb);
-        seq.push(metric.compare(&x, &y));
+        let f = match (export_b, metric) {
+            (true, Metric::Hdr { exposure }) => {
+                for v in x.iter_mut() {
+                    *v = vbim_format::curve::export_curve(*v, exposure);
+                }
+                Metric::Srgb8.compare(&x, &y)
+            }
+            _ => metric.compare(&x, &y),
+        };
+        seq.push(f);
         stages.report("compare", i as u64 + 1, n as u64);
     }
     stages.finish();

@@ -120,6 +120,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         frames: a.render_frames,
         width: 960,
         height: 540,
+        exit_after: None,
     };
     let s = session(&play_args)?;
     let (device, queue, adapter) = vbim_player::headless_device()?;

@@ -18,6 +18,7 @@ use crate::cli::PlayArgs;
 use crate::units::{parse_bandwidth, parse_duration, parse_stall, Bandwidth};
 
 /// Everything one playback session needs.
+#[derive(Clone)]
 pub struct Session {
     pub file: std::path::PathBuf,
     pub policy: Policy,
@@ -280,7 +281,7 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
     let s = session(&a)?;
     if let Some(scene) = &a.scene {
         if !a.headless {
-            return crate::window::run(&s, scene, (a.width, a.height));
+            return crate::window::run(&s, scene, (a.width, a.height), a.exit_after);
         }
         let out = a
             .out

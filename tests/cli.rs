@@ -178,3 +178,54 @@ fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
         Some(2)
     );
 }
+
+#[test]
+fn the_window_opens_renders_and_closes_under_xvfb() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("f");
+    ok(&[
+        "bake",
+        "samples/jacksboro.toml",
+        "--out",
+        s(&frames),
+        "--size",
+        "32",
+        "--frames",
+        "12",
+    ]);
+    let file = dir.path().join("w.vbim");
+    ok(&[
+        "encode",
+        s(&frames),
+        "-o",
+        s(&file),
+        "--fps",
+        "24/1",
+        "--no-verify",
+    ]);
+    let xvfb = Command::new("xvfb-run").arg("--help").output();
+    assert!(
+        xvfb.is_ok(),
+        "xvfb-run is missing: `apt-get install -y xvfb` (.ci/run installs it)"
+    );
+    let o = Command::new("xvfb-run")
+        .args([
+            "-a",
+            env!("CARGO_BIN_EXE_vbim"),
+            "play",
+            s(&file),
+            "--scene",
+            "samples/jacksboro.toml",
+        ])
+        .args(["--exit-after", "10", "--width", "160", "--height", "90"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("xvfb-run runs");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "window run failed:\n{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("window closed after 10 frames"), "{out}");
+}

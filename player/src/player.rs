@@ -170,6 +170,7 @@ enum Pipeline<R> {
     Threaded {
         stop: Arc<AtomicBool>,
         seek: Sender<(usize, u32, Option<usize>)>,
+        throttle: Sender<Throttle>,
         threads: Vec<JoinHandle<()>>,
         ready: Receiver<Box<SegmentData>>,
         errors: Receiver<String>,
@@ -291,12 +292,23 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             let (ready_tx, ready_rx) = bounded::<Box<SegmentData>>(2);
             let (err_tx, err_rx) = bounded::<String>(64);
             let (seek_tx, seek_rx) = bounded::<(usize, u32, Option<usize>)>(16);
+            let (throttle_tx, throttle_rx) = bounded::<Throttle>(16);
             let clock = cfg.clock.clone();
             let (s1, s2) = (stop.clone(), stop.clone());
             let br = bytes_read.clone();
             let reader_thread = std::thread::Builder::new()
                 .name("vbim-reader".into())
-                .spawn(move || reader_loop(&mut reader_core, prod, &*clock, &s1, &br, &seek_rx))
+                .spawn(move || {
+                    reader_loop(
+                        &mut reader_core,
+                        prod,
+                        &*clock,
+                        &s1,
+                        &br,
+                        &seek_rx,
+                        &throttle_rx,
+                    )
+                })
                 .map_err(|e| PlayerError::Thread(e.to_string()))?;
             let mut dec = decoder;
             let decoder_thread = std::thread::Builder::new()
@@ -306,6 +318,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             Pipeline::Threaded {
                 stop,
                 seek: seek_tx,
+                throttle: throttle_tx,
                 threads: vec![reader_thread, decoder_thread],
                 ready: ready_rx,
                 errors: err_rx,
@@ -380,6 +393,18 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     }
     pub fn set_policy(&mut self, p: Policy) {
         self.cfg.policy = p;
+    }
+
+    /// Changes the reader's bandwidth cap and stalls from now on (inline mode: at once;
+    /// threaded mode: at the reader's next chunk).
+    pub fn set_throttle(&mut self, t: Throttle) {
+        self.cfg.throttle = t;
+        match &mut self.pipeline {
+            Pipeline::Inline { reader, .. } => reader.throttle = t,
+            Pipeline::Threaded { throttle, .. } => {
+                let _ = throttle.try_send(t);
+            }
+        }
     }
 
     fn n_frames(&self) -> u64 {
@@ -828,11 +853,15 @@ fn reader_loop<R: Read + Seek>(
     stop: &AtomicBool,
     bytes_read: &AtomicU64,
     seek: &Receiver<(usize, u32, Option<usize>)>,
+    throttle: &Receiver<Throttle>,
 ) {
     let give_up = || stop.load(Ordering::Relaxed) || !seek.is_empty();
     while !stop.load(Ordering::Relaxed) {
         while let Ok((pos, pass, first)) = seek.try_recv() {
             core.restart(pos, pass, first, clock.now_ns());
+        }
+        while let Ok(t) = throttle.try_recv() {
+            core.throttle = t;
         }
         core.prepare(clock.now_ns());
         let Some(arrival) = core.next_arrival() else {
