@@ -268,6 +268,9 @@ pub struct EncodeArgs {
     /// Also write the report as JSON to this file.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Write a PNG map of the polynomial degree of every tile in every segment.
+    #[arg(long)]
+    pub degree_map: Option<PathBuf>,
 }
 
 #[derive(Args)]

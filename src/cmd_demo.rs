@@ -89,6 +89,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     let file = out.join(format!("{}.vbim", scene.name));
     let rep = encode(&fs, &cfg, &file, true, &progress).map_err(|e| e.to_string())?;
     stages.finish();
+    rep.write_degree_map(&out.join("degree_map.png"))?;
     let lossless = lossless_bytes(&fs, &stages)?;
     stages.finish();
     let info = fs.info();
@@ -208,6 +209,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
          | vbim (default preset, --tolerance {}) | {} | {:.4} | {:.1}× | {:.2} dB | {:.2} dB | {:.1} s |\n\
          | lossless zstd per frame (half float) | {} | {:.4} | {:.1}× | identical | identical | |\n\n\
          ![rate–distortion](rate_distortion.png)\n\n\
+         Degree of every 16² tile in every segment (dark blue 1 … yellow {}): ![degrees](degree_map.png)\n\n\
          ## Playback\n\n\
          Reader capped at {} ({:.1} kB/s; the stream's mean is {:.1} kB/s) with stalls {}, policy interpolate, \
          ring {} bytes, 60 Hz display, {:.0} s simulated on {}.\n\n\
@@ -218,7 +220,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
          Total time {:.1} s.\n",
         a.scene.display(), a.size, a.frames, a.fps,
         cfg.tolerance_db, rep.bytes, rep.bpp, rep.ratio_to_raw, rep.mean_psnr.unwrap_or(0.0), rep.worst_psnr.unwrap_or(0.0), rep.encode_s,
-        lossless, lossless_bpp, texel_frames * 6.0 / lossless as f64,
+        lossless, lossless_bpp, texel_frames * 6.0 / lossless as f64, cfg.max_degree,
         a.bandwidth, measured.read_rate.unwrap_or(0) as f64 / 1e3, measured.mean_rate / 1e3, a.stall, measured.ring_bytes, duration, measured.adapter,
         measured.mean_drift, measured.p99_drift, measured.max_drift, measured.late_frames, measured.stalls,
         measured.shown_mean_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),

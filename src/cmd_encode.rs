@@ -79,6 +79,10 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
         a.out.display()
     );
     println!("{rep}");
+    if let Some(p) = &a.degree_map {
+        rep.write_degree_map(p)?;
+        println!("degree map  {}", p.display());
+    }
     if let Some(p) = &a.report {
         std::fs::write(p, serde_json::to_string_pretty(&rep).unwrap())
             .map_err(|e| format!("{}: {e}", p.display()))?;

@@ -44,6 +44,11 @@ pub struct EncodeReport {
     pub max_rel_error: Option<f64>,
     /// Per-frame PSNR.
     pub frame_psnr: Vec<f64>,
+    /// Luma degree of every tile in every segment: `tile_degrees[segment][tile]`, tiles in
+    /// raster order of a `tiles.0 × tiles.1` grid (left out of the JSON report).
+    #[serde(skip)]
+    pub tile_degrees: Vec<Vec<u8>>,
+    pub tiles: (usize, usize),
     #[serde(skip)]
     pub metric: Metric,
 }
@@ -112,6 +117,11 @@ impl EncodeReport {
             max_abs_error: None,
             max_rel_error: None,
             frame_psnr: Vec::new(),
+            tile_degrees: tilemaps.iter().map(|t| t.luma.clone()).collect(),
+            tiles: (
+                info.width.div_ceil(cfg.tile_size),
+                info.height.div_ceil(cfg.tile_size),
+            ),
             metric,
         }
     }
@@ -142,6 +152,46 @@ impl EncodeReport {
             .filter(|&&k| r.entries()[k].is_intra())
             .count();
         Ok(())
+    }
+}
+
+impl EncodeReport {
+    /// A PNG of how the terms were spent: one cell per tile, one row of maps per segment
+    /// (left to right, top to bottom), coloured by luma degree from 1 (dark blue) to the
+    /// maximum (yellow).
+    pub fn write_degree_map(&self, path: &Path) -> Result<(), String> {
+        let (tx, ty) = self.tiles;
+        let segs = self.tile_degrees.len().max(1);
+        let cols = (segs as f64).sqrt().ceil() as usize;
+        let rows = segs.div_ceil(cols);
+        let cell = (256 / tx.max(ty)).clamp(1, 8) as u32;
+        let (mw, mh) = (tx as u32 * cell, ty as u32 * cell);
+        let gap = 4u32;
+        let w = cols as u32 * (mw + gap) + gap;
+        let h = rows as u32 * (mh + gap) + gap;
+        let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+        let dmax = self.max_degree.max(2) as f32;
+        let colour = |d: u8| {
+            let t = (d as f32 - 1.0) / (dmax - 1.0);
+            let lerp = |a: f32, b: f32| (a + (b - a) * t).round() as u8;
+            image::Rgb([lerp(30.0, 250.0), lerp(40.0, 220.0), lerp(120.0, 40.0)])
+        };
+        for (s, degs) in self.tile_degrees.iter().enumerate() {
+            let (ox, oy) = (
+                gap + (s % cols) as u32 * (mw + gap),
+                gap + (s / cols) as u32 * (mh + gap),
+            );
+            for (t, &d) in degs.iter().enumerate() {
+                let (cx, cy) = ((t % tx) as u32 * cell, (t / tx) as u32 * cell);
+                for y in 0..cell {
+                    for x in 0..cell {
+                        img.put_pixel(ox + cx + x, oy + cy + y, colour(d));
+                    }
+                }
+            }
+        }
+        img.save(path)
+            .map_err(|e| format!("{}: {e}", path.display()))
     }
 }
 
