@@ -143,6 +143,19 @@ pub enum BenchCommand {
     /// Sweep bandwidth caps from 0.25× to 2× the stream's mean rate under a stall pattern,
     /// for each policy; drift and shown error against bandwidth (CSV + PNG).
     Drift(BenchDriftArgs),
+    /// The render thread's CPU time per displayed frame (`advance`: plan + record + submit,
+    /// waiting for the GPU between frames so that its execution is not counted), and the
+    /// GPU time apart; real time, 60 Hz, reader and decoder on their own threads.
+    Render(BenchRenderArgs),
+}
+
+#[derive(Args)]
+pub struct BenchRenderArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Displayed frames measured [default: 600].
+    #[arg(long, default_value_t = 600)]
+    pub frames: u64,
 }
 
 #[derive(Args)]
