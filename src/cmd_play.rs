@@ -177,8 +177,20 @@ pub fn play(
         }
         records.push(r);
     }
+    finish(player, s, adapter, records, &err)
+}
+
+/// Stops the player and summarises the session.
+fn finish(
+    mut player: Player<BufReader<File>>,
+    s: &Session,
+    adapter: &str,
+    records: Vec<FrameRecord>,
+    err: &SequenceError,
+) -> Result<Outcome, String> {
     let totals = player.totals().clone();
     let ring = player.ring_bytes();
+    let h = player.header().clone();
     player
         .stop(Duration::from_secs(10))
         .map_err(|e| e.to_string())?;
@@ -444,35 +456,8 @@ pub fn capture_scene(
         Ok(())
     })
     .map_err(|e| e.to_string())?;
-    let totals = player.totals().clone();
-    let ring = player.ring_bytes();
-    player
-        .stop(Duration::from_secs(10))
-        .map_err(|e| e.to_string())?;
-    let sum = Summary::of(&records);
-    let outcome = Outcome {
-        adapter: format!("{} ({:?})", info.name, info.backend),
-        policy: format!("{:?}", s.policy).to_lowercase(),
-        read_rate: s.throttle.rate,
-        mean_rate: mean_rate(&h),
-        ring_bytes: ring,
-        frames: sum.frames,
-        mean_drift: sum.mean_drift,
-        p99_drift: sum.p99_drift,
-        max_drift: sum.max_drift,
-        late_frames: sum.late_frames,
-        stalls: sum.stalls,
-        bytes_read_per_s: sum.bytes_read_per_s,
-        bytes_uploaded_per_s: sum.bytes_uploaded_per_s,
-        mean_render_ms: sum.mean_render_ms,
-        p99_render_ms: sum.p99_render_ms,
-        decode_core_share: sum.decode_core_share,
-        shown_mean_psnr: None,
-        shown_worst_psnr: None,
-        damaged_chunks: totals.damaged,
-        last_error: totals.last_error,
-        records,
-    };
+    let adapter = format!("{} ({:?})", info.name, info.backend);
+    let outcome = finish(player, s, &adapter, records, &SequenceError::default())?;
     Ok(Capture {
         frames,
         preview,

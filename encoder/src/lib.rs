@@ -334,6 +334,7 @@ fn encode_in_pool(
     let mut projectors = Projectors::default();
     let mut prev_key = k0.clone();
     let mut last_intra = 0u32;
+    let mut intra_keyframes = 1; // keyframe 0
     let mut tilemaps = Vec::new();
     let mut b = 0u32;
     while b < end {
@@ -369,6 +370,7 @@ fn encode_in_pool(
             let decoded = Arc::new(chunk::read_keyframe(&header0, &bytes, prev)?);
             if !predicted {
                 last_intra = e;
+                intra_keyframes += 1;
             }
             chunks.push(PendingChunk {
                 kind: ChunkKind::Keyframe,
@@ -428,6 +430,7 @@ fn encode_in_pool(
         total_s,
         metric,
     );
+    rep.intra_keyframes = intra_keyframes;
     if verify {
         rep.verify(src, out, progress)?;
     }

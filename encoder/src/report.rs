@@ -141,16 +141,6 @@ impl EncodeReport {
         self.max_abs_error = Some(seq.max_abs());
         self.max_rel_error = matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel());
         self.frame_psnr = seq.frames.iter().map(|f| f.psnr()).collect();
-        let r = Reader::open(std::io::BufReader::new(
-            std::fs::File::open(file)
-                .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?,
-        ))?;
-        self.intra_keyframes = r
-            .layout()
-            .keyframes
-            .iter()
-            .filter(|&&k| r.entries()[k].is_intra())
-            .count();
         Ok(())
     }
 }

@@ -298,45 +298,11 @@ impl Gpu {
 
     /// Reads the display texture back (RGBA, f32). For tests and error measurement.
     pub fn read_display(&self) -> Vec<f32> {
-        let (w, h) = (self.width, self.height);
-        let row = (w * 8).div_ceil(256) * 256;
-        let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vbim readback"),
-            size: (row * h) as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut enc = self.device.create_command_encoder(&Default::default());
-        enc.copy_texture_to_buffer(
-            self.display.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buf,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(h),
-                },
-            },
-            wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-        );
-        self.queue.submit(Some(enc.finish()));
-        let slice = buf.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
-        let data = slice
-            .get_mapped_range()
-            .expect("the readback buffer is mapped");
-        let mut out = Vec::with_capacity((w * h * 4) as usize);
-        for y in 0..h as usize {
-            let r: &[half::f16] =
-                bytemuck::cast_slice(&data[y * row as usize..y * row as usize + w as usize * 8]);
-            out.extend(r.iter().map(|v| v.to_f32()));
-        }
-        out
+        let raw = read_texture(&self.device, &self.queue, &self.display, 8);
+        bytemuck::cast_slice::<u8, half::f16>(&raw)
+            .iter()
+            .map(|v| v.to_f32())
+            .collect()
     }
 
     /// Waits for the GPU to finish what was submitted.
@@ -349,4 +315,53 @@ impl Params {
     pub fn zeroed_params() -> Params {
         bytemuck::Zeroable::zeroed()
     }
+}
+
+/// Copies a 2D texture to the CPU, rows tightly packed (`bytes_per_texel` per texel):
+/// blocks until the GPU is done. For tests, measurements and headless capture.
+pub fn read_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    bytes_per_texel: u32,
+) -> Vec<u8> {
+    let (w, h) = (texture.width(), texture.height());
+    let row = (w * bytes_per_texel).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+        * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buf = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("vbim readback"),
+        size: (row * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    enc.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buf,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+    queue.submit(Some(enc.finish()));
+    let slice = buf.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+    let data = slice
+        .get_mapped_range()
+        .expect("the readback buffer is mapped");
+    let mut out = Vec::with_capacity((w * h * bytes_per_texel) as usize);
+    for y in 0..h as usize {
+        let start = y * row as usize;
+        out.extend_from_slice(&data[start..start + (w * bytes_per_texel) as usize]);
+    }
+    out
 }
