@@ -217,9 +217,18 @@ fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
     for s in &mut series {
         s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
+    // Lossless points (99 dB) would squash the axis: named in the title instead.
+    let mut title = a.title.clone();
+    for s in series
+        .iter()
+        .filter(|s| s.points.iter().all(|p| p.1 >= 99.0))
+    {
+        title += &format!(" — {}: {:.2} bpp", s.name, s.points[0].0);
+    }
+    series.retain(|s| s.points.iter().any(|p| p.1 < 99.0));
     crate::plot::lines(
         &a.out,
-        &a.title,
+        &title,
         "bits per texel per frame (log)",
         "mean PSNR, dB (protocol metric)",
         &series,
