@@ -206,6 +206,7 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     shown_slot: Option<usize>,
     ticks: u64,
     paused: u64,
+    /// Start of a catch-up (ticks) and the lag the data arrived with.
     catch_start: Option<(u64, MediaTime)>,
     last_shown: MediaTime,
     was_missing: bool,
@@ -664,18 +665,20 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         } else if self.was_missing && self.cfg.policy == Policy::Interpolate && self.frame > 0 {
             // The data arrived: blend from the held image over the catch-up window.
             let held_shown = self.last_shown;
-            self.catch_start = Some((self.ticks, held_shown));
+            self.catch_start = Some((self.ticks, pos.saturating_sub(held_shown)));
             hold_first = true;
         }
         if !missing {
-            if let Some((start, held_shown)) = self.catch_start {
+            if let Some((start, lag)) = self.catch_start {
                 let a = ((self.ticks - start) as f64 / self.cfg.catch_up_ns.max(1) as f64).min(1.0);
                 if a >= 1.0 {
                     self.catch_start = None;
                 } else {
                     alpha = a.max(1e-3) as f32;
                     state = FrameState::CatchingUp;
-                    shown = (held_shown as f64 + a * (pos as f64 - held_shown as f64)) as u64;
+                    // The lag the data arrived with fades out with the blend: a short
+                    // stall leaves a short lag, however long the blend.
+                    shown = pos.saturating_sub(((1.0 - a) * lag as f64) as u64);
                 }
             }
         }
