@@ -59,6 +59,42 @@ pub struct Outcome {
     pub records: Vec<FrameRecord>,
 }
 
+impl Session {
+    /// Opens the session's file in a player on `device` (reader and decoder on their own
+    /// threads when `threaded`, else stepped inside `advance`).
+    pub fn open_player(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        threaded: bool,
+    ) -> Result<Player<BufReader<File>>, String> {
+        let name = self.file.display().to_string();
+        let f = File::open(&self.file).map_err(|e| format!("{name}: {e}"))?;
+        let cfg = PlayerConfig {
+            policy: self.policy,
+            catch_up_ns: self.catch_up_ns,
+            throttle: self.throttle,
+            ring_bytes: self.ring,
+            threaded,
+            ..Default::default()
+        };
+        Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))
+    }
+}
+
+/// The terrain mesh of a scene file, and its height field.
+pub fn scene_mesh(scene_file: &Path) -> Result<(vbim_scene::Mesh, vbim_bake::HeightField), String> {
+    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
+    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
+    let mesh = vbim_scene::Mesh::new(
+        &hf,
+        256,
+        scene.view.vertical_exaggeration as f32,
+        scene.view.snow_line as f32,
+    );
+    Ok((mesh, hf))
+}
+
 pub fn mean_rate(h: &Header) -> f64 {
     h.file_size as f64 / (h.frame_count as f64 / h.fps())
 }
@@ -111,17 +147,7 @@ pub fn play(
     adapter: &str,
 ) -> Result<Outcome, String> {
     let name = s.file.display().to_string();
-    let f = File::open(&s.file).map_err(|e| format!("{name}: {e}"))?;
-    let cfg = PlayerConfig {
-        policy: s.policy,
-        catch_up_ns: s.catch_up_ns,
-        throttle: s.throttle,
-        ring_bytes: s.ring,
-        threaded: s.realtime,
-        ..Default::default()
-    };
-    let mut player =
-        Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))?;
+    let mut player = s.open_player(device, queue, s.realtime)?;
     let h = player.header().clone();
     let mut reference = open_reference(&s.file)?;
     let metric = if s.check_every > 0 {
@@ -351,28 +377,10 @@ pub fn capture_scene(
     size: (u32, u32),
     progress: &dyn Fn(u64, u64),
 ) -> Result<Capture, String> {
-    use vbim_scene::{orbit, Mesh, SceneRenderer, SkyTrack, View, FORMAT};
-    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
-    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
-    let mesh = Mesh::new(
-        &hf,
-        256,
-        scene.view.vertical_exaggeration as f32,
-        scene.view.snow_line as f32,
-    );
+    use vbim_scene::{orbit, SceneRenderer, SkyTrack, View, FORMAT};
+    let (mesh, hf) = scene_mesh(scene_file)?;
     let (device, queue, info) = headless_device()?;
-    let name = s.file.display().to_string();
-    let f = File::open(&s.file).map_err(|e| format!("{name}: {e}"))?;
-    let cfg = PlayerConfig {
-        policy: s.policy,
-        catch_up_ns: s.catch_up_ns,
-        throttle: s.throttle,
-        ring_bytes: s.ring,
-        threaded: s.realtime,
-        ..Default::default()
-    };
-    let mut player = Player::open(&device, &queue, BufReader::new(f), cfg)
-        .map_err(|e| format!("{name}: {e}"))?;
+    let mut player = s.open_player(&device, &queue, s.realtime)?;
     let h = player.header().clone();
     if (h.width, h.height) != (hf.w as u32, hf.h as u32) {
         eprintln!(

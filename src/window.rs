@@ -11,7 +11,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-use vbim_player::{Player, PlayerConfig, Throttle};
+use vbim_player::{Player, Throttle};
 use vbim_scene::{orbit, Mesh, SceneRenderer, SkyTrack, View};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
@@ -20,7 +20,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::cmd_play::{metric_for, open_reference, Session};
+use crate::cmd_play::{metric_for, open_reference, scene_mesh, Session};
 
 struct Gfx {
     window: Arc<Window>,
@@ -85,26 +85,8 @@ impl App {
             .find(|f| f.is_srgb())
             .unwrap_or(config.format);
         surface.configure(&device, &config);
-        let f = File::open(&self.session.file)
-            .map_err(|e| format!("{}: {e}", self.session.file.display()))?;
-        let s = &self.session;
-        let cfg = PlayerConfig {
-            policy: s.policy,
-            catch_up_ns: s.catch_up_ns,
-            throttle: s.throttle,
-            ring_bytes: s.ring,
-            ..Default::default()
-        };
-        let player =
-            Player::open(&device, &queue, BufReader::new(f), cfg).map_err(|e| e.to_string())?;
-        let scene = vbim_bake::Scene::load(&self.scene_file).map_err(|e| e.to_string())?;
-        let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
-        let mesh = Mesh::new(
-            &hf,
-            256,
-            scene.view.vertical_exaggeration as f32,
-            scene.view.snow_line as f32,
-        );
+        let player = self.session.open_player(&device, &queue, true)?;
+        let (mesh, _) = scene_mesh(&self.scene_file)?;
         let renderer = SceneRenderer::new(
             &device,
             &queue,
