@@ -40,7 +40,7 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
                 let mut greens = Vec::with_capacity(n);
                 for i in 0..n {
                     let rgb = to_rgb(&sa.read(i)?, ca);
-                    greens.push(rgb.chunks_exact(3).map(|p| p[1]).fold(0.0, f32::max));
+                    greens.push(vbim_format::curve::max_green(&rgb, 3));
                     stages.report("exposure", i as u64 + 1, n as u64);
                 }
                 exposure_from_max_greens(&greens)

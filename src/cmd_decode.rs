@@ -35,7 +35,7 @@ pub fn run(a: DecodeArgs) -> Result<(), String> {
         let (mut greens, mut max) = (Vec::with_capacity(n), 0f32);
         for i in 0..n {
             let rgb = to_rgb(&seq.read(i)?, ch);
-            greens.push(rgb.chunks_exact(3).map(|p| p[1]).fold(0.0, f32::max));
+            greens.push(vbim_format::curve::max_green(&rgb, 3));
             max = rgb.iter().copied().fold(max, f32::max);
             stages.report("measure", i as u64 + 1, n as u64);
         }

@@ -118,14 +118,7 @@ pub fn metric_for(dec: &mut Decoder<BufReader<File>>) -> Result<Metric, String> 
     for k in (0..n).step_by((n / 48).max(1)) {
         dec.frame(k as f64, Output::Linear, &mut buf)
             .map_err(|e| e.to_string())?;
-        let g = if h.channels == 3 { 1 } else { 0 };
-        greens.push(
-            buf.iter()
-                .skip(g)
-                .step_by(h.channels as usize)
-                .copied()
-                .fold(0.0, f32::max),
-        );
+        greens.push(vbim_format::curve::max_green(&buf, h.channels as usize));
     }
     Ok(Metric::Hdr {
         exposure: exposure_from_max_greens(&greens),

@@ -243,13 +243,7 @@ fn encode_in_pool(
                 done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
                 n as u64,
             );
-            let g = if f.channels == 3 { 1 } else { 0 };
-            Ok(f.data
-                .iter()
-                .skip(g)
-                .step_by(f.channels)
-                .copied()
-                .fold(0.0, f32::max))
+            Ok(vbim_format::curve::max_green(&f.data, f.channels))
         })
         .collect::<Result<_, EncodeError>>()?;
     let (color, transfer, metric) = match info.kind {

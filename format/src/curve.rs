@@ -54,6 +54,17 @@ pub fn export_curve(v: f32, exposure: f32) -> f32 {
     linear_to_srgb(x / (1.0 + x))
 }
 
+/// A frame's largest green value (interleaved RGB, or Y alone for one channel): what the
+/// protocol's exposure is computed from.
+pub fn max_green(data: &[f32], channels: usize) -> f32 {
+    let g = if channels == 3 { 1 } else { 0 };
+    data.iter()
+        .skip(g)
+        .step_by(channels.max(1))
+        .copied()
+        .fold(0.0, f32::max)
+}
+
 /// The protocol's exposure: 1.5 / the median over frames of each frame's largest green.
 pub fn exposure_from_max_greens(max_greens: &[f32]) -> f32 {
     let mut g: Vec<f32> = max_greens
