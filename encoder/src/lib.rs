@@ -277,11 +277,18 @@ fn encode_in_pool(
     let end = if looping { n } else { n - 1 } as u32;
     let intra_every = cfg.intra_interval_frames();
     let mut window: BTreeMap<u32, Arc<CodedFrame>> = BTreeMap::new();
-    let load =
+    // Frames are read once, in order: `next` is the first never loaded. (Frames behind the
+    // current boundary leave the window and are never needed again, so the window — and
+    // the encoder's memory — stays at one segment's worth of frames.)
+    let mut next = 0u32;
+    let mut load =
         |window: &mut BTreeMap<u32, Arc<CodedFrame>>, upto: u32| -> Result<(), EncodeError> {
-            let missing: Vec<u32> = (0..=upto.min(end))
-                .filter(|i| !window.contains_key(i))
-                .collect();
+            let upto = upto.min(end);
+            if upto < next {
+                return Ok(());
+            }
+            let missing: Vec<u32> = (next..=upto).collect();
+            next = upto + 1;
             let fresh: Vec<(u32, CodedFrame)> = missing
                 .par_iter()
                 .map(|&i| {
