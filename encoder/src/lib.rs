@@ -309,7 +309,7 @@ fn encode_in_pool(
             flags: FLAG_OPTIONAL,
             number: 0,
             frames: (0, 0),
-            bytes: m.clone().into_bytes(),
+            bytes: pack_metadata(m, cfg.zstd_level)?,
         });
     }
     load(&mut window, 0)?;
@@ -490,6 +490,23 @@ fn choose_length(
             good
         }
     }
+}
+
+/// The metadata chunk's payload: the JSON made compact (when it parses) and zstd'd. A
+/// bake manifest is ~160 kB as written and ~20 kB packed — bytes that count against the
+/// file's rate like any other.
+fn pack_metadata(text: &str, level: i32) -> Result<Vec<u8>, EncodeError> {
+    let compact = serde_json::from_str::<serde_json::Value>(text)
+        .map(|v| v.to_string())
+        .unwrap_or_else(|_| text.to_string());
+    if compact.len() as u64 > vbim_format::limits::MAX_METADATA {
+        return Err(EncodeError::Input(format!(
+            "metadata of {} bytes (at most {})",
+            compact.len(),
+            vbim_format::limits::MAX_METADATA
+        )));
+    }
+    Ok(zstd::bulk::compress(compact.as_bytes(), level.max(19)).expect("zstd"))
 }
 
 fn header_for(

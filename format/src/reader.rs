@@ -94,8 +94,16 @@ impl<R: Read + Seek> Reader<R> {
         let Some(i) = self.layout.metadata else {
             return Ok(None);
         };
-        let bytes = self.read_chunk(i)?;
+        let packed = self.read_chunk(i)?;
         let e = self.entries[i];
+        let bad = |what: String| FormatError::BadChunk {
+            chunk: i,
+            first: e.first_frame,
+            last: e.last_frame,
+            what,
+        };
+        let bytes = crate::chunk::decompress(&packed, crate::limits::MAX_METADATA as usize)
+            .map_err(|err| bad(format!("metadata: {err}")))?;
         String::from_utf8(bytes)
             .map(Some)
             .map_err(|_| FormatError::BadChunk {

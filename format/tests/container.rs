@@ -90,7 +90,7 @@ fn sample_file() -> Vec<u8> {
         FLAG_OPTIONAL,
         0,
         (0, 0),
-        br#"{"sky":[0.2,0.3,0.5]}"#,
+        &z(br#"{"sky":[0.2,0.3,0.5]}"#),
     )
     .unwrap();
     let kf0 = z(&chunk::write_keyframe(
