@@ -95,7 +95,7 @@ fn parse_segment(s: &str, current: SegmentMode) -> Result<SegmentMode, String> {
     if s == "auto" {
         return Ok(match current {
             SegmentMode::Auto { max } => SegmentMode::Auto { max },
-            SegmentMode::Fixed(_) => SegmentMode::Auto { max: 48 },
+            SegmentMode::Fixed(_) => SegmentMode::Auto { max: 32 },
         });
     }
     if let Some(n) = s.strip_prefix("auto:") {
