@@ -153,9 +153,12 @@ pub enum BenchCommand {
 pub struct BenchRenderArgs {
     /// The .vbim file.
     pub file: PathBuf,
-    /// Displayed frames measured [default: 600].
+    /// Displayed frames measured per run [default: 600].
     #[arg(long, default_value_t = 600)]
     pub frames: u64,
+    /// Runs (each a fresh player); the figures are the median over runs and their spread.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
 }
 
 #[derive(Args)]

@@ -7,6 +7,7 @@
 //! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
 //! first segment whose parts are all good.
 
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -16,8 +17,19 @@ use vbim_format::plane::Plane;
 use vbim_format::reader::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
+/// Where the decoder writes a segment's layers.
+pub enum Staging {
+    /// Host memory (the decoder measured on its own, `vbim bench decode`).
+    Host(Vec<f32>),
+    /// A GPU staging buffer (`MAP_WRITE | COPY_SRC`), mapped while the decoder thread
+    /// writes into it: the render thread then only unmaps it and records one copy into
+    /// the texture slot — the bytes are never touched on the render thread.
+    Mapped(wgpu::Buffer),
+}
+
 /// A decoded segment, ready to upload: `layers` RGBA f32 layers of width × height texels
-/// (layer 0 = K_s, 1 = K_{s+1}, 2.. = bubble coefficients), in the coded YCoCg domain.
+/// (layer 0 = K_s, 1 = K_{s+1}, 2.. = bubble coefficients), in the coded YCoCg domain,
+/// rows `pitch` bytes apart (a multiple of 256, as buffer-to-texture copies require).
 pub struct SegmentData {
     pub generation: u32,
     /// The loop pass of the reader that delivered it (0 for the first play-through).
@@ -26,14 +38,26 @@ pub struct SegmentData {
     pub start: u32,
     pub end: u32,
     pub layers: usize,
-    pub data: Vec<f32>,
+    pub staging: Staging,
+    /// Set once a `Mapped` staging buffer is mapped again after its upload (by wgpu's
+    /// callback): only then may it go back to the decoder.
+    pub mapped: Arc<AtomicBool>,
     /// Nanoseconds the decoder spent on this segment and its closing keyframe.
     pub decode_ns: u64,
 }
 
+/// Bytes between rows of a staging layer.
+pub fn row_pitch(width: u32) -> u64 {
+    (width as u64 * 16).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64)
+}
+
+/// Bytes of one staging layer.
+pub fn layer_bytes(h: &Header) -> u64 {
+    row_pitch(h.width) * h.height as u64
+}
+
 impl SegmentData {
-    pub fn with_capacity(h: &Header) -> SegmentData {
-        let layers = h.max_degree as usize + 1;
+    fn empty(staging: Staging) -> SegmentData {
         SegmentData {
             generation: 0,
             pass: 0,
@@ -41,9 +65,34 @@ impl SegmentData {
             start: 0,
             end: 0,
             layers: 0,
-            data: Vec::with_capacity(layers * h.texel_count() * 4),
+            staging,
+            mapped: Arc::new(AtomicBool::new(true)),
             decode_ns: 0,
         }
+    }
+
+    /// A host-memory staging box (for measuring the decoder without a GPU).
+    pub fn with_capacity(h: &Header) -> SegmentData {
+        let layers = h.max_degree as usize + 1;
+        let floats = layers as u64 * layer_bytes(h) / 4;
+        SegmentData::empty(Staging::Host(Vec::with_capacity(floats as usize)))
+    }
+
+    /// A staging box backed by a mapped GPU buffer large enough for any segment of `h`.
+    pub fn mapped(h: &Header, device: &wgpu::Device) -> SegmentData {
+        let layers = h.max_degree as u64 + 1;
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim staging"),
+            size: layers * layer_bytes(h),
+            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: true,
+        });
+        SegmentData::empty(Staging::Mapped(buffer))
+    }
+
+    /// Bytes the segment's layers occupy in staging (what one upload copies).
+    pub fn bytes(&self, h: &Header) -> u64 {
+        self.layers as u64 * layer_bytes(h)
     }
 }
 
@@ -68,12 +117,15 @@ pub struct DecoderCore {
     chain: Option<(usize, Arc<Vec<Plane>>)>,
     /// Keyframe decoding time not yet charged to a segment.
     key_ns: u64,
+    /// One staging row, reused.
+    row: Vec<f32>,
 }
 
 impl DecoderCore {
     pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
         let k = layout.keyframes.len();
         let s = layout.segments.len();
+        let row = Vec::with_capacity(header.width as usize * 4);
         DecoderCore {
             header,
             layout,
@@ -83,6 +135,7 @@ impl DecoderCore {
             coeffs: vec![None; s],
             chain: None,
             key_ns: 0,
+            row,
         }
     }
 
@@ -224,34 +277,59 @@ impl DecoderCore {
         let (w, ht) = (h.width as usize, h.height as usize);
         let ch = h.channels as usize;
         let layers = 2 + bubbles.len();
-        out.data.clear();
-        // Appended texel by texel (RGBA, alpha 0): every value written once, no zero-fill.
-        let put = |data: &mut Vec<f32>, planes: &[Plane]| {
+        let pitch = row_pitch(h.width) as usize;
+        let layer = layer_bytes(h) as usize;
+        // One row at a time, texel by texel (RGBA, alpha 0) into a row buffer that stays in
+        // cache, then copied to its place in staging: every value written once.
+        let row = &mut self.row;
+        let fill_row = |row: &mut Vec<f32>, planes: &[Plane], y: usize| {
             let pw = planes[0].w;
-            for y in 0..ht {
-                let r = y * pw..y * pw + w;
-                if ch == 3 {
-                    let (a, b, c) = (
-                        &planes[0].data[r.clone()],
-                        &planes[1].data[r.clone()],
-                        &planes[2].data[r],
-                    );
-                    for ((&a, &b), &c) in a.iter().zip(b).zip(c) {
-                        data.extend_from_slice(&[a, b, c, 0.0]);
-                    }
-                } else {
-                    for &a in &planes[0].data[r] {
-                        data.extend_from_slice(&[a, 0.0, 0.0, 0.0]);
-                    }
+            row.clear();
+            let r = y * pw..y * pw + w;
+            if ch == 3 {
+                let (a, b, c) = (
+                    &planes[0].data[r.clone()],
+                    &planes[1].data[r.clone()],
+                    &planes[2].data[r],
+                );
+                for ((&a, &b), &c) in a.iter().zip(b).zip(c) {
+                    row.extend_from_slice(&[a, b, c, 0.0]);
+                }
+            } else {
+                for &a in &planes[0].data[r] {
+                    row.extend_from_slice(&[a, 0.0, 0.0, 0.0]);
                 }
             }
         };
-        put(&mut out.data, &k0);
-        put(&mut out.data, &k1);
-        for b in &bubbles {
-            put(&mut out.data, b);
+        let mut put = |l: usize, planes: &[Plane], staging: &mut Staging| -> Result<(), String> {
+            match staging {
+                Staging::Host(v) => {
+                    v.resize((l + 1) * layer / 4, 0.0);
+                    for y in 0..ht {
+                        fill_row(row, planes, y);
+                        let at = (l * layer + y * pitch) / 4;
+                        v[at..at + row.len()].copy_from_slice(row);
+                    }
+                }
+                Staging::Mapped(b) => {
+                    let mut view = b
+                        .get_mapped_range_mut((l * layer) as u64..((l + 1) * layer) as u64)
+                        .map_err(|e| format!("staging buffer not mapped: {e}"))?;
+                    for y in 0..ht {
+                        fill_row(row, planes, y);
+                        let bytes: &[u8] = bytemuck::cast_slice(row);
+                        view.slice(y * pitch..y * pitch + bytes.len())
+                            .copy_from_slice(bytes);
+                    }
+                }
+            }
+            Ok(())
+        };
+        put(0, &k0, &mut out.staging)?;
+        put(1, &k1, &mut out.staging)?;
+        for (k, b) in bubbles.iter().enumerate() {
+            put(2 + k, b, &mut out.staging)?;
         }
-        debug_assert_eq!(out.data.len(), layers * w * ht * 4);
         out.generation = generation;
         out.pass = pass;
         out.index = s;

@@ -4,7 +4,9 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::assemble::SegmentData;
+use std::sync::atomic::Ordering;
+
+use crate::assemble::{row_pitch, SegmentData, Staging};
 
 /// Finds an adapter and opens a device without a window. With no adapter, the error says
 /// what to install.
@@ -228,37 +230,56 @@ impl Gpu {
         }
     }
 
-    /// Copies a decoded segment into slot `slot`; returns the bytes uploaded.
-    pub fn upload(&self, slot: usize, seg: &SegmentData) -> u64 {
+    /// Records the copy of a decoded segment into slot `slot`. A mapped staging buffer is
+    /// unmapped and copied by the GPU (nothing but the command is recorded here); host
+    /// staging goes through `write_texture`. Returns the bytes uploaded.
+    pub fn upload(&self, enc: &mut wgpu::CommandEncoder, slot: usize, seg: &SegmentData) -> u64 {
         let (w, h) = (self.width, self.height);
-        let layer_bytes = (w * h * 16) as usize;
-        let bytes: &[u8] = bytemuck::cast_slice(&seg.data);
-        for l in 0..seg.layers.min(self.max_layers as usize) {
-            self.queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &self.slots[slot],
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: 0,
-                        y: 0,
-                        z: l as u32,
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
-                &bytes[l * layer_bytes..(l + 1) * layer_bytes],
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(w * 16),
-                    rows_per_image: Some(h),
-                },
-                wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-            );
+        let layers = seg.layers.min(self.max_layers as usize) as u32;
+        let pitch = row_pitch(w) as u32;
+        let layout = wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(pitch),
+            rows_per_image: Some(h),
+        };
+        let dst = wgpu::TexelCopyTextureInfo {
+            texture: &self.slots[slot],
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        };
+        let size = wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: layers,
+        };
+        let bytes = layers as u64 * pitch as u64 * h as u64;
+        match &seg.staging {
+            Staging::Mapped(buffer) => {
+                buffer.unmap();
+                enc.copy_buffer_to_texture(wgpu::TexelCopyBufferInfo { buffer, layout }, dst, size);
+            }
+            Staging::Host(data) => {
+                let b: &[u8] = bytemuck::cast_slice(data);
+                self.queue
+                    .write_texture(dst, &b[..bytes as usize], layout, size);
+            }
         }
-        (seg.layers * layer_bytes) as u64
+        bytes
+    }
+
+    /// After the submission that copied `seg`, asks for its staging buffer to be mapped
+    /// again; `seg.mapped` turns true when it is (wgpu calls back from a later submit or
+    /// poll), and only then may the decoder write into it.
+    pub fn remap(&self, seg: &SegmentData) {
+        if let Staging::Mapped(buffer) = &seg.staging {
+            seg.mapped.store(false, Ordering::Release);
+            let flag = seg.mapped.clone();
+            buffer.map_async(wgpu::MapMode::Write, .., move |_| {
+                // On failure too: the decoder then reports that the buffer is not mapped.
+                flag.store(true, Ordering::Release);
+            });
+        }
     }
 
     /// Keeps what is on screen for blending (at the start of a catch-up).
@@ -274,17 +295,24 @@ impl Gpu {
         );
     }
 
-    /// Records and submits the reconstruction from slot `slot` with `params`.
-    pub fn evaluate(&self, slot: usize, params: &Params, hold_first: bool) {
-        self.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+    /// Records and submits one frame: an optional segment upload into its slot, then the
+    /// reconstruction from slot `eval.0` — one command buffer, one submission. Returns the
+    /// bytes uploaded.
+    pub fn frame(
+        &self,
+        upload: Option<(usize, &SegmentData)>,
+        eval: Option<(usize, &Params, bool)>,
+    ) -> u64 {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        if hold_first {
-            self.hold(&mut enc);
-        }
-        {
+        let uploaded = upload.map_or(0, |(slot, seg)| self.upload(&mut enc, slot, seg));
+        if let Some((slot, params, hold_first)) = eval {
+            self.queue
+                .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+            if hold_first {
+                self.hold(&mut enc);
+            }
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: None,
                 timestamp_writes: None,
@@ -294,6 +322,10 @@ impl Gpu {
             pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
         }
         self.queue.submit(Some(enc.finish()));
+        if let Some((_, seg)) = upload {
+            self.remap(seg);
+        }
+        uploaded
     }
 
     /// Reads the display texture back (RGBA, f32). For tests and error measurement.

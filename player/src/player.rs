@@ -202,6 +202,10 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     incoming: Option<Box<SegmentData>>,
     /// A box planned for upload into a slot this frame.
     to_upload: Option<(usize, Box<SegmentData>)>,
+    /// Uploaded boxes whose staging buffers are not mapped again yet (at most two; the
+    /// boxes themselves travel back to the decoder, so they stay boxed).
+    #[allow(clippy::vec_box)]
+    remapping: Vec<Box<SegmentData>>,
     slots: [Option<Resident>; 2],
     shown_slot: Option<usize>,
     ticks: u64,
@@ -277,7 +281,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let (recycle_tx, recycle_rx) = bounded::<Box<SegmentData>>(2);
         for _ in 0..2 {
             recycle_tx
-                .send(Box::new(SegmentData::with_capacity(&header)))
+                .send(Box::new(SegmentData::mapped(&header, device)))
                 .expect("room for two");
         }
         let gpu = Gpu::new(
@@ -350,6 +354,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             recycle: recycle_tx,
             incoming: None,
             to_upload: None,
+            remapping: Vec::with_capacity(2),
             slots: [None, None],
             shown_slot: None,
             ticks: 0,
@@ -529,7 +534,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         } else if self.slots[free]
             .is_none_or(|old| old.end <= pos || r.start <= pos || old.start > r.start)
         {
-            *uploaded = (b.data.len() * 4) as u64;
+            *uploaded = b.bytes(&self.header);
             self.slots[free] = Some(r);
             self.totals.segments_uploaded += 1;
             // Copied to the GPU in `render`, after which the box goes back to the decoder.
@@ -560,12 +565,31 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Records the GPU work of a planned frame: the upload of a newly arrived segment into
     /// the slot not on screen, and the reconstruction, in one submission.
     pub fn render(&mut self, frame: &Frame) {
-        if let Some((slot, b)) = self.to_upload.take() {
-            self.gpu.upload(slot, &b);
-            self.give_back(b);
+        let up = self.to_upload.take();
+        let eval = frame.eval.as_ref().map(|(s, p, h)| (*s, p, *h));
+        self.gpu
+            .frame(up.as_ref().map(|(slot, b)| (*slot, &**b)), eval);
+        if let Some((_, b)) = up {
+            if matches!(self.pipeline, Pipeline::Inline { .. }) {
+                // Simulated time stays deterministic: the buffer is mapped again now
+                // rather than at whichever later submission the GPU happens to finish by.
+                self.gpu.wait();
+            }
+            self.remapping.push(b);
+            self.return_mapped();
         }
-        if let Some((slot, params, hold_first)) = &frame.eval {
-            self.gpu.evaluate(*slot, params, *hold_first);
+    }
+
+    /// Gives the staging boxes whose buffers are mapped again back to the decoder.
+    fn return_mapped(&mut self) {
+        let mut i = 0;
+        while i < self.remapping.len() {
+            if self.remapping[i].mapped.load(Ordering::Acquire) {
+                let b = self.remapping.swap_remove(i);
+                self.give_back(b);
+            } else {
+                i += 1;
+            }
         }
     }
 
@@ -574,6 +598,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn plan(&mut self, dt: u64) -> Frame {
         let t0 = Instant::now();
         self.ticks += dt;
+        self.return_mapped();
         let decode_ns = self.pump();
         let (num, den) = (self.header.rate_num, self.header.rate_den);
         let n = self.n_frames() << 32;
