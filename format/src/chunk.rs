@@ -10,6 +10,11 @@ use crate::{FormatError, Result};
 pub const MODE_INTRA: u8 = 0;
 pub const MODE_PREDICTED: u8 = 1;
 
+thread_local! {
+    /// Block storage reused by every coefficient stream this thread decodes.
+    static BLOCKS: std::cell::RefCell<plane::Blocks> = Default::default();
+}
+
 /// Padded plane size: whole tiles.
 pub fn padded_size(h: &Header) -> (usize, usize) {
     let t = h.tile_size as usize;
@@ -108,12 +113,15 @@ pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Resu
     let mut out = base;
     let mut pos = r.pos;
     for (p, step) in steps.iter().enumerate() {
-        let q = plane::read_coefficients(raw, &mut pos, nblocks)?;
-        let (bw, bh) = (w / N, ht / N);
-        let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
-        for ((bx, by), qb) in origins.zip(&q) {
-            plane::add_dequantized(&mut out[p], bx, by, qb, *step);
-        }
+        BLOCKS.with_borrow_mut(|q| -> Result<()> {
+            plane::read_blocks(raw, &mut pos, nblocks, q)?;
+            let (bw, bh) = (w / N, ht / N);
+            let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+            for ((bx, by), (qb, &nz)) in origins.zip(q.q.iter().zip(&q.nonzero)) {
+                plane::add_dequantized_counted(&mut out[p], bx, by, qb, *step, nz as usize);
+            }
+            Ok(())
+        })?;
     }
     if pos != raw.len() {
         return Err(FormatError::Invalid(format!(
@@ -245,14 +253,17 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
         for p in 0..planes {
             let mut plane = Plane::zeros(w, ht);
             let members: Vec<usize> = (0..n).filter(|&t| tiles.degree(p, t) >= k).collect();
-            let q = plane::read_coefficients(&raw, &mut pos, members.len() * per_tile)?;
             let step = steps[(k as usize - 2) * planes + p];
-            let origins = members
-                .iter()
-                .flat_map(|&t| plane::tile_blocks(t, tiles_x, ts));
-            for ((bx, by), qb) in origins.zip(&q) {
-                plane::add_dequantized(&mut plane, bx, by, qb, step);
-            }
+            BLOCKS.with_borrow_mut(|q| -> Result<()> {
+                plane::read_blocks(&raw, &mut pos, members.len() * per_tile, q)?;
+                let origins = members
+                    .iter()
+                    .flat_map(|&t| plane::tile_blocks(t, tiles_x, ts));
+                for ((bx, by), (qb, &nz)) in origins.zip(q.q.iter().zip(&q.nonzero)) {
+                    plane::add_dequantized_counted(&mut plane, bx, by, qb, step, nz as usize);
+                }
+                Ok(())
+            })?;
             planes_k.push(plane);
         }
         out.push(planes_k);

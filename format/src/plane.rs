@@ -101,8 +101,24 @@ pub fn write_coefficients(blocks: &[[i32; N * N]], out: &mut Vec<u8>) {
     varint::put_u32(out, run);
 }
 
+/// Decoded blocks of one coefficient stream with each block's number of non-zero terms,
+/// kept from stream to stream so that steady-state decoding neither allocates nor faults
+/// in fresh pages, and so that empty blocks are skipped without being scanned.
+#[derive(Default)]
+pub struct Blocks {
+    pub q: Vec<[i32; N * N]>,
+    pub nonzero: Vec<u8>,
+}
+
 /// Reads `n` blocks written by [`write_coefficients`].
 pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i32; N * N]>> {
+    let mut b = Blocks::default();
+    read_blocks(buf, pos, n, &mut b)?;
+    Ok(b.q)
+}
+
+/// Reads `n` blocks written by [`write_coefficients`] into `out`, reusing its storage.
+pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> Result<()> {
     let total = n * N * N;
     // Every pair takes at least two bytes: refuse a count the stream cannot hold before
     // allocating for it (zero runs make the blocks themselves cheap to describe).
@@ -116,7 +132,11 @@ pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i
             "{n} blocks in one stream"
         )));
     }
-    let mut blocks = vec![[0i32; N * N]; n];
+    out.q.clear();
+    out.q.resize(n, [0i32; N * N]);
+    out.nonzero.clear();
+    out.nonzero.resize(n, 0);
+    let (blocks, nonzero) = (&mut out.q, &mut out.nonzero);
     let mut idx = 0usize;
     loop {
         let run = varint::get_u32(buf, pos)? as usize;
@@ -132,6 +152,9 @@ pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i
         let v = varint::get_i32(buf, pos)?;
         // Frequency-major: position idx is frequency idx / n of block idx % n.
         blocks[idx % n][idx / n] = v;
+        if idx >= n && v != 0 {
+            nonzero[idx % n] += 1; // AC terms; the DC term is counted after its prediction
+        }
         idx += 1;
         if idx == total {
             // The writer always ends with a run, possibly empty.
@@ -144,11 +167,12 @@ pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i
     }
     // Undo the DC prediction.
     let mut prev = 0i32;
-    for b in blocks.iter_mut() {
+    for (b, nz) in blocks.iter_mut().zip(nonzero.iter_mut()) {
         prev = prev.wrapping_add(b[0]);
         b[0] = prev;
+        *nz += (prev != 0) as u8;
     }
-    Ok(blocks)
+    Ok(())
 }
 
 /// Quantised zig-zag integers → spatial block: dequantise with `step`, inverse DCT.
@@ -169,6 +193,19 @@ pub fn dequantize_block(q: &[i32; N * N], step: f32) -> [f32; N * N] {
 /// multiply-adds apiece); denser blocks go through the separable inverse DCT.
 pub fn add_dequantized(p: &mut Plane, bx: usize, by: usize, q: &[i32; N * N], step: f32) {
     let nonzero = q.iter().filter(|&&v| v != 0).count();
+    add_dequantized_counted(p, bx, by, q, step, nonzero);
+}
+
+/// [`add_dequantized`] for a block whose number of non-zero terms is known
+/// ([`Blocks::nonzero`]).
+pub fn add_dequantized_counted(
+    p: &mut Plane,
+    bx: usize,
+    by: usize,
+    q: &[i32; N * N],
+    step: f32,
+    nonzero: usize,
+) {
     if nonzero == 0 {
         return;
     }
