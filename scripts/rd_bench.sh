@@ -54,8 +54,8 @@ run_vbim() { # $1 = method, $2 = setting, rest = encoder flags
     tail -1 "$csv"
 }
 for n in 2 4 8; do run_vbim "keyframes + linear" "every $n" --max-degree 1 --segment "$n"; done
-for t in 36 39 42 45; do run_vbim "vbim default" "tol $t" --tolerance "$t"; done
-for t in 39 42 45; do run_vbim "vbim --best" "tol $t" --best --tolerance "$t"; done
+for t in 36 39 40.5 42 45; do run_vbim "vbim default" "tol $t" --tolerance "$t"; done
+for t in 39 40.5 42; do run_vbim "vbim --best" "tol $t" --best --tolerance "$t"; done
 
 # The anchors on the 8-bit export.
 for codec in x265 x264; do

@@ -1,6 +1,6 @@
 //! The decoder: takes chunks from the ring, verifies them, keeps the keyframe chain, and
 //! when a segment's keyframes, tile map and coefficients are all there decodes it into a
-//! staging buffer laid out for upload (one RGBA f32 layer per term).
+//! staging buffer laid out for upload (one f32 layer per plane of each term).
 //!
 //! A damaged chunk (checksum mismatch, or the source failed) is reported and makes what
 //! depends on it undecodable: a keyframe breaks the predicted chain until the next intra
@@ -27,9 +27,11 @@ pub enum Staging {
     Mapped(wgpu::Buffer),
 }
 
-/// A decoded segment, ready to upload: `layers` RGBA f32 layers of width × height texels
-/// (layer 0 = K_s, 1 = K_{s+1}, 2.. = bubble coefficients), in the coded YCoCg domain,
-/// rows `pitch` bytes apart (a multiple of 256, as buffer-to-texture copies require).
+/// A decoded segment, ready to upload: for each term (0 = K_s, 1 = K_{s+1}, 2.. = bubble
+/// coefficients) one f32 layer per plane of the coded domain (Y, Co, Cg, or Y alone), of
+/// width × height texels, rows `row_pitch` bytes apart (a multiple of 256, as
+/// buffer-to-texture copies require). Planar, so that the decoder copies plane rows as
+/// they are instead of interleaving texels, and no padding channel is uploaded.
 pub struct SegmentData {
     pub generation: u32,
     /// The loop pass of the reader that delivered it (0 for the first play-through).
@@ -37,6 +39,7 @@ pub struct SegmentData {
     pub index: usize,
     pub start: u32,
     pub end: u32,
+    /// Terms (each `channels` layers).
     pub layers: usize,
     pub staging: Staging,
     /// Set once a `Mapped` staging buffer is mapped again after its upload (by wgpu's
@@ -46,14 +49,19 @@ pub struct SegmentData {
     pub decode_ns: u64,
 }
 
-/// Bytes between rows of a staging layer.
+/// Bytes between rows of a staging layer (one plane of one term).
 pub fn row_pitch(width: u32) -> u64 {
-    (width as u64 * 16).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64)
+    (width as u64 * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64)
 }
 
-/// Bytes of one staging layer.
+/// Bytes of one staging layer (one plane of one term).
 pub fn layer_bytes(h: &Header) -> u64 {
     row_pitch(h.width) * h.height as u64
+}
+
+/// Bytes of one term: all its planes.
+pub fn term_bytes(h: &Header) -> u64 {
+    h.channels as u64 * layer_bytes(h)
 }
 
 impl SegmentData {
@@ -74,7 +82,7 @@ impl SegmentData {
     /// A host-memory staging box (for measuring the decoder without a GPU).
     pub fn with_capacity(h: &Header) -> SegmentData {
         let layers = h.max_degree as usize + 1;
-        let floats = layers as u64 * layer_bytes(h) / 4;
+        let floats = layers as u64 * term_bytes(h) / 4;
         SegmentData::empty(Staging::Host(Vec::with_capacity(floats as usize)))
     }
 
@@ -83,7 +91,7 @@ impl SegmentData {
         let layers = h.max_degree as u64 + 1;
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vbim staging"),
-            size: layers * layer_bytes(h),
+            size: layers * term_bytes(h),
             usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: true,
         });
@@ -92,7 +100,7 @@ impl SegmentData {
 
     /// Bytes the segment's layers occupy in staging (what one upload copies).
     pub fn bytes(&self, h: &Header) -> u64 {
-        self.layers as u64 * layer_bytes(h)
+        self.layers as u64 * term_bytes(h)
     }
 }
 
@@ -117,15 +125,12 @@ pub struct DecoderCore {
     chain: Option<(usize, Arc<Vec<Plane>>)>,
     /// Keyframe decoding time not yet charged to a segment.
     key_ns: u64,
-    /// One staging row, reused.
-    row: Vec<f32>,
 }
 
 impl DecoderCore {
     pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
         let k = layout.keyframes.len();
         let s = layout.segments.len();
-        let row = Vec::with_capacity(header.width as usize * 4);
         DecoderCore {
             header,
             layout,
@@ -135,7 +140,6 @@ impl DecoderCore {
             coeffs: vec![None; s],
             chain: None,
             key_ns: 0,
-            row,
         }
     }
 
@@ -279,47 +283,29 @@ impl DecoderCore {
         let layers = 2 + bubbles.len();
         let pitch = row_pitch(h.width) as usize;
         let layer = layer_bytes(h) as usize;
-        // One row at a time, texel by texel (RGBA, alpha 0) into a row buffer that stays in
-        // cache, then copied to its place in staging: every value written once.
-        let row = &mut self.row;
-        let fill_row = |row: &mut Vec<f32>, planes: &[Plane], y: usize| {
-            let pw = planes[0].w;
-            row.clear();
-            let r = y * pw..y * pw + w;
-            if ch == 3 {
-                let (a, b, c) = (
-                    &planes[0].data[r.clone()],
-                    &planes[1].data[r.clone()],
-                    &planes[2].data[r],
-                );
-                for ((&a, &b), &c) in a.iter().zip(b).zip(c) {
-                    row.extend_from_slice(&[a, b, c, 0.0]);
-                }
-            } else {
-                for &a in &planes[0].data[r] {
-                    row.extend_from_slice(&[a, 0.0, 0.0, 0.0]);
-                }
-            }
-        };
-        let mut put = |l: usize, planes: &[Plane], staging: &mut Staging| -> Result<(), String> {
-            match staging {
-                Staging::Host(v) => {
-                    v.resize((l + 1) * layer / 4, 0.0);
-                    for y in 0..ht {
-                        fill_row(row, planes, y);
-                        let at = (l * layer + y * pitch) / 4;
-                        v[at..at + row.len()].copy_from_slice(row);
+        // Term `l`, plane `p` is staging layer l·channels + p: each plane row is copied as
+        // it is (the padding columns of the coded planes are left out).
+        let put = |l: usize, planes: &[Plane], staging: &mut Staging| -> Result<(), String> {
+            for (p, plane) in planes.iter().enumerate().take(ch) {
+                let base = (l * ch + p) * layer;
+                let pw = plane.w;
+                match staging {
+                    Staging::Host(v) => {
+                        v.resize((base + layer) / 4, 0.0);
+                        for y in 0..ht {
+                            let at = (base + y * pitch) / 4;
+                            v[at..at + w].copy_from_slice(&plane.data[y * pw..y * pw + w]);
+                        }
                     }
-                }
-                Staging::Mapped(b) => {
-                    let mut view = b
-                        .get_mapped_range_mut((l * layer) as u64..((l + 1) * layer) as u64)
-                        .map_err(|e| format!("staging buffer not mapped: {e}"))?;
-                    for y in 0..ht {
-                        fill_row(row, planes, y);
-                        let bytes: &[u8] = bytemuck::cast_slice(row);
-                        view.slice(y * pitch..y * pitch + bytes.len())
-                            .copy_from_slice(bytes);
+                    Staging::Mapped(b) => {
+                        let mut view = b
+                            .get_mapped_range_mut(base as u64..(base + layer) as u64)
+                            .map_err(|e| format!("staging buffer not mapped: {e}"))?;
+                        for y in 0..ht {
+                            let row: &[u8] = bytemuck::cast_slice(&plane.data[y * pw..y * pw + w]);
+                            view.slice(y * pitch..y * pitch + row.len())
+                                .copy_from_slice(row);
+                        }
                     }
                 }
             }

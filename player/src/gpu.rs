@@ -64,15 +64,18 @@ pub struct Gpu {
     pub width: u32,
     pub height: u32,
     pub max_layers: u32,
+    pub channels: u32,
 }
 
 impl Gpu {
+    /// `max_layers` terms of `channels` planes each.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         width: u32,
         height: u32,
         max_layers: u32,
+        channels: u32,
     ) -> Gpu {
         let size = wgpu::Extent3d {
             width,
@@ -86,15 +89,17 @@ impl Gpu {
                 } else {
                     "vbim terms B"
                 }),
+                // One R32Float layer per plane of each term: term k, plane p is layer
+                // k·channels + p (the staging layout, copied as it is).
                 size: wgpu::Extent3d {
                     width,
                     height,
-                    depth_or_array_layers: max_layers,
+                    depth_or_array_layers: max_layers * channels,
                 },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba32Float,
+                format: wgpu::TextureFormat::R32Float,
                 usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
                 view_formats: &[],
             })
@@ -227,6 +232,7 @@ impl Gpu {
             width,
             height,
             max_layers,
+            channels,
         }
     }
 
@@ -235,7 +241,7 @@ impl Gpu {
     /// staging goes through `write_texture`. Returns the bytes uploaded.
     pub fn upload(&self, enc: &mut wgpu::CommandEncoder, slot: usize, seg: &SegmentData) -> u64 {
         let (w, h) = (self.width, self.height);
-        let layers = seg.layers.min(self.max_layers as usize) as u32;
+        let layers = seg.layers.min(self.max_layers as usize) as u32 * self.channels;
         let pitch = row_pitch(w) as u32;
         let layout = wgpu::TexelCopyBufferLayout {
             offset: 0,

@@ -290,6 +290,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             header.width,
             header.height,
             header.max_degree as u32 + 1,
+            header.channels as u32,
         );
         let pipeline = if cfg.threaded {
             let stop = Arc::new(AtomicBool::new(false));

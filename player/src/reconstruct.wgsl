@@ -39,6 +39,19 @@ fn decode(c: f32) -> f32 {
     return p.v0 * (exp2(clamp(c, 0.0, 120.0)) - 1.0);
 }
 
+// Term k at a texel: its planes are layers k·channels … (one R32Float layer per plane).
+fn term(xy: vec2<i32>, k: u32) -> vec3<f32> {
+    if (p.channels == 3u) {
+        let b = i32(k * 3u);
+        return vec3<f32>(
+            textureLoad(terms, xy, b, 0).x,
+            textureLoad(terms, xy, b + 1, 0).x,
+            textureLoad(terms, xy, b + 2, 0).x,
+        );
+    }
+    return vec3<f32>(textureLoad(terms, xy, i32(k), 0).x, 0.0, 0.0);
+}
+
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= p.size.x || id.y >= p.size.y) {
@@ -46,9 +59,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let xy = vec2<i32>(id.xy);
     // Same order as the reference decoder: w0·K0 + w1·K1, then each bubble.
-    var c = weight(0u) * textureLoad(terms, xy, 0, 0).xyz + weight(1u) * textureLoad(terms, xy, 1, 0).xyz;
+    var c = weight(0u) * term(xy, 0u) + weight(1u) * term(xy, 1u);
     for (var k = 2u; k < p.layers; k = k + 1u) {
-        c = c + weight(k) * textureLoad(terms, xy, i32(k), 0).xyz;
+        c = c + weight(k) * term(xy, k);
     }
     var rgb: vec3<f32>;
     if (p.channels == 3u) {
