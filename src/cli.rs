@@ -279,8 +279,12 @@ pub struct EncodeArgs {
     #[arg(long)]
     pub best: bool,
     /// Skip decoding the result to measure its error.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "exact")]
     pub no_verify: bool,
+    /// Hold the tolerance exactly: re-encode with a corrected internal budget until the
+    /// measured mean PSNR is within [T, T + 0.5] dB (2–5 encode-and-measure passes).
+    #[arg(long)]
+    pub exact: bool,
     /// Also write the report as JSON to this file.
     #[arg(long)]
     pub report: Option<PathBuf>,

@@ -1,6 +1,6 @@
 //! `vbim encode INPUT --out FILE.vbim`
 
-use vbim_encoder::{encode, EncoderConfig, FrameSet, Preset, SegmentMode};
+use vbim_encoder::{encode, encode_to_tolerance, EncoderConfig, FrameSet, Preset, SegmentMode};
 
 use crate::cli::EncodeArgs;
 use crate::progress::Stages;
@@ -66,9 +66,12 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     }
     cfg.threads = a.threads;
     let stages = Stages::new();
-    let rep = encode(&frames, &cfg, &a.out, !a.no_verify, &|s, d, t| {
-        stages.report(s, d, t)
-    })
+    let progress = |s: &str, d: u64, t: u64| stages.report(s, d, t);
+    let rep = if a.exact {
+        encode_to_tolerance(&frames, &cfg, &a.out, &progress)
+    } else {
+        encode(&frames, &cfg, &a.out, !a.no_verify, &progress)
+    }
     .map_err(|e| e.to_string())?;
     stages.finish();
     println!(

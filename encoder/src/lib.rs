@@ -5,6 +5,7 @@
 //! The public API is data: an [`EncoderConfig`] (built from a [`Preset`] and adjusted
 //! knob by knob), [`encode`], and the [`EncodeReport`] it returns.
 
+pub mod calibrate;
 pub mod domain;
 pub mod input;
 pub mod model;
@@ -25,6 +26,7 @@ use vbim_format::metrics::Metric;
 use vbim_format::plane::Plane;
 use vbim_format::{ChunkKind, ColorEncoding, Header, Transfer, Writer};
 
+pub use calibrate::encode_to_tolerance;
 pub use input::{FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
 use model::{CodedFrame, Projectors, SegmentParams};
 pub use report::EncodeReport;

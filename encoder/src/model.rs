@@ -81,7 +81,17 @@ fn tile_errors(
                 let mut acc = |e: &[f64], slot: usize| {
                     let mut s = 0.0;
                     for (j, (v, f)) in e.iter().zip(inner).enumerate() {
-                        let q = w * (v * f.sens[i] as f64).powi(2);
+                        // The sensitivity at the source value alone understates a large
+                        // luma error: a curve that misses a jump out of the metric's
+                        // saturated range (dawn under a night-set exposure) lands where
+                        // the metric is steep. Take the larger of the two ends.
+                        let sens = if pl == 0 {
+                            let fitted = f.planes[0].data[i] - *v as f32;
+                            f.sens[i].max(dom.sensitivity(fitted))
+                        } else {
+                            f.sens[i]
+                        };
+                        let q = w * (v * sens as f64).powi(2);
                         s += q;
                         if slot == nb {
                             if let Some(pf) = per_frame.as_deref_mut() {

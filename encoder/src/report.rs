@@ -25,6 +25,8 @@ pub struct EncodeReport {
     /// Texel-frames encoded per second of encode time.
     pub texel_frames_per_s: f64,
     pub tolerance_db: f64,
+    /// With `--exact`: every pass as (internal tolerance, delivered mean PSNR, bytes).
+    pub calibration: Vec<(f64, f64, u64)>,
     pub max_degree: usize,
     /// Tiles × segments per luma degree (index = degree).
     pub degree_histogram: Vec<u64>,
@@ -100,6 +102,7 @@ impl EncodeReport {
             total_s,
             texel_frames_per_s: texel_frames / encode_s.max(1e-9),
             tolerance_db: cfg.tolerance_db,
+            calibration: Vec::new(),
             max_degree: cfg.max_degree,
             degree_histogram: hist,
             chroma_degree_histogram: chist,
@@ -289,7 +292,22 @@ impl std::fmt::Display for EncodeReport {
             f,
             "keyframes   {} ({} intra)",
             self.keyframes, self.intra_keyframes
-        )
+        )?;
+        if !self.calibration.is_empty() {
+            let p: Vec<String> = self
+                .calibration
+                .iter()
+                .map(|(t, p, b)| format!("{t:.2} → {p:.2} dB, {b} B"))
+                .collect();
+            write!(
+                f,
+                "\nexact       tolerance {:.2} dB after {} pass(es): {}",
+                self.tolerance_db,
+                self.calibration.len(),
+                p.join("; ")
+            )?;
+        }
+        Ok(())
     }
 }
 

@@ -1,0 +1,139 @@
+//! `--tolerance` as a promise (`--exact`): the budget is spent per segment, and on a day
+//! whose nights sit far below it the pooled mean PSNR comes out several dB above the
+//! tolerance (T + 4.8 dB on the benchmark day at T = 40.5). Here the file is encoded,
+//! measured with the reference decoder, and encoded again with a corrected internal
+//! budget (secant steps on internal tolerance → delivered PSNR, which is monotone) until
+//! the delivered mean PSNR lands in [T, T + BAND_DB]. Each pass costs one encode and one
+//! verification; the smallest file that meets T is kept.
+
+use std::path::{Path, PathBuf};
+
+use crate::{encode, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
+
+/// Width of the accepted band above the tolerance, dB.
+pub const BAND_DB: f64 = 0.5;
+/// Passes at most (the first is the plain encode).
+pub const MAX_PASSES: usize = 6;
+
+/// Encodes so that the delivered mean PSNR is at least `cfg.tolerance_db` and, when the
+/// curve allows, at most `BAND_DB` above it. The report's `tolerance_db` is the one asked
+/// for; `calibration` lists every pass (internal tolerance, delivered PSNR, bytes).
+pub fn encode_to_tolerance(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    out: &Path,
+    progress: Progress,
+) -> Result<EncodeReport, EncodeError> {
+    let t_start = std::time::Instant::now();
+    let target = cfg.tolerance_db;
+    let aim = target + BAND_DB / 2.0;
+    let name = out
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| EncodeError::Output {
+            path: out.to_path_buf(),
+            msg: "not a file name".into(),
+        })?;
+    let pass_path =
+        |k: usize| out.with_file_name(format!(".{name}.pass{k}-{}", std::process::id()));
+    let mut passes: Vec<(f64, f64, u64)> = Vec::new();
+    // (report, file) of the smallest file meeting the target, and of the best one missing it.
+    let mut met: Option<(EncodeReport, PathBuf)> = None;
+    let mut missed: Option<(EncodeReport, PathBuf)> = None;
+    let mut internal = target;
+    let result = (|| {
+        for k in 0..MAX_PASSES {
+            let c = EncoderConfig {
+                tolerance_db: internal,
+                ..cfg.clone()
+            };
+            let path = pass_path(k);
+            let rep = encode(src, &c, &path, true, progress)?;
+            let p = rep.mean_psnr.unwrap_or(f64::INFINITY);
+            passes.push((internal, p, rep.bytes));
+            let keep = |slot: &mut Option<(EncodeReport, PathBuf)>, better: bool| {
+                if better {
+                    if let Some((_, old)) = slot.take() {
+                        let _ = std::fs::remove_file(old);
+                    }
+                    *slot = Some((rep.clone(), path.clone()));
+                    true
+                } else {
+                    false
+                }
+            };
+            let kept = if p >= target {
+                let better = met.as_ref().is_none_or(|(r, _)| rep.bytes < r.bytes);
+                keep(&mut met, better)
+            } else {
+                let better = missed
+                    .as_ref()
+                    .is_none_or(|(r, _)| p > r.mean_psnr.unwrap_or(0.0));
+                keep(&mut missed, better)
+            };
+            if !kept {
+                let _ = std::fs::remove_file(&path);
+            }
+            if (target..=target + BAND_DB).contains(&p) {
+                break;
+            }
+            // The delivered PSNR rises with the internal tolerance, but in steps (segment
+            // lengths change discretely): secant steps until the target is bracketed,
+            // then regula falsi kept away from the bracket's ends (bisection when the
+            // secant would hug one).
+            let below = passes
+                .iter()
+                .filter(|q| q.1 < target)
+                .max_by(|a, b| a.0.total_cmp(&b.0));
+            let above = passes
+                .iter()
+                .filter(|q| q.1 > target + BAND_DB)
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let next = match (below, above) {
+                (Some(&(t0, p0, _)), Some(&(t1, p1, _))) => {
+                    let x = t0 + (aim - p0) * (t1 - t0) / (p1 - p0);
+                    let margin = 0.15 * (t1 - t0);
+                    if x < t0 + margin || x > t1 - margin {
+                        0.5 * (t0 + t1)
+                    } else {
+                        x
+                    }
+                }
+                _ => {
+                    let n = passes.len();
+                    if n >= 2 && (passes[n - 1].1 - passes[n - 2].1).abs() > 1e-3 {
+                        let ((t0, p0, _), (t1, p1, _)) = (passes[n - 2], passes[n - 1]);
+                        t1 + (aim - p1) * (t1 - t0) / (p1 - p0)
+                    } else {
+                        internal + (aim - p)
+                    }
+                }
+            };
+            internal = next;
+        }
+        Ok::<(), EncodeError>(())
+    })();
+    // The smallest file meeting the tolerance, else the closest miss; the other goes.
+    let (chosen, other) = match met {
+        Some(m) => (Some(m), missed),
+        None => (missed, None),
+    };
+    if let Some((_, p)) = other {
+        let _ = std::fs::remove_file(p);
+    }
+    if let Err(e) = result {
+        if let Some((_, p)) = chosen {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
+    }
+    let (mut rep, path) = chosen.expect("at least one pass ran");
+    std::fs::rename(&path, out).map_err(|e| EncodeError::Output {
+        path: out.to_path_buf(),
+        msg: e.to_string(),
+    })?;
+    rep.tolerance_db = target;
+    rep.calibration = passes;
+    rep.total_s = t_start.elapsed().as_secs_f64(); // all passes (encode_s is the kept one's)
+    Ok(rep)
+}
