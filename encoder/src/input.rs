@@ -319,6 +319,30 @@ pub struct MemorySource {
     pub frames: Vec<Vec<f32>>,
 }
 
+impl MemorySource {
+    /// `frames` of `width × height × channels` interleaved values each.
+    pub fn new(
+        name: &str,
+        width: usize,
+        height: usize,
+        channels: usize,
+        kind: InputKind,
+        frames: Vec<Vec<f32>>,
+    ) -> MemorySource {
+        MemorySource {
+            info: SourceInfo {
+                width,
+                height,
+                channels,
+                kind,
+                frames: frames.len(),
+                name: name.into(),
+            },
+            frames,
+        }
+    }
+}
+
 impl FrameSource for MemorySource {
     fn info(&self) -> SourceInfo {
         self.info.clone()

@@ -2,9 +2,7 @@
 
 use std::io::Cursor;
 
-use vbim_encoder::{
-    encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode, SourceInfo,
-};
+use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::Reader;
 
@@ -15,17 +13,7 @@ fn source(
     kind: InputKind,
     frames: Vec<Vec<f32>>,
 ) -> MemorySource {
-    MemorySource {
-        info: SourceInfo {
-            width: w,
-            height: h,
-            channels,
-            kind,
-            frames: frames.len(),
-            name: "memory".into(),
-        },
-        frames,
-    }
+    MemorySource::new("memory", w, h, channels, kind, frames)
 }
 
 fn run(src: &MemorySource, cfg: &EncoderConfig) -> (Vec<u8>, Vec<Vec<f32>>) {

@@ -3,9 +3,7 @@
 //! below the per-segment budget).
 
 use vbim_encoder::calibrate::BAND_DB;
-use vbim_encoder::{
-    encode, encode_to_tolerance, EncoderConfig, InputKind, MemorySource, Preset, SourceInfo,
-};
+use vbim_encoder::{encode, encode_to_tolerance, EncoderConfig, InputKind, MemorySource, Preset};
 
 /// Half a day of light with a shadow edge sweeping across, then a static night.
 fn day_and_night(w: usize, h: usize, n: usize) -> MemorySource {
@@ -25,17 +23,7 @@ fn day_and_night(w: usize, h: usize, n: usize) -> MemorySource {
                 .collect()
         })
         .collect();
-    MemorySource {
-        info: SourceInfo {
-            width: w,
-            height: h,
-            channels: 3,
-            kind: InputKind::Hdr,
-            frames: n,
-            name: "day and night".into(),
-        },
-        frames,
-    }
+    MemorySource::new("day and night", w, h, 3, InputKind::Hdr, frames)
 }
 
 #[test]

@@ -6,9 +6,7 @@ use std::cell::Cell;
 use std::io::Cursor;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 
-use vbim_encoder::{
-    encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode, SourceInfo,
-};
+use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
 use vbim_player::{headless_device, FrameState, Player, PlayerConfig};
 
 struct Counting;
@@ -58,17 +56,7 @@ fn steady_state_frames_do_not_allocate() {
                 .collect()
         })
         .collect();
-    let src = MemorySource {
-        info: SourceInfo {
-            width: w,
-            height: h,
-            channels: 3,
-            kind: InputKind::Hdr,
-            frames: n,
-            name: "m".into(),
-        },
-        frames,
-    };
+    let src = MemorySource::new("m", w, h, 3, InputKind::Hdr, frames);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("a.vbim");
     let cfg = EncoderConfig {

@@ -5,9 +5,7 @@ use std::io::Cursor;
 use std::sync::Arc;
 use std::time::Duration;
 
-use vbim_encoder::{
-    encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode, SourceInfo,
-};
+use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
 use vbim_format::curve::linear_to_srgb;
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::Reader;
@@ -43,17 +41,7 @@ fn sequence(w: usize, h: usize, n: usize, kind: InputKind) -> MemorySource {
                 .collect()
         })
         .collect();
-    MemorySource {
-        info: SourceInfo {
-            width: w,
-            height: h,
-            channels: 3,
-            kind,
-            frames: n,
-            name: "test".into(),
-        },
-        frames,
-    }
+    MemorySource::new("test", w, h, 3, kind, frames)
 }
 
 /// Noisy content: every frame costs bits, so the ring holds little of the file.
