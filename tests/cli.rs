@@ -30,20 +30,27 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Bakes the shipped sample at `size`² with `frames` frames into `out`; returns stdout.
+fn bake(out: &Path, size: &str, frames: &str, extra: &[&str]) -> String {
+    let mut args = vec![
+        "bake",
+        "samples/jacksboro.toml",
+        "--out",
+        s(out),
+        "--size",
+        size,
+        "--frames",
+        frames,
+    ];
+    args.extend_from_slice(extra);
+    ok(&args)
+}
+
 #[test]
 fn bake_encode_inspect_decode_compare() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("frames");
-    let out = ok(&[
-        "bake",
-        "samples/jacksboro.toml",
-        "--out",
-        s(&frames),
-        "--size",
-        "48",
-        "--frames",
-        "12",
-    ]);
+    let out = bake(&frames, "48", "12", &[]);
     assert!(out.contains("baked 12 frames"), "{out}");
     assert!(frames.join("frame_0011.exr").is_file());
     assert!(frames.join("manifest.json").is_file() && frames.join("contact_sheet.png").is_file());
@@ -122,18 +129,7 @@ fn bake_encode_inspect_decode_compare() {
 fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("f");
-    ok(&[
-        "bake",
-        "samples/jacksboro.toml",
-        "--out",
-        s(&frames),
-        "--size",
-        "16",
-        "--frames",
-        "4",
-        "--format",
-        "png8",
-    ]);
+    bake(&frames, "16", "4", &["--format", "png8"]);
     let file = dir.path().join("a.vbim");
     ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
     // Flip a byte in the last chunk: inspect reports that chunk, exit status 1.
@@ -183,16 +179,7 @@ fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
 fn the_window_opens_renders_and_closes_under_xvfb() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("f");
-    ok(&[
-        "bake",
-        "samples/jacksboro.toml",
-        "--out",
-        s(&frames),
-        "--size",
-        "32",
-        "--frames",
-        "12",
-    ]);
+    bake(&frames, "32", "12", &[]);
     let file = dir.path().join("w.vbim");
     ok(&[
         "encode",

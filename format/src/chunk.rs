@@ -15,6 +15,25 @@ thread_local! {
     static BLOCKS: std::cell::RefCell<plane::Blocks> = Default::default();
 }
 
+/// Reads one coefficient stream of `n` blocks at `pos` and adds each dequantised block into
+/// `plane` at the next of `origins` (block units).
+fn add_stream(
+    raw: &[u8],
+    pos: &mut usize,
+    n: usize,
+    origins: impl Iterator<Item = (usize, usize)>,
+    plane: &mut Plane,
+    step: f32,
+) -> Result<()> {
+    BLOCKS.with_borrow_mut(|q| {
+        plane::read_blocks(raw, pos, n, q)?;
+        for ((bx, by), (qb, &nz)) in origins.zip(q.q.iter().zip(&q.nonzero)) {
+            plane::add_dequantized_counted(plane, bx, by, qb, step, nz as usize);
+        }
+        Ok(())
+    })
+}
+
 /// Padded plane size: whole tiles.
 pub fn padded_size(h: &Header) -> (usize, usize) {
     let t = h.tile_size as usize;
@@ -113,15 +132,9 @@ pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Resu
     let mut out = base;
     let mut pos = r.pos;
     for (p, step) in steps.iter().enumerate() {
-        BLOCKS.with_borrow_mut(|q| -> Result<()> {
-            plane::read_blocks(raw, &mut pos, nblocks, q)?;
-            let (bw, bh) = (w / N, ht / N);
-            let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
-            for ((bx, by), (qb, &nz)) in origins.zip(q.q.iter().zip(&q.nonzero)) {
-                plane::add_dequantized_counted(&mut out[p], bx, by, qb, *step, nz as usize);
-            }
-            Ok(())
-        })?;
+        let (bw, bh) = (w / N, ht / N);
+        let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+        add_stream(raw, &mut pos, nblocks, origins, &mut out[p], *step)?;
     }
     if pos != raw.len() {
         return Err(FormatError::Invalid(format!(
@@ -254,16 +267,17 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
             let mut plane = Plane::zeros(w, ht);
             let members: Vec<usize> = (0..n).filter(|&t| tiles.degree(p, t) >= k).collect();
             let step = steps[(k as usize - 2) * planes + p];
-            BLOCKS.with_borrow_mut(|q| -> Result<()> {
-                plane::read_blocks(&raw, &mut pos, members.len() * per_tile, q)?;
-                let origins = members
-                    .iter()
-                    .flat_map(|&t| plane::tile_blocks(t, tiles_x, ts));
-                for ((bx, by), (qb, &nz)) in origins.zip(q.q.iter().zip(&q.nonzero)) {
-                    plane::add_dequantized_counted(&mut plane, bx, by, qb, step, nz as usize);
-                }
-                Ok(())
-            })?;
+            let origins = members
+                .iter()
+                .flat_map(|&t| plane::tile_blocks(t, tiles_x, ts));
+            add_stream(
+                &raw,
+                &mut pos,
+                members.len() * per_tile,
+                origins,
+                &mut plane,
+                step,
+            )?;
             planes_k.push(plane);
         }
         out.push(planes_k);

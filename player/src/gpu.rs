@@ -238,8 +238,9 @@ impl Gpu {
 
     /// Records the copy of a decoded segment into slot `slot`. A mapped staging buffer is
     /// unmapped and copied by the GPU (nothing but the command is recorded here); host
-    /// staging goes through `write_texture`. Returns the bytes uploaded.
-    pub fn upload(&self, enc: &mut wgpu::CommandEncoder, slot: usize, seg: &SegmentData) -> u64 {
+    /// staging goes through `write_texture`. (The bytes it moves are
+    /// [`SegmentData::bytes`], which the player's statistics count.)
+    pub fn upload(&self, enc: &mut wgpu::CommandEncoder, slot: usize, seg: &SegmentData) {
         let (w, h) = (self.width, self.height);
         let layers = seg.layers.min(self.max_layers as usize) as u32 * self.channels;
         let pitch = row_pitch(w) as u32;
@@ -259,19 +260,17 @@ impl Gpu {
             height: h,
             depth_or_array_layers: layers,
         };
-        let bytes = layers as u64 * pitch as u64 * h as u64;
         match &seg.staging {
             Staging::Mapped(buffer) => {
                 buffer.unmap();
                 enc.copy_buffer_to_texture(wgpu::TexelCopyBufferInfo { buffer, layout }, dst, size);
             }
             Staging::Host(data) => {
+                let bytes = layers as usize * pitch as usize * h as usize;
                 let b: &[u8] = bytemuck::cast_slice(data);
-                self.queue
-                    .write_texture(dst, &b[..bytes as usize], layout, size);
+                self.queue.write_texture(dst, &b[..bytes], layout, size);
             }
         }
-        bytes
     }
 
     /// After the submission that copied `seg`, asks for its staging buffer to be mapped
@@ -302,17 +301,18 @@ impl Gpu {
     }
 
     /// Records and submits one frame: an optional segment upload into its slot, then the
-    /// reconstruction from slot `eval.0` — one command buffer, one submission. Returns the
-    /// bytes uploaded.
+    /// reconstruction from slot `eval.0` — one command buffer, one submission.
     pub fn frame(
         &self,
         upload: Option<(usize, &SegmentData)>,
         eval: Option<(usize, &Params, bool)>,
-    ) -> u64 {
+    ) {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        let uploaded = upload.map_or(0, |(slot, seg)| self.upload(&mut enc, slot, seg));
+        if let Some((slot, seg)) = upload {
+            self.upload(&mut enc, slot, seg);
+        }
         if let Some((slot, params, hold_first)) = eval {
             self.queue
                 .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
@@ -331,7 +331,6 @@ impl Gpu {
         if let Some((_, seg)) = upload {
             self.remap(seg);
         }
-        uploaded
     }
 
     /// Reads the display texture back (RGBA, f32). For tests and error measurement.
