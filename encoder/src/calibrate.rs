@@ -2,9 +2,10 @@
 //! whose nights sit far below it the pooled mean PSNR comes out several dB above the
 //! tolerance (T + 4.8 dB on the benchmark day at T = 40.5). Here the file is encoded,
 //! measured with the reference decoder, and encoded again with a corrected internal
-//! budget (secant steps on internal tolerance → delivered PSNR, which is monotone) until
-//! the delivered mean PSNR lands in [T, T + BAND_DB]. Each pass costs one encode and one
-//! verification; the smallest file that meets T is kept.
+//! budget (secant steps on internal tolerance → delivered PSNR, which rises with it but in
+//! steps, then bisection once T is bracketed) until the delivered mean PSNR lands in
+//! [T, T + BAND_DB]. Each pass costs one encode and one verification; the smallest file
+//! that meets T is kept.
 
 use std::path::{Path, PathBuf};
 

@@ -174,7 +174,7 @@ impl EncoderConfig {
 pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
 
 /// Error budgets, as shares of the total RMS error the tolerance allows. They were set by
-/// measurement (BENCHMARKS.md, "tuning the budget shares"): a tight fit (long segments
+/// measurement (BENCHMARKS.md, "What moved the encoder …"): a tight fit (long segments
 /// only where the curve really is smooth) with coarsely quantised bubble planes gives the
 /// fewest bytes at a given mean PSNR. The bubble share exceeds 1 because dead-zone
 /// quantisation of sparse planes errs far below the step²/12 the step is computed from;

@@ -7,9 +7,9 @@
 //! own (paper 001's figure 13): a reader pulls chunks into a bounded ring of compressed
 //! bytes, reading ahead and wrapping at the loop point; a decoder writes them into one of
 //! two mapped GPU staging buffers; the render thread only records the copy into the GPU
-//! slot it is not sampling and evaluates the time basis in a compute shader. When data is late the chosen [`Policy`]
-//! decides what is shown, and every frame's [`FrameRecord`] says how bandwidth turned into
-//! drift.
+//! slot it is not sampling and evaluates the time basis in a compute shader. When data is
+//! late the chosen [`Policy`] decides what is shown, and every frame's [`FrameRecord`] says
+//! how bandwidth turned into drift.
 //!
 //! The player depends on `vbim-format` only, never on the encoder.
 
