@@ -231,62 +231,162 @@ pub fn write_coeffs(max_degree: u8, steps: &[f32], blocks: &[Vec<[i32; N * N]>])
 /// Decodes a coefficient chunk into bubble planes: `result[k − 2][plane]`.
 pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<Plane>>> {
     let (w, ht) = padded_size(h);
-    let planes = h.channels as usize;
-    let ts = h.tile_size as usize;
-    let per_tile = (ts / N) * (ts / N);
-    let n = h.tile_count();
-    let total_blocks: usize = (0..n)
-        .map(|t| {
-            (0..planes)
-                .map(|p| tiles.degree(p, t) as usize - 1)
-                .sum::<usize>()
-                * per_tile
-        })
-        .sum();
-    let dmax = tiles.max_degree();
-    let raw = decompress(
-        bytes,
-        stream_limit(total_blocks, planes * h.max_degree as usize),
-    )?;
-    let mut r = Bytes { b: &raw, pos: 0 };
-    let head = r.take(4)?;
-    if head[0] != dmax || (dmax > 1 && head[1] as usize != planes) {
-        return Err(FormatError::Invalid(format!(
-            "coefficients for degree {} × {} planes, tile map needs {dmax} × {planes}",
-            head[0], head[1]
-        )));
-    }
-    let nsteps = (dmax as usize - 1) * planes;
-    let steps: Vec<f32> = (0..nsteps).map(|_| r.f32()).collect::<Result<_>>()?;
-    let mut pos = r.pos;
-    let tiles_x = h.tiles_x() as usize;
-    let mut out = Vec::with_capacity(dmax as usize - 1);
-    for k in 2..=dmax {
-        let mut planes_k = Vec::with_capacity(planes);
-        for p in 0..planes {
+    let mut reader = CoeffReader::open(h, bytes, tiles)?;
+    let mut band = Plane::zeros(0, 0);
+    let mut out = Vec::new();
+    for k in 2..=reader.max_degree() {
+        let mut planes_k = Vec::with_capacity(h.channels as usize);
+        for p in 0..h.channels as usize {
             let mut plane = Plane::zeros(w, ht);
-            let members: Vec<usize> = (0..n).filter(|&t| tiles.degree(p, t) >= k).collect();
-            let step = steps[(k as usize - 2) * planes + p];
-            let origins = members
-                .iter()
-                .flat_map(|&t| plane::tile_blocks(t, tiles_x, ts));
-            add_stream(
-                &raw,
-                &mut pos,
-                members.len() * per_tile,
-                origins,
-                &mut plane,
-                step,
-            )?;
+            reader.read_plane(k, p, &mut band, |y, row| {
+                plane.data[y * w..(y + 1) * w].copy_from_slice(row)
+            })?;
             planes_k.push(plane);
         }
         out.push(planes_k);
     }
-    if pos != raw.len() {
-        return Err(FormatError::Invalid(format!(
-            "{} stray bytes after the planes",
-            raw.len() - pos
-        )));
-    }
+    reader.finish()?;
     Ok(out)
+}
+
+/// A coefficient chunk decoded plane by plane, one band of tiles at a time, handing out
+/// finished rows: the player writes them straight into a mapped staging buffer, so a
+/// segment's bubble planes are never zeroed, accumulated and copied as whole planes in
+/// memory (a band of 16 rows stays in cache).
+pub struct CoeffReader<'t> {
+    raw: Vec<u8>,
+    pos: usize,
+    steps: Vec<f32>,
+    tiles: &'t TileMap,
+    dmax: u8,
+    planes: usize,
+    tiles_x: usize,
+    tiles_y: usize,
+    tile_size: usize,
+    /// The plane read next, as (k, plane): planes come in stream order.
+    next: (u8, usize),
+}
+
+impl<'t> CoeffReader<'t> {
+    /// Decompresses the chunk and reads its header (degree, planes, steps).
+    pub fn open(h: &Header, bytes: &[u8], tiles: &'t TileMap) -> Result<CoeffReader<'t>> {
+        let planes = h.channels as usize;
+        let ts = h.tile_size as usize;
+        let per_tile = (ts / N) * (ts / N);
+        let n = h.tile_count();
+        let total_blocks: usize = (0..n)
+            .map(|t| {
+                (0..planes)
+                    .map(|p| tiles.degree(p, t) as usize - 1)
+                    .sum::<usize>()
+                    * per_tile
+            })
+            .sum();
+        let dmax = tiles.max_degree();
+        let raw = decompress(
+            bytes,
+            stream_limit(total_blocks, planes * h.max_degree as usize),
+        )?;
+        let mut r = Bytes { b: &raw, pos: 0 };
+        let head = r.take(4)?;
+        if head[0] != dmax || (dmax > 1 && head[1] as usize != planes) {
+            return Err(FormatError::Invalid(format!(
+                "coefficients for degree {} × {} planes, tile map needs {dmax} × {planes}",
+                head[0], head[1]
+            )));
+        }
+        let nsteps = (dmax as usize - 1) * planes;
+        let steps: Vec<f32> = (0..nsteps).map(|_| r.f32()).collect::<Result<_>>()?;
+        let pos = r.pos;
+        Ok(CoeffReader {
+            raw,
+            pos,
+            steps,
+            tiles,
+            dmax,
+            planes,
+            tiles_x: h.tiles_x() as usize,
+            tiles_y: h.tiles_y() as usize,
+            tile_size: ts,
+            next: (2, 0),
+        })
+    }
+
+    /// The highest degree present: planes k = 2..=this follow.
+    pub fn max_degree(&self) -> u8 {
+        self.dmax
+    }
+
+    /// Decodes bubble plane (`k`, `p`) — planes must be read in stream order, k = 2..=D,
+    /// then p — and calls `row(y, values)` for each of its padded rows, top to bottom.
+    /// `band` is scratch space, kept by the caller so that nothing is allocated per plane.
+    pub fn read_plane(
+        &mut self,
+        k: u8,
+        p: usize,
+        band: &mut Plane,
+        mut row: impl FnMut(usize, &[f32]),
+    ) -> Result<()> {
+        if (k, p) != self.next || k > self.dmax {
+            return Err(FormatError::Invalid(format!(
+                "bubble plane {k}/{p} read out of order (next is {}/{})",
+                self.next.0, self.next.1
+            )));
+        }
+        self.next = if p + 1 < self.planes {
+            (k, p + 1)
+        } else {
+            (k + 1, 0)
+        };
+        let ts = self.tile_size;
+        let per = ts / N;
+        let w = self.tiles_x * ts;
+        let step = self.steps[(k as usize - 2) * self.planes + p];
+        let tiles = self.tiles;
+        let members = (0..self.tiles_x * self.tiles_y)
+            .filter(|&t| tiles.degree(p, t) >= k)
+            .count();
+        if band.w != w || band.h != ts {
+            *band = Plane::zeros(w, ts);
+        }
+        let (raw, pos) = (&self.raw, &mut self.pos);
+        BLOCKS.with_borrow_mut(|q| {
+            plane::read_blocks(raw, pos, members * per * per, q)?;
+            let mut b = 0;
+            for ty in 0..self.tiles_y {
+                band.data.fill(0.0);
+                for tx in 0..self.tiles_x {
+                    if tiles.degree(p, ty * self.tiles_x + tx) < k {
+                        continue;
+                    }
+                    for (by, bx) in (0..per).flat_map(|y| (0..per).map(move |x| (y, x))) {
+                        let nz = q.nonzero[b] as usize;
+                        plane::add_dequantized_counted(band, tx * per + bx, by, &q.q[b], step, nz);
+                        b += 1;
+                    }
+                }
+                for y in 0..ts {
+                    row(ty * ts + y, &band.data[y * w..(y + 1) * w]);
+                }
+            }
+            Ok(())
+        })
+    }
+
+    /// Checks that every plane was read and nothing follows them.
+    pub fn finish(&self) -> Result<()> {
+        if self.next.0 <= self.dmax && self.dmax > 1 {
+            return Err(FormatError::Invalid(format!(
+                "bubble planes from {}/{} not read",
+                self.next.0, self.next.1
+            )));
+        }
+        if self.pos != self.raw.len() {
+            return Err(FormatError::Invalid(format!(
+                "{} stray bytes after the planes",
+                self.raw.len() - self.pos
+            )));
+        }
+        Ok(())
+    }
 }

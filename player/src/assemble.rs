@@ -125,6 +125,8 @@ pub struct DecoderCore {
     chain: Option<(usize, Arc<Vec<Plane>>)>,
     /// Keyframe decoding time not yet charged to a segment.
     key_ns: u64,
+    /// Scratch band for decoding bubble planes row band by row band.
+    band: Plane,
 }
 
 impl DecoderCore {
@@ -140,6 +142,7 @@ impl DecoderCore {
             coeffs: vec![None; s],
             chain: None,
             key_ns: 0,
+            band: Plane::zeros(0, 0),
         }
     }
 
@@ -270,52 +273,74 @@ impl DecoderCore {
             .ok_or("keyframe missing")?;
         let tiles = self.tiles[s].take().ok_or("tile map missing")?;
         let bytes = self.coeffs[s].take().ok_or("coefficients missing")?;
-        let bubbles = chunk::read_coeffs(h, &bytes, &tiles).map_err(|e| {
+        let context = |e: vbim_format::FormatError| {
             let (_, ci) = self.layout.segments[s];
             let en = self.entries[ci];
             format!(
                 "chunk {ci}, frames {}–{}: {e}",
                 en.first_frame, en.last_frame
             )
-        })?;
+        };
+        let mut bubbles = chunk::CoeffReader::open(h, &bytes, &tiles).map_err(context)?;
         let (w, ht) = (h.width as usize, h.height as usize);
         let ch = h.channels as usize;
-        let layers = 2 + bubbles.len();
+        let layers = 1 + bubbles.max_degree() as usize;
         let pitch = row_pitch(h.width) as usize;
         let layer = layer_bytes(h) as usize;
-        // Term `l`, plane `p` is staging layer l·channels + p: each plane row is copied as
-        // it is (the padding columns of the coded planes are left out).
-        let put = |l: usize, planes: &[Plane], staging: &mut Staging| -> Result<(), String> {
-            for (p, plane) in planes.iter().enumerate().take(ch) {
-                let base = (l * ch + p) * layer;
-                let pw = plane.w;
-                match staging {
-                    Staging::Host(v) => {
+        // Term `l`, plane `p` is staging layer l·channels + p: each row is written as it is
+        // (the padding columns and rows of the coded planes are left out).
+        fn write_rows(
+            staging: &mut Staging,
+            base: usize,
+            (w, ht, pitch, layer): (usize, usize, usize, usize),
+            fill: impl FnOnce(&mut dyn FnMut(usize, &[f32])) -> Result<(), String>,
+        ) -> Result<(), String> {
+            match staging {
+                Staging::Host(v) => {
+                    if v.len() < (base + layer) / 4 {
                         v.resize((base + layer) / 4, 0.0);
-                        for y in 0..ht {
-                            let at = (base + y * pitch) / 4;
-                            v[at..at + w].copy_from_slice(&plane.data[y * pw..y * pw + w]);
-                        }
                     }
-                    Staging::Mapped(b) => {
-                        let mut view = b
-                            .get_mapped_range_mut(base as u64..(base + layer) as u64)
-                            .map_err(|e| format!("staging buffer not mapped: {e}"))?;
-                        for y in 0..ht {
-                            let row: &[u8] = bytemuck::cast_slice(&plane.data[y * pw..y * pw + w]);
+                    fill(&mut |y, row| {
+                        if y < ht {
+                            let at = (base + y * pitch) / 4;
+                            v[at..at + w].copy_from_slice(&row[..w]);
+                        }
+                    })
+                }
+                Staging::Mapped(b) => {
+                    let mut view = b
+                        .get_mapped_range_mut(base as u64..(base + layer) as u64)
+                        .map_err(|e| format!("staging buffer not mapped: {e}"))?;
+                    fill(&mut |y, row| {
+                        if y < ht {
+                            let row: &[u8] = bytemuck::cast_slice(&row[..w]);
                             view.slice(y * pitch..y * pitch + row.len())
                                 .copy_from_slice(row);
                         }
-                    }
+                    })
                 }
             }
-            Ok(())
-        };
-        put(0, &k0, &mut out.staging)?;
-        put(1, &k1, &mut out.staging)?;
-        for (k, b) in bubbles.iter().enumerate() {
-            put(2 + k, b, &mut out.staging)?;
         }
+        let dims = (w, ht, pitch, layer);
+        for (l, key) in [(0, &k0), (1, &k1)] {
+            for (p, plane) in key.iter().enumerate().take(ch) {
+                write_rows(&mut out.staging, (l * ch + p) * layer, dims, |row| {
+                    for y in 0..ht {
+                        row(y, &plane.data[y * plane.w..(y + 1) * plane.w]);
+                    }
+                    Ok(())
+                })?;
+            }
+        }
+        let band = &mut self.band;
+        for l in 2..layers {
+            for p in 0..ch {
+                write_rows(&mut out.staging, (l * ch + p) * layer, dims, |row| {
+                    bubbles.read_plane(l as u8, p, band, row).map_err(context)
+                })?;
+            }
+        }
+        bubbles.finish().map_err(context)?;
         out.generation = generation;
         out.pass = pass;
         out.index = s;
