@@ -27,8 +27,8 @@ fn add_stream(
 ) -> Result<()> {
     BLOCKS.with_borrow_mut(|q| {
         plane::read_blocks(raw, pos, n, q)?;
-        for ((bx, by), (qb, &nz)) in origins.zip(q.q.iter().zip(&q.nonzero)) {
-            plane::add_dequantized_counted(plane, bx, by, qb, step, nz as usize);
+        for ((bx, by), b) in origins.zip(0..n) {
+            plane::add_block_of(plane, bx, by, q, b, step);
         }
         Ok(())
     })
@@ -360,8 +360,7 @@ impl<'t> CoeffReader<'t> {
                         continue;
                     }
                     for (by, bx) in (0..per).flat_map(|y| (0..per).map(move |x| (y, x))) {
-                        let nz = q.nonzero[b] as usize;
-                        plane::add_dequantized_counted(band, tx * per + bx, by, &q.q[b], step, nz);
+                        plane::add_block_of(band, tx * per + bx, by, q, b, step);
                         b += 1;
                     }
                 }

@@ -101,25 +101,64 @@ pub fn write_coefficients(blocks: &[[i32; N * N]], out: &mut Vec<u8>) {
     varint::put_u32(out, run);
 }
 
-/// Decoded blocks of one coefficient stream with each block's number of non-zero terms,
-/// kept from stream to stream so that steady-state decoding neither allocates nor faults
-/// in fresh pages, and so that empty blocks are skipped without being scanned.
+/// Decoded blocks of one coefficient stream, kept sparse: each block's DC term, and its
+/// non-zero AC terms as (zig-zag index, value) in increasing index. The stream is
+/// frequency-major, so writing it into 64-integer blocks would scatter one store per term
+/// across a megabyte; here the terms are gathered per block in a second, cache-resident
+/// pass. Kept from stream to stream so that steady-state decoding does not allocate.
 #[derive(Default)]
 pub struct Blocks {
-    pub q: Vec<[i32; N * N]>,
-    pub nonzero: Vec<u8>,
+    dc: Vec<i32>,
+    /// AC terms of block b: `ac[start[b]..start[b + 1]]`.
+    ac: Vec<(u8, i32)>,
+    start: Vec<u32>,
+    /// Scratch: (block, zig-zag index, value) in stream order, and bucket cursors.
+    parsed: Vec<(u32, u8, i32)>,
+    cursor: Vec<u32>,
+}
+
+impl Blocks {
+    /// Number of blocks read.
+    pub fn len(&self) -> usize {
+        self.dc.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.dc.is_empty()
+    }
+
+    /// Non-zero terms of block `b`, DC included.
+    pub fn nonzero(&self, b: usize) -> usize {
+        (self.dc[b] != 0) as usize + (self.start[b + 1] - self.start[b]) as usize
+    }
+
+    /// The non-zero terms of block `b` as (zig-zag index, value), in increasing index.
+    pub fn terms(&self, b: usize) -> impl Iterator<Item = (usize, i32)> + '_ {
+        let dc = (self.dc[b] != 0).then_some((0, self.dc[b]));
+        let ac = &self.ac[self.start[b] as usize..self.start[b + 1] as usize];
+        dc.into_iter()
+            .chain(ac.iter().map(|&(i, v)| (i as usize, v)))
+    }
+
+    /// Block `b` as 64 integers in zig-zag order.
+    pub fn block(&self, b: usize) -> [i32; N * N] {
+        let mut q = [0i32; N * N];
+        for (i, v) in self.terms(b) {
+            q[i] = v;
+        }
+        q
+    }
 }
 
 /// Reads `n` blocks written by [`write_coefficients`].
 pub fn read_coefficients(buf: &[u8], pos: &mut usize, n: usize) -> Result<Vec<[i32; N * N]>> {
     let mut b = Blocks::default();
     read_blocks(buf, pos, n, &mut b)?;
-    Ok(b.q)
+    Ok((0..n).map(|i| b.block(i)).collect())
 }
 
 /// Reads `n` blocks written by [`write_coefficients`] into `out`, reusing its storage.
 pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> Result<()> {
-    let total = n * N * N;
     // Every pair takes at least two bytes: refuse a count the stream cannot hold before
     // allocating for it (zero runs make the blocks themselves cheap to describe).
     if n > 0 && buf.len() <= *pos {
@@ -132,31 +171,47 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
             "{n} blocks in one stream"
         )));
     }
-    out.q.clear();
-    out.q.resize(n, [0i32; N * N]);
-    out.nonzero.clear();
-    out.nonzero.resize(n, 0);
-    let (blocks, nonzero) = (&mut out.q, &mut out.nonzero);
-    let mut idx = 0usize;
+    out.dc.clear();
+    out.dc.resize(n, 0);
+    out.parsed.clear();
+    out.start.clear();
+    out.start.resize(n + 1, 0);
+    // Frequency-major: stream position f·n + b is frequency f of block b. The position is
+    // kept as (f, b), so that a pair costs no division unless its run wraps a frequency.
+    let past_end = || crate::FormatError::Invalid(format!("zero run past the end of {n} blocks"));
+    let (mut f, mut b) = (0usize, 0usize);
     loop {
         let run = varint::get_u32(buf, pos)? as usize;
-        idx = idx
-            .checked_add(run)
-            .filter(|&i| i <= total)
-            .ok_or_else(|| {
-                crate::FormatError::Invalid(format!("zero run past the end of {n} blocks"))
-            })?;
-        if idx == total {
+        if n == 0 {
+            if run > 0 {
+                return Err(past_end());
+            }
+            break;
+        }
+        b += run;
+        if b >= n {
+            f += b / n;
+            b %= n;
+        }
+        if f > N * N || (f == N * N && b > 0) {
+            return Err(past_end());
+        }
+        if f == N * N {
             break;
         }
         let v = varint::get_i32(buf, pos)?;
-        // Frequency-major: position idx is frequency idx / n of block idx % n.
-        blocks[idx % n][idx / n] = v;
-        if idx >= n && v != 0 {
-            nonzero[idx % n] += 1; // AC terms; the DC term is counted after its prediction
+        if f == 0 {
+            out.dc[b] = v;
+        } else if v != 0 {
+            out.parsed.push((b as u32, f as u8, v));
+            out.start[b + 1] += 1;
         }
-        idx += 1;
-        if idx == total {
+        b += 1;
+        if b == n {
+            b = 0;
+            f += 1;
+        }
+        if f == N * N {
             // The writer always ends with a run, possibly empty.
             let tail = varint::get_u32(buf, pos)?;
             if tail != 0 {
@@ -167,10 +222,23 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
     }
     // Undo the DC prediction.
     let mut prev = 0i32;
-    for (b, nz) in blocks.iter_mut().zip(nonzero.iter_mut()) {
-        prev = prev.wrapping_add(b[0]);
-        b[0] = prev;
-        *nz += (prev != 0) as u8;
+    for d in out.dc.iter_mut() {
+        prev = prev.wrapping_add(*d);
+        *d = prev;
+    }
+    // Gather each block's AC terms: counts → offsets, then one pass in stream order, which
+    // is increasing frequency within every block.
+    for i in 0..n {
+        out.start[i + 1] += out.start[i];
+    }
+    out.cursor.clear();
+    out.cursor.extend_from_slice(&out.start[..n]);
+    out.ac.clear();
+    out.ac.resize(out.parsed.len(), (0, 0));
+    for &(b, f, v) in &out.parsed {
+        let c = &mut out.cursor[b as usize];
+        out.ac[*c as usize] = (f, v);
+        *c += 1;
     }
     Ok(())
 }
@@ -186,57 +254,36 @@ pub fn dequantize_block(q: &[i32; N * N], step: f32) -> [f32; N * N] {
     b
 }
 
-/// Adds a dequantised block into the plane at block (bx, by). This is the decoder's
-/// definition of a block's contribution (the encoder reconstructs through it too, so both
-/// sides agree bit for bit): an all-zero block adds nothing; a block with at most
-/// [`SPARSE_MAX`] non-zero coefficients adds each one's basis image directly (64
-/// multiply-adds apiece); denser blocks go through the separable inverse DCT.
-pub fn add_dequantized(p: &mut Plane, bx: usize, by: usize, q: &[i32; N * N], step: f32) {
-    let nonzero = q.iter().filter(|&&v| v != 0).count();
-    add_dequantized_counted(p, bx, by, q, step, nonzero);
-}
-
-/// [`add_dequantized`] for a block whose number of non-zero terms is known
-/// ([`Blocks::nonzero`]).
-pub fn add_dequantized_counted(
-    p: &mut Plane,
-    bx: usize,
-    by: usize,
-    q: &[i32; N * N],
-    step: f32,
-    nonzero: usize,
-) {
+/// Adds block `b` of a decoded stream, dequantised, into the plane at block (bx, by). This
+/// is the decoder's definition of a block's contribution (the encoder reconstructs its
+/// keyframes through the decoder, so both sides agree bit for bit): an all-zero block adds
+/// nothing; a block with at most [`SPARSE_MAX`] non-zero coefficients adds each one's basis
+/// image directly (64 multiply-adds apiece, in increasing zig-zag order); denser blocks go
+/// through the separable inverse DCT.
+pub fn add_block_of(p: &mut Plane, bx: usize, by: usize, blocks: &Blocks, b: usize, step: f32) {
+    let nonzero = blocks.nonzero(b);
     if nonzero == 0 {
         return;
     }
     if nonzero > SPARSE_MAX {
-        p.add_block(bx, by, &dequantize_block(q, step));
+        p.add_block(bx, by, &dequantize_block(&blocks.block(b), step));
         return;
     }
     let t = dct::basis();
     let z = dct::zigzag();
     let w = p.w;
-    let mut left = nonzero;
-    for (i, &v) in q.iter().enumerate() {
-        if v == 0 {
-            continue;
-        }
+    for (i, v) in blocks.terms(b) {
         let (ky, kx) = (z[i] / N, z[i] % N);
         let c = v as f32 * step;
         let tx = &t[kx];
-        for y in 0..N {
-            let a = c * t[ky][y];
+        for (y, &ty) in t[ky].iter().enumerate() {
+            let a = c * ty;
             let at = (by * N + y) * w + bx * N;
             // A fixed-size row: no bounds checks inside, so the eight lanes vectorise.
             let row: &mut [f32; N] = (&mut p.data[at..at + N]).try_into().unwrap();
-            for x in 0..N {
-                row[x] += a * tx[x];
+            for (o, &bx) in row.iter_mut().zip(tx) {
+                *o += a * bx;
             }
-        }
-        // The count says when the last one is done: the high frequencies are not scanned.
-        left -= 1;
-        if left == 0 {
-            break;
         }
     }
 }
@@ -294,6 +341,36 @@ mod tests {
             let mut pos = 0;
             assert_eq!(read_coefficients(&buf, &mut pos, bl.len()).unwrap(), bl);
             assert_eq!(pos, buf.len());
+        }
+    }
+
+    #[test]
+    fn reused_block_storage_reads_like_fresh_storage() {
+        // Dense, then sparse and shorter, then a damaged stream, then dense again: nothing
+        // one stream leaves in the reused storage shows through the next.
+        let dense: Vec<[i32; 64]> = (0..9)
+            .map(|i| std::array::from_fn(|j| ((i * 64 + j) as i32 * 7919) % 41 - 20))
+            .collect();
+        let mut sparse = vec![[0i32; 64]; 6];
+        sparse[2][0] = 5;
+        sparse[4][17] = -3;
+        sparse[4][63] = 1;
+        let streams = [dense.clone(), sparse, vec![[0i32; 64]; 3], dense];
+        let mut reused = Blocks::default();
+        for (k, bl) in streams.iter().enumerate() {
+            let mut buf = Vec::new();
+            write_coefficients(bl, &mut buf);
+            if k == 2 {
+                let bad = &buf[..buf.len() / 2];
+                assert!(read_blocks(bad, &mut 0, bl.len(), &mut reused).is_err());
+            }
+            read_blocks(&buf, &mut 0, bl.len(), &mut reused).unwrap();
+            assert_eq!(reused.len(), bl.len());
+            for (b, want) in bl.iter().enumerate() {
+                assert_eq!(&reused.block(b), want, "stream {k}, block {b}");
+                let n = want.iter().filter(|&&v| v != 0).count();
+                assert_eq!(reused.nonzero(b), n, "stream {k}, block {b}");
+            }
         }
     }
 
