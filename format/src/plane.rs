@@ -243,11 +243,16 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
     Ok(())
 }
 
-/// Block `b` dequantised with `step` and inverse-transformed into space.
-fn spatial_block(blocks: &Blocks, b: usize, step: f32) -> [f32; N * N] {
+/// Quantised zig-zag integers → spatial block: dequantise with `step`, inverse DCT.
+pub fn dequantize_block(q: &[i32; N * N], step: f32) -> [f32; N * N] {
+    spatial(q.iter().enumerate().map(|(i, &v)| (i, v)), step)
+}
+
+/// Dequantised terms (zig-zag index, value) inverse-transformed into a spatial block.
+fn spatial(terms: impl Iterator<Item = (usize, i32)>, step: f32) -> [f32; N * N] {
     let z = dct::zigzag();
     let mut d = [0f32; N * N];
-    for (i, v) in blocks.terms(b) {
+    for (i, v) in terms {
         d[z[i]] = v as f32 * step;
     }
     dct::inverse(&mut d);
@@ -266,7 +271,7 @@ pub fn add_block_of(p: &mut Plane, bx: usize, by: usize, blocks: &Blocks, b: usi
         return;
     }
     if nonzero > SPARSE_MAX {
-        p.add_block(bx, by, &spatial_block(blocks, b, step));
+        p.add_block(bx, by, &spatial(blocks.terms(b), step));
         return;
     }
     let t = dct::basis();
