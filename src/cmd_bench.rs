@@ -3,6 +3,8 @@
 
 use std::time::Instant;
 
+use vbim_player::cpu_time::thread_cpu_ns;
+
 use rayon::prelude::*;
 use vbim_bake::{light, load_terrain, output, FrameFormat, Precomputed, Scene};
 
@@ -327,19 +329,6 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
         a.out.display()
     );
     Ok(())
-}
-
-/// CPU time of the calling thread, ns: what the render thread itself spends, without the
-/// time it sits preempted or blocked (on two cores shared with lavapipe's workers and the
-/// decoder, wall-clock spikes of several ms are the scheduler's, not the player's).
-fn thread_cpu_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: a valid clock id and a valid pointer to a timespec we own.
-    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
 fn bench_render(a: crate::cli::BenchRenderArgs) -> Result<(), String> {

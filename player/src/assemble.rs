@@ -7,9 +7,9 @@
 //! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
 //! first segment whose parts are all good.
 
+use crate::cpu_time::thread_cpu_ns;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::Instant;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::index::Layout;
@@ -45,7 +45,8 @@ pub struct SegmentData {
     /// Set once a `Mapped` staging buffer is mapped again after its upload (by wgpu's
     /// callback): only then may it go back to the decoder.
     pub mapped: Arc<AtomicBool>,
-    /// Nanoseconds the decoder spent on this segment and its closing keyframe.
+    /// CPU nanoseconds (the decoding thread's own clock) spent on this segment and its
+    /// closing keyframe.
     pub decode_ns: u64,
 }
 
@@ -185,10 +186,10 @@ impl DecoderCore {
                     self.keys[n] = None;
                     return Event::Nothing;
                 }
-                let t = Instant::now();
+                let t = thread_cpu_ns();
                 match chunk::read_keyframe(&self.header, bytes, prev.as_deref().map(|v| &v[..])) {
                     Ok(planes) => {
-                        self.key_ns += t.elapsed().as_nanos() as u64;
+                        self.key_ns += thread_cpu_ns() - t;
                         let planes = Arc::new(planes);
                         self.keys[n] = Some(planes.clone());
                         self.chain = Some((n, planes));
@@ -265,7 +266,7 @@ impl DecoderCore {
         pass: u32,
         out: &mut SegmentData,
     ) -> Result<(), String> {
-        let t0 = Instant::now();
+        let t0 = thread_cpu_ns();
         let h = &self.header;
         let k0 = self.keys[s].clone().ok_or("keyframe missing")?;
         let k1 = self.keys[self.layout.keyframe_of_boundary(s + 1)]
@@ -347,7 +348,7 @@ impl DecoderCore {
         out.start = self.layout.boundaries[s];
         out.end = self.layout.boundaries[s + 1];
         out.layers = layers;
-        out.decode_ns = t0.elapsed().as_nanos() as u64 + std::mem::take(&mut self.key_ns);
+        out.decode_ns = thread_cpu_ns() - t0 + std::mem::take(&mut self.key_ns);
         // Keyframe s is no longer needed unless it is keyframe 0 (a loop's end).
         if s > 0 {
             self.keys[s] = None;

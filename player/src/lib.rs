@@ -15,6 +15,7 @@
 
 pub mod assemble;
 pub mod clock;
+pub mod cpu_time;
 pub mod gpu;
 mod player;
 pub mod stats;

@@ -122,7 +122,8 @@ pub struct FrameRecord {
     pub bytes_read: u64,
     /// Bytes uploaded to the GPU this frame.
     pub bytes_uploaded: u64,
-    /// Decoder time charged to segments received this frame, ns.
+    /// Decoder CPU time (the decoding thread's own clock) charged to segments received
+    /// this frame, ns.
     pub decode_ns: u64,
     /// Time spent in `advance` on the calling thread, ns.
     pub render_ns: u64,
