@@ -15,7 +15,7 @@ use vbim_player::stats::{csv, Summary};
 use vbim_player::{headless_device, FrameRecord, Player, PlayerConfig, Policy, Throttle};
 
 use crate::cli::PlayArgs;
-use crate::units::{parse_bandwidth, parse_duration, parse_stall, Bandwidth};
+use crate::units::{parse_bandwidth, parse_duration, parse_stall};
 
 /// Everything one playback session needs.
 #[derive(Clone)]
@@ -242,11 +242,12 @@ fn finish(
 /// Builds the session from the command line.
 pub fn session(a: &PlayArgs) -> Result<Session, String> {
     let h = open_reference(&a.file)?.header().clone();
-    let rate = match a.bandwidth.as_deref().map(parse_bandwidth).transpose()? {
-        None => None,
-        Some(Bandwidth::BytesPerSecond(b)) => Some(b.round() as u64),
-        Some(Bandwidth::TimesMean(x)) => Some((x * mean_rate(&h)).round().max(1.0) as u64),
-    };
+    let rate = a
+        .bandwidth
+        .as_deref()
+        .map(parse_bandwidth)
+        .transpose()?
+        .map(|b| b.bytes_per_second(h.file_size, h.frame_count as f64 / h.fps()));
     let stall = a.stall.as_deref().map(parse_stall).transpose()?;
     if a.display_hz == 0 {
         return Err("--display-hz must be positive".into());

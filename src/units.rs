@@ -32,6 +32,18 @@ pub enum Bandwidth {
     TimesMean(f64),
 }
 
+impl Bandwidth {
+    /// Bytes per second for a file of `file_size` bytes lasting `duration_s`. A multiple of
+    /// the mean rate resolves exactly as the header's read-ahead table does (rounded up), so
+    /// that `1.2x` finds the table's 1.2× point.
+    pub fn bytes_per_second(self, file_size: u64, duration_s: f64) -> u64 {
+        match self {
+            Bandwidth::BytesPerSecond(b) => b.round().max(1.0) as u64,
+            Bandwidth::TimesMean(x) => vbim_format::buffer_model::rate_at(file_size, duration_s, x),
+        }
+    }
+}
+
 pub fn parse_bandwidth(s: &str) -> Result<Bandwidth, String> {
     let t = s.trim();
     let bad = || format!("bandwidth {s:?} (expected e.g. 2MB/s, 500kB/s or 1.2x)");
@@ -102,6 +114,16 @@ mod tests {
         );
         assert_eq!(parse_bandwidth("1.2x").unwrap(), Bandwidth::TimesMean(1.2));
         assert!(parse_bandwidth("2MiB").is_err());
+        // 1.2 × 697 686.0 B/s = 837 223.2: the table's point is at 837 224 (rounded up), and
+        // rounding to nearest once made `1.2x` fall back to the 1× point's larger ring.
+        assert_eq!(
+            Bandwidth::TimesMean(1.2).bytes_per_second(6_976_860, 10.0),
+            837_224
+        );
+        assert_eq!(
+            Bandwidth::BytesPerSecond(2e6).bytes_per_second(6_976_860, 10.0),
+            2_000_000
+        );
         assert_eq!(
             parse_stall("300ms@5s").unwrap(),
             (300_000_000, 5_000_000_000)

@@ -91,6 +91,27 @@ fn bake_encode_inspect_decode_compare() {
         "the bake's manifest is stored"
     );
 
+    // `play --bandwidth 1.2x` reads at exactly the rate of the header's 1.2× point, so that
+    // the ring is that point's read-ahead (a rounding difference once picked the 1× point).
+    let summary = dir.path().join("play.json");
+    ok(&[
+        "play",
+        s(&file),
+        "--headless",
+        "--duration",
+        "1s",
+        "--bandwidth",
+        "1.2x",
+        "--json",
+        s(&summary),
+    ]);
+    let play: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(
+        play["read_rate"], json["header"]["read_ahead"][1]["rate_bytes_per_s"],
+        "{play}"
+    );
+
     let decoded = dir.path().join("decoded");
     ok(&["decode", s(&file), "-o", s(&decoded)]);
     assert!(decoded.join("frame_0011.exr").is_file());

@@ -103,16 +103,22 @@ fn meets(needs: &[Need], rate: f64, cap: u64, preroll: f64) -> bool {
     true
 }
 
+/// The read rate, bytes per second, at `factor` × the mean bit rate of a file of
+/// `file_size` bytes lasting `duration_s`: rounded up, as the table's points are, so that a
+/// player asked for "1.2× the mean rate" finds the table's 1.2× point.
+pub fn rate_at(file_size: u64, duration_s: f64, factor: f64) -> u64 {
+    (file_size as f64 / duration_s * factor).ceil().max(1.0) as u64
+}
+
 /// Computes the header's read-ahead table for a file whose chunks are `entries`.
 pub fn table(h: &Header, entries: &[IndexEntry]) -> [ReadAhead; READ_AHEAD_POINTS] {
     let needs = needs(h, entries);
     let file_size = entries.last().map_or(0, |e| e.offset + e.length).max(1);
     let duration = h.frame_count as f64 / h.fps();
-    let mean_rate = file_size as f64 / duration;
     let total: u64 = needs.last().map_or(1, |n| n.end).max(1);
     let mut out = [ReadAhead::default(); READ_AHEAD_POINTS];
     for (p, f) in out.iter_mut().zip(RATE_FACTORS) {
-        let rate = (mean_rate * f).ceil().max(1.0);
+        let rate = rate_at(file_size, duration, f) as f64;
         let preroll = needs
             .iter()
             .map(|n| n.end as f64 / rate - n.deadline)

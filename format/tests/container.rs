@@ -195,6 +195,17 @@ fn round_trip_header_index_and_frames() {
     assert_eq!(h.file_size as usize, bytes.len());
     assert_eq!(r.layout().boundaries, vec![0, 4, 9]);
     assert!(h.read_ahead.iter().all(|p| p.rate > 0 && p.bytes > 0));
+    // A player asked for f × the mean rate finds the table's point for f (not the one below
+    // it through a rounding difference).
+    let duration = h.frame_count as f64 / h.fps();
+    for (p, f) in h
+        .read_ahead
+        .iter()
+        .zip(vbim_format::buffer_model::RATE_FACTORS)
+    {
+        let rate = vbim_format::buffer_model::rate_at(h.file_size, duration, f);
+        assert_eq!(h.read_ahead_at(rate), Some(*p), "{f}× the mean rate");
+    }
     let frames = decode_all(&bytes).unwrap();
     // Frame 0 is keyframe 0: R = G = B ≈ decode(2 + …) in the coded domain, within quantisation.
     let t = Transfer::LogToe { v0: 1e-3 };
