@@ -54,7 +54,7 @@ pub struct PlayArgs {
     /// Cap the reader: SI bytes per second (`2MB/s`, `500kB/s`) or a multiple of the stream's mean bit rate (`1.2x`) [default: unlimited].
     #[arg(long)]
     pub bandwidth: Option<String>,
-    /// Stall the reader periodically: `300ms@5s` = 300 ms every 5 s of playback [default: none].
+    /// Stall the reader periodically: `300ms@5s` = 300 ms every 5 s of playback; `300ms@5s+2s` = the same, the first at 2 s [default: none].
     #[arg(long)]
     pub stall: Option<String>,
     /// What to show when data is late: interpolate (hold, then blend), wait (pause the clock) or skip (hold, then jump) [default: interpolate].

@@ -75,18 +75,35 @@ pub fn parse_bandwidth(s: &str) -> Result<Bandwidth, String> {
         .ok_or_else(bad)
 }
 
-/// `300ms@5s`: a stall of 300 ms every 5 s → (stall ns, period ns).
-pub fn parse_stall(s: &str) -> Result<(u64, u64), String> {
-    let (d, p) = s
-        .split_once('@')
-        .ok_or_else(|| format!("stall {s:?} (expected DURATION@PERIOD, e.g. 300ms@5s)"))?;
+/// `300ms@5s`: a stall of 300 ms every 5 s, the first at 5 s; `300ms@5s+2s`: the same with
+/// the first at 2 s (a phase within the first period, to put a stall where the stream is
+/// busiest).
+pub fn parse_stall(s: &str) -> Result<vbim_player::Stall, String> {
+    let bad =
+        || format!("stall {s:?} (expected DURATION@PERIOD[+FIRST], e.g. 300ms@5s or 300ms@5s+2s)");
+    let (d, rest) = s.split_once('@').ok_or_else(bad)?;
+    let (p, first) = match rest.split_once('+') {
+        Some((p, f)) => (p, Some(f)),
+        None => (rest, None),
+    };
     let (d, p) = (parse_duration(d)?, parse_duration(p)?);
     if d >= p || p <= 0.0 {
         return Err(format!(
             "stall {s:?}: the stall must be shorter than its period"
         ));
     }
-    Ok(((d * 1e9).round() as u64, (p * 1e9).round() as u64))
+    let first = first.map(parse_duration).transpose()?.unwrap_or(p);
+    if first > p {
+        return Err(format!(
+            "stall {s:?}: the first stall must come within one period"
+        ));
+    }
+    let ns = |v: f64| (v * 1e9).round() as u64;
+    Ok(vbim_player::Stall {
+        length_ns: ns(d),
+        every_ns: ns(p),
+        first_ns: ns(first),
+    })
 }
 
 #[cfg(test)]
@@ -126,8 +143,12 @@ mod tests {
         );
         assert_eq!(
             parse_stall("300ms@5s").unwrap(),
-            (300_000_000, 5_000_000_000)
+            vbim_player::Stall::every(300_000_000, 5_000_000_000)
         );
+        assert_eq!(parse_stall("300ms@5s+2s").unwrap().first_ns, 2_000_000_000);
+        assert_eq!(parse_stall("300ms@5s+0s").unwrap().first_ns, 0);
         assert!(parse_stall("5s@1s").is_err());
+        assert!(parse_stall("300ms@5s+6s").is_err());
+        assert!(parse_stall("300ms@5s+soon").is_err());
     }
 }

@@ -26,7 +26,7 @@ pub mod time;
 pub use clock::{Clock, SimClock, SystemClock};
 pub use gpu::headless_device;
 pub use player::{frame_ns, Frame, FrameRecord, FrameState, Player, PlayerConfig, Policy, Totals};
-pub use throttle::Throttle;
+pub use throttle::{Stall, Throttle};
 
 #[derive(Debug, thiserror::Error)]
 pub enum PlayerError {

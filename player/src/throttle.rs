@@ -6,8 +6,29 @@
 pub struct Throttle {
     /// Bytes per second; `None` = unlimited.
     pub rate: Option<u64>,
-    /// A stall of `stall.0` ns every `stall.1` ns of clock time, starting at `stall.1`.
-    pub stall: Option<(u64, u64)>,
+    /// Periodic stalls; `None` = none.
+    pub stall: Option<Stall>,
+}
+
+/// A stall of `length_ns` every `every_ns` of clock time, the first at `first_ns`, at most
+/// one period in (`300ms@5s` starts at 5 s; `300ms@5s+2s` at 2 s, then 7 s, 12 s, …). The phase lets a
+/// benchmark put the stall where the stream is busiest instead of where the period falls.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stall {
+    pub length_ns: u64,
+    pub every_ns: u64,
+    pub first_ns: u64,
+}
+
+impl Stall {
+    /// Every `every_ns`, the first one period in.
+    pub fn every(length_ns: u64, every_ns: u64) -> Stall {
+        Stall {
+            length_ns,
+            every_ns,
+            first_ns: every_ns,
+        }
+    }
 }
 
 impl Throttle {
@@ -22,10 +43,17 @@ impl Throttle {
             None => 0u128,
             Some(r) => (bytes as u128 * 1_000_000_000).div_ceil(r.max(1) as u128),
         } as u64;
-        let mut t = start;
-        let Some((d, p)) = self.stall.filter(|s| s.0 > 0 && s.1 > s.0) else {
-            return t + need;
+        let Some(s) = self
+            .stall
+            .filter(|s| s.length_ns > 0 && s.every_ns > s.length_ns)
+        else {
+            return start + need;
         };
+        let (d, p) = (s.length_ns, s.every_ns);
+        // Shifted so that the stalls fall at k·p, k ≥ 1, in the time `t` counts (a first
+        // stall later than one period is taken as one period in).
+        let shift = p - s.first_ns.min(p);
+        let mut t = start + shift;
         loop {
             // Inside a stall window [k·p, k·p + d) (k ≥ 1) nothing arrives.
             let k = t / p;
@@ -34,7 +62,7 @@ impl Throttle {
             }
             let next = (t / p + 1) * p;
             if t + need <= next {
-                return t + need;
+                return t + need - shift;
             }
             need -= next - t;
             t = next;
@@ -55,12 +83,34 @@ mod tests {
         assert_eq!(t.arrival(0, 500_000), 500_000_000);
         let t = Throttle {
             rate: Some(1_000_000),
-            stall: Some((300_000_000, 5_000_000_000)),
+            stall: Some(Stall::every(300_000_000, 5_000_000_000)),
         };
         // 6 MB from 0: 5 s of reading, a 0.3 s stall, 1 s more.
         assert_eq!(t.arrival(0, 6_000_000), 6_300_000_000);
         // Starting inside a stall waits for its end.
         assert_eq!(t.arrival(5_100_000_000, 1_000), 5_301_000_000);
         assert_eq!(Throttle::UNLIMITED.arrival(7, 1 << 40), 7);
+        // The same stalls with the first at 2 s (then 7 s, 12 s): 2 s of reading, the
+        // stall, 3 s more (to 5.3 s), then 1 s → 6.3 s; from 6.9 s, 0.1 s runs into the
+        // stall at 7 s and ends at 7.4 s.
+        let t = Throttle {
+            rate: Some(1_000_000),
+            stall: Some(Stall {
+                first_ns: 2_000_000_000,
+                ..Stall::every(300_000_000, 5_000_000_000)
+            }),
+        };
+        assert_eq!(t.arrival(0, 6_000_000), 6_300_000_000);
+        assert_eq!(t.arrival(6_900_000_000, 200_000), 7_400_000_000);
+        assert_eq!(t.arrival(2_100_000_000, 1_000), 2_301_000_000);
+        // A first stall at 0 s: time 0 is inside it.
+        let t = Throttle {
+            rate: Some(1_000_000),
+            stall: Some(Stall {
+                first_ns: 0,
+                ..Stall::every(300_000_000, 5_000_000_000)
+            }),
+        };
+        assert_eq!(t.arrival(0, 1_000_000), 1_300_000_000);
     }
 }

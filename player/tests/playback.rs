@@ -9,7 +9,7 @@ use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, Segme
 use vbim_format::curve::linear_to_srgb;
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::Reader;
-use vbim_player::{headless_device, FrameState, Player, PlayerConfig, Policy, Throttle};
+use vbim_player::{headless_device, FrameState, Player, PlayerConfig, Policy, Stall, Throttle};
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
     match headless_device() {
@@ -173,7 +173,7 @@ fn a_stall_longer_than_the_read_ahead_holds_then_catches_up_without_black_frames
     assert!(1.5 > ahead / mean_rate, "the stall outlasts the read-ahead");
     let throttle = Throttle {
         rate: Some(rate),
-        stall: Some((1_500_000_000, 6_000_000_000)),
+        stall: Some(Stall::every(1_500_000_000, 6_000_000_000)),
     };
     let mut player = Player::open(
         &device,
