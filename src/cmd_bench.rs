@@ -390,11 +390,7 @@ fn bench_render(a: crate::cli::BenchRenderArgs) -> Result<(), String> {
     }
     let h = h.expect("at least one run");
     // Median over runs of each figure, with the smallest and largest.
-    let stat = |i: usize| {
-        let mut v: Vec<f64> = runs.iter().map(|r| r[i]).collect();
-        v.sort_by(f64::total_cmp);
-        (v[v.len() / 2], v[0], v[v.len() - 1])
-    };
+    let stat = |i: usize| stats(&mut runs.iter().map(|r| r[i]).collect::<Vec<_>>());
     let line = |label: &str, i: usize, digits: usize| {
         let ((m, m0, m1), (p, p0, p1)) = (stat(i), stat(i + 1));
         println!(

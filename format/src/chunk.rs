@@ -355,12 +355,13 @@ impl<'t> CoeffReader<'t> {
             let mut b = 0;
             for ty in 0..self.tiles_y {
                 band.data.fill(0.0);
-                for tx in 0..self.tiles_x {
-                    if tiles.degree(p, ty * self.tiles_x + tx) < k {
+                for t in ty * self.tiles_x..(ty + 1) * self.tiles_x {
+                    if tiles.degree(p, t) < k {
                         continue;
                     }
-                    for (by, bx) in (0..per).flat_map(|y| (0..per).map(move |x| (y, x))) {
-                        plane::add_block_of(band, tx * per + bx, by, q, b, step);
+                    // The blocks in the order the encoder wrote them, moved into the band.
+                    for (bx, by) in plane::tile_blocks(t, self.tiles_x, ts) {
+                        plane::add_block_of(band, bx, by - ty * per, q, b, step);
                         b += 1;
                     }
                 }
@@ -374,7 +375,7 @@ impl<'t> CoeffReader<'t> {
 
     /// Checks that every plane was read and nothing follows them.
     pub fn finish(&self) -> Result<()> {
-        if self.next.0 <= self.dmax && self.dmax > 1 {
+        if self.next.0 <= self.dmax {
             return Err(FormatError::Invalid(format!(
                 "bubble planes from {}/{} not read",
                 self.next.0, self.next.1

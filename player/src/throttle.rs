@@ -76,41 +76,37 @@ mod tests {
 
     #[test]
     fn rate_and_stalls() {
+        // 1 MB/s with 300 ms stalls every 5 s, the first at `first_ns`.
+        let stalling = |first_ns| Throttle {
+            rate: Some(1_000_000),
+            stall: Some(Stall {
+                first_ns,
+                ..Stall::every(300_000_000, 5_000_000_000)
+            }),
+        };
         let t = Throttle {
             rate: Some(1_000_000),
             stall: None,
         };
         assert_eq!(t.arrival(0, 500_000), 500_000_000);
+        // `every` puts the first stall one period in.
         let t = Throttle {
             rate: Some(1_000_000),
             stall: Some(Stall::every(300_000_000, 5_000_000_000)),
         };
+        assert_eq!(t, stalling(5_000_000_000));
         // 6 MB from 0: 5 s of reading, a 0.3 s stall, 1 s more.
         assert_eq!(t.arrival(0, 6_000_000), 6_300_000_000);
         // Starting inside a stall waits for its end.
         assert_eq!(t.arrival(5_100_000_000, 1_000), 5_301_000_000);
         assert_eq!(Throttle::UNLIMITED.arrival(7, 1 << 40), 7);
-        // The same stalls with the first at 2 s (then 7 s, 12 s): 2 s of reading, the
-        // stall, 3 s more (to 5.3 s), then 1 s → 6.3 s; from 6.9 s, 0.1 s runs into the
-        // stall at 7 s and ends at 7.4 s.
-        let t = Throttle {
-            rate: Some(1_000_000),
-            stall: Some(Stall {
-                first_ns: 2_000_000_000,
-                ..Stall::every(300_000_000, 5_000_000_000)
-            }),
-        };
+        // The first stall at 2 s (then 7 s, 12 s): 2 s of reading, the 0.3 s stall, 4 s
+        // more → 6.3 s; from 6.9 s, 0.1 s runs into the stall at 7 s and ends at 7.4 s.
+        let t = stalling(2_000_000_000);
         assert_eq!(t.arrival(0, 6_000_000), 6_300_000_000);
         assert_eq!(t.arrival(6_900_000_000, 200_000), 7_400_000_000);
         assert_eq!(t.arrival(2_100_000_000, 1_000), 2_301_000_000);
         // A first stall at 0 s: time 0 is inside it.
-        let t = Throttle {
-            rate: Some(1_000_000),
-            stall: Some(Stall {
-                first_ns: 0,
-                ..Stall::every(300_000_000, 5_000_000_000)
-            }),
-        };
-        assert_eq!(t.arrival(0, 1_000_000), 1_300_000_000);
+        assert_eq!(stalling(0).arrival(0, 1_000_000), 1_300_000_000);
     }
 }
