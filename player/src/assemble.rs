@@ -32,6 +32,12 @@ pub enum Staging {
 /// width × height texels, rows `row_pitch` bytes apart (a multiple of 256, as
 /// buffer-to-texture copies require). Planar, so that the decoder copies plane rows as
 /// they are instead of interleaving texels, and no padding channel is uploaded.
+///
+/// Term 0 is left unwritten (`k0_staged == false`) when the segment the decoder sent just
+/// before was the one this segment follows: its closing keyframe is this segment's opening
+/// one, and the render thread has it on the GPU already (it uploads every segment's
+/// closing keyframe, even one it drops). That saves a term's copy per segment, on the
+/// decoder and on the GPU.
 pub struct SegmentData {
     pub generation: u32,
     /// The loop pass of the reader that delivered it (0 for the first play-through).
@@ -41,6 +47,10 @@ pub struct SegmentData {
     pub end: u32,
     /// Terms (each `channels` layers).
     pub layers: usize,
+    /// Keyframe numbers of K_s and K_{s+1}.
+    pub keys: [usize; 2],
+    /// Whether term 0 (K_s) is in staging; if not, the GPU has it from the segment before.
+    pub k0_staged: bool,
     pub staging: Staging,
     /// Set once a `Mapped` staging buffer is mapped again after its upload (by wgpu's
     /// callback): only then may it go back to the decoder.
@@ -74,6 +84,8 @@ impl SegmentData {
             start: 0,
             end: 0,
             layers: 0,
+            keys: [0, 0],
+            k0_staged: true,
             staging,
             mapped: Arc::new(AtomicBool::new(true)),
             decode_ns: 0,
@@ -99,9 +111,10 @@ impl SegmentData {
         SegmentData::empty(Staging::Mapped(buffer))
     }
 
-    /// Bytes the segment's layers occupy in staging (what one upload copies).
+    /// Bytes of the segment's layers written into staging (at most what its upload
+    /// copies).
     pub fn bytes(&self, h: &Header) -> u64 {
-        self.layers as u64 * term_bytes(h)
+        (self.layers as u64 - !self.k0_staged as u64) * term_bytes(h)
     }
 }
 
@@ -128,6 +141,9 @@ pub struct DecoderCore {
     key_ns: u64,
     /// Scratch band for decoding bubble planes row band by row band.
     band: Plane,
+    /// Generation and closing keyframe of the last segment filled: the next segment,
+    /// if it opens with that keyframe, need not stage it again.
+    last_closing: Option<(u32, usize)>,
 }
 
 impl DecoderCore {
@@ -144,6 +160,7 @@ impl DecoderCore {
             chain: None,
             key_ns: 0,
             band: Plane::zeros(0, 0),
+            last_closing: None,
         }
     }
 
@@ -153,6 +170,7 @@ impl DecoderCore {
         self.tiles.iter_mut().for_each(|k| *k = None);
         self.coeffs.iter_mut().for_each(|k| *k = None);
         self.chain = None;
+        self.last_closing = None;
     }
 
     fn damaged(&self, i: usize, what: &str) -> Event {
@@ -268,10 +286,12 @@ impl DecoderCore {
     ) -> Result<(), String> {
         let t0 = thread_cpu_ns();
         let h = &self.header;
+        let k1n = self.layout.keyframe_of_boundary(s + 1);
         let k0 = self.keys[s].clone().ok_or("keyframe missing")?;
-        let k1 = self.keys[self.layout.keyframe_of_boundary(s + 1)]
-            .clone()
-            .ok_or("keyframe missing")?;
+        let k1 = self.keys[k1n].clone().ok_or("keyframe missing")?;
+        let k0_staged = self.last_closing != Some((generation, s));
+        // Whatever happens below, the box's old contents are not what it is about to hold.
+        self.last_closing = None;
         let tiles = self.tiles[s].take().ok_or("tile map missing")?;
         let bytes = self.coeffs[s].take().ok_or("coefficients missing")?;
         let context = |e: vbim_format::FormatError| {
@@ -324,6 +344,9 @@ impl DecoderCore {
         }
         let dims = (w, ht, pitch, layer);
         for (l, key) in [(0, &k0), (1, &k1)] {
+            if l == 0 && !k0_staged {
+                continue;
+            }
             for (p, plane) in key.iter().enumerate().take(ch) {
                 write_rows(&mut out.staging, (l * ch + p) * layer, dims, |row| {
                     for y in 0..ht {
@@ -348,6 +371,9 @@ impl DecoderCore {
         out.start = self.layout.boundaries[s];
         out.end = self.layout.boundaries[s + 1];
         out.layers = layers;
+        out.keys = [s, k1n];
+        out.k0_staged = k0_staged;
+        self.last_closing = Some((generation, k1n));
         out.decode_ns = thread_cpu_ns() - t0 + std::mem::take(&mut self.key_ns);
         // Keyframe s is no longer needed unless it is keyframe 0 (a loop's end).
         if s > 0 {

@@ -1,6 +1,12 @@
-//! The GPU side: two slots of term textures (double buffering: the slot being displayed is
-//! never written), the display texture the renderer samples, a held copy for catch-up
-//! blending, and the compute pass that evaluates the basis per texel.
+//! The GPU side: a pool of keyframe slots and two slots of bubble terms (double
+//! buffering: what is being displayed is never written), the display texture the renderer
+//! samples, a held copy for catch-up blending, and the compute pass that evaluates the
+//! basis per texel.
+//!
+//! Keyframes live apart from the bubbles because consecutive segments share one: K_{s+1}
+//! closes segment s and opens s + 1, so it is uploaded once. Four keyframe slots are
+//! enough for any upload: the segment on screen holds at most two, the one being uploaded
+//! needs at most two more.
 
 use wgpu::util::DeviceExt;
 
@@ -49,6 +55,31 @@ pub struct Params {
     pub alpha: f32,
     pub channels: u32,
     pub blend: u32,
+    /// Keyframe slots of K_s and K_{s+1}.
+    pub key0: u32,
+    pub key1: u32,
+    pub _pad: [u32; 2],
+}
+
+/// Keyframe slots on the GPU.
+pub const KEY_SLOTS: usize = 4;
+
+impl UploadPlan {
+    /// Bytes the upload copies from staging.
+    pub fn bytes(&self, seg: &SegmentData, h: &vbim_format::Header) -> u64 {
+        let bubbles = self.bubbles.map_or(0, |_| seg.layers.saturating_sub(2));
+        let terms = self.key0.is_some() as usize + self.key1.is_some() as usize + bubbles;
+        terms as u64 * crate::assemble::term_bytes(h)
+    }
+}
+
+/// What one upload copies from a segment's staging buffer: its K_s and K_{s+1} into
+/// keyframe slots (`None`: already there, or not wanted), its bubbles into a bubble slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UploadPlan {
+    pub key0: Option<usize>,
+    pub key1: Option<usize>,
+    pub bubbles: Option<usize>,
 }
 
 pub struct Gpu {
@@ -56,6 +87,7 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
     params: wgpu::Buffer,
+    keys: wgpu::Texture,
     slots: [wgpu::Texture; 2],
     display: wgpu::Texture,
     pub display_view: wgpu::TextureView,
@@ -82,19 +114,15 @@ impl Gpu {
             height,
             depth_or_array_layers: 1,
         };
-        let slot = |i: usize| {
+        // One R32Float layer per plane of each term: term k, plane p is layer
+        // k·channels + p of its texture (the staging layout, copied as it is).
+        let array = |label: &'static str, terms: u32| {
             device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(if i == 0 {
-                    "vbim terms A"
-                } else {
-                    "vbim terms B"
-                }),
-                // One R32Float layer per plane of each term: term k, plane p is layer
-                // k·channels + p (the staging layout, copied as it is).
+                label: Some(label),
                 size: wgpu::Extent3d {
                     width,
                     height,
-                    depth_or_array_layers: max_layers * channels,
+                    depth_or_array_layers: terms.max(1) * channels,
                 },
                 mip_level_count: 1,
                 sample_count: 1,
@@ -104,7 +132,12 @@ impl Gpu {
                 view_formats: &[],
             })
         };
-        let slots = [slot(0), slot(1)];
+        let keys = array("vbim keyframes", KEY_SLOTS as u32);
+        let bubbles = max_layers.saturating_sub(2);
+        let slots = [
+            array("vbim bubbles A", bubbles),
+            array("vbim bubbles B", bubbles),
+        ];
         let image = |label: &str, usage: wgpu::TextureUsages| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
@@ -168,6 +201,14 @@ impl Gpu {
                     },
                 ),
                 entry(
+                    4,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                ),
+                entry(
                     3,
                     wgpu::BindingType::StorageTexture {
                         access: wgpu::StorageTextureAccess::WriteOnly,
@@ -190,11 +231,15 @@ impl Gpu {
             compilation_options: Default::default(),
             cache: None,
         });
-        let bind = |t: &wgpu::Texture| {
-            let v = t.create_view(&wgpu::TextureViewDescriptor {
+        let array_view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
                 ..Default::default()
-            });
+            })
+        };
+        let keys_view = array_view(&keys);
+        let bind = |t: &wgpu::Texture| {
+            let v = array_view(t);
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vbim"),
                 layout: &bgl,
@@ -205,6 +250,10 @@ impl Gpu {
                     },
                     wgpu::BindGroupEntry {
                         binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&keys_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
                         resource: wgpu::BindingResource::TextureView(&v),
                     },
                     wgpu::BindGroupEntry {
@@ -224,6 +273,7 @@ impl Gpu {
             queue: queue.clone(),
             pipeline,
             params,
+            keys,
             slots,
             display,
             display_view,
@@ -236,39 +286,71 @@ impl Gpu {
         }
     }
 
-    /// Records the copy of a decoded segment into slot `slot`. A mapped staging buffer is
-    /// unmapped and copied by the GPU (nothing but the command is recorded here); host
-    /// staging goes through `write_texture`. (The bytes it moves are
-    /// [`SegmentData::bytes`], which the player's statistics count.)
-    pub fn upload(&self, enc: &mut wgpu::CommandEncoder, slot: usize, seg: &SegmentData) {
+    /// Records the copies of a decoded segment that `plan` asks for: its keyframes into
+    /// keyframe slots, its bubble terms into a bubble slot. A mapped staging buffer is
+    /// unmapped and copied by the GPU (nothing but the commands is recorded here); host
+    /// staging goes through `write_texture`. ([`UploadPlan::bytes`] is what it moves.)
+    pub fn upload(&self, enc: &mut wgpu::CommandEncoder, plan: UploadPlan, seg: &SegmentData) {
         let (w, h) = (self.width, self.height);
-        let layers = seg.layers.min(self.max_layers as usize) as u32 * self.channels;
+        let ch = self.channels;
         let pitch = row_pitch(w) as u32;
-        let layout = wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(pitch),
-            rows_per_image: Some(h),
-        };
-        let dst = wgpu::TexelCopyTextureInfo {
-            texture: &self.slots[slot],
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        };
-        let size = wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: layers,
-        };
-        match &seg.staging {
-            Staging::Mapped(buffer) => {
-                buffer.unmap();
-                enc.copy_buffer_to_texture(wgpu::TexelCopyBufferInfo { buffer, layout }, dst, size);
+        let term = pitch as u64 * h as u64 * ch as u64;
+        // (staging term, texture, first layer, terms)
+        let mut copies: [Option<(u32, &wgpu::Texture, u32, u32)>; 3] = [None; 3];
+        if let Some(k) = plan.key0 {
+            copies[0] = Some((0, &self.keys, k as u32 * ch, 1));
+        }
+        if let Some(k) = plan.key1 {
+            copies[1] = Some((1, &self.keys, k as u32 * ch, 1));
+        }
+        if let Some(b) = plan.bubbles {
+            let n = (seg.layers.min(self.max_layers as usize) as u32).saturating_sub(2);
+            if n > 0 {
+                copies[2] = Some((2, &self.slots[b], 0, n));
             }
-            Staging::Host(data) => {
-                let bytes = layers as usize * pitch as usize * h as usize;
-                let b: &[u8] = bytemuck::cast_slice(data);
-                self.queue.write_texture(dst, &b[..bytes], layout, size);
+        }
+        if let Staging::Mapped(buffer) = &seg.staging {
+            buffer.unmap();
+        }
+        for (t, texture, layer, terms) in copies.into_iter().flatten() {
+            let layout = wgpu::TexelCopyBufferLayout {
+                offset: t as u64 * term,
+                bytes_per_row: Some(pitch),
+                rows_per_image: Some(h),
+            };
+            let dst = wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: layer,
+                },
+                aspect: wgpu::TextureAspect::All,
+            };
+            let size = wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: terms * ch,
+            };
+            match &seg.staging {
+                Staging::Mapped(buffer) => {
+                    enc.copy_buffer_to_texture(
+                        wgpu::TexelCopyBufferInfo { buffer, layout },
+                        dst,
+                        size,
+                    );
+                }
+                Staging::Host(data) => {
+                    let b: &[u8] = bytemuck::cast_slice(data);
+                    let at = layout.offset as usize;
+                    let data = &b[at..at + (terms as u64 * term) as usize];
+                    let layout = wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        ..layout
+                    };
+                    self.queue.write_texture(dst, data, layout, size);
+                }
             }
         }
     }
@@ -300,18 +382,19 @@ impl Gpu {
         );
     }
 
-    /// Records and submits one frame: an optional segment upload into its slot, then the
-    /// reconstruction from slot `eval.0` — one command buffer, one submission.
+    /// Records and submits one frame: an optional segment upload, then the reconstruction
+    /// from bubble slot `eval.0` and the keyframe slots in its parameters — one command
+    /// buffer, one submission.
     pub fn frame(
         &self,
-        upload: Option<(usize, &SegmentData)>,
+        upload: Option<(UploadPlan, &SegmentData)>,
         eval: Option<(usize, &Params, bool)>,
     ) {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        if let Some((slot, seg)) = upload {
-            self.upload(&mut enc, slot, seg);
+        if let Some((plan, seg)) = upload {
+            self.upload(&mut enc, plan, seg);
         }
         if let Some((slot, params, hold_first)) = eval {
             self.queue

@@ -15,7 +15,7 @@ use vbim_format::{Header, Reader, Transfer};
 
 use crate::assemble::{DecoderCore, Event, SegmentData};
 use crate::clock::{Clock, SystemClock};
-use crate::gpu::{Gpu, Params};
+use crate::gpu::{Gpu, Params, UploadPlan, KEY_SLOTS};
 use crate::stream::{pop_message, ReaderCore};
 use crate::throttle::Throttle;
 use crate::time::{frames_f64, media_to_ticks, ticks_to_media, MediaTime, ONE_FRAME};
@@ -163,6 +163,8 @@ struct Resident {
     start: u64,
     end: u64,
     layers: usize,
+    /// Keyframe slots holding its K_s and K_{s+1}.
+    keys: [usize; 2],
 }
 
 // Staging buffers travel as the same boxes through channels and these pools.
@@ -201,14 +203,16 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     recycle: Sender<Box<SegmentData>>,
     /// The box received but not yet uploaded.
     incoming: Option<Box<SegmentData>>,
-    /// A box planned for upload into a slot this frame.
-    to_upload: Option<(usize, Box<SegmentData>)>,
+    /// A box planned for upload this frame, and what to copy from it.
+    to_upload: Option<(UploadPlan, Box<SegmentData>)>,
     /// Uploaded boxes whose staging buffers are not mapped again yet (at most two; the
     /// boxes themselves travel back to the decoder, so they stay boxed).
     #[allow(clippy::vec_box)]
     remapping: Vec<Box<SegmentData>>,
     slots: [Option<Resident>; 2],
     shown_slot: Option<usize>,
+    /// Which keyframe (by number) each GPU keyframe slot holds.
+    key_slots: [Option<usize>; KEY_SLOTS],
     ticks: u64,
     paused: u64,
     /// Start of a catch-up (ticks) and the lag the data arrived with.
@@ -359,6 +363,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             remapping: Vec::with_capacity(2),
             slots: [None, None],
             shown_slot: None,
+            key_slots: [None; KEY_SLOTS],
             ticks: 0,
             paused: 0,
             catch_start: None,
@@ -518,8 +523,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         }
     }
 
-    /// Puts an arrived segment in the slot that is not on screen (never the displayed one),
-    /// or drops it when it is already in the past.
+    /// Puts an arrived segment in the bubble slot that is not on screen (never the
+    /// displayed one) and its keyframes in keyframe slots the other bubble slot does not
+    /// use, or drops it when it is already in the past. A dropped segment still leaves its
+    /// closing keyframe on the GPU: the decoder did not stage it again for the next one.
     fn take_incoming(&mut self, b: Box<SegmentData>, pos: MediaTime, n: u64, uploaded: &mut u64) {
         let base = b.pass as u64 * n;
         let r = Resident {
@@ -527,23 +534,116 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             start: base + ((b.start as u64) << 32),
             end: base + ((b.end as u64) << 32),
             layers: b.layers,
+            keys: [0, 0],
         };
         let free = self.shown_slot.map_or(0, |s| 1 - s);
         let last_of_still = !self.header.looping && r.end >= n - ONE_FRAME;
-        if r.end <= pos && !last_of_still {
-            self.totals.segments_dropped += 1;
-            self.give_back(b);
-        } else if self.slots[free]
-            .is_none_or(|old| old.end <= pos || r.start <= pos || old.start > r.start)
+        let past = r.end <= pos && !last_of_still;
+        if !past
+            && self.slots[free]
+                .is_some_and(|old| old.end > pos && r.start > pos && old.start <= r.start)
         {
-            *uploaded = b.bytes(&self.header);
-            self.slots[free] = Some(r);
-            self.totals.segments_uploaded += 1;
-            // Copied to the GPU in `render`, after which the box goes back to the decoder.
-            self.to_upload = Some((free, b));
-        } else {
+            // The slot not on screen holds a segment still to come: wait for it to play.
             self.incoming = Some(b);
+            return;
         }
+        if !past {
+            let keep = [self.slots[1 - free], None];
+            if let Some((mut plan, keys)) = self.place_keys(&b, keep) {
+                plan.bubbles = Some(free);
+                *uploaded = plan.bytes(&b, &self.header);
+                self.slots[free] = Some(Resident { keys, ..r });
+                self.totals.segments_uploaded += 1;
+                // Copied to the GPU in `render`, after which the box goes back to the decoder.
+                self.to_upload = Some((plan, b));
+                return;
+            }
+            // Its K_s is neither staged nor on the GPU (only if a closing keyframe could
+            // not be kept, below): drop it like a late one; the next segment plays.
+        }
+        self.totals.segments_dropped += 1;
+        let mut placed = self.place_closing(&b);
+        if placed.is_none() {
+            // Both bubble slots' keyframes are protected: forget the one not on screen if
+            // it is over (it can never be shown again).
+            let other = self.shown_slot.map_or(1, |s| 1 - s);
+            if self.slots[other].is_some_and(|o| o.end <= pos) {
+                self.slots[other] = None;
+                placed = self.place_closing(&b);
+            }
+        }
+        match placed {
+            Some(plan) if plan.key1.is_some() => {
+                *uploaded = plan.bytes(&b, &self.header);
+                self.to_upload = Some((plan, b));
+            }
+            _ => self.give_back(b),
+        }
+    }
+
+    /// Keyframe slots for a dropped segment's closing keyframe, keeping both bubble
+    /// slots' keyframes.
+    fn place_closing(&mut self, b: &SegmentData) -> Option<UploadPlan> {
+        let keep = [self.slots[0], self.slots[1]];
+        let k = b.keys[1];
+        if self.key_slots.contains(&Some(k)) {
+            return Some(UploadPlan {
+                key0: None,
+                key1: None,
+                bubbles: None,
+            });
+        }
+        let slot = self.free_key_slot(keep, None)?;
+        self.key_slots[slot] = Some(k);
+        Some(UploadPlan {
+            key0: None,
+            key1: Some(slot),
+            bubbles: None,
+        })
+    }
+
+    /// Keyframe slots for segment `b`'s K_s and K_{s+1}: where they already are, or
+    /// slots that no segment in `keep` uses. `None` if K_s is neither staged nor resident.
+    fn place_keys(
+        &mut self,
+        b: &SegmentData,
+        keep: [Option<Resident>; 2],
+    ) -> Option<(UploadPlan, [usize; 2])> {
+        let find =
+            |slots: &[Option<usize>; KEY_SLOTS], k: usize| slots.iter().position(|&x| x == Some(k));
+        let (k0, copy0) = match find(&self.key_slots, b.keys[0]) {
+            Some(s) => (s, None),
+            None if b.k0_staged => {
+                let s = self.free_key_slot(keep, None)?;
+                (s, Some(s))
+            }
+            None => return None,
+        };
+        let (k1, copy1) = match find(&self.key_slots, b.keys[1]) {
+            Some(s) => (s, None),
+            None => {
+                let s = self.free_key_slot(keep, Some(k0))?;
+                (s, Some(s))
+            }
+        };
+        self.key_slots[k0] = Some(b.keys[0]);
+        self.key_slots[k1] = Some(b.keys[1]);
+        let plan = UploadPlan {
+            key0: copy0,
+            key1: copy1,
+            bubbles: None,
+        };
+        Some((plan, [k0, k1]))
+    }
+
+    /// A keyframe slot that no segment in `keep` uses, other than `avoid`: an empty one
+    /// first.
+    fn free_key_slot(&self, keep: [Option<Resident>; 2], avoid: Option<usize>) -> Option<usize> {
+        let usable =
+            |s: usize| Some(s) != avoid && !keep.iter().flatten().any(|r| r.keys.contains(&s));
+        (0..KEY_SLOTS)
+            .find(|&s| usable(s) && self.key_slots[s].is_none())
+            .or_else(|| (0..KEY_SLOTS).find(|&s| usable(s)))
     }
 
     fn covers(r: &Option<Resident>, p: u64) -> bool {
@@ -570,7 +670,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let up = self.to_upload.take();
         let eval = frame.eval.as_ref().map(|(s, p, h)| (*s, p, *h));
         self.gpu
-            .frame(up.as_ref().map(|(slot, b)| (*slot, &**b)), eval);
+            .frame(up.as_ref().map(|(plan, b)| (*plan, &**b)), eval);
         if let Some((_, b)) = up {
             if matches!(self.pipeline, Pipeline::Inline { .. }) {
                 // Simulated time stays deterministic: the buffer is mapped again now
@@ -735,6 +835,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 params.transfer = tr;
                 params.v0 = v0;
                 params.channels = self.header.channels as u32;
+                params.key0 = r.keys[0] as u32;
+                params.key1 = r.keys[1] as u32;
                 params.alpha = alpha;
                 params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
                 if hold_first {
@@ -819,6 +921,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         }
         self.slots = [None, None];
         self.shown_slot = None;
+        self.key_slots = [None; KEY_SLOTS];
         match &mut self.pipeline {
             Pipeline::Inline {
                 reader,
@@ -923,6 +1026,8 @@ fn decoder_loop(
 ) {
     let mut msg = Vec::with_capacity(1 << 20);
     let mut generation = 0;
+    // A box whose segment failed to decode: used again before asking for another.
+    let mut spare: Option<Box<SegmentData>> = None;
     while !stop.load(Ordering::Relaxed) {
         let Some(m) = pop_message(&mut cons, &mut msg) else {
             std::thread::sleep(Duration::from_micros(500));
@@ -936,6 +1041,9 @@ fn decoder_loop(
             Event::Ready(s) => {
                 // A free staging buffer: the render thread has uploaded one.
                 let mut b = loop {
+                    if let Some(b) = spare.take() {
+                        break b;
+                    }
                     match free.recv_timeout(Duration::from_millis(5)) {
                         Ok(b) => break b,
                         Err(_) if stop.load(Ordering::Relaxed) => return,
@@ -960,7 +1068,7 @@ fn decoder_loop(
                     }
                     Err(e) => {
                         let _ = errors.try_send(e);
-                        // The buffer is lost to this thread; the player keeps the other.
+                        spare = Some(b);
                     }
                 }
             }

@@ -14,10 +14,18 @@ struct Params {
     alpha: f32,
     channels: u32,
     blend: u32,
+    // Keyframe slots of K_s and K_{s+1}.
+    key0: u32,
+    key1: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var terms: texture_2d_array<f32>;
+// Keyframes (a pool of slots, `channels` layers each) and the segment's bubble terms
+// (term k ≥ 2 at layers (k − 2)·channels …).
+@group(0) @binding(1) var keys: texture_2d_array<f32>;
+@group(0) @binding(4) var bubbles: texture_2d_array<f32>;
 @group(0) @binding(2) var held: texture_2d<f32>;
 @group(0) @binding(3) var out_tex: texture_storage_2d<rgba16float, write>;
 
@@ -39,17 +47,24 @@ fn decode(c: f32) -> f32 {
     return p.v0 * (exp2(clamp(c, 0.0, 120.0)) - 1.0);
 }
 
-// Term k at a texel: its planes are layers k·channels … (one R32Float layer per plane).
-fn term(xy: vec2<i32>, k: u32) -> vec3<f32> {
+// One term at a texel from `channels` consecutive R32Float layers starting at `b`.
+fn planes(t: texture_2d_array<f32>, xy: vec2<i32>, b: i32) -> vec3<f32> {
     if (p.channels == 3u) {
-        let b = i32(k * 3u);
         return vec3<f32>(
-            textureLoad(terms, xy, b, 0).x,
-            textureLoad(terms, xy, b + 1, 0).x,
-            textureLoad(terms, xy, b + 2, 0).x,
+            textureLoad(t, xy, b, 0).x,
+            textureLoad(t, xy, b + 1, 0).x,
+            textureLoad(t, xy, b + 2, 0).x,
         );
     }
-    return vec3<f32>(textureLoad(terms, xy, i32(k), 0).x, 0.0, 0.0);
+    return vec3<f32>(textureLoad(t, xy, b, 0).x, 0.0, 0.0);
+}
+
+fn key(xy: vec2<i32>, slot: u32) -> vec3<f32> {
+    return planes(keys, xy, i32(slot * p.channels));
+}
+
+fn bubble(xy: vec2<i32>, k: u32) -> vec3<f32> {
+    return planes(bubbles, xy, i32((k - 2u) * p.channels));
 }
 
 @compute @workgroup_size(8, 8)
@@ -59,9 +74,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let xy = vec2<i32>(id.xy);
     // Same order as the reference decoder: w0·K0 + w1·K1, then each bubble.
-    var c = weight(0u) * term(xy, 0u) + weight(1u) * term(xy, 1u);
+    var c = weight(0u) * key(xy, p.key0) + weight(1u) * key(xy, p.key1);
     for (var k = 2u; k < p.layers; k = k + 1u) {
-        c = c + weight(k) * term(xy, k);
+        c = c + weight(k) * bubble(xy, k);
     }
     var rgb: vec3<f32>;
     if (p.channels == 3u) {
