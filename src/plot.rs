@@ -48,8 +48,19 @@ fn range(series: &[Series], f: impl Fn(&(f64, f64)) -> f64, log: bool) -> (f64, 
     if log {
         (lo / 1.3, hi * 1.3)
     } else {
-        let pad = ((hi - lo) * 0.08).max(1e-3);
-        (lo - pad, hi + pad)
+        // A flat series (no drift at all) gets a unit of room; values that are never
+        // negative get no negative axis.
+        let pad = if hi - lo < 1e-12 {
+            (hi.abs() * 0.1).max(1.0)
+        } else {
+            (hi - lo) * 0.08
+        };
+        let low = if lo >= 0.0 {
+            (lo - pad).max(0.0)
+        } else {
+            lo - pad
+        };
+        (low, hi + pad)
     }
 }
 
@@ -115,4 +126,23 @@ pub fn lines(
     }
     root.present()
         .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_ranges_of_flat_and_non_negative_series() {
+        let s = |pts: &[(f64, f64)]| Series {
+            name: "s".into(),
+            points: pts.to_vec(),
+        };
+        let y = |p: &(f64, f64)| p.1;
+        assert_eq!(range(&[s(&[(1.0, 0.0), (2.0, 0.0)])], y, false), (0.0, 1.0));
+        let (lo, hi) = range(&[s(&[(1.0, 0.5), (2.0, 3.0)])], y, false);
+        assert!((0.0..0.5).contains(&lo) && hi > 3.0, "{lo} {hi}");
+        let (lo, _) = range(&[s(&[(1.0, -1.0), (2.0, 3.0)])], y, false);
+        assert!(lo < -1.0);
+    }
 }
