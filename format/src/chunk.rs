@@ -132,8 +132,7 @@ pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Resu
     let mut out = base;
     let mut pos = r.pos;
     for (p, step) in steps.iter().enumerate() {
-        let (bw, bh) = (w / N, ht / N);
-        let origins = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+        let origins = crate::plane::all_blocks(&out[p]);
         add_stream(raw, &mut pos, nblocks, origins, &mut out[p], *step)?;
     }
     if pos != raw.len() {

@@ -66,7 +66,7 @@ pub fn tile_blocks(
 }
 
 /// Block origins of a whole plane, row by row.
-pub fn all_blocks(p: &Plane) -> impl Iterator<Item = (usize, usize)> {
+pub fn all_blocks(p: &Plane) -> impl Iterator<Item = (usize, usize)> + use<> {
     let (bw, bh) = (p.w / N, p.h / N);
     (0..bh).flat_map(move |y| (0..bw).map(move |x| (x, y)))
 }
