@@ -66,6 +66,9 @@ pub struct PlayArgs {
     /// Ring capacity in bytes [default: the header's read-ahead at the read rate].
     #[arg(long)]
     pub ring: Option<usize>,
+    /// Added to the header's pre-roll: a reader stall this long while the ring first fills is survived (`500ms`) [default: 0].
+    #[arg(long, default_value = "0s")]
+    pub preroll_margin: String,
     /// Run in real time with the reader and decoder on their own threads (default: simulated time, stepped deterministically, as fast as the machine goes).
     #[arg(long)]
     pub realtime: bool,

@@ -261,6 +261,7 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
                 policy: policy.into(),
                 catch_up: "500ms".into(),
                 ring: None,
+                preroll_margin: "0s".into(),
                 realtime: false,
                 stats: None,
                 check_every: a.check_every,

@@ -112,6 +112,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         policy: "interpolate".into(),
         catch_up: "500ms".into(),
         ring: None,
+        preroll_margin: "0s".into(),
         realtime: false,
         stats: None,
         check_every: 15,

@@ -25,6 +25,7 @@ pub struct Session {
     pub throttle: Throttle,
     pub catch_up_ns: u64,
     pub ring: Option<usize>,
+    pub preroll_margin_ns: u64,
     pub realtime: bool,
     pub duration_ns: u64,
     pub display_hz: u32,
@@ -39,6 +40,8 @@ pub struct Outcome {
     pub read_rate: Option<u64>,
     pub mean_rate: f64,
     pub ring_bytes: usize,
+    /// Buffering before the first frame (the header's pre-roll and the margin), ms.
+    pub preroll_ms: f64,
     pub frames: usize,
     pub mean_drift: f64,
     pub p99_drift: f64,
@@ -75,6 +78,7 @@ impl Session {
             catch_up_ns: self.catch_up_ns,
             throttle: self.throttle,
             ring_bytes: self.ring,
+            preroll_margin_ns: self.preroll_margin_ns,
             threaded,
             ..Default::default()
         };
@@ -209,6 +213,7 @@ fn finish(
 ) -> Result<Outcome, String> {
     let totals = player.totals().clone();
     let ring = player.ring_bytes();
+    let preroll_ms = player.preroll_ns() as f64 / 1e6;
     let h = player.header().clone();
     player
         .stop(Duration::from_secs(10))
@@ -220,6 +225,7 @@ fn finish(
         read_rate: s.throttle.rate,
         mean_rate: mean_rate(&h),
         ring_bytes: ring,
+        preroll_ms,
         frames: sum.frames,
         mean_drift: sum.mean_drift,
         p99_drift: sum.p99_drift,
@@ -258,6 +264,7 @@ pub fn session(a: &PlayArgs) -> Result<Session, String> {
         throttle: Throttle { rate, stall },
         catch_up_ns: (parse_duration(&a.catch_up)? * 1e9) as u64,
         ring: a.ring,
+        preroll_margin_ns: (parse_duration(&a.preroll_margin)? * 1e9) as u64,
         realtime: a.realtime,
         duration_ns: (parse_duration(&a.duration)? * 1e9) as u64,
         display_hz: a.display_hz,
@@ -277,12 +284,13 @@ pub fn print(o: &Outcome, s: &Session) {
         o.policy
     );
     println!(
-        "read        {} (cap {}, stream mean {}), ring {} bytes",
+        "read        {} (cap {}, stream mean {}), ring {} bytes, pre-roll {:.0} ms",
         fmt_rate(o.bytes_read_per_s),
         o.read_rate
             .map_or("none".to_string(), |r| fmt_rate(r as f64)),
         fmt_rate(o.mean_rate),
-        o.ring_bytes
+        o.ring_bytes,
+        o.preroll_ms
     );
     println!("uploaded    {:.2} MB/s", o.bytes_uploaded_per_s / 1e6);
     println!(

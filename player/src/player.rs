@@ -66,6 +66,11 @@ pub struct PlayerConfig {
     /// How long to buffer before the first frame; `None`: the header's buffer model at the
     /// throttle's rate (no wait when unthrottled).
     pub preroll_ns: Option<u64>,
+    /// Added to the pre-roll. The buffer model's pre-roll assumes a reader that never
+    /// stalls; while the ring is still filling after it, a stall can make the first
+    /// transition late. A margin as long as the stall to survive buys that back with
+    /// start-up time (measured in BENCHMARKS.md).
+    pub preroll_margin_ns: u64,
 }
 
 impl Default for PlayerConfig {
@@ -78,6 +83,7 @@ impl Default for PlayerConfig {
             threaded: true,
             clock: Arc::new(SystemClock::new()),
             preroll_ns: None,
+            preroll_margin_ns: 0,
         }
     }
 }
@@ -277,7 +283,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                     |p| p.preroll_ns,
                 )
             })
-        });
+        }) + cfg.preroll_margin_ns;
         let (prod, cons) = HeapRb::<u8>::new(ring_bytes).split();
         let mut reader_core = ReaderCore::new(src, entries.clone(), header.looping, cfg.throttle);
         let player_entries = entries.clone();
@@ -393,6 +399,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     }
     pub fn totals(&self) -> &Totals {
         &self.totals
+    }
+    /// Buffering before the first frame, ns (the pre-roll and its margin).
+    pub fn preroll_ns(&self) -> u64 {
+        self.preroll
     }
     pub fn ring_bytes(&self) -> usize {
         self.ring_bytes

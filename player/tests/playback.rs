@@ -659,3 +659,43 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
         assert!(t.bytes_uploaded < full, "{} of {full}", t.bytes_uploaded);
     }
 }
+
+#[test]
+fn a_preroll_margin_absorbs_a_stall_while_the_ring_first_fills() {
+    let (device, queue) = device();
+    let bytes = encode_bytes(&noisy(64, 32, 96), &config(SegmentMode::Fixed(6)));
+    let header = Reader::open(Cursor::new(bytes.clone()))
+        .unwrap()
+        .header()
+        .clone();
+    let rate = (header.file_size as f64 / 4.0 * 1.2) as u64;
+    // A 500 ms stall at 300 ms, before the ring has filled, then every 10 s.
+    let stall = Stall {
+        length_ns: 500_000_000,
+        every_ns: 10_000_000_000,
+        first_ns: 300_000_000,
+    };
+    let late = |margin: u64| {
+        let cfg = PlayerConfig {
+            preroll_margin_ns: margin,
+            ..inline(
+                Policy::Interpolate,
+                Throttle {
+                    rate: Some(rate),
+                    stall: Some(stall),
+                },
+            )
+        };
+        let mut player = Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg).unwrap();
+        let base = player.preroll_ns() - margin;
+        let late = (0..600)
+            .filter(|_| player.advance(DISPLAY).drift > 1.0)
+            .count();
+        (late, base)
+    };
+    let (without, base) = late(0);
+    let (with, _) = late(500_000_000);
+    eprintln!("header pre-roll {base} ns: {without} frames late without a margin, {with} with");
+    assert!(without > 0, "the start-up stall is felt without a margin");
+    assert_eq!(with, 0, "a margin as long as the stall absorbs it");
+}
