@@ -208,6 +208,14 @@ pub struct BenchDriftArgs {
     /// Measure shown error every N frames [default: 30].
     #[arg(long, default_value_t = 30)]
     pub check_every: u64,
+    /// Run each point with the stall at N phases spread evenly over its period (a stall
+    /// whose period is the loop's length always lands at the same moment of the day); the
+    /// plots show the worst phase, the CSV every run [default: 1].
+    #[arg(long, default_value_t = 1)]
+    pub phases: u32,
+    /// Added to the header's pre-roll, as `vbim play --preroll-margin` [default: 0].
+    #[arg(long, default_value = "0s")]
+    pub preroll_margin: String,
 }
 
 #[derive(Args)]

@@ -245,7 +245,10 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
     std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
     let (device, queue, info) = vbim_player::headless_device()?;
     let adapter = format!("{} ({:?})", info.name, info.backend);
-    let mut csv = String::from("policy,factor,read_rate,ring_bytes,mean_drift,p99_drift,max_drift,late_frames,stalls,shown_mean_psnr,shown_worst_psnr\n");
+    if a.phases == 0 {
+        return Err("--phases must be at least 1".into());
+    }
+    let mut csv = String::from("policy,factor,first_stall_s,read_rate,ring_bytes,mean_drift,p99_drift,max_drift,late_frames,stalls,shown_mean_psnr,shown_worst_psnr\n");
     let mut drift_series = Vec::new();
     let mut psnr_series = Vec::new();
     for policy in ["interpolate", "wait", "skip"] {
@@ -261,7 +264,7 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
                 policy: policy.into(),
                 catch_up: "500ms".into(),
                 ring: None,
-                preroll_margin: "0s".into(),
+                preroll_margin: a.preroll_margin.clone(),
                 realtime: false,
                 stats: None,
                 check_every: a.check_every,
@@ -273,29 +276,43 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
                 height: 0,
                 exit_after: None,
             };
-            let s = session(&args)?;
-            let o = play(&s, &device, &queue, &adapter)?;
-            eprintln!(
-                "{policy:>11} {f:>5}×: mean drift {:.3}, max {:.3}, late {}, shown {:.2} dB",
-                o.mean_drift,
-                o.max_drift,
-                o.late_frames,
-                o.shown_mean_psnr.unwrap_or(99.0)
-            );
-            csv += &format!(
-                "{policy},{f},{},{},{:.4},{:.4},{:.4},{},{},{:.3},{:.3}\n",
-                o.read_rate.unwrap_or(0),
-                o.ring_bytes,
-                o.mean_drift,
-                o.p99_drift,
-                o.max_drift,
-                o.late_frames,
-                o.stalls,
-                o.shown_mean_psnr.unwrap_or(99.0),
-                o.shown_worst_psnr.unwrap_or(99.0)
-            );
-            dp.push((f, o.mean_drift));
-            pp.push((f, o.shown_mean_psnr.unwrap_or(99.0)));
+            let base = session(&args)?;
+            // The worst phase: the largest mean drift, the lowest shown PSNR.
+            let (mut worst_drift, mut worst_psnr) = (f64::MIN, f64::MAX);
+            for k in 0..a.phases as u64 {
+                let mut s = base.clone();
+                if let Some(st) = s.throttle.stall.as_mut() {
+                    st.first_ns += k * st.every_ns / a.phases as u64;
+                    if st.first_ns > st.every_ns {
+                        st.first_ns -= st.every_ns;
+                    }
+                }
+                let first = s.throttle.stall.map_or(0.0, |st| st.first_ns as f64 * 1e-9);
+                let o = play(&s, &device, &queue, &adapter)?;
+                eprintln!(
+                    "{policy:>11} {f:>5}×, first stall at {first:.2} s: mean drift {:.3}, max {:.3}, late {}, shown {:.2} dB",
+                    o.mean_drift,
+                    o.max_drift,
+                    o.late_frames,
+                    o.shown_mean_psnr.unwrap_or(99.0)
+                );
+                csv += &format!(
+                    "{policy},{f},{first:.3},{},{},{:.4},{:.4},{:.4},{},{},{:.3},{:.3}\n",
+                    o.read_rate.unwrap_or(0),
+                    o.ring_bytes,
+                    o.mean_drift,
+                    o.p99_drift,
+                    o.max_drift,
+                    o.late_frames,
+                    o.stalls,
+                    o.shown_mean_psnr.unwrap_or(99.0),
+                    o.shown_worst_psnr.unwrap_or(99.0)
+                );
+                worst_drift = worst_drift.max(o.mean_drift);
+                worst_psnr = worst_psnr.min(o.shown_mean_psnr.unwrap_or(99.0));
+            }
+            dp.push((f, worst_drift));
+            pp.push((f, worst_psnr));
         }
         drift_series.push(crate::plot::Series {
             name: policy.into(),
@@ -306,11 +323,23 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
             points: pp,
         });
     }
+    let phases = if a.phases > 1 {
+        format!(", worst of {} phases", a.phases)
+    } else {
+        String::new()
+    };
     std::fs::write(a.out.join("drift.csv"), &csv).map_err(|e| e.to_string())?;
-    let name = a.file.display().to_string();
+    // The file's name, not its path: a long path pushed the title off the image.
+    let name = a.file.file_name().map_or_else(
+        || a.file.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
     crate::plot::lines(
         &a.out.join("drift.png"),
-        &format!("Mean drift against bandwidth, stalls {} ({name})", a.stall),
+        &format!(
+            "Mean drift against bandwidth, stalls {}{phases} ({name})",
+            a.stall
+        ),
         "read rate / stream mean rate",
         "mean drift, media frames",
         &drift_series,
@@ -318,7 +347,10 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
     )?;
     crate::plot::lines(
         &a.out.join("shown_error.png"),
-        &format!("What was shown against the true state, stalls {}", a.stall),
+        &format!(
+            "What was shown against the true state, stalls {}{phases}",
+            a.stall
+        ),
         "read rate / stream mean rate",
         "mean PSNR of shown frames, dB",
         &psnr_series,

@@ -111,6 +111,66 @@ fn bake_encode_inspect_decode_compare() {
         play["read_rate"], json["header"]["read_ahead"][1]["rate_bytes_per_s"],
         "{play}"
     );
+    let preroll = json["header"]["read_ahead"][1]["preroll_s"]
+        .as_f64()
+        .unwrap()
+        * 1e3;
+    assert!(
+        (play["preroll_ms"].as_f64().unwrap() - preroll).abs() < 1e-3,
+        "{play}"
+    );
+    // `--preroll-margin` adds to the header's pre-roll.
+    ok(&[
+        "play",
+        s(&file),
+        "--headless",
+        "--duration",
+        "1s",
+        "--bandwidth",
+        "1.2x",
+        "--preroll-margin",
+        "250ms",
+        "--json",
+        s(&summary),
+    ]);
+    let play: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert!(
+        (play["preroll_ms"].as_f64().unwrap() - preroll - 250.0).abs() < 1e-3,
+        "{play}"
+    );
+
+    // `bench drift --phases 2`: every policy at each phase, the CSV says which.
+    let drift = dir.path().join("drift");
+    ok(&[
+        "bench",
+        "drift",
+        s(&file),
+        "-o",
+        s(&drift),
+        "--factors",
+        "1.2",
+        "--phases",
+        "2",
+        "--stall",
+        "100ms@400ms",
+        "--duration",
+        "1s",
+        "--check-every",
+        "0",
+    ]);
+    let csv = std::fs::read_to_string(drift.join("drift.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 6, "{csv}");
+    let mut phases: Vec<&str> = rows.iter().map(|r| r[2]).collect();
+    phases.sort();
+    phases.dedup();
+    assert_eq!(phases, ["0.200", "0.400"], "{csv}");
+    assert!(drift.join("drift.png").is_file() && drift.join("shown_error.png").is_file());
 
     let decoded = dir.path().join("decoded");
     ok(&["decode", s(&file), "-o", s(&decoded)]);
