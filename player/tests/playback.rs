@@ -699,3 +699,36 @@ fn a_preroll_margin_absorbs_a_stall_while_the_ring_first_fills() {
     assert!(without > 0, "the start-up stall is felt without a margin");
     assert_eq!(with, 0, "a margin as long as the stall absorbs it");
 }
+
+#[test]
+fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
+    // The reader and decoder on their own threads, the display stepped faster than real
+    // time: which frames are exact depends on scheduling, but every one that says so must
+    // match the reference (keyframe slots shared across segments, loops included).
+    let (device, queue) = device();
+    let (w, h, n) = (48, 32, 48);
+    let bytes = encode_bytes(&noisy(w, h, n), &config(SegmentMode::Fixed(4)));
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let cfg = PlayerConfig {
+        clock: Arc::new(vbim_player::SystemClock::new()),
+        ..Default::default()
+    };
+    let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
+    let mut checked = 0;
+    for k in 0..600 {
+        let r = player.advance(DISPLAY);
+        if r.state == FrameState::Exact && k % 4 == 0 {
+            let what = format!("threaded, frame {}", r.index);
+            assert_display_matches(&player, &mut reference, r.shown % n as f64, w * h, &what);
+            checked += 1;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let t = player.totals().clone();
+    player
+        .stop(Duration::from_secs(10))
+        .expect("threads joined");
+    eprintln!("{checked} frames checked, {t:?}");
+    assert!(checked >= 20, "{checked} exact frames checked: {t:?}");
+    assert!(t.segments_uploaded >= 24, "two loops and more: {t:?}");
+}
