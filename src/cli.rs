@@ -124,6 +124,11 @@ pub struct DemoArgs {
     /// Reader stalls during playback [default: 500ms@4s].
     #[arg(long, default_value = "500ms@4s")]
     pub stall: String,
+    /// Added to the header's pre-roll, as long as a stall: the header's pre-roll assumes a
+    /// reader that never stalls, and a stall while the ring first fills would make the
+    /// day's first transition late [default: 500ms].
+    #[arg(long, default_value = "500ms")]
+    pub preroll_margin: String,
     /// Frames rendered in the terrain scene [default: 120].
     #[arg(long, default_value_t = 120)]
     pub render_frames: usize,

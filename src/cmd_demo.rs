@@ -112,7 +112,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         policy: "interpolate".into(),
         catch_up: "500ms".into(),
         ring: None,
-        preroll_margin: "0s".into(),
+        preroll_margin: a.preroll_margin.clone(),
         realtime: false,
         stats: None,
         check_every: 15,
@@ -213,7 +213,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
          Degree of every 16² tile in every segment (dark blue 1 … yellow {}): ![degrees](degree_map.png)\n\n\
          ## Playback\n\n\
          Reader capped at {} ({:.1} kB/s; the stream's mean is {:.1} kB/s) with stalls {}, policy interpolate, \
-         ring {} bytes, 60 Hz display, {:.0} s simulated on {}.\n\n\
+         ring {} bytes, pre-roll {:.0} ms (the header's and a {} margin), 60 Hz display, {:.0} s simulated on {}.\n\n\
          | mean drift | p99 drift | max drift | frames late by > 1 | stalls | shown vs true (mean PSNR) | worst checked |\n|---:|---:|---:|---:|---:|---:|---:|\n\
          | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} |\n\n\
          ![drift](drift.png)\n\n\
@@ -222,7 +222,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         a.scene.display(), a.size, a.frames, a.fps,
         cfg.tolerance_db, rep.bytes, rep.bpp, rep.ratio_to_raw, rep.mean_psnr.unwrap_or(0.0), rep.worst_psnr.unwrap_or(0.0), rep.encode_s,
         lossless, lossless_bpp, texel_frames * 6.0 / lossless as f64, cfg.max_degree,
-        a.bandwidth, measured.read_rate.unwrap_or(0) as f64 / 1e3, measured.mean_rate / 1e3, a.stall, measured.ring_bytes, duration, measured.adapter,
+        a.bandwidth, measured.read_rate.unwrap_or(0) as f64 / 1e3, measured.mean_rate / 1e3, a.stall, measured.ring_bytes, measured.preroll_ms, a.preroll_margin, duration, measured.adapter,
         measured.mean_drift, measured.p99_drift, measured.max_drift, measured.late_frames, measured.stalls,
         measured.shown_mean_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),
         measured.shown_worst_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),

@@ -760,9 +760,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             // segment, before the clock starts, whatever the policy; reported as waiting.
             self.startup = self.ticks;
             self.was_missing = false;
+            // Target and shown are both the start: pre-roll is not drift (`wall` still
+            // counted this frame's step).
             let record = self.record(
                 t0,
-                wall,
+                0,
                 0,
                 FrameState::Waiting,
                 1.0,

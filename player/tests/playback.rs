@@ -689,7 +689,13 @@ fn a_preroll_margin_absorbs_a_stall_while_the_ring_first_fills() {
         let mut player = Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg).unwrap();
         let base = player.preroll_ns() - margin;
         let late = (0..600)
-            .filter(|_| player.advance(DISPLAY).drift > 1.0)
+            .filter(|_| {
+                let r = player.advance(DISPLAY);
+                if r.state == FrameState::Waiting && r.index < 60 {
+                    assert_eq!(r.drift, 0.0, "pre-roll is not drift: {r:?}");
+                }
+                r.drift > 1.0
+            })
             .count();
         (late, base)
     };
