@@ -595,19 +595,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// slots' keyframes.
     fn place_closing(&mut self, b: &SegmentData) -> Option<UploadPlan> {
         let keep = [self.slots[0], self.slots[1]];
-        let k = b.keys[1];
-        if self.key_slots.contains(&Some(k)) {
-            return Some(UploadPlan {
-                key0: None,
-                key1: None,
-                bubbles: None,
-            });
-        }
-        let slot = self.free_key_slot(keep, None)?;
-        self.key_slots[slot] = Some(k);
+        let (slot, copy) = self.key_slot_for(b.keys[1], keep, None)?;
+        self.key_slots[slot] = Some(b.keys[1]);
         Some(UploadPlan {
             key0: None,
-            key1: Some(slot),
+            key1: copy,
             bubbles: None,
         })
     }
@@ -619,23 +611,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         b: &SegmentData,
         keep: [Option<Resident>; 2],
     ) -> Option<(UploadPlan, [usize; 2])> {
-        let find =
-            |slots: &[Option<usize>; KEY_SLOTS], k: usize| slots.iter().position(|&x| x == Some(k));
-        let (k0, copy0) = match find(&self.key_slots, b.keys[0]) {
-            Some(s) => (s, None),
-            None if b.k0_staged => {
-                let s = self.free_key_slot(keep, None)?;
-                (s, Some(s))
-            }
-            None => return None,
-        };
-        let (k1, copy1) = match find(&self.key_slots, b.keys[1]) {
-            Some(s) => (s, None),
-            None => {
-                let s = self.free_key_slot(keep, Some(k0))?;
-                (s, Some(s))
-            }
-        };
+        let (k0, copy0) = self.key_slot_for(b.keys[0], keep, None)?;
+        if copy0.is_some() && !b.k0_staged {
+            return None;
+        }
+        let (k1, copy1) = self.key_slot_for(b.keys[1], keep, Some(k0))?;
         self.key_slots[k0] = Some(b.keys[0]);
         self.key_slots[k1] = Some(b.keys[1]);
         let plan = UploadPlan {
@@ -644,6 +624,20 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             bubbles: None,
         };
         Some((plan, [k0, k1]))
+    }
+
+    /// The keyframe slot for keyframe `k`: the one that holds it already (nothing to
+    /// copy), or a free one (see [`Self::free_key_slot`]) to copy it into — `(slot, copy)`.
+    fn key_slot_for(
+        &self,
+        k: usize,
+        keep: [Option<Resident>; 2],
+        avoid: Option<usize>,
+    ) -> Option<(usize, Option<usize>)> {
+        match self.key_slots.iter().position(|&x| x == Some(k)) {
+            Some(s) => Some((s, None)),
+            None => self.free_key_slot(keep, avoid).map(|s| (s, Some(s))),
+        }
     }
 
     /// A keyframe slot that no segment in `keep` uses, other than `avoid`: an empty one
