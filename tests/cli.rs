@@ -94,19 +94,23 @@ fn bake_encode_inspect_decode_compare() {
     // `play --bandwidth 1.2x` reads at exactly the rate of the header's 1.2× point, so that
     // the ring is that point's read-ahead (a rounding difference once picked the 1× point).
     let summary = dir.path().join("play.json");
-    ok(&[
-        "play",
-        s(&file),
-        "--headless",
-        "--duration",
-        "1s",
-        "--bandwidth",
-        "1.2x",
-        "--json",
-        s(&summary),
-    ]);
-    let play: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let play_json = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            "play",
+            s(&file),
+            "--headless",
+            "--duration",
+            "1s",
+            "--bandwidth",
+            "1.2x",
+            "--json",
+            s(&summary),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap()
+    };
+    let play = play_json(&[]);
     assert_eq!(
         play["read_rate"], json["header"]["read_ahead"][1]["rate_bytes_per_s"],
         "{play}"
@@ -120,21 +124,7 @@ fn bake_encode_inspect_decode_compare() {
         "{play}"
     );
     // `--preroll-margin` adds to the header's pre-roll.
-    ok(&[
-        "play",
-        s(&file),
-        "--headless",
-        "--duration",
-        "1s",
-        "--bandwidth",
-        "1.2x",
-        "--preroll-margin",
-        "250ms",
-        "--json",
-        s(&summary),
-    ]);
-    let play: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let play = play_json(&["--preroll-margin", "250ms"]);
     assert!(
         (play["preroll_ms"].as_f64().unwrap() - preroll - 250.0).abs() < 1e-3,
         "{play}"

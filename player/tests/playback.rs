@@ -136,15 +136,10 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
                             let d = (linear_to_srgb(g) - want).abs() * 255.0;
                             assert!(d <= 0.5, "frame {t:.3} texel {i} channel {c}: {g} vs code {want} ({d} codes)");
                         }
-                        // Within 2^-10 relative, or 1e-6 absolute below 1e-3.
+                        // The protocol's HDR bound.
                         InputKind::Hdr => {
-                            let ok = if want < 1e-3 {
-                                (g - want).abs() <= 1e-6 + want * 2f32.powi(-10)
-                            } else {
-                                (g - want).abs() <= want * 2f32.powi(-10)
-                            };
                             assert!(
-                                ok,
+                                within_hdr_bound(g, want),
                                 "frame {t:.3} texel {i} channel {c}: GPU {g} vs CPU {want}"
                             );
                         }
@@ -528,6 +523,15 @@ fn the_loop_seam_in_a_sunrise_adds_no_error() {
     }
 }
 
+/// The protocol's GPU bound for HDR: within 2^-10 relative, or 1e-6 absolute below 1e-3.
+fn within_hdr_bound(g: f32, want: f32) -> bool {
+    if want < 1e-3 {
+        (g - want).abs() <= 1e-6 + want * 2f32.powi(-10)
+    } else {
+        (g - want).abs() <= want * 2f32.powi(-10)
+    }
+}
+
 /// Compares the display with the reference decoder at media time `t` (3-channel HDR):
 /// the protocol's GPU bound.
 fn assert_display_matches(
@@ -543,13 +547,8 @@ fn assert_display_matches(
     for i in 0..texels {
         for c in 0..3 {
             let (g, want) = (gpu[i * 4 + c], cpu[i * 3 + c]);
-            let ok = if want < 1e-3 {
-                (g - want).abs() <= 1e-6 + want * 2f32.powi(-10)
-            } else {
-                (g - want).abs() <= want * 2f32.powi(-10)
-            };
             assert!(
-                ok,
+                within_hdr_bound(g, want),
                 "{what}, media time {t:.3}, texel {i} channel {c}: GPU {g} vs CPU {want}"
             );
         }
