@@ -80,15 +80,25 @@ pub fn write_frame(
     png16_scale: Option<f32>,
 ) -> Result<(), BakeError> {
     write_atomic(path, |tmp| match format {
-        FrameFormat::Exr => exr::prelude::write_rgb_file(tmp, w, h, |x, y| {
-            let i = (y * w + x) * 3;
-            (
-                f16::from_f32(rgb[i]),
-                f16::from_f32(rgb[i + 1]),
-                f16::from_f32(rgb[i + 2]),
-            )
-        })
-        .map_err(|e| e.to_string()),
+        // One thread per file: exr's parallel writer stores the blocks in the order its
+        // threads finish them, so the same frame came out as different bytes from run to
+        // run. Callers write frames in parallel already.
+        FrameFormat::Exr => {
+            use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+            let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+                let i = (y * w + x) * 3;
+                (
+                    f16::from_f32(rgb[i]),
+                    f16::from_f32(rgb[i + 1]),
+                    f16::from_f32(rgb[i + 2]),
+                )
+            });
+            Image::from_channels((w, h), channels)
+                .write()
+                .non_parallel()
+                .to_file(tmp)
+                .map_err(|e| e.to_string())
+        }
         FrameFormat::Png8 => {
             let px = to_png8(rgb, exposure.unwrap_or(1.0));
             image::RgbImage::from_raw(w as u32, h as u32, px)
@@ -205,4 +215,28 @@ pub fn contact_sheet(
         }
     }
     write_atomic(path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame written twice is the same bytes (exr's parallel writer stored blocks in
+    /// whatever order its threads finished, so this failed before the writer was made
+    /// single-threaded per file).
+    #[test]
+    fn exr_frames_are_reproducible_bytes() {
+        let (w, h) = (96, 80);
+        let rgb: Vec<f32> = (0..w * h * 3).map(|i| (i % 997) as f32 / 97.0).collect();
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str| {
+            let p = dir.path().join(name);
+            write_frame(&p, w, h, &rgb, FrameFormat::Exr, None, None).unwrap();
+            std::fs::read(p).unwrap()
+        };
+        let first = write("a.exr");
+        for k in 0..8 {
+            assert!(first == write(&format!("b{k}.exr")), "write {k} differs");
+        }
+    }
 }
