@@ -237,8 +237,14 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
         let mut planes_k = Vec::with_capacity(h.channels as usize);
         for p in 0..h.channels as usize {
             let mut plane = Plane::zeros(w, ht);
-            reader.read_plane(k, p, &mut band, |y, row| {
-                plane.data[y * w..(y + 1) * w].copy_from_slice(row)
+            reader.read_plane(k, p, &mut band, |r| {
+                for (x0, x1) in r.member_spans() {
+                    for y in 0..r.band.h {
+                        let at = (r.y0 + y) * w;
+                        plane.data[at + x0..at + x1]
+                            .copy_from_slice(&r.band.data[y * w + x0..y * w + x1]);
+                    }
+                }
             })?;
             planes_k.push(plane);
         }
@@ -246,6 +252,50 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
     }
     reader.finish()?;
     Ok(out)
+}
+
+/// One row of tiles of a decoded bubble plane, as [`CoeffReader::read_plane`] hands it out.
+pub struct TileRows<'a> {
+    /// The padded plane's row at the band's first row.
+    pub y0: usize,
+    /// `tile_size` rows of the padded plane's width. Only the member tiles' columns hold
+    /// this plane's values; the others hold whatever an earlier row left there.
+    pub band: &'a Plane,
+    /// Degree of each tile of the row (for this plane's channel).
+    pub degrees: &'a [u8],
+    /// The term being read: tiles of degree ≥ k are members.
+    pub k: u8,
+    pub tile_size: usize,
+}
+
+impl TileRows<'_> {
+    pub fn is_member(&self, tile: usize) -> bool {
+        self.degrees[tile] >= self.k
+    }
+
+    /// Column ranges `[x0, x1)` of the padded plane covered by runs of member tiles.
+    pub fn member_spans(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        spans(self.degrees.len(), move |t| self.is_member(t))
+            .map(move |(a, b)| (a * self.tile_size, b * self.tile_size))
+    }
+}
+
+/// Maximal runs `[a, b)` of `0..n` where `keep` holds.
+pub fn spans(n: usize, keep: impl Fn(usize) -> bool) -> impl Iterator<Item = (usize, usize)> {
+    let mut t = 0;
+    std::iter::from_fn(move || {
+        while t < n && !keep(t) {
+            t += 1;
+        }
+        if t == n {
+            return None;
+        }
+        let a = t;
+        while t < n && keep(t) {
+            t += 1;
+        }
+        Some((a, t))
+    })
 }
 
 /// A coefficient chunk decoded plane by plane, one band of tiles at a time, handing out
@@ -317,14 +367,17 @@ impl<'t> CoeffReader<'t> {
     }
 
     /// Decodes bubble plane (`k`, `p`) — planes must be read in stream order, k = 2..=D,
-    /// then p — and calls `row(y, values)` for each of its padded rows, top to bottom.
+    /// then p — and calls `rows` for each row of tiles, top to bottom. Only the tiles whose
+    /// degree reaches `k` carry terms ([`TileRows`]); the rest of the plane is zero, and
+    /// their columns of the band are left as they were, so that a caller keeping a
+    /// plane's zeros from one segment to the next writes only what changed.
     /// `band` is scratch space, kept by the caller so that nothing is allocated per plane.
     pub fn read_plane(
         &mut self,
         k: u8,
         p: usize,
         band: &mut Plane,
-        mut row: impl FnMut(usize, &[f32]),
+        mut rows: impl FnMut(TileRows<'_>),
     ) -> Result<()> {
         if (k, p) != self.next || k > self.dmax {
             return Err(FormatError::Invalid(format!(
@@ -352,21 +405,34 @@ impl<'t> CoeffReader<'t> {
         BLOCKS.with_borrow_mut(|q| {
             plane::read_blocks(raw, pos, members * per * per, q)?;
             let mut b = 0;
+            let degrees = if p == 0 { &tiles.luma } else { &tiles.chroma };
             for ty in 0..self.tiles_y {
-                band.data.fill(0.0);
-                for t in ty * self.tiles_x..(ty + 1) * self.tiles_x {
-                    if tiles.degree(p, t) < k {
+                let row_degrees = &degrees[ty * self.tiles_x..(ty + 1) * self.tiles_x];
+                // Clear the member tiles' columns (runs of them at a time: one call per
+                // run and row, not per tile).
+                for (a, b) in spans(row_degrees.len(), |t| row_degrees[t] >= k) {
+                    for y in 0..ts {
+                        band.data[y * w + a * ts..y * w + b * ts].fill(0.0);
+                    }
+                }
+                for (tx, &d) in row_degrees.iter().enumerate() {
+                    if d < k {
                         continue;
                     }
                     // The blocks in the order the encoder wrote them, moved into the band.
+                    let t = ty * self.tiles_x + tx;
                     for (bx, by) in plane::tile_blocks(t, self.tiles_x, ts) {
                         plane::add_block_of(band, bx, by - ty * per, q, b, step);
                         b += 1;
                     }
                 }
-                for y in 0..ts {
-                    row(ty * ts + y, &band.data[y * w..(y + 1) * w]);
-                }
+                rows(TileRows {
+                    y0: ty * ts,
+                    band,
+                    degrees: row_degrees,
+                    k,
+                    tile_size: ts,
+                });
             }
             Ok(())
         })
@@ -387,5 +453,20 @@ impl<'t> CoeffReader<'t> {
             )));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spans;
+
+    #[test]
+    fn spans_are_the_maximal_runs() {
+        let keep = [false, true, true, false, true, false, false, true];
+        let got: Vec<_> = spans(keep.len(), |t| keep[t]).collect();
+        assert_eq!(got, vec![(1, 3), (4, 5), (7, 8)]);
+        assert_eq!(spans(3, |_| false).count(), 0);
+        assert_eq!(spans(3, |_| true).collect::<Vec<_>>(), vec![(0, 3)]);
+        assert_eq!(spans(0, |_| true).count(), 0);
     }
 }

@@ -58,6 +58,13 @@ pub struct SegmentData {
     /// CPU nanoseconds (the decoding thread's own clock) spent on this segment and its
     /// closing keyframe.
     pub decode_ns: u64,
+    /// For each bubble layer's tiles (`[(term · channels + plane) · tiles + tile]`):
+    /// whether staging holds zeros there. A staging buffer keeps its contents from one
+    /// segment to the next (it is mapped again, not replaced), and a tile whose degree
+    /// is below a term is zero in that term's layer: such a tile is written only when the
+    /// box's last segment left something else there. On cloudy days about 40% of the
+    /// bubble layers' tiles are zero.
+    zero_tiles: Vec<bool>,
 }
 
 /// Bytes between rows of a staging layer (one plane of one term).
@@ -89,6 +96,8 @@ impl SegmentData {
             staging,
             mapped: Arc::new(AtomicBool::new(true)),
             decode_ns: 0,
+            // Both kinds of staging start zeroed (a new buffer is zero-initialised).
+            zero_tiles: Vec::new(),
         }
     }
 
@@ -306,51 +315,23 @@ impl DecoderCore {
         let (w, ht) = (h.width as usize, h.height as usize);
         let ch = h.channels as usize;
         let layers = 1 + bubbles.max_degree() as usize;
-        let pitch = row_pitch(h.width) as usize;
+        let stride = row_pitch(h.width) as usize / 4;
         let layer = layer_bytes(h) as usize;
+        let tile_count = h.tile_count();
+        let flags = (h.max_degree as usize + 1) * ch * tile_count;
+        if out.zero_tiles.len() != flags {
+            out.zero_tiles = vec![true; flags];
+        }
         // Term `l`, plane `p` is staging layer l·channels + p: each row is written as it is
         // (the padding columns and rows of the coded planes are left out).
-        fn write_rows(
-            staging: &mut Staging,
-            base: usize,
-            (w, ht, pitch, layer): (usize, usize, usize, usize),
-            fill: impl FnOnce(&mut dyn FnMut(usize, &[f32])) -> Result<(), String>,
-        ) -> Result<(), String> {
-            match staging {
-                Staging::Host(v) => {
-                    if v.len() < (base + layer) / 4 {
-                        v.resize((base + layer) / 4, 0.0);
-                    }
-                    fill(&mut |y, row| {
-                        if y < ht {
-                            let at = (base + y * pitch) / 4;
-                            v[at..at + w].copy_from_slice(&row[..w]);
-                        }
-                    })
-                }
-                Staging::Mapped(b) => {
-                    let mut view = b
-                        .get_mapped_range_mut(base as u64..(base + layer) as u64)
-                        .map_err(|e| format!("staging buffer not mapped: {e}"))?;
-                    fill(&mut |y, row| {
-                        if y < ht {
-                            let row: &[u8] = bytemuck::cast_slice(&row[..w]);
-                            view.slice(y * pitch..y * pitch + row.len())
-                                .copy_from_slice(row);
-                        }
-                    })
-                }
-            }
-        }
-        let dims = (w, ht, pitch, layer);
         for (l, key) in [(0, &k0), (1, &k1)] {
             if l == 0 && !k0_staged {
                 continue;
             }
             for (p, plane) in key.iter().enumerate().take(ch) {
-                write_rows(&mut out.staging, (l * ch + p) * layer, dims, |row| {
+                with_layer(&mut out.staging, (l * ch + p) * layer, layer, |o| {
                     for y in 0..ht {
-                        row(y, &plane.data[y * plane.w..(y + 1) * plane.w]);
+                        o.copy(y * stride, &plane.data[y * plane.w..y * plane.w + w]);
                     }
                     Ok(())
                 })?;
@@ -359,8 +340,14 @@ impl DecoderCore {
         let band = &mut self.band;
         for l in 2..layers {
             for p in 0..ch {
-                write_rows(&mut out.staging, (l * ch + p) * layer, dims, |row| {
-                    bubbles.read_plane(l as u8, p, band, row).map_err(context)
+                let li = l * ch + p;
+                let zero = &mut out.zero_tiles[li * tile_count..(li + 1) * tile_count];
+                with_layer(&mut out.staging, li * layer, layer, |o| {
+                    bubbles
+                        .read_plane(l as u8, p, band, |r| {
+                            write_tile_row(o, (w, ht, stride), &r, zero)
+                        })
+                        .map_err(context)
                 })?;
             }
         }
@@ -387,5 +374,85 @@ impl DecoderCore {
     }
     pub fn entries(&self) -> &[IndexEntry] {
         &self.entries
+    }
+}
+
+/// One staging layer open for writing, addressed in texels. Write-only: a mapped
+/// buffer may be write-combined memory, where reading back is slow.
+enum LayerOut<'a> {
+    Host(&'a mut [f32]),
+    Mapped(wgpu::BufferViewMut),
+}
+
+impl LayerOut<'_> {
+    fn copy(&mut self, at: usize, src: &[f32]) {
+        match self {
+            LayerOut::Host(t) => t[at..at + src.len()].copy_from_slice(src),
+            LayerOut::Mapped(v) => v
+                .slice(at * 4..(at + src.len()) * 4)
+                .copy_from_slice(bytemuck::cast_slice(src)),
+        }
+    }
+
+    fn zero(&mut self, at: usize, len: usize) {
+        match self {
+            LayerOut::Host(t) => t[at..at + len].fill(0.0),
+            // All-zero bytes are 0.0f32.
+            LayerOut::Mapped(v) => v.slice(at * 4..(at + len) * 4).fill(0),
+        }
+    }
+}
+
+/// Runs `write` on the staging layer at byte `base` (`len` bytes).
+fn with_layer(
+    staging: &mut Staging,
+    base: usize,
+    len: usize,
+    write: impl FnOnce(&mut LayerOut) -> Result<(), String>,
+) -> Result<(), String> {
+    match staging {
+        Staging::Host(v) => {
+            if v.len() < (base + len) / 4 {
+                v.resize((base + len) / 4, 0.0);
+            }
+            write(&mut LayerOut::Host(&mut v[base / 4..(base + len) / 4]))
+        }
+        Staging::Mapped(b) => {
+            let view = b
+                .get_mapped_range_mut(base as u64..(base + len) as u64)
+                .map_err(|e| format!("staging buffer not mapped: {e}"))?;
+            write(&mut LayerOut::Mapped(view))
+        }
+    }
+}
+
+/// Writes one row of tiles of a bubble layer into staging (`w` × `ht` texels, rows
+/// `stride` texels apart, the coded plane's padding left out): member tiles from the band,
+/// zeros where the layer's last contents were not zero, nothing where they were.
+fn write_tile_row(
+    out: &mut LayerOut,
+    (w, ht, stride): (usize, usize, usize),
+    r: &chunk::TileRows<'_>,
+    zero: &mut [bool],
+) {
+    let ts = r.tile_size;
+    let rows = r.y0..(r.y0 + ts).min(ht);
+    let first_tile = (r.y0 / ts) * r.degrees.len();
+    let zero = &mut zero[first_tile..first_tile + r.degrees.len()];
+    for (a, b) in r.member_spans() {
+        let (a, b) = (a.min(w), b.min(w));
+        for y in rows.clone() {
+            let from = (y - r.y0) * r.band.w;
+            out.copy(y * stride + a, &r.band.data[from + a..from + b]);
+        }
+    }
+    for (a, b) in chunk::spans(zero.len(), |t| !r.is_member(t) && !zero[t]) {
+        let (a, b) = ((a * ts).min(w), (b * ts).min(w));
+        for y in rows.clone() {
+            out.zero(y * stride + a, b - a);
+        }
+    }
+    for (t, z) in zero.iter_mut().enumerate() {
+        *z = !r.is_member(t);
     }
 }
