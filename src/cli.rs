@@ -45,10 +45,10 @@ pub struct PlayArgs {
     /// Run without a window and print the summary.
     #[arg(long)]
     pub headless: bool,
-    /// Playback duration (`60s`, `2min`, `500ms`) [default: 60s].
+    /// Playback duration (`60s`, `2min`, `500ms`).
     #[arg(long, default_value = "60s")]
     pub duration: String,
-    /// Display refresh rate in Hz [default: 60].
+    /// Display refresh rate in Hz.
     #[arg(long, default_value_t = 60)]
     pub display_hz: u32,
     /// Cap the reader: SI bytes per second (`2MB/s`, `500kB/s`) or a multiple of the stream's mean bit rate (`1.2x`) [default: unlimited].
@@ -57,16 +57,16 @@ pub struct PlayArgs {
     /// Stall the reader periodically: `300ms@5s` = 300 ms every 5 s of playback; `300ms@5s+2s` = the same, the first at 2 s [default: none].
     #[arg(long)]
     pub stall: Option<String>,
-    /// What to show when data is late: interpolate (hold, then blend), wait (pause the clock) or skip (hold, then jump) [default: interpolate].
+    /// What to show when data is late: interpolate (hold, then blend), wait (pause the clock) or skip (hold, then jump).
     #[arg(long, default_value = "interpolate")]
     pub policy: String,
-    /// Catch-up window of the interpolate policy [default: 500ms].
+    /// Catch-up window of the interpolate policy.
     #[arg(long, default_value = "500ms")]
     pub catch_up: String,
     /// Ring capacity in bytes [default: the header's read-ahead at the read rate].
     #[arg(long)]
     pub ring: Option<usize>,
-    /// Added to the header's pre-roll: a reader stall this long while the ring first fills is survived (`500ms`) [default: 0].
+    /// Added to the header's pre-roll: a reader stall this long while the ring first fills is survived (`500ms`).
     #[arg(long, default_value = "0s")]
     pub preroll_margin: String,
     /// Run in real time with the reader and decoder on their own threads (default: simulated time, stepped deterministically, as fast as the machine goes).
@@ -75,7 +75,7 @@ pub struct PlayArgs {
     /// Per-frame records as CSV.
     #[arg(long)]
     pub stats: Option<PathBuf>,
-    /// Measure the shown frame against the reference decoder every N displayed frames (0 = never) [default: 30].
+    /// Measure the shown frame against the reference decoder every N displayed frames (0 = never).
     #[arg(long, default_value_t = 30)]
     pub check_every: u64,
     /// Summary as JSON to this file.
@@ -87,13 +87,13 @@ pub struct PlayArgs {
     /// With --scene --headless: directory for the rendered PNG frames and the animated preview (preview.gif).
     #[arg(short, long)]
     pub out: Option<PathBuf>,
-    /// With --scene --headless: frames to capture, evenly spread over the duration [default: 120].
+    /// With --scene --headless: frames to capture, evenly spread over the duration.
     #[arg(long, default_value_t = 120)]
     pub frames: usize,
-    /// Rendered width in pixels [default: 960].
+    /// Rendered width in pixels.
     #[arg(long, default_value_t = 960)]
     pub width: u32,
-    /// Rendered height in pixels [default: 540].
+    /// Rendered height in pixels.
     #[arg(long, default_value_t = 540)]
     pub height: u32,
     /// With a window: close it after this many frames (for scripted runs) [default: never].
@@ -103,33 +103,33 @@ pub struct PlayArgs {
 
 #[derive(Args)]
 pub struct DemoArgs {
-    /// Scene file [default: samples/jacksboro.toml].
+    /// Scene file.
     #[arg(default_value = "samples/jacksboro.toml")]
     pub scene: PathBuf,
-    /// Output directory [default: out/demo].
+    /// Output directory.
     #[arg(short, long, default_value = "out/demo")]
     pub out: PathBuf,
-    /// Bake resolution, texels per side [default: 512].
+    /// Bake resolution, texels per side.
     #[arg(long, default_value_t = 512)]
     pub size: usize,
-    /// Frames per day [default: 240].
+    /// Frames per day.
     #[arg(long, default_value_t = 240)]
     pub frames: usize,
-    /// Media frame rate of the demo stream: the day plays in frames / fps seconds [default: 24/1].
+    /// Media frame rate of the demo stream: the day plays in frames / fps seconds.
     #[arg(long, default_value = "24/1")]
     pub fps: String,
-    /// Reader cap during playback, SI rate or multiple of the stream's mean [default: 1.2x].
+    /// Reader cap during playback, SI rate or multiple of the stream's mean.
     #[arg(long, default_value = "1.2x")]
     pub bandwidth: String,
-    /// Reader stalls during playback [default: 500ms@4s].
+    /// Reader stalls during playback.
     #[arg(long, default_value = "500ms@4s")]
     pub stall: String,
     /// Added to the header's pre-roll, as long as a stall: the header's pre-roll assumes a
     /// reader that never stalls, and a stall while the ring first fills would make the
-    /// day's first transition late [default: 500ms].
+    /// day's first transition late.
     #[arg(long, default_value = "500ms")]
     pub preroll_margin: String,
-    /// Frames rendered in the terrain scene [default: 120].
+    /// Frames rendered in the terrain scene.
     #[arg(long, default_value_t = 120)]
     pub render_frames: usize,
     /// Moving cloud shadows in the bake [default: the scene's].
@@ -161,7 +161,7 @@ pub enum BenchCommand {
 pub struct BenchRenderArgs {
     /// The .vbim file.
     pub file: PathBuf,
-    /// Displayed frames measured per run [default: 600].
+    /// Displayed frames measured per run.
     #[arg(long, default_value_t = 600)]
     pub frames: u64,
     /// Runs (each a fresh player); the figures are the median over runs and their spread.
@@ -173,7 +173,7 @@ pub struct BenchRenderArgs {
 pub struct BenchLosslessArgs {
     /// Frames (directory, glob or pattern).
     pub input: String,
-    /// zstd level [default: 3].
+    /// zstd level.
     #[arg(long, default_value_t = 3)]
     pub level: i32,
 }
@@ -194,31 +194,31 @@ pub struct BenchPlotArgs {
 pub struct BenchDriftArgs {
     /// The .vbim file.
     pub file: PathBuf,
-    /// Output directory for drift.csv and drift.png [default: out/bench-drift].
+    /// Output directory for drift.csv and drift.png.
     #[arg(short, long, default_value = "out/bench-drift")]
     pub out: PathBuf,
-    /// Stall pattern [default: 500ms@10s].
+    /// Stall pattern.
     #[arg(long, default_value = "500ms@10s")]
     pub stall: String,
-    /// Playback per point [default: 60s].
+    /// Playback per point.
     #[arg(long, default_value = "60s")]
     pub duration: String,
-    /// Multiples of the mean bit rate to sweep [default: 0.25,0.5,0.75,1,1.2,1.5,2].
+    /// Multiples of the mean bit rate to sweep.
     #[arg(
         long,
         default_value = "0.25,0.5,0.75,1,1.2,1.5,2",
         value_delimiter = ','
     )]
     pub factors: Vec<f64>,
-    /// Measure shown error every N frames [default: 30].
+    /// Measure shown error every N frames.
     #[arg(long, default_value_t = 30)]
     pub check_every: u64,
     /// Run each point with the stall at N phases spread evenly over its period (a stall
     /// whose period is the loop's length always lands at the same moment of the day); the
-    /// plots show the worst phase, the CSV every run [default: 1].
+    /// plots show the worst phase, the CSV every run.
     #[arg(long, default_value_t = 1)]
     pub phases: u32,
-    /// Added to the header's pre-roll, as `vbim play --preroll-margin` [default: 0].
+    /// Added to the header's pre-roll, as `vbim play --preroll-margin`.
     #[arg(long, default_value = "0s")]
     pub preroll_margin: String,
 }
@@ -227,26 +227,26 @@ pub struct BenchDriftArgs {
 pub struct BenchDecodeArgs {
     /// The .vbim file.
     pub file: PathBuf,
-    /// Repetitions; the median and the spread are reported [default: 5].
+    /// Repetitions; the median and the spread are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
 }
 
 #[derive(Args)]
 pub struct BenchBakeArgs {
-    /// Scene file [default: samples/jacksboro.toml].
+    /// Scene file.
     #[arg(default_value = "samples/jacksboro.toml")]
     pub scene: PathBuf,
-    /// Bake resolution, texels per side [default: 512].
+    /// Bake resolution, texels per side.
     #[arg(long, default_value_t = 512)]
     pub size: usize,
-    /// Frames per day [default: 240].
+    /// Frames per day.
     #[arg(long, default_value_t = 240)]
     pub frames: usize,
-    /// Repetitions; the median and the spread are reported [default: 5].
+    /// Repetitions; the median and the spread are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
-    /// Moving clouds on or off [default: off].
+    /// Moving clouds on or off.
     #[arg(long, default_value_t = false)]
     pub clouds: bool,
 }
@@ -270,7 +270,7 @@ pub struct EncodeArgs {
     /// zstd level, 1–22 [default: preset's, 9].
     #[arg(long)]
     pub zstd_level: Option<i32>,
-    /// Worker threads; 0 = one per core. The output is identical for any value [default: 0].
+    /// Worker threads; 0 = one per core. The output is identical for any value.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Largest distance between independently decodable keyframes, media time (`4s`, `500ms`, `2min`) [default: 4s].

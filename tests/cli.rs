@@ -287,3 +287,36 @@ fn the_window_opens_renders_and_closes_under_xvfb() {
     );
     assert!(out.contains("window closed after 10 frames"), "{out}");
 }
+
+/// Every command's help gives each default once: clap prints `[default: …]` for an
+/// argument with a default value, so a doc comment that says it too printed it twice.
+#[test]
+fn help_states_each_default_once() {
+    let commands: &[&[&str]] = &[
+        &["bake"],
+        &["encode"],
+        &["inspect"],
+        &["decode"],
+        &["compare"],
+        &["play"],
+        &["demo"],
+        &["bench", "bake"],
+        &["bench", "decode"],
+        &["bench", "lossless"],
+        &["bench", "plot-rd"],
+        &["bench", "drift"],
+        &["bench", "render"],
+    ];
+    for c in commands {
+        let mut args = c.to_vec();
+        args.push("--help");
+        let help = ok(&args);
+        for line in help.lines() {
+            assert!(
+                line.matches("[default:").count() <= 1,
+                "vbim {}: {line}",
+                args.join(" ")
+            );
+        }
+    }
+}
