@@ -38,6 +38,31 @@ pub enum Command {
     Bench(BenchCommand),
 }
 
+/// `vbim play` parsed on its own (see [`PlayArgs::headless`]).
+#[derive(Parser)]
+#[command(name = "play")]
+struct PlayCommand {
+    #[command(flatten)]
+    args: PlayArgs,
+}
+
+impl PlayArgs {
+    /// `vbim play FILE --headless` with the command line's defaults: commands that play a
+    /// file (`bench drift`, `demo`) start from this and set what they change, so that a
+    /// default is written once, in its `#[arg]`.
+    pub fn headless(file: &std::path::Path) -> PlayArgs {
+        let argv = [
+            std::ffi::OsStr::new("play"),
+            "--headless".as_ref(),
+            "--".as_ref(),
+            file.as_os_str(),
+        ];
+        PlayCommand::try_parse_from(argv)
+            .expect("play's defaults parse")
+            .args
+    }
+}
+
 #[derive(Args, Clone)]
 pub struct PlayArgs {
     /// The .vbim file.
@@ -370,4 +395,23 @@ pub struct InspectArgs {
     /// Verify every chunk's checksum (reads the whole file).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub verify: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn headless_play_args_are_the_commands_defaults() {
+        let a = PlayArgs::headless(std::path::Path::new("-odd name.vbim"));
+        assert_eq!(a.file, PathBuf::from("-odd name.vbim"));
+        assert!(a.headless && !a.realtime);
+        assert_eq!((a.duration.as_str(), a.display_hz), ("60s", 60));
+        assert_eq!(
+            (a.policy.as_str(), a.catch_up.as_str()),
+            ("interpolate", "500ms")
+        );
+        assert_eq!((a.bandwidth, a.stall, a.ring), (None, None, None));
+        assert_eq!((a.check_every, a.preroll_margin.as_str()), (30, "0s"));
+    }
 }

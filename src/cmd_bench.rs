@@ -255,26 +255,13 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
         let (mut dp, mut pp) = (Vec::new(), Vec::new());
         for &f in &a.factors {
             let args = crate::cli::PlayArgs {
-                file: a.file.clone(),
-                headless: true,
                 duration: a.duration.clone(),
-                display_hz: 60,
                 bandwidth: Some(format!("{f}x")),
                 stall: Some(a.stall.clone()),
                 policy: policy.into(),
-                catch_up: "500ms".into(),
-                ring: None,
                 preroll_margin: a.preroll_margin.clone(),
-                realtime: false,
-                stats: None,
                 check_every: a.check_every,
-                json: None,
-                scene: None,
-                out: None,
-                frames: 0,
-                width: 0,
-                height: 0,
-                exit_after: None,
+                ..crate::cli::PlayArgs::headless(&a.file)
             };
             let base = session(&args)?;
             // The worst phase: the largest mean drift, the lowest shown PSNR.

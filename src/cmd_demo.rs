@@ -103,26 +103,13 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     );
     let duration = 2.0 * a.frames as f64 * cfg.rate.1 as f64 / cfg.rate.0 as f64;
     let play_args = crate::cli::PlayArgs {
-        file: file.clone(),
-        headless: true,
         duration: format!("{duration}s"),
-        display_hz: 60,
         bandwidth: Some(a.bandwidth.clone()),
         stall: Some(a.stall.clone()),
-        policy: "interpolate".into(),
-        catch_up: "500ms".into(),
-        ring: None,
         preroll_margin: a.preroll_margin.clone(),
-        realtime: false,
-        stats: None,
         check_every: 15,
-        json: None,
-        scene: None,
-        out: None,
         frames: a.render_frames,
-        width: 960,
-        height: 540,
-        exit_after: None,
+        ..crate::cli::PlayArgs::headless(&file)
     };
     let s = session(&play_args)?;
     let (device, queue, adapter) = vbim_player::headless_device()?;

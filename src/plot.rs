@@ -101,7 +101,10 @@ pub fn lines(
                     .copied()
                     .filter(|p| p.0.is_finite() && p.1.is_finite())
                     .collect();
-                c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
+                // One pixel wide: plotters draws wider lines with a polygon that can reach
+                // past the plotting area on a near-vertical step (plotters issue #549; the
+                // demo's drift plot showed a line below its x-axis at the catch-up).
+                c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(1)))
                     .map_err(|e| e.to_string())?
                     .label(s.name.clone())
                     .legend(move |(x, y)| {
