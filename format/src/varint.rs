@@ -22,7 +22,9 @@ pub fn get_u32(buf: &[u8], pos: &mut usize) -> Result<u32> {
     Ok(z)
 }
 
-#[inline]
+/// Most coefficients and runs fit in one byte: that case is inlined into the caller's loop,
+/// the rest is an out-of-line call.
+#[inline(always)]
 fn get_i32_raw(buf: &[u8], pos: &mut usize) -> Result<u32> {
     if let Some(&b) = buf.get(*pos) {
         if b & 0x80 == 0 {
@@ -30,6 +32,12 @@ fn get_i32_raw(buf: &[u8], pos: &mut usize) -> Result<u32> {
             return Ok(b as u32);
         }
     }
+    get_long(buf, pos)
+}
+
+#[cold]
+#[inline(never)]
+fn get_long(buf: &[u8], pos: &mut usize) -> Result<u32> {
     let mut u: u32 = 0;
     for shift in (0..35).step_by(7) {
         let b = *buf
