@@ -17,20 +17,44 @@ thread_local! {
 
 /// Reads one coefficient stream of `n` blocks at `pos` and adds each dequantised block into
 /// `plane` at the next of `origins` (block units).
-fn add_stream(
+/// One keyframe plane: `base` (the predecessor's plane; zeros for an intra keyframe) plus
+/// the stream's blocks. Built one row of blocks at a time: each row is copied from the
+/// base and gets its blocks added while it is in cache, rather than the whole base being
+/// copied first and walked again (the additions are the same, in the same order).
+fn keyframe_plane(
     raw: &[u8],
     pos: &mut usize,
-    n: usize,
-    origins: impl Iterator<Item = (usize, usize)>,
-    plane: &mut Plane,
+    (w, ht): (usize, usize),
+    base: Option<&Plane>,
     step: f32,
-) -> Result<()> {
-    BLOCKS.with_borrow_mut(|q| {
-        plane::read_blocks(raw, pos, n, q)?;
-        for ((bx, by), b) in origins.zip(0..n) {
-            plane::add_block_of(plane, bx, by, q, b, step);
+) -> Result<Plane> {
+    if let Some(b) = base {
+        if (b.w, b.h) != (w, ht) {
+            return Err(FormatError::Invalid(format!(
+                "reference keyframe is {}×{}, expected {w}×{ht}",
+                b.w, b.h
+            )));
         }
-        Ok(())
+    }
+    let bw = w / N;
+    BLOCKS.with_borrow_mut(|q| {
+        plane::read_blocks(raw, pos, bw * (ht / N), q)?;
+        let mut out = Plane {
+            w,
+            h: ht,
+            data: Vec::with_capacity(w * ht),
+        };
+        for by in 0..ht / N {
+            let rows = by * N * w..(by + 1) * N * w;
+            match base {
+                Some(b) => out.data.extend_from_slice(&b.data[rows]),
+                None => out.data.resize(rows.end, 0.0),
+            }
+            for bx in 0..bw {
+                plane::add_block_of(&mut out, bx, by, q, by * bw + bx, step);
+            }
+        }
+        Ok(out)
     })
 }
 
@@ -107,7 +131,6 @@ pub fn read_keyframe(h: &Header, bytes: &[u8], prev: Option<&[Plane]>) -> Result
 pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Result<Vec<Plane>> {
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
-    let nblocks = (w / N) * (ht / N);
     let mut r = Bytes { b: raw, pos: 0 };
     let head = r.take(4)?;
     let (mode, np) = (head[0], head[1] as usize);
@@ -116,10 +139,10 @@ pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Resu
             "{np} planes, expected {planes}"
         )));
     }
-    let base: Vec<Plane> = match mode {
-        MODE_INTRA => vec![Plane::zeros(w, ht); planes],
+    let base: Option<&[Plane]> = match mode {
+        MODE_INTRA => None,
         MODE_PREDICTED => match prev {
-            Some(p) if p.len() == planes => p.to_vec(),
+            Some(p) if p.len() == planes => Some(p),
             _ => {
                 return Err(FormatError::Invalid(
                     "predicted keyframe without its reference".into(),
@@ -129,11 +152,11 @@ pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Resu
         m => return Err(FormatError::Invalid(format!("unknown keyframe mode {m}"))),
     };
     let steps: Vec<f32> = (0..planes).map(|_| r.f32()).collect::<Result<_>>()?;
-    let mut out = base;
     let mut pos = r.pos;
-    for (p, step) in steps.iter().enumerate() {
-        let origins = crate::plane::all_blocks(&out[p]);
-        add_stream(raw, &mut pos, nblocks, origins, &mut out[p], *step)?;
+    let mut out = Vec::with_capacity(planes);
+    for (p, &step) in steps.iter().enumerate() {
+        let b = base.map(|b| &b[p]);
+        out.push(keyframe_plane(raw, &mut pos, (w, ht), b, step)?);
     }
     if pos != raw.len() {
         return Err(FormatError::Invalid(format!(
