@@ -737,3 +737,71 @@ fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
     assert!(checked >= 20, "{checked} exact frames checked: {t:?}");
     assert!(t.segments_uploaded >= 24, "two loops and more: {t:?}");
 }
+
+/// A staging box reused from segment to segment holds exactly each segment's bubble
+/// planes, although tiles below a term's degree are only written when the box's last
+/// segment left something there (the moving edge takes tiles in and out of each term).
+#[test]
+fn a_reused_staging_box_holds_each_segments_bubbles_exactly() {
+    use vbim_format::chunk::{read_coeffs, read_tilemap};
+    use vbim_player::assemble::{layer_bytes, row_pitch, DecoderCore, Event, SegmentData, Staging};
+    let bytes = encode_bytes(
+        &sequence(96, 32, 96, InputKind::Hdr),
+        &config(SegmentMode::Fixed(8)),
+    );
+    let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
+    let (h, entries, layout) = (r.header().clone(), r.entries().to_vec(), r.layout().clone());
+    let chunk = |i: usize| {
+        let e = &entries[i];
+        &bytes[e.offset as usize..(e.offset + e.length) as usize]
+    };
+    let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
+    let mut staging = SegmentData::with_capacity(&h);
+    let (w, ht, ch) = (h.width as usize, h.height as usize, h.channels as usize);
+    let (stride, layer) = (
+        row_pitch(h.width) as usize / 4,
+        layer_bytes(&h) as usize / 4,
+    );
+    // (term k, plane p, tile) members of the segment before, to count tiles that leave.
+    let mut before: Option<Vec<bool>> = None;
+    let (mut checked, mut left) = (0, 0);
+    for i in 0..entries.len() {
+        let Event::Ready(s) = dec.take(i, Some(chunk(i))) else {
+            continue;
+        };
+        dec.fill(s, 0, 0, &mut staging).unwrap();
+        let (ti, ci) = layout.segments[s];
+        let len = layout.boundaries[s + 1] - layout.boundaries[s];
+        let tiles = read_tilemap(&h, chunk(ti), len).unwrap();
+        let want = read_coeffs(&h, chunk(ci), &tiles).unwrap();
+        let Staging::Host(got) = &staging.staging else {
+            unreachable!()
+        };
+        let n = h.tile_count();
+        let members: Vec<bool> = (2..=h.max_degree)
+            .flat_map(|k| (0..ch).flat_map(move |p| (0..n).map(move |t| (k, p, t))))
+            .map(|(k, p, t)| tiles.degree(p, t) >= k)
+            .collect();
+        for (k, planes) in want.iter().enumerate() {
+            for (p, plane) in planes.iter().enumerate().take(ch) {
+                let base = ((k + 2) * ch + p) * layer;
+                for y in 0..ht {
+                    let row = &got[base + y * stride..base + y * stride + w];
+                    assert!(
+                        row == &plane.data[y * plane.w..y * plane.w + w],
+                        "segment {s}, term {}, plane {p}, row {y}",
+                        k + 2
+                    );
+                }
+            }
+        }
+        if let Some(b) = &before {
+            left += b.iter().zip(&members).filter(|(a, b)| **a && !**b).count();
+        }
+        before = Some(members);
+        checked += 1;
+    }
+    assert!(checked >= 8, "{checked} segments");
+    // Otherwise the test could not tell a stale tile from a zero one.
+    assert!(left > 0, "no tile left a term between segments");
+}
