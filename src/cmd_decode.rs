@@ -42,8 +42,7 @@ pub fn run(a: DecodeArgs) -> Result<(), String> {
         exposure.get_or_insert(exposure_from_max_greens(&greens));
         png16_scale.get_or_insert(if max > 0.0 { 65535.0 / max } else { 1.0 });
     }
-    for i in 0..n {
-        let stored = to_rgb(&seq.read(i)?, ch);
+    let write_one = |i: usize, stored: Vec<f32>| -> Result<(), String> {
         let path = a.out.join(frame_name(i, format));
         if srgb8 && format == FrameFormat::Png8 {
             // 8-bit files decode to their own code values.
@@ -57,7 +56,7 @@ pub fn run(a: DecodeArgs) -> Result<(), String> {
                     .save(tmp)
                     .map_err(|e| e.to_string())
             })
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| e.to_string())
         } else {
             let linear: Vec<f32> = if srgb8 {
                 stored.iter().map(|&c| srgb_to_linear(c)).collect()
@@ -65,10 +64,46 @@ pub fn run(a: DecodeArgs) -> Result<(), String> {
                 stored
             };
             let scale = if srgb8 { Some(65535.0) } else { png16_scale };
-            write_frame(&path, w, h, &linear, format, exposure, scale)
-                .map_err(|e| e.to_string())?;
+            write_frame(&path, w, h, &linear, format, exposure, scale).map_err(|e| e.to_string())
         }
-        stages.report("decode", i as u64 + 1, n as u64);
+    };
+    // Frames are decoded in order on this thread (the decoder walks the keyframe chain)
+    // and written by one thread per core, as many as fit in 512 MB of frames in flight:
+    // encoding an EXR or PNG costs more than decoding the frame.
+    let frame_bytes = (w * h * 3 * 4).max(1);
+    let writers = std::thread::available_parallelism()
+        .map_or(1, |c| c.get())
+        .min((512 << 20) / frame_bytes / 2)
+        .max(1);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, Vec<f32>)>(writers);
+    let rx = std::sync::Mutex::new(rx);
+    let failed = std::sync::Mutex::new(None::<String>);
+    std::thread::scope(|s| -> Result<(), String> {
+        // Owned here, so that an early return closes the channel and the writers finish.
+        let tx = tx;
+        for _ in 0..writers {
+            s.spawn(|| loop {
+                let next = rx.lock().expect("no writer panics").recv();
+                let Ok((i, stored)) = next else { break };
+                if let Err(e) = write_one(i, stored) {
+                    failed.lock().expect("no writer panics").get_or_insert(e);
+                }
+            });
+        }
+        for i in 0..n {
+            if failed.lock().expect("no writer panics").is_some() {
+                break;
+            }
+            let stored = to_rgb(&seq.read(i)?, ch);
+            if tx.send((i, stored)).is_err() {
+                break;
+            }
+            stages.report("decode", i as u64 + 1, n as u64);
+        }
+        Ok(())
+    })?;
+    if let Some(e) = failed.into_inner().expect("no writer panics") {
+        return Err(e);
     }
     stages.finish();
     println!("decoded {n} frames of {w}×{h} into {}", a.out.display());
