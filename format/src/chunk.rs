@@ -25,20 +25,33 @@ fn keyframe_plane(
     raw: &[u8],
     pos: &mut usize,
     (w, ht): (usize, usize),
-    base: Option<&Plane>,
+    base: Reference<&Plane, Plane>,
     step: f32,
 ) -> Result<Plane> {
-    if let Some(b) = base {
-        if (b.w, b.h) != (w, ht) {
-            return Err(FormatError::Invalid(format!(
-                "reference keyframe is {}×{}, expected {w}×{ht}",
-                b.w, b.h
-            )));
-        }
+    let dims = match &base {
+        Reference::None => None,
+        Reference::Borrowed(b) => Some((b.w, b.h)),
+        Reference::Owned(b) => Some((b.w, b.h)),
+    };
+    if let Some((bw, bh)) = dims.filter(|&d| d != (w, ht)) {
+        return Err(FormatError::Invalid(format!(
+            "reference keyframe is {bw}×{bh}, expected {w}×{ht}"
+        )));
     }
     let bw = w / N;
     BLOCKS.with_borrow_mut(|q| {
         plane::read_blocks(raw, pos, bw * (ht / N), q)?;
+        let base = match base {
+            // Nothing to copy: the blocks are added where the reference is.
+            Reference::Owned(mut out) => {
+                for (bx, by) in plane::all_blocks(&out) {
+                    plane::add_block_of(&mut out, bx, by, q, by * bw + bx, step);
+                }
+                return Ok(out);
+            }
+            Reference::Borrowed(b) => Some(b),
+            Reference::None => None,
+        };
         let mut out = Plane {
             w,
             h: ht,
@@ -119,16 +132,43 @@ pub fn write_keyframe(mode: u8, steps: &[f32], blocks: &[Vec<[i32; N * N]>]) -> 
 /// Decodes a keyframe chunk (already checksum-verified) into coded-domain planes.
 /// `prev` is the previous decoded keyframe, required when the keyframe is predicted.
 pub fn read_keyframe(h: &Header, bytes: &[u8], prev: Option<&[Plane]>) -> Result<Vec<Plane>> {
+    let prev = prev.map_or(Reference::None, Reference::Borrowed);
+    read_keyframe_from(h, bytes, prev)
+}
+
+/// The keyframe a predicted keyframe is coded against.
+pub enum Reference<B, O> {
+    None,
+    /// Still needed by its owner: copied.
+    Borrowed(B),
+    /// No longer needed: the new keyframe is built in its planes, with no copy.
+    Owned(O),
+}
+
+/// [`read_keyframe`] with the reference given as a [`Reference`].
+pub fn read_keyframe_from(
+    h: &Header,
+    bytes: &[u8],
+    prev: Reference<&[Plane], Vec<Plane>>,
+) -> Result<Vec<Plane>> {
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
     let raw = decompress(bytes, stream_limit(nblocks * planes, planes))?;
-    read_keyframe_raw(h, &raw, prev)
+    keyframe_from_raw(h, &raw, prev)
 }
 
 /// Decodes an uncompressed keyframe payload (what [`write_keyframe`] returns). The encoder
 /// uses it to measure candidate quantisers exactly as a player will decode them.
 pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Result<Vec<Plane>> {
+    keyframe_from_raw(h, raw, prev.map_or(Reference::None, Reference::Borrowed))
+}
+
+fn keyframe_from_raw(
+    h: &Header,
+    raw: &[u8],
+    prev: Reference<&[Plane], Vec<Plane>>,
+) -> Result<Vec<Plane>> {
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let mut r = Bytes { b: raw, pos: 0 };
@@ -139,23 +179,29 @@ pub fn read_keyframe_raw(h: &Header, raw: &[u8], prev: Option<&[Plane]>) -> Resu
             "{np} planes, expected {planes}"
         )));
     }
-    let base: Option<&[Plane]> = match mode {
-        MODE_INTRA => None,
-        MODE_PREDICTED => match prev {
-            Some(p) if p.len() == planes => Some(p),
-            _ => {
-                return Err(FormatError::Invalid(
-                    "predicted keyframe without its reference".into(),
-                ))
-            }
+    let count = match &prev {
+        Reference::None => None,
+        Reference::Borrowed(p) => Some(p.len()),
+        Reference::Owned(p) => Some(p.len()),
+    };
+    let mut base: Vec<Reference<&Plane, Plane>> = match (mode, count) {
+        (MODE_INTRA, _) => (0..planes).map(|_| Reference::None).collect(),
+        (MODE_PREDICTED, Some(c)) if c == planes => match prev {
+            Reference::Borrowed(p) => p.iter().map(Reference::Borrowed).collect(),
+            Reference::Owned(p) => p.into_iter().map(Reference::Owned).collect(),
+            Reference::None => unreachable!("counted above"),
         },
-        m => return Err(FormatError::Invalid(format!("unknown keyframe mode {m}"))),
+        (MODE_PREDICTED, _) => {
+            return Err(FormatError::Invalid(
+                "predicted keyframe without its reference".into(),
+            ))
+        }
+        (m, _) => return Err(FormatError::Invalid(format!("unknown keyframe mode {m}"))),
     };
     let steps: Vec<f32> = (0..planes).map(|_| r.f32()).collect::<Result<_>>()?;
     let mut pos = r.pos;
     let mut out = Vec::with_capacity(planes);
-    for (p, &step) in steps.iter().enumerate() {
-        let b = base.map(|b| &b[p]);
+    for (b, &step) in base.drain(..).zip(&steps) {
         out.push(keyframe_plane(raw, &mut pos, (w, ht), b, step)?);
     }
     if pos != raw.len() {

@@ -136,12 +136,22 @@ pub enum Event {
     Damaged(String),
 }
 
+/// A keyframe the decoder has.
+#[derive(Clone)]
+enum Key {
+    Planes(Arc<Vec<Plane>>),
+    /// Its planes became the next predicted keyframe's. Only done when the segment it
+    /// opens will not stage it: the segment before, which it closes, was filled, and the
+    /// render thread has it on the GPU.
+    OnGpu,
+}
+
 pub struct DecoderCore {
     pub header: Header,
     layout: Layout,
     entries: Vec<IndexEntry>,
-    /// Decoded keyframes still needed: by keyframe number.
-    keys: Vec<Option<Arc<Vec<Plane>>>>,
+    /// Keyframes still needed: by keyframe number.
+    keys: Vec<Option<Key>>,
     tiles: Vec<Option<TileMap>>,
     coeffs: Vec<Option<Vec<u8>>>,
     /// The last keyframe decoded, for the predicted chain.
@@ -204,21 +214,41 @@ impl DecoderCore {
         let n = e.number as usize;
         match e.kind {
             ChunkKind::Keyframe => {
-                let prev = match &self.chain {
-                    Some((k, p)) if *k + 1 == n => Some(p.clone()),
-                    _ => None,
-                };
-                if !e.is_intra() && prev.is_none() {
-                    // The chain is broken (damage, or we started mid-stream): wait for intra.
-                    self.keys[n] = None;
-                    return Event::Nothing;
+                // The reference: K_{n−1}, if the chain holds it. When the segment K_{n−1}
+                // opens will not stage it (the segment before, closed by it, was filled),
+                // no one needs its planes on the CPU any more — except keyframe 0, kept
+                // for a loop's end — and K_n is built in them instead of a copy.
+                let (mut owned, mut held) = (None, None);
+                match self.chain.take() {
+                    Some((k, p)) if k + 1 == n => {
+                        if k > 0 && self.last_closing.is_some_and(|(_, c)| c == k) {
+                            self.keys[k] = Some(Key::OnGpu);
+                        }
+                        // Unique unless `keys[k]` still holds it.
+                        match Arc::try_unwrap(p) {
+                            Ok(planes) => owned = Some(planes),
+                            Err(p) => held = Some(p),
+                        }
+                    }
+                    other => self.chain = other,
                 }
+                let prev = match (owned, &held) {
+                    (Some(planes), _) => chunk::Reference::Owned(planes),
+                    (None, Some(p)) => chunk::Reference::Borrowed(&p[..]),
+                    (None, None) if !e.is_intra() => {
+                        // The chain is broken (damage, or we started mid-stream): wait for
+                        // an intra keyframe.
+                        self.keys[n] = None;
+                        return Event::Nothing;
+                    }
+                    (None, None) => chunk::Reference::None,
+                };
                 let t = thread_cpu_ns();
-                match chunk::read_keyframe(&self.header, bytes, prev.as_deref().map(|v| &v[..])) {
+                match chunk::read_keyframe_from(&self.header, bytes, prev) {
                     Ok(planes) => {
                         self.key_ns += thread_cpu_ns() - t;
                         let planes = Arc::new(planes);
-                        self.keys[n] = Some(planes.clone());
+                        self.keys[n] = Some(Key::Planes(planes.clone()));
                         self.chain = Some((n, planes));
                         // Drop keyframes no segment ahead needs (keyframe 0 stays for a loop).
                         for k in 1..n.saturating_sub(1) {
@@ -296,9 +326,15 @@ impl DecoderCore {
         let t0 = thread_cpu_ns();
         let h = &self.header;
         let k1n = self.layout.keyframe_of_boundary(s + 1);
-        let k0 = self.keys[s].clone().ok_or("keyframe missing")?;
-        let k1 = self.keys[k1n].clone().ok_or("keyframe missing")?;
         let k0_staged = self.last_closing != Some((generation, s));
+        let planes = |k: usize| match &self.keys[k] {
+            Some(Key::Planes(p)) => Ok(p.clone()),
+            Some(Key::OnGpu) => Err(format!("keyframe {k} is no longer decoded")),
+            None => Err(format!("keyframe {k} missing")),
+        };
+        let k1 = planes(k1n)?;
+        // K_s only when it is staged.
+        let k0 = if k0_staged { Some(planes(s)?) } else { None };
         // Whatever happens below, the box's old contents are not what it is about to hold.
         self.last_closing = None;
         let tiles = self.tiles[s].take().ok_or("tile map missing")?;
@@ -324,10 +360,10 @@ impl DecoderCore {
         }
         // Term `l`, plane `p` is staging layer l·channels + p: each row is written as it is
         // (the padding columns and rows of the coded planes are left out).
-        for (l, key) in [(0, &k0), (1, &k1)] {
-            if l == 0 && !k0_staged {
+        for (l, key) in [(0, k0.as_ref()), (1, Some(&k1))] {
+            let Some(key) = key else {
                 continue;
-            }
+            };
             for (p, plane) in key.iter().enumerate().take(ch) {
                 with_layer(&mut out.staging, (l * ch + p) * layer, layer, |o| {
                     for y in 0..ht {
