@@ -79,14 +79,30 @@ pub fn padded_size(h: &Header) -> (usize, usize) {
 
 /// Decompresses a zstd frame, refusing output larger than `limit` bytes.
 pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
+    let mut capacity = limit;
     if let Ok(Some(n)) = zstd::zstd_safe::get_frame_content_size(bytes) {
         if n > limit as u64 {
             return Err(FormatError::Invalid(format!(
                 "payload claims {n} bytes decompressed (limit {limit})"
             )));
         }
+        // The encoder's frames state their size: allocate that, not the limit.
+        capacity = n as usize;
     }
-    zstd::bulk::decompress(bytes, limit).map_err(|e| FormatError::Invalid(format!("zstd: {e}")))
+    // One decompression context per thread, kept: creating one per chunk cost ~1% of the
+    // player's decode.
+    thread_local! {
+        static DCTX: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
+            const { std::cell::RefCell::new(None) };
+    }
+    let zstd_error = |e: std::io::Error| FormatError::Invalid(format!("zstd: {e}"));
+    DCTX.with_borrow_mut(|d| {
+        let d = match d {
+            Some(d) => d,
+            None => d.insert(zstd::bulk::Decompressor::new().map_err(zstd_error)?),
+        };
+        d.decompress(bytes, capacity).map_err(zstd_error)
+    })
 }
 
 /// Upper bound of a decompressed payload holding `blocks` coefficient blocks.
