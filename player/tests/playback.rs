@@ -555,15 +555,31 @@ fn assert_display_matches(
     }
 }
 
+/// An HDR test sequence encoded with fixed segments: its bytes, header, index and layout.
+fn stream(
+    w: usize,
+    h: usize,
+    n: usize,
+    segment: u32,
+) -> (
+    Vec<u8>,
+    vbim_format::Header,
+    Vec<vbim_format::IndexEntry>,
+    vbim_format::index::Layout,
+) {
+    let bytes = encode_bytes(
+        &sequence(w, h, n, InputKind::Hdr),
+        &config(SegmentMode::Fixed(segment)),
+    );
+    let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
+    let (hd, entries, layout) = (r.header().clone(), r.entries().to_vec(), r.layout().clone());
+    (bytes, hd, entries, layout)
+}
+
 #[test]
 fn keyframes_shared_by_consecutive_segments_are_staged_once() {
     use vbim_player::assemble::{DecoderCore, Event, SegmentData};
-    let bytes = encode_bytes(
-        &sequence(32, 16, 48, InputKind::Hdr),
-        &config(SegmentMode::Fixed(6)),
-    );
-    let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
-    let (h, entries, layout) = (r.header().clone(), r.entries().to_vec(), r.layout().clone());
+    let (bytes, h, entries, layout) = stream(32, 16, 48, 6);
     let mut dec = DecoderCore::new(h.clone(), layout, entries.clone());
     let mut staging = SegmentData::with_capacity(&h);
     let mut staged = Vec::new();
@@ -745,12 +761,7 @@ fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
 fn a_reused_staging_box_holds_each_segments_bubbles_exactly() {
     use vbim_format::chunk::{read_coeffs, read_tilemap};
     use vbim_player::assemble::{layer_bytes, row_pitch, DecoderCore, Event, SegmentData, Staging};
-    let bytes = encode_bytes(
-        &sequence(96, 32, 96, InputKind::Hdr),
-        &config(SegmentMode::Fixed(8)),
-    );
-    let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
-    let (h, entries, layout) = (r.header().clone(), r.entries().to_vec(), r.layout().clone());
+    let (bytes, h, entries, layout) = stream(96, 32, 96, 8);
     let chunk = |i: usize| {
         let e = &entries[i];
         &bytes[e.offset as usize..(e.offset + e.length) as usize]
