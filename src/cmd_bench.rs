@@ -242,12 +242,12 @@ fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
 
 fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
     use crate::cmd_play::{play, session};
-    std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
-    let (device, queue, info) = vbim_player::headless_device()?;
-    let adapter = format!("{} ({:?})", info.name, info.backend);
     if a.phases == 0 {
         return Err("--phases must be at least 1".into());
     }
+    std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
+    let (device, queue, info) = vbim_player::headless_device()?;
+    let adapter = format!("{} ({:?})", info.name, info.backend);
     let mut csv = String::from("policy,factor,first_stall_s,read_rate,ring_bytes,mean_drift,p99_drift,max_drift,late_frames,stalls,shown_mean_psnr,shown_worst_psnr\n");
     let mut drift_series = Vec::new();
     let mut psnr_series = Vec::new();

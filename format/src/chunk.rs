@@ -15,8 +15,6 @@ thread_local! {
     static BLOCKS: std::cell::RefCell<plane::Blocks> = Default::default();
 }
 
-/// Reads one coefficient stream of `n` blocks at `pos` and adds each dequantised block into
-/// `plane` at the next of `origins` (block units).
 /// One keyframe plane: `base` (the predecessor's plane; zeros for an intra keyframe) plus
 /// the stream's blocks. Built one row of blocks at a time: each row is copied from the
 /// base and gets its blocks added while it is in cache, rather than the whole base being
@@ -195,18 +193,14 @@ fn keyframe_from_raw(
             "{np} planes, expected {planes}"
         )));
     }
-    let count = match &prev {
-        Reference::None => None,
-        Reference::Borrowed(p) => Some(p.len()),
-        Reference::Owned(p) => Some(p.len()),
-    };
-    let mut base: Vec<Reference<&Plane, Plane>> = match (mode, count) {
+    let mut base: Vec<Reference<&Plane, Plane>> = match (mode, prev) {
         (MODE_INTRA, _) => (0..planes).map(|_| Reference::None).collect(),
-        (MODE_PREDICTED, Some(c)) if c == planes => match prev {
-            Reference::Borrowed(p) => p.iter().map(Reference::Borrowed).collect(),
-            Reference::Owned(p) => p.into_iter().map(Reference::Owned).collect(),
-            Reference::None => unreachable!("counted above"),
-        },
+        (MODE_PREDICTED, Reference::Borrowed(p)) if p.len() == planes => {
+            p.iter().map(Reference::Borrowed).collect()
+        }
+        (MODE_PREDICTED, Reference::Owned(p)) if p.len() == planes => {
+            p.into_iter().map(Reference::Owned).collect()
+        }
         (MODE_PREDICTED, _) => {
             return Err(FormatError::Invalid(
                 "predicted keyframe without its reference".into(),
@@ -237,12 +231,16 @@ pub struct TileMap {
 }
 
 impl TileMap {
-    pub fn degree(&self, plane: usize, tile: usize) -> u8 {
+    /// The degrees of every tile for `plane`: luma for plane 0, chroma for the others.
+    pub fn degrees(&self, plane: usize) -> &[u8] {
         if plane == 0 {
-            self.luma[tile]
+            &self.luma
         } else {
-            self.chroma[tile]
+            &self.chroma
         }
+    }
+    pub fn degree(&self, plane: usize, tile: usize) -> u8 {
+        self.degrees(plane)[tile]
     }
     pub fn max_degree(&self) -> u8 {
         self.luma
@@ -490,7 +488,7 @@ impl<'t> CoeffReader<'t> {
         BLOCKS.with_borrow_mut(|q| {
             plane::read_blocks(raw, pos, members * per * per, q)?;
             let mut b = 0;
-            let degrees = if p == 0 { &tiles.luma } else { &tiles.chroma };
+            let degrees = tiles.degrees(p);
             for ty in 0..self.tiles_y {
                 let row_degrees = &degrees[ty * self.tiles_x..(ty + 1) * self.tiles_x];
                 // Clear the member tiles' columns (runs of them at a time: one call per

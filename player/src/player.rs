@@ -1072,7 +1072,7 @@ fn decoder_loop(
     let mut spare: Option<Box<SegmentData>> = None;
     while !stop.load(Ordering::Relaxed) {
         // An empty ring: the reader wakes this thread when a chunk goes in. (Polling it
-        // every 0.5 ms cost ~1% of this thread's time in wake-ups.)
+        // every 0.5 ms woke this thread ~9× as often at 1.2× the mean rate.)
         let Some(m) = pop_message(&mut cons, &mut msg) else {
             std::thread::park_timeout(PARK);
             continue;

@@ -64,6 +64,10 @@ fn encode_bytes(src: &MemorySource, cfg: &EncoderConfig) -> Vec<u8> {
     std::fs::read(out).unwrap()
 }
 
+fn header_of(bytes: &[u8]) -> vbim_format::Header {
+    Reader::open(Cursor::new(bytes)).unwrap().header().clone()
+}
+
 fn config(segment: SegmentMode) -> EncoderConfig {
     EncoderConfig {
         segment,
@@ -156,10 +160,7 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
 fn a_stall_longer_than_the_read_ahead_holds_then_catches_up_without_black_frames() {
     let (device, queue) = device();
     let bytes = encode_bytes(&noisy(64, 32, 96), &config(SegmentMode::Fixed(6)));
-    let header = Reader::open(Cursor::new(bytes.clone()))
-        .unwrap()
-        .header()
-        .clone();
+    let header = header_of(&bytes);
     let mean_rate = header.file_size as f64 / (96.0 / 24.0);
     // 3× the mean rate, with a 1.5 s stall every 6 s of playback: far longer than what the
     // ring (the header's read-ahead at that rate) holds.
@@ -333,10 +334,7 @@ fn wait_and_skip_policies() {
         &sequence(32, 16, 48, InputKind::Hdr),
         &config(SegmentMode::Fixed(6)),
     );
-    let header = Reader::open(Cursor::new(bytes.clone()))
-        .unwrap()
-        .header()
-        .clone();
+    let header = header_of(&bytes);
     let rate = (header.file_size as f64 / 2.0 * 0.5) as u64; // half the mean rate: always late
     for policy in [Policy::Wait, Policy::Skip] {
         // No pre-roll: start as soon as the first segment is in, and fall behind.
@@ -619,10 +617,7 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
     let (device, queue) = device();
     let (w, h, n) = (48, 32, 96);
     let bytes = encode_bytes(&noisy(w, h, n), &config(SegmentMode::Fixed(4)));
-    let header = Reader::open(Cursor::new(bytes.clone()))
-        .unwrap()
-        .header()
-        .clone();
+    let header = header_of(&bytes);
     let mean_rate = header.file_size as f64 / (n as f64 / 24.0);
     let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
     for (policy, factor) in [(Policy::Skip, 2.0), (Policy::Interpolate, 1.5)] {
@@ -679,10 +674,7 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
 fn a_preroll_margin_absorbs_a_stall_while_the_ring_first_fills() {
     let (device, queue) = device();
     let bytes = encode_bytes(&noisy(64, 32, 96), &config(SegmentMode::Fixed(6)));
-    let header = Reader::open(Cursor::new(bytes.clone()))
-        .unwrap()
-        .header()
-        .clone();
+    let header = header_of(&bytes);
     let rate = (header.file_size as f64 / 4.0 * 1.2) as u64;
     // A 500 ms stall at 300 ms, before the ring has filled, then every 10 s.
     let stall = Stall {
