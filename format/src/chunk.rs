@@ -4,7 +4,7 @@
 
 use crate::dct::N;
 use crate::header::Header;
-use crate::plane::{self, Plane};
+use crate::plane::{self, Onto, Plane};
 use crate::{FormatError, Result};
 
 pub const MODE_INTRA: u8 = 0;
@@ -42,9 +42,8 @@ fn keyframe_plane(
         let base = match base {
             // Nothing to copy: the blocks are added where the reference is.
             Reference::Owned(mut out) => {
-                for (bx, by) in plane::all_blocks(&out) {
-                    plane::add_block_of(&mut out, bx, by, q, by * bw + bx, step);
-                }
+                let at = plane::all_blocks(&out);
+                plane::add_blocks_of(&mut out, at, Onto::Plane, q, 0, step);
                 return Ok(out);
             }
             Reference::Borrowed(b) => Some(b),
@@ -61,9 +60,8 @@ fn keyframe_plane(
                 Some(b) => out.data.extend_from_slice(&b.data[rows]),
                 None => out.data.resize(rows.end, 0.0),
             }
-            for bx in 0..bw {
-                plane::add_block_of(&mut out, bx, by, q, by * bw + bx, step);
-            }
+            let at = (0..bw).map(|bx| (bx, by));
+            plane::add_blocks_of(&mut out, at, Onto::Plane, q, by * bw, step);
         }
         Ok(out)
     })
@@ -491,23 +489,18 @@ impl<'t> CoeffReader<'t> {
             let degrees = tiles.degrees(p);
             for ty in 0..self.tiles_y {
                 let row_degrees = &degrees[ty * self.tiles_x..(ty + 1) * self.tiles_x];
-                // Clear the member tiles' columns (runs of them at a time: one call per
-                // run and row, not per tile).
-                for (a, b) in spans(row_degrees.len(), |t| row_degrees[t] >= k) {
-                    for y in 0..ts {
-                        band.data[y * w + a * ts..y * w + b * ts].fill(0.0);
-                    }
-                }
                 for (tx, &d) in row_degrees.iter().enumerate() {
                     if d < k {
                         continue;
                     }
                     // The blocks in the order the encoder wrote them, moved into the band.
+                    // Every block of a member tile is written whole (onto zeros), so the
+                    // band needs no clearing first.
                     let t = ty * self.tiles_x + tx;
-                    for (bx, by) in plane::tile_blocks(t, self.tiles_x, ts) {
-                        plane::add_block_of(band, bx, by - ty * per, q, b, step);
-                        b += 1;
-                    }
+                    let at =
+                        plane::tile_blocks(t, self.tiles_x, ts).map(|(bx, by)| (bx, by - ty * per));
+                    plane::add_blocks_of(band, at, Onto::Zeros, q, b, step);
+                    b += per * per;
                 }
                 rows(TileRows {
                     y0: ty * ts,
