@@ -388,6 +388,8 @@ impl DecoderCore {
             }
         }
         bubbles.finish().map_err(context)?;
+        // The box goes to the render thread next.
+        fence_streaming();
         out.generation = generation;
         out.pass = pass;
         out.index = s;
@@ -423,10 +425,12 @@ enum LayerOut<'a> {
 impl LayerOut<'_> {
     fn copy(&mut self, at: usize, src: &[f32]) {
         match self {
-            LayerOut::Host(t) => t[at..at + src.len()].copy_from_slice(src),
-            LayerOut::Mapped(v) => v
-                .slice(at * 4..(at + src.len()) * 4)
-                .copy_from_slice(bytemuck::cast_slice(src)),
+            // SAFETY: both ranges are `src.len()` f32 values, bounds-checked by `slice`.
+            LayerOut::Host(t) => unsafe { copy_streaming(t[at..at + src.len()].as_mut_ptr(), src) },
+            LayerOut::Mapped(v) => unsafe {
+                let mut range = v.slice(at * 4..(at + src.len()) * 4);
+                copy_streaming(range.as_raw_ptr().cast::<f32>().as_ptr(), src)
+            },
         }
     }
 
@@ -437,6 +441,45 @@ impl LayerOut<'_> {
             LayerOut::Mapped(v) => v.slice(at * 4..(at + len) * 4).fill(0),
         }
     }
+}
+
+/// Copies `src` to `dst` with non-temporal stores: the decoder never reads staging back,
+/// so its lines need not displace the band, the keyframes and the coefficient stream from
+/// the cache, nor be read from memory before being overwritten.
+///
+/// # Safety
+/// `dst` must be valid for writing `src.len()` f32 values (any alignment).
+unsafe fn copy_streaming(dst: *mut f32, src: &[f32]) {
+    let n = src.len();
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: every write is inside dst[0..n] (the caller's promise); the streamed ones are
+    // 16-byte aligned (`head` aligns them, steps are 16 bytes); SSE is part of x86-64.
+    unsafe {
+        use std::arch::x86_64::{_mm_loadu_ps, _mm_stream_ps};
+        let head = dst.align_offset(16).min(n);
+        let body = head + (n - head) / 4 * 4;
+        for i in (0..head).chain(body..n) {
+            dst.add(i).write_unaligned(src[i]);
+        }
+        for i in (head..body).step_by(4) {
+            _mm_stream_ps(dst.add(i), _mm_loadu_ps(src.as_ptr().add(i)));
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    // SAFETY: as the caller promises; bytes have no alignment.
+    unsafe {
+        std::ptr::copy_nonoverlapping(src.as_ptr().cast::<u8>(), dst.cast::<u8>(), n * 4)
+    };
+}
+
+/// Non-temporal stores are weakly ordered: this makes the ones before it visible before
+/// any store after it (such as handing the staging box to another thread).
+fn fence_streaming() {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: SSE is part of x86-64.
+    unsafe {
+        std::arch::x86_64::_mm_sfence()
+    };
 }
 
 /// Runs `write` on the staging layer at byte `base` (`len` bytes).
@@ -490,5 +533,35 @@ fn write_tile_row(
     }
     for (t, z) in zero.iter_mut().enumerate() {
         *z = !r.is_member(t);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{copy_streaming, fence_streaming};
+
+    #[test]
+    fn streaming_copy_writes_exactly_its_range_at_any_alignment() {
+        let src: Vec<f32> = (0..67).map(|i| i as f32 * 1.5 - 20.0).collect();
+        for offset in 0..5 {
+            for len in [0, 1, 3, 4, 5, 8, 13, 16, 31, 60] {
+                // Destination bytes start at `offset` bytes past a 16-byte boundary (so
+                // also at addresses f32 would not be aligned to), between guard values.
+                let mut bytes = vec![0xA5u8; 16 * 20];
+                let base = bytes.as_ptr().align_offset(16) + offset;
+                // SAFETY: base + 4·len lies inside `bytes` (16·20 bytes).
+                unsafe {
+                    copy_streaming(bytes.as_mut_ptr().add(base).cast::<f32>(), &src[..len]);
+                }
+                fence_streaming();
+                let got: Vec<f32> = bytes[base..base + 4 * len]
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                    .collect();
+                assert_eq!(got, &src[..len], "offset {offset}, length {len}");
+                assert!(bytes[..base].iter().all(|&b| b == 0xA5));
+                assert!(bytes[base + 4 * len..].iter().all(|&b| b == 0xA5));
+            }
+        }
     }
 }
