@@ -128,11 +128,14 @@ impl Blocks {
     }
 
     /// Non-zero terms of block `b`, DC included.
+    #[inline(always)]
     pub fn nonzero(&self, b: usize) -> usize {
         (self.dc[b] != 0) as usize + (self.start[b + 1] - self.start[b]) as usize
     }
 
     /// The non-zero terms of block `b` as (zig-zag index, value), in increasing index.
+    /// (Inlined: the block kernel runs it once or twice per block.)
+    #[inline(always)]
     pub fn terms(&self, b: usize) -> impl Iterator<Item = (usize, i32)> + '_ {
         let dc = (self.dc[b] != 0).then_some((0, self.dc[b]));
         let ac = &self.ac[self.start[b] as usize..self.start[b + 1] as usize];
