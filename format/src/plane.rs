@@ -42,16 +42,6 @@ impl Plane {
             self.data[row..row + N].copy_from_slice(&b[y * N..y * N + N]);
         }
     }
-
-    /// Adds a block into the plane (used by predicted keyframes).
-    pub fn add_block(&mut self, bx: usize, by: usize, b: &[f32; N * N]) {
-        for y in 0..N {
-            let row = (by * N + y) * self.w + bx * N;
-            for x in 0..N {
-                self.data[row + x] += b[y * N + x];
-            }
-        }
-    }
 }
 
 /// Block origins (in block units) of the blocks covering tile `t` of a plane, row by row.
@@ -263,10 +253,10 @@ fn spatial(terms: impl Iterator<Item = (usize, i32)>, step: f32) -> [f32; N * N]
     d
 }
 
-/// Where decoded blocks go: added to the plane's values (a predicted keyframe onto its
-/// reference), or written over whatever the plane held, as if onto zeros (a plane coded
-/// on its own). Both give the bits of the additions onto a zeroed plane; `Zeros` saves
-/// clearing the plane first and reading it back.
+/// Where decoded blocks go: `Plane` adds them to the plane's values (a predicted keyframe
+/// onto its reference); `Zeros` writes each block whole over whatever the plane held (a
+/// plane coded on its own), with the bits `Plane` would give on a zeroed plane but
+/// without clearing the plane first or reading it back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Onto {
     Plane,
@@ -484,7 +474,10 @@ mod tests {
             for (b, (bx, by)) in all_blocks(&p).enumerate() {
                 let n = bl[b].iter().filter(|&&v| v != 0).count();
                 if n > SPARSE_MAX {
-                    want.add_block(bx, by, &dequantize_block(&bl[b], step));
+                    let s = dequantize_block(&bl[b], step);
+                    for (i, v) in s.iter().enumerate() {
+                        want.data[(by * N + i / N) * p.w + bx * N + i % N] += v;
+                    }
                     continue;
                 }
                 for (i, &v) in bl[b].iter().enumerate().filter(|(_, v)| **v != 0) {
