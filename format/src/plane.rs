@@ -430,7 +430,8 @@ mod tests {
 
     /// Blocks of every density (empty, sparse, dense) added onto a plane of arbitrary
     /// values, so that the order of the additions shows in the bits.
-    fn mixed_blocks(seed: &mut u32) -> (Plane, Vec<[i32; 64]>) {
+    /// Returns the plane, the blocks and the blocks as read back from their stream.
+    fn mixed_blocks(seed: &mut u32) -> (Plane, Vec<[i32; 64]>, Blocks) {
         let mut next = || {
             *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             *seed >> 8
@@ -440,7 +441,7 @@ mod tests {
             h: 32,
             data: (0..64 * 32).map(|_| next() as f32 * 1e-4 - 800.0).collect(),
         };
-        let blocks = (0..32)
+        let blocks: Vec<[i32; 64]> = (0..32)
             .map(|i| {
                 let density = [0, 1, 2, 6, 7, 20, 64][i % 7];
                 std::array::from_fn(|_| {
@@ -452,18 +453,24 @@ mod tests {
                 })
             })
             .collect();
-        (p, blocks)
+        let mut buf = Vec::new();
+        write_coefficients(&blocks, &mut buf);
+        let mut q = Blocks::default();
+        read_blocks(&buf, &mut 0, 32, &mut q).unwrap();
+        (p, blocks, q)
+    }
+
+    fn assert_same_bits(a: &Plane, b: &Plane, what: &str) {
+        for (i, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
+            assert_eq!(x.to_bits(), y.to_bits(), "texel {i}, {what}");
+        }
     }
 
     #[test]
     fn added_blocks_are_the_per_texel_sums_in_order() {
         let mut seed = 11;
         for _ in 0..20 {
-            let (p, bl) = mixed_blocks(&mut seed);
-            let mut buf = Vec::new();
-            write_coefficients(&bl, &mut buf);
-            let mut q = Blocks::default();
-            read_blocks(&buf, &mut 0, bl.len(), &mut q).unwrap();
+            let (p, bl, q) = mixed_blocks(&mut seed);
             let step = 0.37;
             let mut got = p.clone();
             add_blocks_of(&mut got, all_blocks(&p), Onto::Plane, &q, 0, step);
@@ -490,17 +497,13 @@ mod tests {
                     }
                 }
             }
-            for (i, (a, b)) in got.data.iter().zip(&want.data).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "texel {i}");
-            }
+            assert_same_bits(&got, &want, "added");
             // Written over the plane's values, the blocks are their sums onto zeros.
             let mut over = p.clone();
             add_blocks_of(&mut over, all_blocks(&p), Onto::Zeros, &q, 0, step);
             let mut onto_zeros = Plane::zeros(p.w, p.h);
             add_blocks_of(&mut onto_zeros, all_blocks(&p), Onto::Plane, &q, 0, step);
-            for (i, (a, b)) in over.data.iter().zip(&onto_zeros.data).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "texel {i} written over");
-            }
+            assert_same_bits(&over, &onto_zeros, "written over");
         }
     }
 
@@ -514,19 +517,13 @@ mod tests {
         );
         let mut seed = 5;
         for _ in 0..20 {
-            let (p, bl) = mixed_blocks(&mut seed);
-            let mut buf = Vec::new();
-            write_coefficients(&bl, &mut buf);
-            let mut q = Blocks::default();
-            read_blocks(&buf, &mut 0, bl.len(), &mut q).unwrap();
+            let (p, _, q) = mixed_blocks(&mut seed);
             let (mut portable, mut avx) = (p.clone(), p.clone());
             add_blocks_portable(&mut portable, all_blocks(&p), Onto::Plane, &q, 0, 0.37);
             // SAFETY: AVX support was checked above.
             unsafe { add_blocks_avx(&mut avx, all_blocks(&p), Onto::Plane, &q, 0, 0.37) };
             assert_ne!(portable, p);
-            for (i, (a, b)) in portable.data.iter().zip(&avx.data).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "texel {i}");
-            }
+            assert_same_bits(&portable, &avx, "AVX");
         }
     }
 
