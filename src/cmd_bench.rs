@@ -158,8 +158,9 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
     let (zm, z0, z1) = stats(&mut zstd_t);
     let (fm, f0, f1) = stats(&mut full_t);
     println!(
-        "decode benchmark: {name}, {}×{}, {} frames at {}/{} fps ({duration:.1} s), {} segments, {} runs",
-        h.width, h.height, h.frame_count, h.rate_num, h.rate_den, h.segment_count, a.runs
+        "decode benchmark: {name}, {}×{}, {} frames at {}/{} fps ({duration:.1} s), {} segments, {} runs, block kernel {}",
+        h.width, h.height, h.frame_count, h.rate_num, h.rate_den, h.segment_count, a.runs,
+        vbim_format::plane::kernel_build()
     );
     println!("zstd alone      median {:.3} s (min {z0:.3}, max {z1:.3}) = {:.2}% of one core in real time", zm, 100.0 * zm / duration);
     println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);

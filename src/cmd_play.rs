@@ -301,7 +301,7 @@ pub fn print(o: &Outcome, s: &Session) {
     // time the reader and decoder run inside `advance` and the GPU is waited for, so it is
     // not the render thread's cost (`vbim bench render` measures that).
     println!(
-        "advance     {:.3} ms mean, {:.3} ms p99 per frame, wall clock ({}); decoder {:.2}% of a core",
+        "advance     {:.3} ms mean, {:.3} ms p99 per frame, wall clock ({}); decoder {:.2}% of a core (block kernel {})",
         o.mean_render_ms,
         o.p99_render_ms,
         if s.realtime {
@@ -309,7 +309,8 @@ pub fn print(o: &Outcome, s: &Session) {
         } else {
             "simulated time: includes reading, decoding and GPU waits"
         },
-        o.decode_core_share * 100.0
+        o.decode_core_share * 100.0,
+        vbim_format::plane::kernel_build()
     );
     if let (Some(m), Some(w)) = (o.shown_mean_psnr, o.shown_worst_psnr) {
         println!(

@@ -294,6 +294,16 @@ pub fn add_blocks_of(
     add_blocks_portable(p, at, onto, blocks, b0, step);
 }
 
+/// Which build of the block kernel [`add_blocks_of`] runs on this CPU, for benchmark
+/// reports (figures from the two builds are not comparable).
+pub fn kernel_build() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        return "AVX, 8 lanes";
+    }
+    "portable"
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 fn add_blocks_avx(
