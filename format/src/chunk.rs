@@ -319,12 +319,8 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
         for p in 0..h.channels as usize {
             let mut plane = Plane::zeros(w, ht);
             reader.read_plane(k, p, &mut band, |r| {
-                for (x0, x1) in r.member_spans() {
-                    for y in 0..r.band.h {
-                        let at = (r.y0 + y) * w;
-                        plane.data[at + x0..at + x1]
-                            .copy_from_slice(&r.band.data[y * w + x0..y * w + x1]);
-                    }
+                for (y, x0, values) in r.member_rows() {
+                    plane.data[y * w + x0..][..values.len()].copy_from_slice(values);
                 }
             })?;
             planes_k.push(plane);
@@ -358,6 +354,16 @@ impl TileRows<'_> {
     pub fn member_spans(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         spans(self.degrees.len(), move |t| self.is_member(t))
             .map(move |(a, b)| (a * self.tile_size, b * self.tile_size))
+    }
+
+    /// The member tiles' values, run by run and row by row: (row of the padded plane,
+    /// first column, values).
+    pub fn member_rows(&self) -> impl Iterator<Item = (usize, usize, &[f32])> + '_ {
+        let w = self.band.w;
+        self.member_spans().flat_map(move |(x0, x1)| {
+            (0..self.band.h)
+                .map(move |y| (self.y0 + y, x0, &self.band.data[y * w + x0..y * w + x1]))
+        })
     }
 }
 

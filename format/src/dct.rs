@@ -54,9 +54,10 @@ pub fn forward(block: &mut [f32; N * N]) {
     }
 }
 
-/// Inverse transform of one block of coefficients, in place. Zero coefficients are
-/// skipped: adding an exact zero never changes a float sum, so the result is the same as
-/// the dense loops' (most blocks of a coefficient plane are nearly empty).
+/// Inverse transform of one block of coefficients, in place. Rows of coefficients that are
+/// all zero, and then columns that are, are skipped: adding an exact zero to a sum that
+/// starts at +0.0 never changes its bits, so the result is the dense loops' (most blocks
+/// of a coefficient plane are nearly empty).
 #[inline(always)]
 pub fn inverse(block: &mut [f32; N * N]) {
     let t = table();

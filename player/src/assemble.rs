@@ -518,11 +518,9 @@ fn write_tile_row(
     let rows = r.y0..(r.y0 + ts).min(ht);
     let first_tile = (r.y0 / ts) * r.degrees.len();
     let zero = &mut zero[first_tile..first_tile + r.degrees.len()];
-    for (a, b) in r.member_spans() {
-        let (a, b) = (a.min(w), b.min(w));
-        for y in rows.clone() {
-            let from = (y - r.y0) * r.band.w;
-            out.copy(y * stride + a, &r.band.data[from + a..from + b]);
+    for (y, x0, values) in r.member_rows() {
+        if y < ht && x0 < w {
+            out.copy(y * stride + x0, &values[..values.len().min(w - x0)]);
         }
     }
     for (a, b) in chunk::spans(zero.len(), |t| !r.is_member(t) && !zero[t]) {

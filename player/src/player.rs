@@ -435,9 +435,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 throttle, threads, ..
             } => {
                 let _ = throttle.try_send(t);
-                if let Some(reader) = threads.first() {
-                    reader.thread().unpark();
-                }
+                unpark_reader(threads);
             }
         }
     }
@@ -954,9 +952,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             }
             Pipeline::Threaded { seek, threads, .. } => {
                 let _ = seek.send((keys[k], pass as u32, first));
-                if let Some(reader) = threads.first() {
-                    reader.thread().unpark();
-                }
+                unpark_reader(threads);
             }
         }
         self.totals.seeks += 1;
@@ -998,6 +994,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 impl<R: Read + Seek + Send + 'static> Drop for Player<R> {
     fn drop(&mut self) {
         let _ = self.stop(Duration::from_secs(10));
+    }
+}
+
+/// Wakes the reader (the pipeline's first thread) to read a control message now: it may
+/// be parked waiting for room in the ring.
+fn unpark_reader(threads: &[JoinHandle<()>]) {
+    if let Some(reader) = threads.first() {
+        reader.thread().unpark();
     }
 }
 
