@@ -98,6 +98,46 @@ pub fn inverse(block: &mut [f32; N * N]) {
     }
 }
 
+/// [`inverse`] of a block given as its non-zero coefficients, `(row-major position, value)`
+/// in zig-zag order, with the same bits, as rows of samples. This is the decoder's dense
+/// path: its work grows with the terms and the columns that hold them, where [`inverse`]
+/// scans all 64 coefficients and loads whole coefficient rows that were just written one
+/// scalar at a time.
+///
+/// The columns pass takes one term at a time into the intermediate held transposed: term
+/// (ky, kx) adds `t[ky] · c` to intermediate column kx, one 8-lane row of `tmp_t`. Zig-zag
+/// order visits each column's terms in ascending ky, the order of [`inverse`]'s sums, and
+/// the absent (zero) terms it would add leave a sum that starts at +0.0 unchanged.
+#[inline(always)]
+pub fn inverse_terms(terms: impl Iterator<Item = (usize, f32)>) -> [[f32; N]; N] {
+    let t = table();
+    let mut tmp_t = [[0f32; N]; N];
+    let mut cols = 0u8;
+    for (pos, c) in terms {
+        let (ky, kx) = (pos / N % N, pos % N);
+        cols |= 1 << kx;
+        let (col, tk) = (&mut tmp_t[kx], &t[ky]);
+        for n in 0..N {
+            col[n] += tk[n] * c;
+        }
+    }
+    // Rows: column k of the intermediate (a row of `tmp_t`) times basis row k, for the
+    // columns that hold a term, in ascending k.
+    let mut out = [[0f32; N]; N];
+    let mut left = cols;
+    while left != 0 {
+        let k = left.trailing_zeros() as usize;
+        left &= left - 1;
+        let tk = &t[k];
+        for (row, &c) in out.iter_mut().zip(&tmp_t[k]) {
+            for n in 0..N {
+                row[n] += tk[n] * c;
+            }
+        }
+    }
+    out
+}
+
 /// Zig-zag scan order: coefficient positions from low to high frequency.
 pub fn zigzag() -> &'static [usize; N * N] {
     static Z: OnceLock<[usize; N * N]> = OnceLock::new();
@@ -166,6 +206,30 @@ mod tests {
                 }
             }
             block[y * N..y * N + N].copy_from_slice(&out);
+        }
+    }
+
+    #[test]
+    fn inverse_terms_is_inverse_bit_for_bit() {
+        let z = zigzag();
+        let mut seed = 3u32;
+        for density in [1, 2, 7, 20, 64] {
+            for _ in 0..500 {
+                let mut b = [0f32; 64];
+                for v in b.iter_mut() {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    if (seed >> 8) % 64 < density {
+                        *v = ((seed >> 12) % 2001) as f32 * 0.37 - 370.0;
+                    }
+                }
+                let terms = z.iter().map(|&p| (p, b[p])).filter(|&(_, v)| v != 0.0);
+                let got = inverse_terms(terms);
+                let mut want = b;
+                inverse(&mut want);
+                for (i, (x, y)) in got.as_flattened().iter().zip(&want).enumerate() {
+                    assert_eq!(x.to_bits(), y.to_bits(), "sample {i} of {b:?}");
+                }
+            }
         }
     }
 

@@ -169,12 +169,55 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
     out.parsed.clear();
     out.start.clear();
     out.start.resize(n + 1, 0);
+    // The parse loop works on locals: behind `out` the vectors' lengths and pointers would
+    // be reloaded after every store, as the compiler cannot tell them from the data.
+    let mut parsed = std::mem::take(&mut out.parsed);
+    let parse = parse_pairs(buf, pos, &mut out.dc, &mut parsed, &mut out.start[1..]);
+    out.parsed = parsed;
+    parse?;
+    // Undo the DC prediction.
+    let mut prev = 0i32;
+    for d in out.dc.iter_mut() {
+        prev = prev.wrapping_add(*d);
+        *d = prev;
+    }
+    // Gather each block's AC terms: counts → offsets, then one pass in stream order, which
+    // is increasing frequency within every block.
+    for i in 0..n {
+        out.start[i + 1] += out.start[i];
+    }
+    out.cursor.clear();
+    out.cursor.extend_from_slice(&out.start[..n]);
+    out.ac.clear();
+    out.ac.resize(out.parsed.len(), (0, 0));
+    // (As slices, whose pointers stay in registers.)
+    let (cursor, ac) = (&mut out.cursor[..], &mut out.ac[..]);
+    for &(b, f, v) in &out.parsed {
+        let c = &mut cursor[b as usize];
+        ac[*c as usize] = (f, v);
+        *c += 1;
+    }
+    Ok(())
+}
+
+/// The (zero run, value) pairs of a stream of `dc.len()` blocks: DC differences into `dc`,
+/// non-zero AC terms as (block, zig-zag index, value) in stream order into `parsed`, and
+/// each block's count of them into `counts`.
+fn parse_pairs(
+    buf: &[u8],
+    pos: &mut usize,
+    dc: &mut [i32],
+    parsed: &mut Vec<(u32, u8, i32)>,
+    counts: &mut [u32],
+) -> Result<()> {
+    let n = dc.len();
     // Frequency-major: stream position f·n + b is frequency f of block b. The position is
     // kept as (f, b), so that a pair costs no division unless its run wraps a frequency.
     let past_end = || crate::FormatError::Invalid(format!("zero run past the end of {n} blocks"));
+    let mut at = *pos;
     let (mut f, mut b) = (0usize, 0usize);
     loop {
-        let run = varint::get_u32(buf, pos)? as usize;
+        let run = varint::get_u32(buf, &mut at)? as usize;
         if n == 0 {
             if run > 0 {
                 return Err(past_end());
@@ -192,12 +235,12 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
         if f == N * N {
             break;
         }
-        let v = varint::get_i32(buf, pos)?;
+        let v = varint::get_i32(buf, &mut at)?;
         if f == 0 {
-            out.dc[b] = v;
+            dc[b] = v;
         } else if v != 0 {
-            out.parsed.push((b as u32, f as u8, v));
-            out.start[b + 1] += 1;
+            parsed.push((b as u32, f as u8, v));
+            counts[b] += 1;
         }
         b += 1;
         if b == n {
@@ -206,33 +249,14 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
         }
         if f == N * N {
             // The writer always ends with a run, possibly empty.
-            let tail = varint::get_u32(buf, pos)?;
+            let tail = varint::get_u32(buf, &mut at)?;
             if tail != 0 {
                 return Err(crate::FormatError::Invalid("zero run past the end".into()));
             }
             break;
         }
     }
-    // Undo the DC prediction.
-    let mut prev = 0i32;
-    for d in out.dc.iter_mut() {
-        prev = prev.wrapping_add(*d);
-        *d = prev;
-    }
-    // Gather each block's AC terms: counts → offsets, then one pass in stream order, which
-    // is increasing frequency within every block.
-    for i in 0..n {
-        out.start[i + 1] += out.start[i];
-    }
-    out.cursor.clear();
-    out.cursor.extend_from_slice(&out.start[..n]);
-    out.ac.clear();
-    out.ac.resize(out.parsed.len(), (0, 0));
-    for &(b, f, v) in &out.parsed {
-        let c = &mut out.cursor[b as usize];
-        out.ac[*c as usize] = (f, v);
-        *c += 1;
-    }
+    *pos = at;
     Ok(())
 }
 
@@ -355,22 +379,24 @@ fn add_block_of(
             *row = p.data[at + y * w..at + y * w + N].try_into().unwrap();
         }
     }
+    let z = dct::zigzag();
     if nonzero > SPARSE_MAX {
-        let s = spatial(blocks.terms(b), step);
-        for (y, row) in acc.iter_mut().enumerate() {
+        let s = dct::inverse_terms(blocks.terms(b).map(|(i, v)| (z[i], v as f32 * step)));
+        for (row, s) in acc.iter_mut().zip(&s) {
             for x in 0..N {
-                row[x] += s[y * N + x];
+                row[x] += s[x];
             }
         }
     } else {
         let t = dct::basis();
-        let z = dct::zigzag();
         for (i, v) in blocks.terms(b) {
-            let (ky, kx) = (z[i] / N, z[i] % N);
+            let (ky, kx) = (z[i] / N % N, z[i] % N);
             let c = v as f32 * step;
+            // The term's factor for every row at once (one 8-lane multiply), then each
+            // row adds its factor times the column basis.
+            let a: [f32; N] = std::array::from_fn(|y| c * t[ky][y]);
             let tx = &t[kx];
-            for (row, &ty) in acc.iter_mut().zip(&t[ky]) {
-                let a = c * ty;
+            for (row, &a) in acc.iter_mut().zip(&a) {
                 for x in 0..N {
                     row[x] += a * tx[x];
                 }
