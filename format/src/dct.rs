@@ -6,10 +6,13 @@ use std::sync::OnceLock;
 pub const N: usize = 8;
 
 /// The orthonormal DCT-II basis: `basis()[k][n]` is frequency k at sample n.
+/// (This and [`zigzag`] are inlined: the block kernel asks for them once per block.)
+#[inline]
 pub fn basis() -> &'static [[f32; N]; N] {
     table()
 }
 
+#[inline]
 fn table() -> &'static [[f32; N]; N] {
     static T: OnceLock<[[f32; N]; N]> = OnceLock::new();
     T.get_or_init(|| {
@@ -139,6 +142,7 @@ pub fn inverse_terms(terms: impl Iterator<Item = (usize, f32)>) -> [[f32; N]; N]
 }
 
 /// Zig-zag scan order: coefficient positions from low to high frequency.
+#[inline]
 pub fn zigzag() -> &'static [usize; N * N] {
     static Z: OnceLock<[usize; N * N]> = OnceLock::new();
     Z.get_or_init(|| {
