@@ -365,17 +365,33 @@ fn encode_in_pool(
         let k1 = if looping && e == end {
             k0.clone()
         } else {
-            let predicted = e - last_intra <= intra_every;
+            // Intra, or predicted from the previous keyframe while the intra interval
+            // allows it — whichever is smaller. Both quantise with the same step, so they
+            // err alike; but the residual carries the reference's quantisation noise as
+            // well as the change, and where the light moves fast (sunrise, sunset) the
+            // intra frame is often the smaller (BENCHMARKS.md, "Keyframe modes").
+            let code = |prev: Option<&[Plane]>| {
+                model::code_keyframe(
+                    &dom,
+                    &window[&e],
+                    prev,
+                    KEY_SHARE * eps,
+                    cfg.chroma_step_factor,
+                    cfg.deadzone,
+                    cfg.zstd_level,
+                )
+            };
+            let (predicted, bytes) = if e - last_intra <= intra_every {
+                let (p, i) = rayon::join(|| code(Some(prev_key.as_slice())), || code(None));
+                if p.len() <= i.len() {
+                    (true, p)
+                } else {
+                    (false, i)
+                }
+            } else {
+                (false, code(None))
+            };
             let prev = predicted.then(|| prev_key.as_slice());
-            let bytes = model::code_keyframe(
-                &dom,
-                &window[&e],
-                prev,
-                KEY_SHARE * eps,
-                cfg.chroma_step_factor,
-                cfg.deadzone,
-                cfg.zstd_level,
-            );
             let decoded = Arc::new(chunk::read_keyframe(&header0, &bytes, prev)?);
             if !predicted {
                 last_intra = e;

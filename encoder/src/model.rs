@@ -38,9 +38,9 @@ impl Projectors {
     }
 }
 
-/// Weighted squared fit error of one tile for each number of bubbles 0..=nb, summed over
-/// its texels and interior frames, per plane group (luma, chroma). Optionally keeps
-/// z = Qᵀr per texel and plane (for the coefficients).
+/// Weighted squared fit error of one tile for each number of bubbles 0..=nb and each
+/// interior frame (`[slot · frames + frame]`), summed over its texels, per plane group
+/// (luma, chroma). Optionally keeps z = Qᵀr per texel and plane (for the coefficients).
 #[allow(clippy::too_many_arguments)]
 fn tile_errors(
     dom: &Domain,
@@ -52,12 +52,11 @@ fn tile_errors(
     inner: &[&CodedFrame],
     p: &Projector,
     mut keep_z: Option<&mut Vec<f64>>,
-    mut per_frame: Option<&mut [f64]>,
 ) -> ([Vec<f64>; 2], usize) {
     let m = inner.len();
     let nb = p.bubbles;
     let len = (m + 1) as f64;
-    let mut err = [vec![0.0; nb + 1], vec![0.0; nb + 1]];
+    let mut err = [vec![0.0; (nb + 1) * m], vec![0.0; (nb + 1) * m]];
     let mut r = vec![0.0f64; m];
     let mut e = vec![0.0f64; m];
     let mut z = vec![0.0f64; nb];
@@ -79,7 +78,6 @@ fn tile_errors(
                 let g = if pl == 0 { 0 } else { 1 };
                 let w = PLANE_WEIGHT[pl];
                 let mut acc = |e: &[f64], slot: usize| {
-                    let mut s = 0.0;
                     for (j, (v, f)) in e.iter().zip(inner).enumerate() {
                         // The sensitivity at the source value alone understates a large
                         // luma error: a curve that misses a jump out of the metric's
@@ -91,15 +89,8 @@ fn tile_errors(
                         } else {
                             f.sens[i]
                         };
-                        let q = w * (v * sens as f64).powi(2);
-                        s += q;
-                        if slot == nb {
-                            if let Some(pf) = per_frame.as_deref_mut() {
-                                pf[j] += q;
-                            }
-                        }
+                        err[g][slot * m + j] += w * (v * sens as f64).powi(2);
                     }
-                    err[g][slot] += s;
                 };
                 e.copy_from_slice(&r);
                 acc(&e, 0);
@@ -135,21 +126,16 @@ pub fn fit_error(
     let (sum, max, frames_sq, count) = (0..tx * ty)
         .into_par_iter()
         .map(|t| {
-            let mut pf = vec![0.0; m];
-            let (err, count) = tile_errors(
-                dom,
-                (t % tx, t / tx),
-                ts,
-                stride,
-                k0,
-                k1,
-                inner,
-                p,
-                None,
-                Some(&mut pf),
-            );
+            let (err, count) =
+                tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, p, None);
+            let all = p.bubbles * m..(p.bubbles + 1) * m;
+            let pf: Vec<f64> = err[0][all.clone()]
+                .iter()
+                .zip(&err[1][all])
+                .map(|(a, b)| a + b)
+                .collect();
             let n = (count * m.max(1)) as f64;
-            let ms = (err[0][p.bubbles] + err[1][p.bubbles]) / n;
+            let ms = pf.iter().sum::<f64>() / n;
             (ms, ms, pf, count)
         })
         .reduce(
@@ -170,6 +156,10 @@ pub fn fit_error(
         worst_frame.sqrt(),
     )
 }
+
+/// How far one frame's fit error in a tile may exceed the fit budget (as mean squares;
+/// 1.25² is the RMS bound the segment length keeps to, `choose_length`).
+const WORST_FRAME_SHARE: f64 = 1.25 * 1.25;
 
 /// One coded segment: its tile map and compressed chunk payloads.
 pub struct SegmentCode {
@@ -221,18 +211,30 @@ pub fn code_segment(
                 inner,
                 &p,
                 Some(&mut zs),
-                None,
             );
-            let n = (count * inner.len().max(1)) as f64;
-            let budget = sp.fit_budget * sp.fit_budget * n;
-            // The cheapest (luma, chroma) pair within budget: each bubble costs one plane
-            // for luma and two for chroma.
+            let m = inner.len();
+            let budget = sp.fit_budget * sp.fit_budget * count as f64;
+            // The cheapest (luma, chroma) pair within budget — on average over the
+            // segment's frames, and in every frame within WORST_FRAME_SHARE of it, so that
+            // a tile's error cannot gather in the one frame where the light turns — each
+            // bubble costs one plane for luma and two for chroma.
+            let frame_err = |dl: usize, dc: usize, j: usize| {
+                err[0][dl * m + j] + if planes == 3 { err[1][dc * m + j] } else { 0.0 }
+            };
             let mut best = (nb + 1, nb + 1, usize::MAX);
             for dl in 0..=nb {
                 for dc in 0..=dl {
-                    let e = err[0][dl] + if planes == 3 { err[1][dc] } else { 0.0 };
                     let cost = dl + 2 * dc;
-                    if e <= budget && cost < best.2 {
+                    if cost >= best.2 {
+                        continue;
+                    }
+                    let (mut sum, mut worst) = (0.0, 0.0f64);
+                    for j in 0..m {
+                        let e = frame_err(dl, dc, j);
+                        sum += e;
+                        worst = worst.max(e);
+                    }
+                    if sum <= budget * m.max(1) as f64 && worst <= WORST_FRAME_SHARE * budget {
                         best = (dl, dc, cost);
                     }
                 }
