@@ -322,16 +322,16 @@ fn encode_in_pool(
     }
     load(&mut window, 0)?;
     let header0 = header_for(src, cfg, color, transfer, 0, 0, 1);
-    let key_bytes = model::code_keyframe(
+    let key_raw = model::code_keyframe(
         &dom,
         &window[&0],
         None,
         KEY_SHARE * eps,
         cfg.chroma_step_factor,
         cfg.deadzone,
-        cfg.zstd_level,
     );
-    let k0: Arc<Vec<Plane>> = Arc::new(chunk::read_keyframe(&header0, &key_bytes, None)?);
+    let k0: Arc<Vec<Plane>> = Arc::new(chunk::read_keyframe_raw(&header0, &key_raw, None)?);
+    let key_bytes = model::compress(&key_raw, cfg.zstd_level);
     chunks.push(PendingChunk {
         kind: ChunkKind::Keyframe,
         flags: FLAG_INTRA,
@@ -369,7 +369,9 @@ fn encode_in_pool(
             // allows it — whichever is smaller. Both quantise with the same step, so they
             // err alike; but the residual carries the reference's quantisation noise as
             // well as the change, and where the light moves fast (sunrise, sunset) the
-            // intra frame is often the smaller (BENCHMARKS.md, "Keyframe modes").
+            // intra frame is often the smaller (BENCHMARKS.md, "Keyframe modes"). The two
+            // are compared before zstd, which ranks them as zstd does at a fraction of
+            // the time (the same section).
             let code = |prev: Option<&[Plane]>| {
                 model::code_keyframe(
                     &dom,
@@ -378,10 +380,9 @@ fn encode_in_pool(
                     KEY_SHARE * eps,
                     cfg.chroma_step_factor,
                     cfg.deadzone,
-                    cfg.zstd_level,
                 )
             };
-            let (predicted, bytes) = if e - last_intra <= intra_every {
+            let (predicted, raw) = if e - last_intra <= intra_every {
                 let (p, i) = rayon::join(|| code(Some(prev_key.as_slice())), || code(None));
                 if p.len() <= i.len() {
                     (true, p)
@@ -392,7 +393,8 @@ fn encode_in_pool(
                 (false, code(None))
             };
             let prev = predicted.then(|| prev_key.as_slice());
-            let decoded = Arc::new(chunk::read_keyframe(&header0, &bytes, prev)?);
+            let decoded = Arc::new(chunk::read_keyframe_raw(&header0, &raw, prev)?);
+            let bytes = model::compress(&raw, cfg.zstd_level);
             if !predicted {
                 last_intra = e;
                 intra_keyframes += 1;

@@ -326,7 +326,8 @@ pub fn code_segment(
 }
 
 /// Codes a keyframe: intra, or as the difference from the previous decoded keyframe.
-/// Returns the payload; the caller decodes it with the reference decoder (closed loop).
+/// Returns the payload before zstd (see [`compress`]); the caller decodes it with the
+/// reference decoder (closed loop).
 pub fn code_keyframe(
     dom: &Domain,
     src: &CodedFrame,
@@ -334,7 +335,6 @@ pub fn code_keyframe(
     budget: f64,
     chroma_step_factor: f32,
     deadzone: f32,
-    zstd_level: i32,
 ) -> Vec<u8> {
     let sens_rms = (src.sens.iter().map(|v| (*v as f64).powi(2)).sum::<f64>()
         / src.sens.len() as f64)
@@ -376,5 +376,10 @@ pub fn code_keyframe(
         chunk::MODE_INTRA
     };
     let _ = dom;
-    zstd::bulk::compress(&chunk::write_keyframe(mode, &steps, &blocks), zstd_level).expect("zstd")
+    chunk::write_keyframe(mode, &steps, &blocks)
+}
+
+/// A keyframe payload as stored: one zstd frame.
+pub fn compress(raw: &[u8], zstd_level: i32) -> Vec<u8> {
+    zstd::bulk::compress(raw, zstd_level).expect("zstd")
 }
