@@ -366,12 +366,12 @@ fn encode_in_pool(
             k0.clone()
         } else {
             // Intra, or predicted from the previous keyframe while the intra interval
-            // allows it — whichever is smaller. Both quantise with the same step, so they
-            // err alike; but the residual carries the reference's quantisation noise as
-            // well as the change, and where the light moves fast (sunrise, sunset) the
-            // intra frame is often the smaller (BENCHMARKS.md, "Keyframe modes"). The two
-            // are compared before zstd, which ranks them as zstd does at a fraction of
-            // the time (the same section).
+            // allows it — whichever is smaller. Both quantise with the same step, but a
+            // residual carries the reference's quantisation noise as well as the change,
+            // and a change that falls in the dead zone is dropped: where the light moves
+            // fast (sunrise, sunset) the intra frame is often the smaller, and the more
+            // accurate (BENCHMARKS.md, "Keyframe modes"). The two are compared before
+            // zstd, which ranks them as zstd does at a fraction of the time.
             let code = |prev: Option<&[Plane]>| {
                 model::code_keyframe(
                     &dom,

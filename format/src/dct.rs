@@ -117,6 +117,7 @@ pub fn inverse_terms(terms: impl Iterator<Item = (usize, f32)>) -> [[f32; N]; N]
     let mut tmp_t = [[0f32; N]; N];
     let mut cols = 0u8;
     for (pos, c) in terms {
+        // (`% N` tells the compiler the row is in range.)
         let (ky, kx) = (pos / N % N, pos % N);
         cols |= 1 << kx;
         let (col, tk) = (&mut tmp_t[kx], &t[ky]);

@@ -391,6 +391,7 @@ fn add_block_of(
     } else {
         let t = dct::basis();
         for (i, v) in blocks.terms(b) {
+            // (`% N` tells the compiler the row is in range.)
             let (ky, kx) = (z[i] / N % N, z[i] % N);
             let c = v as f32 * step;
             // The term's factor for every row at once (one 8-lane multiply), then each
