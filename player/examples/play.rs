@@ -3,7 +3,9 @@
 //!
 //! In an engine, pass the renderer's device and queue instead of `headless_device`, call
 //! `advance` once per frame with the frame's time step, and bind `player.view()` (linear
-//! RGB lightmap, Rgba16Float) where the terrain shader samples its lightmap.
+//! RGB lightmap, Rgba16Float) where the terrain shader samples its lightmap. A renderer
+//! that submits once per frame calls `advance_into(dt, &mut encoder)` instead, submits,
+//! then calls `submitted()`.
 
 use std::fs::File;
 use std::io::BufReader;

@@ -382,9 +382,8 @@ impl Gpu {
         );
     }
 
-    /// Records and submits one frame: an optional segment upload, then the reconstruction
-    /// from bubble slot `eval.0` and the keyframe slots in its parameters — one command
-    /// buffer, one submission.
+    /// Records and submits one frame ([`Gpu::record`]) — one command buffer, one
+    /// submission — then maps the uploaded staging buffer again.
     pub fn frame(
         &self,
         upload: Option<(UploadPlan, &SegmentData)>,
@@ -393,14 +392,32 @@ impl Gpu {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.record(&mut enc, upload, eval);
+        self.queue.submit(Some(enc.finish()));
+        if let Some((_, seg)) = upload {
+            self.remap(seg);
+        }
+    }
+
+    /// Records one frame into `enc`: an optional segment upload, then the reconstruction
+    /// from bubble slot `eval.0` and the keyframe slots in its parameters. The parameters
+    /// go through `Queue::write_buffer`, which takes effect at the queue's next submission:
+    /// the one that carries `enc`. An uploaded staging buffer may be mapped again
+    /// ([`Gpu::remap`]) only after that submission.
+    pub fn record(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        upload: Option<(UploadPlan, &SegmentData)>,
+        eval: Option<(usize, &Params, bool)>,
+    ) {
         if let Some((plan, seg)) = upload {
-            self.upload(&mut enc, plan, seg);
+            self.upload(enc, plan, seg);
         }
         if let Some((slot, params, hold_first)) = eval {
             self.queue
                 .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
             if hold_first {
-                self.hold(&mut enc);
+                self.hold(enc);
             }
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: None,
@@ -409,10 +426,6 @@ impl Gpu {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_groups[slot], &[]);
             pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
-        }
-        self.queue.submit(Some(enc.finish()));
-        if let Some((_, seg)) = upload {
-            self.remap(seg);
         }
     }
 

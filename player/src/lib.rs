@@ -9,7 +9,9 @@
 //! two mapped GPU staging buffers; the render thread only records the copy into the GPU
 //! slot it is not sampling and evaluates the time basis in a compute shader. When data is
 //! late the chosen [`Policy`] decides what is shown, and every frame's [`FrameRecord`] says
-//! how bandwidth turned into drift.
+//! how bandwidth turned into drift. A renderer that submits once per frame records the
+//! player's work into its own encoder with [`Player::advance_into`] and calls
+//! [`Player::submitted`] after its submission.
 //!
 //! The player depends on `vbim-format` only, never on the encoder.
 

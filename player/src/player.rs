@@ -215,6 +215,8 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     /// boxes themselves travel back to the decoder, so they stay boxed).
     #[allow(clippy::vec_box)]
     remapping: Vec<Box<SegmentData>>,
+    /// The box uploaded by the last `render_into`, until its encoder is submitted.
+    awaiting_submit: Option<Box<SegmentData>>,
     slots: [Option<Resident>; 2],
     shown_slot: Option<usize>,
     /// Which keyframe (by number) each GPU keyframe slot holds.
@@ -374,6 +376,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             incoming: None,
             to_upload: None,
             remapping: Vec::with_capacity(2),
+            awaiting_submit: None,
             slots: [None, None],
             shown_slot: None,
             key_slots: [None; KEY_SLOTS],
@@ -681,19 +684,65 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Records the GPU work of a planned frame: the upload of a newly arrived segment into
     /// the slot not on screen, and the reconstruction, in one submission.
     pub fn render(&mut self, frame: &Frame) {
+        self.submitted();
         let up = self.to_upload.take();
         let eval = frame.eval.as_ref().map(|(s, p, h)| (*s, p, *h));
         self.gpu
             .frame(up.as_ref().map(|(plan, b)| (*plan, &**b)), eval);
         if let Some((_, b)) = up {
-            if matches!(self.pipeline, Pipeline::Inline { .. }) {
-                // Simulated time stays deterministic: the buffer is mapped again now
-                // rather than at whichever later submission the GPU happens to finish by.
-                self.gpu.wait();
-            }
-            self.remapping.push(b);
-            self.return_mapped();
+            self.remapped(b);
         }
+    }
+
+    /// Like [`advance`], but records the frame's GPU work into the caller's encoder instead
+    /// of submitting a command buffer of its own, for a renderer that submits once per
+    /// frame. Submit `encoder` (it must be the next submission on the player's queue that
+    /// carries this work), then call [`submitted`] before the next frame: only then can
+    /// the staging buffer of an upload be mapped again for the decoder.
+    ///
+    /// [`advance`]: Player::advance
+    /// [`submitted`]: Player::submitted
+    pub fn advance_into(&mut self, dt: u64, encoder: &mut wgpu::CommandEncoder) -> FrameRecord {
+        let t0 = Instant::now();
+        let frame = self.plan(dt);
+        self.render_into(&frame, encoder);
+        let mut r = frame.record;
+        r.render_ns = t0.elapsed().as_nanos() as u64;
+        r
+    }
+
+    /// Records the GPU work of a planned frame into `encoder` (see [`Player::advance_into`]).
+    pub fn render_into(&mut self, frame: &Frame, encoder: &mut wgpu::CommandEncoder) {
+        // A caller that skipped `submitted` for the last frame: catch up now (right if
+        // that frame's encoder was submitted, which the contract asks for).
+        self.submitted();
+        let up = self.to_upload.take();
+        let eval = frame.eval.as_ref().map(|(s, p, h)| (*s, p, *h));
+        self.gpu
+            .record(encoder, up.as_ref().map(|(plan, b)| (*plan, &**b)), eval);
+        self.awaiting_submit = up.map(|(_, b)| b);
+    }
+
+    /// Tells the player that the encoder of its last [`Player::advance_into`] was
+    /// submitted: a staging buffer it uploaded from is mapped again for the decoder.
+    /// Harmless when there is nothing to do.
+    pub fn submitted(&mut self) {
+        if let Some(b) = self.awaiting_submit.take() {
+            self.gpu.remap(&b);
+            self.remapped(b);
+        }
+    }
+
+    /// A staging box whose buffer has been submitted and asked to map again: it goes back
+    /// to the decoder once mapped.
+    fn remapped(&mut self, b: Box<SegmentData>) {
+        if matches!(self.pipeline, Pipeline::Inline { .. }) {
+            // Simulated time stays deterministic: the buffer is mapped again now
+            // rather than at whichever later submission the GPU happens to finish by.
+            self.gpu.wait();
+        }
+        self.remapping.push(b);
+        self.return_mapped();
     }
 
     /// Gives the staging boxes whose buffers are mapped again back to the decoder.

@@ -93,6 +93,37 @@ fn steady_state_frames_do_not_allocate() {
         std::thread::sleep(std::time::Duration::from_micros(200));
     }
     let growth = LIVE.load(Ordering::Relaxed) - live_before;
+    // Recorded into the caller's encoder instead (`advance_into`, then `submitted`), the
+    // player's share of a frame is the recording alone: the encoder and the submission
+    // are the renderer's, not counted here.
+    let (mut ours_into, mut wgpu_into) = (0, 0);
+    for _ in 0..1000 {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        HERE.store(0, Ordering::Relaxed);
+        COUNT_HERE.with(|c| c.set(true));
+        let frame = player.plan(dt);
+        COUNT_HERE.with(|c| c.set(false));
+        ours_into += HERE.swap(0, Ordering::Relaxed);
+        COUNT_HERE.with(|c| c.set(true));
+        player.render_into(&frame, &mut encoder);
+        COUNT_HERE.with(|c| c.set(false));
+        wgpu_into += HERE.swap(0, Ordering::Relaxed);
+        queue.submit([encoder.finish()]);
+        COUNT_HERE.with(|c| c.set(true));
+        player.submitted();
+        COUNT_HERE.with(|c| c.set(false));
+        wgpu_into += HERE.swap(0, Ordering::Relaxed);
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
+    eprintln!(
+        "recorded into the caller's encoder: {ours_into} allocations by the player, {:.1} per \
+         frame inside wgpu's recording",
+        wgpu_into as f64 / 1000.0
+    );
+    assert_eq!(
+        ours_into, 0,
+        "the player allocated {ours_into} times planning 1000 frames recorded into the caller's encoder"
+    );
     // wgpu's floor, for the figure above: an empty command encoder, finished and
     // submitted, on the same device.
     HERE.store(0, Ordering::Relaxed);

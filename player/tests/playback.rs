@@ -808,3 +808,50 @@ fn a_reused_staging_box_holds_each_segments_bubbles_exactly() {
     // Otherwise the test could not tell a stale tile from a zero one.
     assert!(left > 0, "no tile left a term between segments");
 }
+
+#[test]
+fn recording_into_the_callers_encoder_shows_what_advance_shows() {
+    // A renderer that submits once per frame: `advance_into` its encoder, submit, then
+    // `submitted`. Under stalls (uploads, holds, catch-ups), every frame must match a
+    // player that submits on its own, bit for bit.
+    let (device, queue) = device();
+    let bytes = encode_bytes(&noisy(64, 32, 96), &config(SegmentMode::Fixed(6)));
+    let header = header_of(&bytes);
+    let rate = (header.file_size as f64 / 4.0 * 3.0) as u64;
+    let throttle = Throttle {
+        rate: Some(rate),
+        stall: Some(Stall::every(1_500_000_000, 6_000_000_000)),
+    };
+    let open = || {
+        Player::open(
+            &device,
+            &queue,
+            Cursor::new(bytes.clone()),
+            inline(Policy::Interpolate, throttle),
+        )
+        .unwrap()
+    };
+    let (mut own, mut embedded) = (open(), open());
+    let mut states = Vec::new();
+    for k in 0..900 {
+        let a = own.advance(DISPLAY);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let b = embedded.advance_into(DISPLAY, &mut encoder);
+        queue.submit([encoder.finish()]);
+        embedded.submitted();
+        assert_eq!(
+            (a.state, a.shown.to_bits()),
+            (b.state, b.shown.to_bits()),
+            "frame {k}"
+        );
+        assert_eq!(
+            own.gpu().read_display(),
+            embedded.gpu().read_display(),
+            "frame {k}: the displays differ"
+        );
+        states.push(a.state);
+    }
+    for s in [FrameState::Exact, FrameState::Held, FrameState::CatchingUp] {
+        assert!(states.contains(&s), "{s:?} was shown");
+    }
+}
