@@ -382,23 +382,6 @@ impl Gpu {
         );
     }
 
-    /// Records and submits one frame ([`Gpu::record`]) — one command buffer, one
-    /// submission — then maps the uploaded staging buffer again.
-    pub fn frame(
-        &self,
-        upload: Option<(UploadPlan, &SegmentData)>,
-        eval: Option<(usize, &Params, bool)>,
-    ) {
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.record(&mut enc, upload, eval);
-        self.queue.submit(Some(enc.finish()));
-        if let Some((_, seg)) = upload {
-            self.remap(seg);
-        }
-    }
-
     /// Records one frame into `enc`: an optional segment upload, then the reconstruction
     /// from bubble slot `eval.0` and the keyframe slots in its parameters. The parameters
     /// go through `Queue::write_buffer`, which takes effect at the queue's next submission:

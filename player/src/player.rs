@@ -682,16 +682,15 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     }
 
     /// Records the GPU work of a planned frame: the upload of a newly arrived segment into
-    /// the slot not on screen, and the reconstruction, in one submission.
+    /// the slot not on screen, and the reconstruction, in one submission of its own.
     pub fn render(&mut self, frame: &Frame) {
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.render_into(frame, &mut encoder);
+        self.gpu.queue.submit(Some(encoder.finish()));
         self.submitted();
-        let up = self.to_upload.take();
-        let eval = frame.eval.as_ref().map(|(s, p, h)| (*s, p, *h));
-        self.gpu
-            .frame(up.as_ref().map(|(plan, b)| (*plan, &**b)), eval);
-        if let Some((_, b)) = up {
-            self.remapped(b);
-        }
     }
 
     /// Like [`advance`], but records the frame's GPU work into the caller's encoder instead
@@ -724,25 +723,19 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     }
 
     /// Tells the player that the encoder of its last [`Player::advance_into`] was
-    /// submitted: a staging buffer it uploaded from is mapped again for the decoder.
-    /// Harmless when there is nothing to do.
+    /// submitted: a staging buffer it uploaded from is mapped again, and goes back to the
+    /// decoder once it is. Harmless when there is nothing to do.
     pub fn submitted(&mut self) {
         if let Some(b) = self.awaiting_submit.take() {
             self.gpu.remap(&b);
-            self.remapped(b);
+            if matches!(self.pipeline, Pipeline::Inline { .. }) {
+                // Simulated time stays deterministic: the buffer is mapped again now
+                // rather than at whichever later submission the GPU happens to finish by.
+                self.gpu.wait();
+            }
+            self.remapping.push(b);
+            self.return_mapped();
         }
-    }
-
-    /// A staging box whose buffer has been submitted and asked to map again: it goes back
-    /// to the decoder once mapped.
-    fn remapped(&mut self, b: Box<SegmentData>) {
-        if matches!(self.pipeline, Pipeline::Inline { .. }) {
-            // Simulated time stays deterministic: the buffer is mapped again now
-            // rather than at whichever later submission the GPU happens to finish by.
-            self.gpu.wait();
-        }
-        self.remapping.push(b);
-        self.return_mapped();
     }
 
     /// Gives the staging boxes whose buffers are mapped again back to the decoder.
