@@ -61,7 +61,6 @@ pub fn forward(block: &mut [f32; N * N]) {
 /// all zero, and then columns that are, are skipped: adding an exact zero to a sum that
 /// starts at +0.0 never changes its bits, so the result is the dense loops' (most blocks
 /// of a coefficient plane are nearly empty).
-#[inline(always)]
 pub fn inverse(block: &mut [f32; N * N]) {
     let t = table();
     // Columns, a whole row of coefficients at a time: for every output (n, x) the sum still
@@ -214,19 +213,25 @@ mod tests {
         }
     }
 
+    /// A block of coefficients, each non-zero with probability `density`/64.
+    fn random_block(seed: &mut u32, density: u32) -> [f32; 64] {
+        let mut b = [0f32; 64];
+        for v in b.iter_mut() {
+            *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            if (*seed >> 8) % 64 < density {
+                *v = ((*seed >> 12) % 2001) as f32 * 0.37 - 370.0;
+            }
+        }
+        b
+    }
+
     #[test]
     fn inverse_terms_is_inverse_bit_for_bit() {
         let z = zigzag();
         let mut seed = 3u32;
         for density in [1, 2, 7, 20, 64] {
             for _ in 0..500 {
-                let mut b = [0f32; 64];
-                for v in b.iter_mut() {
-                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    if (seed >> 8) % 64 < density {
-                        *v = ((seed >> 12) % 2001) as f32 * 0.37 - 370.0;
-                    }
-                }
+                let b = random_block(&mut seed, density);
                 let terms = z.iter().map(|&p| (p, b[p])).filter(|&(_, v)| v != 0.0);
                 let got = inverse_terms(terms);
                 let mut want = b;
@@ -243,13 +248,7 @@ mod tests {
         let mut seed = 7u32;
         for density in [1, 3, 8, 20, 64] {
             for _ in 0..500 {
-                let mut b = [0f32; 64];
-                for v in b.iter_mut() {
-                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    if (seed >> 8) % 64 < density {
-                        *v = ((seed >> 12) % 2001) as f32 * 0.37 - 370.0;
-                    }
-                }
+                let b = random_block(&mut seed, density);
                 let (mut a, mut e) = (b, b);
                 inverse(&mut a);
                 inverse_elementwise(&mut e);

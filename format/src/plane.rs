@@ -266,7 +266,6 @@ pub fn dequantize_block(q: &[i32; N * N], step: f32) -> [f32; N * N] {
 }
 
 /// Dequantised terms (zig-zag index, value) inverse-transformed into a spatial block.
-#[inline(always)]
 fn spatial(terms: impl Iterator<Item = (usize, i32)>, step: f32) -> [f32; N * N] {
     let z = dct::zigzag();
     let mut d = [0f32; N * N];
