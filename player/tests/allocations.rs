@@ -41,6 +41,15 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static A: Counting = Counting;
 
+/// Runs `f`, counting the allocations this thread makes in it.
+fn counted<T>(f: impl FnOnce() -> T) -> (T, u64) {
+    HERE.store(0, Ordering::Relaxed);
+    COUNT_HERE.with(|c| c.set(true));
+    let out = f();
+    COUNT_HERE.with(|c| c.set(false));
+    (out, HERE.swap(0, Ordering::Relaxed))
+}
+
 #[test]
 fn steady_state_frames_do_not_allocate() {
     let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
@@ -80,15 +89,9 @@ fn steady_state_frames_do_not_allocate() {
     for _ in 0..1000 {
         // The player's own work on the render thread (`plan`), then wgpu's (`render`:
         // write_texture, write_buffer, a command encoder and a submit), counted apart.
-        HERE.store(0, Ordering::Relaxed);
-        COUNT_HERE.with(|c| c.set(true));
-        let frame = player.plan(dt);
-        COUNT_HERE.with(|c| c.set(false));
-        ours += HERE.swap(0, Ordering::Relaxed);
-        COUNT_HERE.with(|c| c.set(true));
-        player.render(&frame);
-        COUNT_HERE.with(|c| c.set(false));
-        wgpu += HERE.swap(0, Ordering::Relaxed);
+        let (frame, n) = counted(|| player.plan(dt));
+        ours += n;
+        wgpu += counted(|| player.render(&frame)).1;
         exact += (frame.record.state == FrameState::Exact) as u32;
         std::thread::sleep(std::time::Duration::from_micros(200));
     }
@@ -99,20 +102,11 @@ fn steady_state_frames_do_not_allocate() {
     let (mut ours_into, mut wgpu_into) = (0, 0);
     for _ in 0..1000 {
         let mut encoder = device.create_command_encoder(&Default::default());
-        HERE.store(0, Ordering::Relaxed);
-        COUNT_HERE.with(|c| c.set(true));
-        let frame = player.plan(dt);
-        COUNT_HERE.with(|c| c.set(false));
-        ours_into += HERE.swap(0, Ordering::Relaxed);
-        COUNT_HERE.with(|c| c.set(true));
-        player.render_into(&frame, &mut encoder);
-        COUNT_HERE.with(|c| c.set(false));
-        wgpu_into += HERE.swap(0, Ordering::Relaxed);
+        let (frame, n) = counted(|| player.plan(dt));
+        ours_into += n;
+        wgpu_into += counted(|| player.render_into(&frame, &mut encoder)).1;
         queue.submit([encoder.finish()]);
-        COUNT_HERE.with(|c| c.set(true));
-        player.submitted();
-        COUNT_HERE.with(|c| c.set(false));
-        wgpu_into += HERE.swap(0, Ordering::Relaxed);
+        wgpu_into += counted(|| player.submitted()).1;
         std::thread::sleep(std::time::Duration::from_micros(200));
     }
     eprintln!(
@@ -126,14 +120,12 @@ fn steady_state_frames_do_not_allocate() {
     );
     // wgpu's floor, for the figure above: an empty command encoder, finished and
     // submitted, on the same device.
-    HERE.store(0, Ordering::Relaxed);
-    COUNT_HERE.with(|c| c.set(true));
-    for _ in 0..1000 {
-        let encoder = device.create_command_encoder(&Default::default());
-        queue.submit([encoder.finish()]);
-    }
-    COUNT_HERE.with(|c| c.set(false));
-    let empty = HERE.swap(0, Ordering::Relaxed);
+    let ((), empty) = counted(|| {
+        for _ in 0..1000 {
+            let encoder = device.create_command_encoder(&Default::default());
+            queue.submit([encoder.finish()]);
+        }
+    });
     eprintln!(
         "an empty wgpu frame (encoder, finish, submit) allocates {:.1} times",
         empty as f64 / 1000.0
