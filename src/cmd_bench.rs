@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use vbim_player::cpu_time::thread_cpu_ns;
+use vbim_player::thread_cpu_ns;
 
 use rayon::prelude::*;
 use vbim_bake::{light, load_terrain, output, FrameFormat, Precomputed, Scene};
@@ -115,7 +115,7 @@ fn bench_bake(a: BenchBakeArgs) -> Result<(), String> {
 fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
     use vbim_format::chunk;
     use vbim_format::{ChunkKind, Reader};
-    use vbim_player::assemble::{DecoderCore, Event, SegmentData};
+    use vbim_player::bench::{DecoderCore, Event, SegmentData};
     let name = a.file.display().to_string();
     let bytes = std::fs::read(&a.file).map_err(|e| format!("{name}: {e}"))?;
     let r = Reader::open(std::io::Cursor::new(&bytes)).map_err(|e| format!("{name}: {e}"))?;
@@ -390,7 +390,7 @@ fn bench_render(a: crate::cli::BenchRenderArgs) -> Result<(), String> {
             let t1 = Instant::now();
             player.render(&frame);
             let (c2, t2) = (thread_cpu_ns(), Instant::now());
-            player.gpu().wait();
+            player.wait_for_gpu();
             let t3 = Instant::now();
             prev = t;
             if k > warm {

@@ -11,7 +11,7 @@ use vbim_format::curve::{exposure_from_max_greens, linear_to_srgb};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::{Metric, SequenceError};
 use vbim_format::{ColorEncoding, Header, Reader};
-use vbim_player::stats::{csv, Summary};
+use vbim_player::{frames_csv, Summary};
 use vbim_player::{headless_device, FrameRecord, Player, PlayerConfig, Policy, Throttle};
 
 use crate::cli::PlayArgs;
@@ -180,7 +180,7 @@ pub fn play(
                 reference
                     .frame(target, Output::Linear, &mut truth)
                     .map_err(|e| format!("{name}: {e}"))?;
-                let shown = player.gpu().read_display();
+                let shown = player.read_display();
                 let mut a = Vec::with_capacity(truth.len());
                 let mut b = Vec::with_capacity(truth.len());
                 for i in 0..h.texel_count() {
@@ -349,7 +349,7 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
             c.preview.display()
         );
         if let Some(p) = &a.stats {
-            std::fs::write(p, csv(&c.outcome.records))
+            std::fs::write(p, frames_csv(&c.outcome.records))
                 .map_err(|e| format!("{}: {e}", p.display()))?;
         }
         return Ok(());
@@ -362,7 +362,7 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
     let o = play(&s, &device, &queue, &adapter)?;
     print(&o, &s);
     if let Some(p) = &a.stats {
-        std::fs::write(p, csv(&o.records)).map_err(|e| format!("{}: {e}", p.display()))?;
+        std::fs::write(p, frames_csv(&o.records)).map_err(|e| format!("{}: {e}", p.display()))?;
     }
     if let Some(p) = &a.json {
         std::fs::write(p, serde_json::to_string_pretty(&o).unwrap())

@@ -141,7 +141,7 @@ impl App {
             },
             Some(&view),
         );
-        g.queue.present(frame);
+        frame.present();
         self.frames += 1;
         let n = g.player.header().frame_count as f64;
         let hours = 24.0 * (r.shown.rem_euclid(n)) / n;

@@ -10,7 +10,7 @@
 use std::fs::File;
 use std::io::BufReader;
 
-use vbim_player::stats::Summary;
+use vbim_player::Summary;
 use vbim_player::{headless_device, Player, PlayerConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -19,6 +19,7 @@ pub struct SystemClock {
 }
 
 impl SystemClock {
+    /// A clock whose zero is now.
     pub fn new() -> SystemClock {
         SystemClock {
             start: Instant::now(),
@@ -58,12 +59,15 @@ pub struct SimClock {
 }
 
 impl SimClock {
+    /// A clock at zero.
     pub fn new() -> SimClock {
         SimClock::default()
     }
+    /// Moves the clock forward by `dt` ns.
     pub fn advance(&self, dt: u64) {
         self.now.fetch_add(dt, Ordering::SeqCst);
     }
+    /// Sets the clock to `t` ns.
     pub fn set(&self, t: u64) {
         self.now.store(t, Ordering::SeqCst);
     }

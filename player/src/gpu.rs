@@ -12,7 +12,7 @@ use wgpu::util::DeviceExt;
 
 use std::sync::atomic::Ordering;
 
-use crate::assemble::{row_pitch, SegmentData, Staging};
+use crate::decoder::{row_pitch, SegmentData, Staging};
 
 /// Finds an adapter and opens a device without a window. With no adapter, the error says
 /// what to install.
@@ -46,7 +46,7 @@ pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Params {
+pub(crate) struct Params {
     pub w: [f32; 12],
     pub size: [u32; 2],
     pub layers: u32,
@@ -62,27 +62,27 @@ pub struct Params {
 }
 
 /// Keyframe slots on the GPU.
-pub const KEY_SLOTS: usize = 4;
+pub(crate) const KEY_SLOTS: usize = 4;
 
 impl UploadPlan {
     /// Bytes the upload copies from staging.
     pub fn bytes(&self, seg: &SegmentData, h: &vbim_format::Header) -> u64 {
         let bubbles = self.bubbles.map_or(0, |_| seg.layers.saturating_sub(2));
         let terms = self.key0.is_some() as usize + self.key1.is_some() as usize + bubbles;
-        terms as u64 * crate::assemble::term_bytes(h)
+        terms as u64 * crate::decoder::term_bytes(h)
     }
 }
 
 /// What one upload copies from a segment's staging buffer: its K_s and K_{s+1} into
 /// keyframe slots (`None`: already there, or not wanted), its bubbles into a bubble slot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct UploadPlan {
+pub(crate) struct UploadPlan {
     pub key0: Option<usize>,
     pub key1: Option<usize>,
     pub bubbles: Option<usize>,
 }
 
-pub struct Gpu {
+pub(crate) struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
@@ -471,9 +471,7 @@ pub fn read_texture(
     let slice = buf.slice(..);
     slice.map_async(wgpu::MapMode::Read, |_| {});
     let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    let data = slice
-        .get_mapped_range()
-        .expect("the readback buffer is mapped");
+    let data = slice.get_mapped_range();
     let mut out = Vec::with_capacity((w * h * bytes_per_texel) as usize);
     for y in 0..h as usize {
         let start = y * row as usize;

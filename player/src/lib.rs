@@ -14,28 +14,70 @@
 //! [`Player::submitted`] after its submission.
 //!
 //! The player depends on `vbim-format` only, never on the encoder.
+//!
+//! Modules, in the order a chunk meets them: `reader` (source → ring), `decoder` (ring →
+//! staging), `pipeline` (the two threads and the staging boxes between them), `slots`
+//! (which GPU slot holds what), `gpu` (copies and the reconstruction shader), `player` (the
+//! render-thread state machine); `config`, `record` and `stats` are its inputs and outputs.
+#![deny(missing_docs)]
 
-pub mod assemble;
-pub mod clock;
-pub mod cpu_time;
-pub mod gpu;
+mod clock;
+mod config;
+mod cpu_time;
+mod decoder;
+mod gpu;
+mod pipeline;
 mod player;
-pub mod stats;
-pub mod stream;
-pub mod throttle;
-pub mod time;
+mod reader;
+mod record;
+mod slots;
+mod stats;
+mod throttle;
+mod time;
 
 pub use clock::{Clock, SimClock, SystemClock};
-pub use gpu::headless_device;
-pub use player::{frame_ns, Frame, FrameRecord, FrameState, Player, PlayerConfig, Policy, Totals};
+pub use config::{PlayerConfig, Policy};
+pub use cpu_time::thread_cpu_ns;
+pub use gpu::{headless_device, read_texture};
+pub use player::Player;
+pub use record::{Frame, FrameRecord, FrameState, Totals};
+pub use stats::{frames_csv, Summary};
 pub use throttle::{Stall, Throttle};
 
+/// The decoder alone, without threads or a GPU, for `vbim bench decode` and the tests
+/// that check what it stages. Not a stable API.
+#[cfg(feature = "bench")]
+pub mod bench {
+    pub use crate::decoder::{
+        layer_bytes, row_pitch, term_bytes, DecoderCore, Event, SegmentData, Staging,
+    };
+}
+
+/// Why a player could not be opened or stopped.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum PlayerError {
-    #[error("{0}")]
+    /// The stream's header or index is invalid.
+    #[error(transparent)]
     Format(#[from] vbim_format::FormatError),
-    #[error("{0}")]
-    Unsupported(String),
-    #[error("{0}")]
-    Thread(String),
+    /// A one-frame stream that does not loop: there is no time to play.
+    #[error("a single-frame sequence that does not loop has nothing to play")]
+    NothingToPlay,
+    /// A reader or decoder thread could not be started.
+    #[error("cannot start a player thread: {0}")]
+    Thread(#[source] std::io::Error),
+    /// A player thread did not stop in time.
+    #[error("thread {thread} did not stop within {deadline:?}")]
+    Stuck {
+        /// The thread's name.
+        thread: String,
+        /// How long it was given.
+        deadline: std::time::Duration,
+    },
+    /// A player thread panicked (a bug).
+    #[error("thread {thread} panicked")]
+    Panicked {
+        /// The thread's name.
+        thread: String,
+    },
 }

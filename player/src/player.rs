@@ -1,22 +1,21 @@
-//! The player: the reader and decoder (on their own threads, or stepped inline for
-//! deterministic simulated time), the render-thread state machine that decides what to
-//! show under each stall policy, and the per-frame record of what it did.
+//! The player: the render-thread state machine that decides what each displayed frame
+//! shows under the stall policy, the GPU work it records, seeking, and the per-frame
+//! record of what it did. The reader and decoder behind it are in `pipeline.rs`; the
+//! slot bookkeeping in `slots.rs`.
 
 use std::io::{Read, Seek};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
-use std::thread::JoinHandle;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{bounded, Receiver, Sender, TryRecvError};
-use ringbuf::traits::Split;
-use ringbuf::{HeapCons, HeapProd, HeapRb};
-use vbim_format::{Header, Reader, Transfer};
+use vbim_format::index::Layout;
+use vbim_format::{Header, IndexEntry, Reader, Transfer};
 
-use crate::assemble::{DecoderCore, Event, SegmentData};
-use crate::clock::{Clock, SystemClock};
-use crate::gpu::{Gpu, Params, UploadPlan, KEY_SLOTS};
-use crate::stream::{pop_message, ReaderCore};
+use crate::config::{PlayerConfig, Policy};
+use crate::decoder::SegmentData;
+use crate::gpu::{Gpu, Params, UploadPlan};
+use crate::pipeline::Pipeline;
+use crate::record::{Frame, FrameRecord, FrameState, Totals};
+use crate::slots::{Arrival, Placement, SlotTable};
 use crate::throttle::Throttle;
 use crate::time::{frames_f64, media_to_ticks, ticks_to_media, MediaTime, ONE_FRAME};
 use crate::PlayerError;
@@ -24,189 +23,14 @@ use crate::PlayerError;
 /// After a re-synchronisation, how long to let the reader catch up before another.
 const SEEK_COOLDOWN_NS: u64 = 2_000_000_000;
 
-/// What the display does when the next segment's data is late.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Policy {
-    /// The clock runs on; the last resident state is held, and when the data arrives the
-    /// display blends from what is shown to the true state over the catch-up window.
-    Interpolate,
-    /// The clock pauses until the data is there: drift accumulates, no error is shown.
-    Wait,
-    /// The display holds, then jumps to the true state when the data arrives.
-    Skip,
-}
-
-impl std::str::FromStr for Policy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "interpolate" => Ok(Policy::Interpolate),
-            "wait" => Ok(Policy::Wait),
-            "skip" => Ok(Policy::Skip),
-            _ => Err(format!("policy {s:?} (interpolate, wait or skip)")),
-        }
-    }
-}
-
-#[derive(Clone)]
-pub struct PlayerConfig {
-    pub policy: Policy,
-    /// Catch-up window, ns of playback.
-    pub catch_up_ns: u64,
-    /// The reader's bandwidth cap and stall pattern.
-    pub throttle: Throttle,
-    /// Ring capacity in bytes; `None`: the header's read-ahead at the throttle's rate (the
-    /// largest tabulated point when unthrottled), and never less than the largest chunk.
-    pub ring_bytes: Option<usize>,
-    /// Run reader and decoder on their own threads (the default), or step them inside
-    /// `advance` — deterministic, for simulated time.
-    pub threaded: bool,
-    /// The clock that paces the reader thread (threaded mode).
-    pub clock: Arc<dyn Clock>,
-    /// How long to buffer before the first frame; `None`: the header's buffer model at the
-    /// throttle's rate (no wait when unthrottled).
-    pub preroll_ns: Option<u64>,
-    /// Added to the pre-roll. The buffer model's pre-roll assumes a reader that never
-    /// stalls; while the ring is still filling after it, a stall can make the first
-    /// transition late. A margin as long as the stall to survive buys that back with
-    /// start-up time (measured in BENCHMARKS.md).
-    pub preroll_margin_ns: u64,
-}
-
-impl Default for PlayerConfig {
-    fn default() -> Self {
-        PlayerConfig {
-            policy: Policy::Interpolate,
-            catch_up_ns: 500_000_000,
-            throttle: Throttle::UNLIMITED,
-            ring_bytes: None,
-            threaded: true,
-            clock: Arc::new(SystemClock::new()),
-            preroll_ns: None,
-            preroll_margin_ns: 0,
-        }
-    }
-}
-
-/// What a displayed frame showed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FrameState {
-    /// The true state at the target time.
-    Exact,
-    /// Data late: the last resident state is held.
-    Held,
-    /// Blending from the held image to the true state.
-    CatchingUp,
-    /// `wait` policy: the clock is paused for data.
-    Waiting,
-}
-
-impl FrameState {
-    pub fn name(self) -> &'static str {
-        match self {
-            FrameState::Exact => "exact",
-            FrameState::Held => "held",
-            FrameState::CatchingUp => "catching_up",
-            FrameState::Waiting => "waiting",
-        }
-    }
-}
-
-/// One displayed frame.
-#[derive(Clone, Copy, Debug)]
-pub struct FrameRecord {
-    pub index: u64,
-    /// Playback clock, ns.
-    pub clock_ns: u64,
-    /// Target and shown media time, frames (not wrapped at loops).
-    pub target: f64,
-    pub shown: f64,
-    /// target − shown, frames.
-    pub drift: f64,
-    pub state: FrameState,
-    /// Bytes the reader delivered since the previous frame.
-    pub bytes_read: u64,
-    /// Bytes uploaded to the GPU this frame.
-    pub bytes_uploaded: u64,
-    /// Decoder CPU time (the decoding thread's own clock) charged to segments received
-    /// this frame, ns.
-    pub decode_ns: u64,
-    /// Time spent in `advance` on the calling thread, ns.
-    pub render_ns: u64,
-    /// Blend weight of the true state while catching up (1 otherwise).
-    pub alpha: f32,
-    /// The segment shown and its normalised time.
-    pub segment: usize,
-    pub u: f64,
-}
-
-/// A planned frame: its record and the reconstruction to run (slot, parameters, whether
-/// to keep the current image for blending first).
-pub struct Frame {
-    pub record: FrameRecord,
-    pub eval: Option<(usize, Params, bool)>,
-}
-
-/// Running totals.
-#[derive(Clone, Debug, Default)]
-pub struct Totals {
-    pub frames: u64,
-    pub stalls: u64,
-    pub bytes_read: u64,
-    pub bytes_uploaded: u64,
-    pub decode_ns: u64,
-    pub segments_uploaded: u64,
-    pub segments_dropped: u64,
-    pub damaged: u64,
-    pub seeks: u64,
-    pub last_error: Option<String>,
-}
-
-/// A segment resident in a GPU slot, with its absolute frame range (pass · N + frames).
-#[derive(Clone, Copy, Debug)]
-struct Resident {
-    index: usize,
-    start: u64,
-    end: u64,
-    layers: usize,
-    /// Keyframe slots holding its K_s and K_{s+1}.
-    keys: [usize; 2],
-}
-
-// Staging buffers travel as the same boxes through channels and these pools.
-#[allow(clippy::vec_box)]
-enum Pipeline<R> {
-    Threaded {
-        stop: Arc<AtomicBool>,
-        seek: Sender<(usize, u32, Option<usize>)>,
-        throttle: Sender<Throttle>,
-        threads: Vec<JoinHandle<()>>,
-        ready: Receiver<Box<SegmentData>>,
-        errors: Receiver<String>,
-        bytes_read: Arc<AtomicU64>,
-        read_seen: u64,
-    },
-    Inline {
-        reader: Box<ReaderCore<R>>,
-        prod: HeapProd<u8>,
-        cons: HeapCons<u8>,
-        decoder: Box<DecoderCore>,
-        msg: Vec<u8>,
-        pool: Vec<Box<SegmentData>>,
-        ready: Vec<Box<SegmentData>>,
-        read_seen: u64,
-    },
-}
-
+/// A `.vbim` stream playing into a GPU texture. See the crate's documentation.
 pub struct Player<R: Read + Seek + Send + 'static> {
     header: Header,
-    layout: vbim_format::index::Layout,
-    entries: Vec<vbim_format::IndexEntry>,
+    layout: Layout,
+    entries: Vec<IndexEntry>,
     cfg: PlayerConfig,
     gpu: Gpu,
     pipeline: Pipeline<R>,
-    /// Staging buffers going back to the decoder after upload.
-    recycle: Sender<Box<SegmentData>>,
     /// The box received but not yet uploaded.
     incoming: Option<Box<SegmentData>>,
     /// A box planned for upload this frame, and what to copy from it.
@@ -217,10 +41,7 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     remapping: Vec<Box<SegmentData>>,
     /// The box uploaded by the last `render_into`, until its encoder is submitted.
     awaiting_submit: Option<Box<SegmentData>>,
-    slots: [Option<Resident>; 2],
-    shown_slot: Option<usize>,
-    /// Which keyframe (by number) each GPU keyframe slot holds.
-    key_slots: [Option<usize>; KEY_SLOTS],
+    slots: SlotTable,
     ticks: u64,
     paused: u64,
     /// Start of a catch-up (ticks) and the lag the data arrived with.
@@ -239,9 +60,9 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     preroll: u64,
 }
 
-fn ring_capacity(h: &Header, entries: &[vbim_format::IndexEntry], cfg: &PlayerConfig) -> usize {
+fn ring_capacity(h: &Header, entries: &[IndexEntry], cfg: &PlayerConfig) -> usize {
     let largest =
-        entries.iter().map(|e| e.length).max().unwrap_or(0) as usize + crate::stream::MSG_HEADER;
+        entries.iter().map(|e| e.length).max().unwrap_or(0) as usize + crate::reader::MSG_HEADER;
     let model = match cfg.throttle.rate {
         Some(r) => h
             .read_ahead_at(r)
@@ -249,7 +70,7 @@ fn ring_capacity(h: &Header, entries: &[vbim_format::IndexEntry], cfg: &PlayerCo
             .unwrap_or_else(|| h.read_ahead.iter().map(|p| p.bytes).max().unwrap_or(0)),
         None => h.read_ahead.iter().map(|p| p.bytes).max().unwrap_or(0),
     } as usize;
-    cfg.ring_bytes.unwrap_or(model).max(largest) + crate::stream::MSG_HEADER * 4
+    cfg.ring_bytes.unwrap_or(model).max(largest) + crate::reader::MSG_HEADER * 4
 }
 
 impl<R: Read + Seek + Send + 'static> Player<R> {
@@ -266,9 +87,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let layout = reader.layout().clone();
         let src = reader.into_inner();
         if header.segment_count == 0 {
-            return Err(PlayerError::Unsupported(
-                "a single-frame sequence that does not loop has nothing to play".into(),
-            ));
+            return Err(PlayerError::NothingToPlay);
         }
         let ring_bytes = ring_capacity(&header, &entries, &cfg);
         let preroll = cfg.preroll_ns.unwrap_or_else(|| {
@@ -286,17 +105,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 )
             })
         }) + cfg.preroll_margin_ns;
-        let (prod, cons) = HeapRb::<u8>::new(ring_bytes).split();
-        let mut reader_core = ReaderCore::new(src, entries.clone(), header.looping, cfg.throttle);
-        let player_entries = entries.clone();
-        let player_layout = layout.clone();
-        let decoder = DecoderCore::new(header.clone(), layout.clone(), entries.clone());
-        let (recycle_tx, recycle_rx) = bounded::<Box<SegmentData>>(2);
-        for _ in 0..2 {
-            recycle_tx
-                .send(Box::new(SegmentData::mapped(&header, device)))
-                .expect("room for two");
-        }
         let gpu = Gpu::new(
             device,
             queue,
@@ -305,81 +113,19 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             header.max_degree as u32 + 1,
             header.channels as u32,
         );
-        let pipeline = if cfg.threaded {
-            let stop = Arc::new(AtomicBool::new(false));
-            let bytes_read = Arc::new(AtomicU64::new(0));
-            let (ready_tx, ready_rx) = bounded::<Box<SegmentData>>(2);
-            let (err_tx, err_rx) = bounded::<String>(64);
-            let (seek_tx, seek_rx) = bounded::<(usize, u32, Option<usize>)>(16);
-            let (throttle_tx, throttle_rx) = bounded::<Throttle>(16);
-            let clock = cfg.clock.clone();
-            let (s1, s2) = (stop.clone(), stop.clone());
-            let br = bytes_read.clone();
-            // Each thread wakes the other through the ring: the reader after a chunk goes
-            // in, the decoder after one comes out (set once both threads exist).
-            let (wake_reader, wake_decoder) = (Waker::default(), Waker::default());
-            let (wr, wd) = (wake_reader.clone(), wake_decoder.clone());
-            let reader_thread = std::thread::Builder::new()
-                .name("vbim-reader".into())
-                .spawn(move || {
-                    reader_loop(
-                        &mut reader_core,
-                        prod,
-                        &*clock,
-                        &s1,
-                        &br,
-                        &seek_rx,
-                        &throttle_rx,
-                        &wd,
-                    )
-                })
-                .map_err(|e| PlayerError::Thread(e.to_string()))?;
-            let mut dec = decoder;
-            let decoder_thread = std::thread::Builder::new()
-                .name("vbim-decoder".into())
-                .spawn(move || decoder_loop(&mut dec, cons, recycle_rx, ready_tx, err_tx, &s2, &wr))
-                .map_err(|e| PlayerError::Thread(e.to_string()))?;
-            let _ = wake_reader.set(reader_thread.thread().clone());
-            let _ = wake_decoder.set(decoder_thread.thread().clone());
-            Pipeline::Threaded {
-                stop,
-                seek: seek_tx,
-                throttle: throttle_tx,
-                threads: vec![reader_thread, decoder_thread],
-                ready: ready_rx,
-                errors: err_rx,
-                bytes_read,
-                read_seen: 0,
-            }
-        } else {
-            let pool: Vec<Box<SegmentData>> = recycle_rx.try_iter().collect();
-            reader_core.prepare(0);
-            Pipeline::Inline {
-                reader: Box::new(reader_core),
-                prod,
-                cons,
-                decoder: Box::new(decoder),
-                msg: Vec::with_capacity(1 << 20),
-                ready: Vec::with_capacity(2),
-                pool,
-                read_seen: 0,
-            }
-        };
+        let pipeline = Pipeline::start(src, &header, &layout, &entries, &cfg, ring_bytes, device)?;
         Ok(Player {
             header,
-            layout: player_layout,
-            entries: player_entries,
+            layout,
+            entries,
             cfg,
             gpu,
             pipeline,
-            recycle: recycle_tx,
             incoming: None,
             to_upload: None,
             remapping: Vec::with_capacity(2),
             awaiting_submit: None,
-            slots: [None, None],
-            shown_slot: None,
-            key_slots: [None; KEY_SLOTS],
+            slots: SlotTable::default(),
             ticks: 0,
             paused: 0,
             catch_start: None,
@@ -397,6 +143,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         })
     }
 
+    /// The stream's header.
     pub fn header(&self) -> &Header {
         &self.header
     }
@@ -404,9 +151,18 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn view(&self) -> &wgpu::TextureView {
         &self.gpu.display_view
     }
-    pub fn gpu(&self) -> &Gpu {
-        &self.gpu
+    /// Reads the lightmap back to the CPU: RGBA, f32, row by row. Blocks until the GPU is
+    /// done; for tests, checks and captures, never per frame.
+    pub fn read_display(&self) -> Vec<f32> {
+        self.gpu.read_display()
     }
+
+    /// Blocks until the GPU has finished what was submitted (to time the GPU's share).
+    pub fn wait_for_gpu(&self) {
+        self.gpu.wait();
+    }
+
+    /// Running totals since the player was opened.
     pub fn totals(&self) -> &Totals {
         &self.totals
     }
@@ -414,6 +170,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn preroll_ns(&self) -> u64 {
         self.preroll
     }
+    /// The ring's capacity in bytes.
     pub fn ring_bytes(&self) -> usize {
         self.ring_bytes
     }
@@ -421,9 +178,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn ticks(&self) -> u64 {
         self.ticks
     }
+    /// The stall policy in force.
     pub fn policy(&self) -> Policy {
         self.cfg.policy
     }
+    /// Changes the stall policy from the next frame on.
     pub fn set_policy(&mut self, p: Policy) {
         self.cfg.policy = p;
     }
@@ -432,239 +191,53 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// threaded mode: at the reader's next chunk).
     pub fn set_throttle(&mut self, t: Throttle) {
         self.cfg.throttle = t;
-        match &mut self.pipeline {
-            Pipeline::Inline { reader, .. } => reader.throttle = t,
-            Pipeline::Threaded {
-                throttle, threads, ..
-            } => {
-                let _ = throttle.try_send(t);
-                unpark_reader(threads);
-            }
-        }
+        self.pipeline.set_throttle(t);
     }
 
     fn n_frames(&self) -> u64 {
         self.header.frame_count as u64
     }
 
-    /// Moves the pipeline forward and takes decoded segments (never blocks).
-    fn pump(&mut self) -> u64 {
-        let mut decode_ns = 0;
-        match &mut self.pipeline {
-            Pipeline::Threaded {
-                ready,
-                errors,
-                bytes_read,
-                read_seen,
-                ..
-            } => {
-                while let Ok(e) = errors.try_recv() {
-                    self.totals.damaged += 1;
-                    self.totals.last_error = Some(e);
-                }
-                if self.incoming.is_none() {
-                    match ready.try_recv() {
-                        Ok(b) => {
-                            decode_ns += b.decode_ns;
-                            self.incoming = Some(b);
-                        }
-                        Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => {}
-                    }
-                }
-                let r = bytes_read.load(Ordering::Relaxed);
-                self.totals.bytes_read += r - *read_seen;
-                *read_seen = r;
-            }
-            Pipeline::Inline {
-                reader,
-                prod,
-                cons,
-                decoder,
-                msg,
-                pool,
-                ready,
-                read_seen,
-            } => {
-                let now = self.ticks;
-                loop {
-                    let mut progress = false;
-                    reader.prepare(now);
-                    if reader.deliver(now, prod) {
-                        progress = true;
-                    }
-                    // Decode only while a staging buffer is free (the render thread returns
-                    // them after upload): the natural back-pressure of double buffering.
-                    while !pool.is_empty() {
-                        let Some(m) = pop_message(cons, msg) else {
-                            break;
-                        };
-                        progress = true;
-                        if m.generation != reader.generation {
-                            continue;
-                        }
-                        match decoder.take(m.chunk as usize, m.ok.then_some(&msg[..])) {
-                            Event::Ready(s) => {
-                                let mut b = pool.pop().unwrap();
-                                match decoder.fill(s, m.generation, m.pass, &mut b) {
-                                    Ok(()) => ready.push(b),
-                                    Err(e) => {
-                                        self.totals.damaged += 1;
-                                        self.totals.last_error = Some(e);
-                                        pool.push(b);
-                                    }
-                                }
-                            }
-                            Event::Damaged(e) => {
-                                self.totals.damaged += 1;
-                                self.totals.last_error = Some(e);
-                            }
-                            Event::Nothing => {}
-                        }
-                    }
-                    if !progress {
-                        break;
-                    }
-                }
-                if self.incoming.is_none() && !ready.is_empty() {
-                    let b = ready.remove(0);
-                    decode_ns += b.decode_ns;
-                    self.incoming = Some(b);
-                }
-                self.totals.bytes_read += reader.bytes_read - *read_seen;
-                *read_seen = reader.bytes_read;
-            }
-        }
-        decode_ns
-    }
-
-    fn give_back(&mut self, b: Box<SegmentData>) {
-        match &mut self.pipeline {
-            Pipeline::Inline { pool, .. } => pool.push(b),
-            Pipeline::Threaded { .. } => {
-                let _ = self.recycle.try_send(b);
-            }
-        }
-    }
-
-    /// Puts an arrived segment in the bubble slot that is not on screen (never the
-    /// displayed one) and its keyframes in keyframe slots the other bubble slot does not
-    /// use, or drops it when it is already in the past. A dropped segment still leaves its
-    /// closing keyframe on the GPU: the decoder did not stage it again for the next one.
-    fn take_incoming(&mut self, b: Box<SegmentData>, pos: MediaTime, n: u64, uploaded: &mut u64) {
+    /// Puts an arrived segment in the bubble slot that is not on screen and its
+    /// keyframes in keyframe slots the other bubble slot does not use, or drops it when it
+    /// is already in the past (keeping its closing keyframe: the decoder does not stage it
+    /// again for the next segment). Returns the bytes its upload will copy.
+    fn take_incoming(&mut self, b: Box<SegmentData>, pos: MediaTime, n: u64) -> u64 {
         let base = b.pass as u64 * n;
-        let r = Resident {
+        let arrival = Arrival {
             index: b.index,
             start: base + ((b.start as u64) << 32),
             end: base + ((b.end as u64) << 32),
             layers: b.layers,
-            keys: [0, 0],
+            keyframes: b.keys,
+            k0_staged: b.k0_staged,
         };
-        let free = self.shown_slot.map_or(0, |s| 1 - s);
-        let last_of_still = !self.header.looping && r.end >= n - ONE_FRAME;
-        let past = r.end <= pos && !last_of_still;
-        if !past
-            && self.slots[free]
-                .is_some_and(|old| old.end > pos && r.start > pos && old.start <= r.start)
-        {
-            // The slot not on screen holds a segment still to come: wait for it to play.
-            self.incoming = Some(b);
-            return;
-        }
-        if !past {
-            let keep = [self.slots[1 - free], None];
-            if let Some((mut plan, keys)) = self.place_keys(&b, keep) {
-                plan.bubbles = Some(free);
-                *uploaded = plan.bytes(&b, &self.header);
-                self.slots[free] = Some(Resident { keys, ..r });
+        let plan = match self.slots.place(&arrival, pos, n, self.header.looping) {
+            Placement::NotYet => {
+                self.incoming = Some(b);
+                return 0;
+            }
+            Placement::Upload(plan) => {
                 self.totals.segments_uploaded += 1;
+                Some(plan)
+            }
+            Placement::Dropped(plan) => {
+                self.totals.segments_dropped += 1;
+                plan
+            }
+        };
+        match plan {
+            Some(plan) => {
+                let bytes = plan.bytes(&b, &self.header);
                 // Copied to the GPU in `render`, after which the box goes back to the decoder.
                 self.to_upload = Some((plan, b));
-                return;
+                bytes
             }
-            // Its K_s is neither staged nor on the GPU (only if a closing keyframe could
-            // not be kept, below): drop it like a late one; the next segment plays.
-        }
-        self.totals.segments_dropped += 1;
-        let mut placed = self.place_closing(&b);
-        if placed.is_none() {
-            // Both bubble slots' keyframes are protected: forget the one not on screen if
-            // it is over (it can never be shown again).
-            let other = self.shown_slot.map_or(1, |s| 1 - s);
-            if self.slots[other].is_some_and(|o| o.end <= pos) {
-                self.slots[other] = None;
-                placed = self.place_closing(&b);
+            None => {
+                self.pipeline.give_back(b);
+                0
             }
         }
-        match placed {
-            Some(plan) if plan.key1.is_some() => {
-                *uploaded = plan.bytes(&b, &self.header);
-                self.to_upload = Some((plan, b));
-            }
-            _ => self.give_back(b),
-        }
-    }
-
-    /// Keyframe slots for a dropped segment's closing keyframe, keeping both bubble
-    /// slots' keyframes.
-    fn place_closing(&mut self, b: &SegmentData) -> Option<UploadPlan> {
-        let keep = [self.slots[0], self.slots[1]];
-        let (slot, copy) = self.key_slot_for(b.keys[1], keep, None)?;
-        self.key_slots[slot] = Some(b.keys[1]);
-        Some(UploadPlan {
-            key0: None,
-            key1: copy,
-            bubbles: None,
-        })
-    }
-
-    /// Keyframe slots for segment `b`'s K_s and K_{s+1}: where they already are, or
-    /// slots that no segment in `keep` uses. `None` if K_s is neither staged nor resident.
-    fn place_keys(
-        &mut self,
-        b: &SegmentData,
-        keep: [Option<Resident>; 2],
-    ) -> Option<(UploadPlan, [usize; 2])> {
-        let (k0, copy0) = self.key_slot_for(b.keys[0], keep, None)?;
-        if copy0.is_some() && !b.k0_staged {
-            return None;
-        }
-        let (k1, copy1) = self.key_slot_for(b.keys[1], keep, Some(k0))?;
-        self.key_slots[k0] = Some(b.keys[0]);
-        self.key_slots[k1] = Some(b.keys[1]);
-        let plan = UploadPlan {
-            key0: copy0,
-            key1: copy1,
-            bubbles: None,
-        };
-        Some((plan, [k0, k1]))
-    }
-
-    /// The keyframe slot for keyframe `k`: the one that holds it already (nothing to
-    /// copy), or a free one (see [`Self::free_key_slot`]) to copy it into — `(slot, copy)`.
-    fn key_slot_for(
-        &self,
-        k: usize,
-        keep: [Option<Resident>; 2],
-        avoid: Option<usize>,
-    ) -> Option<(usize, Option<usize>)> {
-        match self.key_slots.iter().position(|&x| x == Some(k)) {
-            Some(s) => Some((s, None)),
-            None => self.free_key_slot(keep, avoid).map(|s| (s, Some(s))),
-        }
-    }
-
-    /// A keyframe slot that no segment in `keep` uses, other than `avoid`: an empty one
-    /// first.
-    fn free_key_slot(&self, keep: [Option<Resident>; 2], avoid: Option<usize>) -> Option<usize> {
-        let usable =
-            |s: usize| Some(s) != avoid && !keep.iter().flatten().any(|r| r.keys.contains(&s));
-        (0..KEY_SLOTS)
-            .find(|&s| usable(s) && self.key_slots[s].is_none())
-            .or_else(|| (0..KEY_SLOTS).find(|&s| usable(s)))
-    }
-
-    fn covers(r: &Option<Resident>, p: u64) -> bool {
-        r.is_some_and(|r| r.start <= p && p < r.end)
     }
 
     /// Advances playback by `dt` ns and renders the lightmap for the new time: [`plan`]
@@ -728,7 +301,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn submitted(&mut self) {
         if let Some(b) = self.awaiting_submit.take() {
             self.gpu.remap(&b);
-            if matches!(self.pipeline, Pipeline::Inline { .. }) {
+            if self.pipeline.is_inline() {
                 // Simulated time stays deterministic: the buffer is mapped again now
                 // rather than at whichever later submission the GPU happens to finish by.
                 self.gpu.wait();
@@ -744,7 +317,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         while i < self.remapping.len() {
             if self.remapping[i].mapped.load(Ordering::Acquire) {
                 let b = self.remapping.swap_remove(i);
-                self.give_back(b);
+                self.pipeline.give_back(b);
             } else {
                 i += 1;
             }
@@ -757,7 +330,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let t0 = Instant::now();
         self.ticks += dt;
         self.return_mapped();
-        let decode_ns = self.pump();
+        let decode_ns = self
+            .pipeline
+            .pump(self.ticks, &mut self.incoming, &mut self.totals);
         let (num, den) = (self.header.rate_num, self.header.rate_den);
         let n = self.n_frames() << 32;
         // Playback starts when the first segment is resident (pre-roll is not drift).
@@ -772,28 +347,17 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         if let Some(b) = self.incoming.take() {
             if b.generation != self.generation {
                 // Decoded before a seek: no longer wanted.
-                self.give_back(b);
+                self.pipeline.give_back(b);
             } else {
-                self.take_incoming(b, pos, n, &mut uploaded);
+                uploaded = self.take_incoming(b, pos, n);
             }
         }
         let mut state = FrameState::Exact;
-        let covering = (0..2).find(|&s| Self::covers(&self.slots[s], pos));
-        let missing = covering.is_none();
-        if let Some(s) = covering {
-            self.shown_slot = Some(s);
-        }
+        let missing = self.slots.show_covering(pos).is_none();
         if missing && self.ticks.saturating_sub(self.last_seek) > SEEK_COOLDOWN_NS {
             // So far behind that reading on would only deliver the past: re-synchronise
             // at the last intra keyframe before the target.
-            let known_end = self
-                .slots
-                .iter()
-                .flatten()
-                .map(|r| r.end)
-                .max()
-                .unwrap_or(0);
-            if pos.saturating_sub(known_end) > (n / 2).max(ONE_FRAME) {
+            if pos.saturating_sub(self.slots.known_end()) > (n / 2).max(ONE_FRAME) {
                 self.last_seek = self.ticks;
                 self.seek(pos);
             }
@@ -825,8 +389,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         if missing {
             // Hold the end of what is on screen (its closing keyframe), or its start.
             let held = self
-                .shown_slot
-                .and_then(|s| self.slots[s])
+                .slots
+                .shown()
+                .and_then(|s| self.slots.slot(s))
                 .map_or(self.last_shown, |r| {
                     if pos >= r.end {
                         r.end - 1
@@ -871,8 +436,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         // Evaluate the shown slot at the (clamped) time.
         let (mut seg, mut u) = (0, 0.0);
         let mut eval = None;
-        if let Some(s) = self.shown_slot {
-            if let Some(r) = self.slots[s] {
+        if let Some(s) = self.slots.shown() {
+            if let Some(r) = self.slots.slot(s) {
                 let t = if missing {
                     shown.clamp(r.start, r.end)
                 } else {
@@ -952,51 +517,22 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let n = self.n_frames();
         let pass = (pos >> 32) / n;
         let f = ((pos >> 32) % n) as u32;
-        let (keys, boundaries, entries) = match &self.pipeline {
-            Pipeline::Inline { decoder, .. } => (
-                decoder.layout().keyframes.clone(),
-                decoder.layout().boundaries.clone(),
-                decoder.entries().to_vec(),
-            ),
-            Pipeline::Threaded { .. } => (
-                self.layout.keyframes.clone(),
-                self.layout.boundaries.clone(),
-                self.entries.clone(),
-            ),
-        };
+        let (keys, boundaries) = (&self.layout.keyframes, &self.layout.boundaries);
         let s = boundaries
             .partition_point(|&b| b <= f)
             .saturating_sub(1)
             .min(boundaries.len().saturating_sub(2));
         let k = (0..=s.min(keys.len() - 1))
             .rev()
-            .find(|&k| entries[keys[k]].is_intra())
+            .find(|&k| self.entries[keys[k]].is_intra())
             .unwrap_or(0);
-        let first = (self.header.looping && k > 0).then_some(keys[0]);
+        let restart = (keys[k], pass as u32, (self.header.looping && k > 0).then_some(keys[0]));
         self.generation = self.generation.wrapping_add(1);
         if let Some(b) = self.incoming.take() {
-            self.give_back(b);
+            self.pipeline.give_back(b);
         }
-        self.slots = [None, None];
-        self.shown_slot = None;
-        self.key_slots = [None; KEY_SLOTS];
-        match &mut self.pipeline {
-            Pipeline::Inline {
-                reader,
-                decoder,
-                pool,
-                ready,
-                ..
-            } => {
-                reader.restart(keys[k], pass as u32, first, self.ticks);
-                decoder.reset();
-                pool.append(ready);
-            }
-            Pipeline::Threaded { seek, threads, .. } => {
-                let _ = seek.send((keys[k], pass as u32, first));
-                unpark_reader(threads);
-            }
-        }
+        self.slots.clear();
+        self.pipeline.restart(restart, self.ticks);
         self.totals.seeks += 1;
     }
 
@@ -1011,25 +547,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 
     /// Stops the reader and decoder threads and waits for them (at most `deadline`).
     pub fn stop(&mut self, deadline: Duration) -> Result<(), PlayerError> {
-        if let Pipeline::Threaded { stop, threads, .. } = &mut self.pipeline {
-            stop.store(true, Ordering::SeqCst);
-            threads.iter().for_each(|th| th.thread().unpark());
-            let t = Instant::now();
-            for th in threads.drain(..) {
-                while !th.is_finished() {
-                    if t.elapsed() > deadline {
-                        return Err(PlayerError::Thread(format!(
-                            "thread {} did not stop within {deadline:?}",
-                            th.thread().name().unwrap_or("?")
-                        )));
-                    }
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-                th.join()
-                    .map_err(|_| PlayerError::Thread("a player thread panicked".into()))?;
-            }
-        }
-        Ok(())
+        self.pipeline.stop(deadline)
     }
 }
 
@@ -1039,139 +557,3 @@ impl<R: Read + Seek + Send + 'static> Drop for Player<R> {
     }
 }
 
-/// Wakes the reader (the pipeline's first thread) to read a control message now: it may
-/// be parked waiting for room in the ring.
-fn unpark_reader(threads: &[JoinHandle<()>]) {
-    if let Some(reader) = threads.first() {
-        reader.thread().unpark();
-    }
-}
-
-/// A thread to wake, once it exists.
-type Waker = Arc<std::sync::OnceLock<std::thread::Thread>>;
-
-fn wake(w: &Waker) {
-    if let Some(t) = w.get() {
-        t.unpark();
-    }
-}
-
-/// Longest park while waiting on the ring: bounds a missed wake-up (there should be none:
-/// an unpark before the park makes it return at once).
-const PARK: Duration = Duration::from_millis(20);
-/// How often a thread blocked on a channel looks at the stop flag.
-const STOP_CHECK: Duration = Duration::from_millis(50);
-
-#[allow(clippy::too_many_arguments)]
-fn reader_loop<R: Read + Seek>(
-    core: &mut ReaderCore<R>,
-    mut prod: HeapProd<u8>,
-    clock: &dyn Clock,
-    stop: &AtomicBool,
-    bytes_read: &AtomicU64,
-    seek: &Receiver<(usize, u32, Option<usize>)>,
-    throttle: &Receiver<Throttle>,
-    wake_decoder: &Waker,
-) {
-    let give_up = || stop.load(Ordering::Relaxed) || !seek.is_empty();
-    while !stop.load(Ordering::Relaxed) {
-        while let Ok((pos, pass, first)) = seek.try_recv() {
-            core.restart(pos, pass, first, clock.now_ns());
-        }
-        while let Ok(t) = throttle.try_recv() {
-            core.throttle = t;
-        }
-        core.prepare(clock.now_ns());
-        let Some(arrival) = core.next_arrival() else {
-            // Finished a file that does not loop.
-            std::thread::sleep(Duration::from_millis(5));
-            continue;
-        };
-        if !clock.sleep_until(arrival, &give_up) {
-            continue;
-        }
-        // Wait for room in the ring: the decoder wakes this thread when it takes a chunk
-        // out (the timeout only bounds a missed wake-up).
-        while !core.deliver(clock.now_ns(), &mut prod) {
-            if give_up() {
-                break;
-            }
-            std::thread::park_timeout(PARK);
-        }
-        wake(wake_decoder);
-        bytes_read.store(core.bytes_read, Ordering::Relaxed);
-    }
-}
-
-fn decoder_loop(
-    core: &mut DecoderCore,
-    mut cons: HeapCons<u8>,
-    free: Receiver<Box<SegmentData>>,
-    ready: Sender<Box<SegmentData>>,
-    errors: Sender<String>,
-    stop: &AtomicBool,
-    wake_reader: &Waker,
-) {
-    let mut msg = Vec::with_capacity(1 << 20);
-    let mut generation = 0;
-    // A box whose segment failed to decode: used again before asking for another.
-    let mut spare: Option<Box<SegmentData>> = None;
-    while !stop.load(Ordering::Relaxed) {
-        // An empty ring: the reader wakes this thread when a chunk goes in. (Polling it
-        // every 0.5 ms woke this thread ~9× as often at 1.2× the mean rate.)
-        let Some(m) = pop_message(&mut cons, &mut msg) else {
-            std::thread::park_timeout(PARK);
-            continue;
-        };
-        wake(wake_reader);
-        if m.generation != generation {
-            generation = m.generation;
-            core.reset();
-        }
-        match core.take(m.chunk as usize, m.ok.then_some(&msg[..])) {
-            Event::Ready(s) => {
-                // A free staging buffer: the render thread has uploaded one.
-                let mut b = loop {
-                    if let Some(b) = spare.take() {
-                        break b;
-                    }
-                    match free.recv_timeout(STOP_CHECK) {
-                        Ok(b) => break b,
-                        Err(_) if stop.load(Ordering::Relaxed) => return,
-                        Err(_) => {}
-                    }
-                };
-                match core.fill(s, m.generation, m.pass, &mut b) {
-                    Ok(()) => {
-                        let mut b = Some(b);
-                        while let Some(x) = b.take() {
-                            match ready.send_timeout(x, STOP_CHECK) {
-                                Ok(()) => {}
-                                Err(crossbeam_channel::SendTimeoutError::Timeout(x)) => {
-                                    if stop.load(Ordering::Relaxed) {
-                                        return;
-                                    }
-                                    b = Some(x);
-                                }
-                                Err(_) => return,
-                            }
-                        }
-                    }
-                    Err(e) => {
-                        let _ = errors.try_send(e);
-                        spare = Some(b);
-                    }
-                }
-            }
-            Event::Damaged(e) => {
-                let _ = errors.try_send(e);
-            }
-            Event::Nothing => {}
-        }
-    }
-}
-
-/// Returns the ring's media time of one frame, for the stats (media frames per ns).
-pub fn frame_ns(h: &Header) -> u64 {
-    media_to_ticks(ONE_FRAME, h.rate_num, h.rate_den)
-}

@@ -2,25 +2,36 @@
 
 use std::fmt::Write as _;
 
-use crate::player::{FrameRecord, FrameState};
+use crate::record::{FrameRecord, FrameState};
 
+/// A playback's figures, from its frame records ([`Summary::of`]).
 #[derive(Clone, Debug, Default)]
 pub struct Summary {
+    /// Frames displayed after the pre-roll.
     pub frames: usize,
     /// Seconds of playback clock covered.
     pub seconds: f64,
+    /// Mean drift, media frames.
     pub mean_drift: f64,
+    /// 99th percentile of the drift, media frames.
     pub p99_drift: f64,
+    /// Largest drift, media frames.
     pub max_drift: f64,
     /// Frames late by more than one media frame (drift > 1).
     pub late_frames: usize,
     /// Transitions into a held or waiting state.
     pub stalls: usize,
+    /// Frames that held the last resident state.
     pub held_frames: usize,
+    /// Frames that blended from the held image to the true state.
     pub catching_up_frames: usize,
+    /// Bytes read per second of playback clock.
     pub bytes_read_per_s: f64,
+    /// Bytes uploaded to the GPU per second of playback clock.
     pub bytes_uploaded_per_s: f64,
+    /// Mean time in `advance` on the calling thread, ms.
     pub mean_render_ms: f64,
+    /// 99th percentile of that time, ms.
     pub p99_render_ms: f64,
     /// Decoder time per second of playback (share of one core).
     pub decode_core_share: f64,
@@ -85,7 +96,7 @@ impl Summary {
 }
 
 /// Per-frame records as CSV.
-pub fn csv(records: &[FrameRecord]) -> String {
+pub fn frames_csv(records: &[FrameRecord]) -> String {
     let mut s = String::from(
         "frame,clock_ns,target_frames,shown_frames,drift_frames,state,bytes_read,bytes_uploaded,decode_ns,render_ns,alpha,segment,u\n",
     );

@@ -2,6 +2,7 @@
 //! `--stall 300ms@5s`), as arrival times on the playback clock. Pure arithmetic, so that a
 //! simulated clock gives the same schedule every run.
 
+/// How fast the reader may read: a byte rate and periodic stalls.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Throttle {
     /// Bytes per second; `None` = unlimited.
@@ -15,8 +16,11 @@ pub struct Throttle {
 /// benchmark put the stall where the stream is busiest instead of where the period falls.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stall {
+    /// How long the reader stops, ns.
     pub length_ns: u64,
+    /// The period, ns.
     pub every_ns: u64,
+    /// When the first stall starts, ns of playback clock.
     pub first_ns: u64,
 }
 
@@ -32,6 +36,7 @@ impl Stall {
 }
 
 impl Throttle {
+    /// No cap and no stalls.
     pub const UNLIMITED: Throttle = Throttle {
         rate: None,
         stall: None,

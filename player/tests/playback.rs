@@ -122,7 +122,7 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
             if r.index % 7 != 0 {
                 continue;
             }
-            let gpu = player.gpu().read_display();
+            let gpu = player.read_display();
             let t = r.shown % 30.0;
             let mode = if kind == InputKind::Srgb8 {
                 Output::Stored
@@ -190,7 +190,7 @@ fn a_stall_longer_than_the_read_ahead_holds_then_catches_up_without_black_frames
             );
             continue;
         }
-        let img = player.gpu().read_display();
+        let img = player.read_display();
         let mean: f32 = img.chunks(4).map(|p| p[1]).sum::<f32>() / (img.len() / 4) as f32;
         assert!(
             mean > 1e-3,
@@ -258,7 +258,7 @@ fn loops_are_seamless_and_100_hours_land_on_the_exact_frame() {
         "shown {} expected {expect}",
         r.shown % 24.0
     );
-    let gpu = player.gpu().read_display();
+    let gpu = player.read_display();
     let mut cpu = vec![0f32; 16 * 8 * 3];
     reference.frame(expect, Output::Linear, &mut cpu).unwrap();
     for i in 0..16 * 8 {
@@ -288,7 +288,7 @@ fn a_damaged_chunk_mid_stream_is_reported_and_playback_recovers() {
     for _ in 0..200 {
         let rec = player.advance(DISPLAY);
         saw_hold |= rec.state != FrameState::Exact;
-        let img = player.gpu().read_display();
+        let img = player.read_display();
         assert!(img.iter().all(|v| v.is_finite()));
     }
     let t = player.totals();
@@ -453,7 +453,7 @@ fn the_loop_seam_in_a_sunrise_adds_no_error() {
             r.target
         );
         let f = r.shown % n as f64;
-        let gpu = player.gpu().read_display();
+        let gpu = player.read_display();
         let rgb: Vec<f32> = gpu.chunks(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
         reference.frame(f, Output::Linear, &mut cpu).unwrap();
         let added = rgb
@@ -539,7 +539,7 @@ fn assert_display_matches(
     texels: usize,
     what: &str,
 ) {
-    let gpu = player.gpu().read_display();
+    let gpu = player.read_display();
     let mut cpu = vec![0f32; texels * 3];
     reference.frame(t, Output::Linear, &mut cpu).unwrap();
     for i in 0..texels {
@@ -576,7 +576,7 @@ fn stream(
 
 #[test]
 fn keyframes_shared_by_consecutive_segments_are_staged_once() {
-    use vbim_player::assemble::{DecoderCore, Event, SegmentData};
+    use vbim_player::bench::{DecoderCore, Event, SegmentData};
     let (bytes, h, entries, layout) = stream(32, 16, 48, 6);
     let mut dec = DecoderCore::new(h.clone(), layout, entries.clone());
     let mut staging = SegmentData::with_capacity(&h);
@@ -605,7 +605,7 @@ fn keyframes_shared_by_consecutive_segments_are_staged_once() {
     assert_eq!(restarts, [0, 0]);
     for (_, k0, layers, bytes) in &staged {
         let terms = *layers as u64 - !k0 as u64;
-        assert_eq!(*bytes, terms * vbim_player::assemble::term_bytes(&h));
+        assert_eq!(*bytes, terms * vbim_player::bench::term_bytes(&h));
     }
 }
 
@@ -665,7 +665,7 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
         // Most uploads shared K_s with the segment before.
         let full = t.segments_uploaded
             * (header.max_degree as u64 + 1)
-            * vbim_player::assemble::term_bytes(&header);
+            * vbim_player::bench::term_bytes(&header);
         assert!(t.bytes_uploaded < full, "{} of {full}", t.bytes_uploaded);
     }
 }
@@ -752,7 +752,7 @@ fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
 #[test]
 fn a_reused_staging_box_holds_each_segments_bubbles_exactly() {
     use vbim_format::chunk::{read_coeffs, read_tilemap};
-    use vbim_player::assemble::{layer_bytes, row_pitch, DecoderCore, Event, SegmentData, Staging};
+    use vbim_player::bench::{layer_bytes, row_pitch, DecoderCore, Event, SegmentData, Staging};
     let (bytes, h, entries, layout) = stream(96, 32, 96, 8);
     let chunk = |i: usize| {
         let e = &entries[i];
@@ -845,8 +845,8 @@ fn recording_into_the_callers_encoder_shows_what_advance_shows() {
             "frame {k}"
         );
         assert_eq!(
-            own.gpu().read_display(),
-            embedded.gpu().read_display(),
+            own.read_display(),
+            embedded.read_display(),
             "frame {k}: the displays differ"
         );
         states.push(a.state);

@@ -234,7 +234,7 @@ impl SceneRenderer {
         });
         let pipeline = |vs: &str,
                         fs: &str,
-                        buffers: &[Option<wgpu::VertexBufferLayout>],
+                        buffers: &[wgpu::VertexBufferLayout],
                         depth_write: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(vs),
@@ -276,7 +276,7 @@ impl SceneRenderer {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2, 2 => Float32x3],
         };
-        let terrain = pipeline("vs_terrain", "fs_terrain", &[Some(vlayout)], true);
+        let terrain = pipeline("vs_terrain", "fs_terrain", &[vlayout], true);
         let sky = pipeline("vs_sky", "fs_sky", &[], false);
         let size = wgpu::Extent3d {
             width,
@@ -372,7 +372,7 @@ impl SceneRenderer {
 
     /// Reads the offscreen target back as RGBA8 (sRGB-encoded).
     pub fn read(&self) -> Vec<u8> {
-        vbim_player::gpu::read_texture(&self.device, &self.queue, &self.color, 4)
+        vbim_player::read_texture(&self.device, &self.queue, &self.color, 4)
     }
 }
 

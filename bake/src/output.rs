@@ -130,7 +130,7 @@ struct Manifest<'a> {
     fps: &'a str,
     looping: bool,
     format: FrameFormat,
-    /// What a texel holds (../shared/PROTOCOL.md).
+    /// What a texel holds (docs/CONVENTIONS.md).
     units: &'static str,
     /// The 8-bit export curve's exposure e = 1.5 / median of per-frame max green.
     exposure: f32,

@@ -174,7 +174,7 @@ fn horizons_are_clamped_to_the_normals_hemisphere_on_steep_slopes() {
 }
 
 fn real_scene(size: usize) -> Scene {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples");
     let mut s = Scene::load(&root.join("jacksboro.toml")).unwrap();
     s.size = size;
     s.frames = 48;

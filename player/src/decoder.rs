@@ -8,7 +8,7 @@
 //! first segment whose parts are all good.
 
 use crate::cpu_time::thread_cpu_ns;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use vbim_format::chunk::{self, TileMap};
@@ -18,6 +18,7 @@ use vbim_format::reader::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
 /// Where the decoder writes a segment's layers.
+#[cfg_attr(not(feature = "bench"), allow(dead_code))]
 pub enum Staging {
     /// Host memory (the decoder measured on its own, `vbim bench decode`).
     Host(Vec<f32>),
@@ -39,11 +40,15 @@ pub enum Staging {
 /// closing keyframe, even one it drops). That saves a term's copy per segment, on the
 /// decoder and on the GPU.
 pub struct SegmentData {
+    /// The seek generation it was decoded in: a box from before a seek is not shown.
     pub generation: u32,
     /// The loop pass of the reader that delivered it (0 for the first play-through).
     pub pass: u32,
+    /// The segment's number.
     pub index: usize,
+    /// Its first frame.
     pub start: u32,
+    /// The frame after its last (its closing keyframe's frame).
     pub end: u32,
     /// Terms (each `channels` layers).
     pub layers: usize,
@@ -51,6 +56,7 @@ pub struct SegmentData {
     pub keys: [usize; 2],
     /// Whether term 0 (K_s) is in staging; if not, the GPU has it from the segment before.
     pub k0_staged: bool,
+    /// Where its layers are written.
     pub staging: Staging,
     /// Set once a `Mapped` staging buffer is mapped again after its upload (by wgpu's
     /// callback): only then may it go back to the decoder.
@@ -102,6 +108,7 @@ impl SegmentData {
     }
 
     /// A host-memory staging box (for measuring the decoder without a GPU).
+    #[cfg_attr(not(feature = "bench"), allow(dead_code))]
     pub fn with_capacity(h: &Header) -> SegmentData {
         let layers = h.max_degree as usize + 1;
         let floats = layers as u64 * term_bytes(h) / 4;
@@ -122,6 +129,7 @@ impl SegmentData {
 
     /// Bytes of the segment's layers written into staging (at most what its upload
     /// copies).
+    #[cfg_attr(not(feature = "bench"), allow(dead_code))]
     pub fn bytes(&self, h: &Header) -> u64 {
         (self.layers as u64 - !self.k0_staged as u64) * term_bytes(h)
     }
@@ -129,6 +137,7 @@ impl SegmentData {
 
 /// What the decoder made of one chunk.
 pub enum Event {
+    /// The chunk was taken; nothing can be decoded yet.
     Nothing,
     /// Segment `index` can be decoded now (call [`DecoderCore::fill`]).
     Ready(usize),
@@ -146,8 +155,10 @@ enum Key {
     OnGpu,
 }
 
+/// The decoder's state between chunks: the keyframe chain, and each segment's parts
+/// until all have arrived.
 pub struct DecoderCore {
-    pub header: Header,
+    header: Header,
     layout: Layout,
     entries: Vec<IndexEntry>,
     /// Keyframes still needed: by keyframe number.
@@ -166,6 +177,7 @@ pub struct DecoderCore {
 }
 
 impl DecoderCore {
+    /// A decoder for the stream described by `header`, `layout` and `entries`.
     pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
         let k = layout.keyframes.len();
         let s = layout.segments.len();
@@ -324,6 +336,11 @@ impl DecoderCore {
         out: &mut SegmentData,
     ) -> Result<(), String> {
         let t0 = thread_cpu_ns();
+        // wgpu panics on writing a buffer that is not mapped: a box only comes back to
+        // the decoder once its buffer is mapped again, so this is a broken contract.
+        if matches!(out.staging, Staging::Mapped(_)) && !out.mapped.load(Ordering::Acquire) {
+            return Err("staging buffer not mapped".into());
+        }
         let h = &self.header;
         let k1n = self.layout.keyframe_of_boundary(s + 1);
         let k0_staged = self.last_closing != Some((generation, s));
@@ -405,13 +422,6 @@ impl DecoderCore {
             self.keys[s] = None;
         }
         Ok(())
-    }
-
-    pub fn layout(&self) -> &Layout {
-        &self.layout
-    }
-    pub fn entries(&self) -> &[IndexEntry] {
-        &self.entries
     }
 }
 
@@ -497,9 +507,8 @@ fn with_layer(
             write(&mut LayerOut::Host(&mut v[base / 4..(base + len) / 4]))
         }
         Staging::Mapped(b) => {
-            let view = b
-                .get_mapped_range_mut(base as u64..(base + len) as u64)
-                .map_err(|e| format!("staging buffer not mapped: {e}"))?;
+            // Mapped: `fill` refuses a box whose `mapped` flag is not set.
+            let view = b.get_mapped_range_mut(base as u64..(base + len) as u64);
             write(&mut LayerOut::Mapped(view))
         }
     }

@@ -7,7 +7,7 @@ use serde::Deserialize;
 
 use crate::BakeError;
 
-/// The sidecar describing how to read a height field (the format of `../shared/dem/*.json`).
+/// The sidecar describing how to read a height field (the format of `samples/dem/*.json`).
 #[derive(Clone, Debug, Deserialize)]
 pub struct Sidecar {
     pub width: u32,

@@ -1,5 +1,5 @@
 //! vbim-bake: day/night terrain lightmap sequences from real height fields, with the
-//! analytical terrain lighting of the papers in `../shared/papers/` — horizon-map sun
+//! analytical terrain lighting of the papers listed in `docs/REFERENCES.md` — horizon-map sun
 //! shadows with a soft sun disc, Stewart–Langer sky light with interreflection, obscurance
 //! ambient — and optional moving cloud shadows. `docs/BAKE.md` gives every equation.
 

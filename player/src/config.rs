@@ -1,0 +1,75 @@
+//! How a player is set up: the stall policy, the reader's throttle, ring and pre-roll
+//! sizes, and whether the reader and decoder run on threads or inline.
+
+use std::sync::Arc;
+
+use crate::clock::{Clock, SystemClock};
+use crate::throttle::Throttle;
+
+/// What the display does when the next segment's data is late.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Policy {
+    /// The clock runs on; the last resident state is held, and when the data arrives the
+    /// display blends from what is shown to the true state over the catch-up window.
+    Interpolate,
+    /// The clock pauses until the data is there: drift accumulates, no error is shown.
+    Wait,
+    /// The display holds, then jumps to the true state when the data arrives.
+    Skip,
+}
+
+impl std::str::FromStr for Policy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "interpolate" => Ok(Policy::Interpolate),
+            "wait" => Ok(Policy::Wait),
+            "skip" => Ok(Policy::Skip),
+            _ => Err(format!("policy {s:?} (interpolate, wait or skip)")),
+        }
+    }
+}
+
+/// How a player is set up. `PlayerConfig::default()` plays at full speed on threads, with
+/// the `interpolate` policy and a 0.5 s catch-up.
+#[derive(Clone)]
+pub struct PlayerConfig {
+    /// What the display does when data is late.
+    pub policy: Policy,
+    /// Catch-up window, ns of playback.
+    pub catch_up_ns: u64,
+    /// The reader's bandwidth cap and stall pattern.
+    pub throttle: Throttle,
+    /// Ring capacity in bytes; `None`: the header's read-ahead at the throttle's rate (the
+    /// largest tabulated point when unthrottled), and never less than the largest chunk.
+    pub ring_bytes: Option<usize>,
+    /// Run reader and decoder on their own threads (the default), or step them inside
+    /// `advance` — deterministic, for simulated time.
+    pub threaded: bool,
+    /// The clock that paces the reader thread (threaded mode).
+    pub clock: Arc<dyn Clock>,
+    /// How long to buffer before the first frame; `None`: the header's buffer model at the
+    /// throttle's rate (no wait when unthrottled).
+    pub preroll_ns: Option<u64>,
+    /// Added to the pre-roll. The buffer model's pre-roll assumes a reader that never
+    /// stalls; while the ring is still filling after it, a stall can make the first
+    /// transition late. A margin as long as the stall to survive buys that back with
+    /// start-up time (measured in BENCHMARKS.md).
+    pub preroll_margin_ns: u64,
+}
+
+impl Default for PlayerConfig {
+    fn default() -> Self {
+        PlayerConfig {
+            policy: Policy::Interpolate,
+            catch_up_ns: 500_000_000,
+            throttle: Throttle::UNLIMITED,
+            ring_bytes: None,
+            threaded: true,
+            clock: Arc::new(SystemClock::new()),
+            preroll_ns: None,
+            preroll_margin_ns: 0,
+        }
+    }
+}
+

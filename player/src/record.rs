@@ -1,0 +1,98 @@
+//! What the player reports: each displayed frame's record and the running totals.
+
+use crate::gpu::Params;
+
+/// What a displayed frame showed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameState {
+    /// The true state at the target time.
+    Exact,
+    /// Data late: the last resident state is held.
+    Held,
+    /// Blending from the held image to the true state.
+    CatchingUp,
+    /// `wait` policy: the clock is paused for data.
+    Waiting,
+}
+
+impl FrameState {
+    /// The state's name in reports and CSV files.
+    pub fn name(self) -> &'static str {
+        match self {
+            FrameState::Exact => "exact",
+            FrameState::Held => "held",
+            FrameState::CatchingUp => "catching_up",
+            FrameState::Waiting => "waiting",
+        }
+    }
+}
+
+/// One displayed frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameRecord {
+    /// Frames since the player was opened (0 first).
+    pub index: u64,
+    /// Playback clock, ns.
+    pub clock_ns: u64,
+    /// The media time the clock asks for, frames (not wrapped at loops).
+    pub target: f64,
+    /// The media time shown, frames (not wrapped at loops).
+    pub shown: f64,
+    /// target − shown, frames.
+    pub drift: f64,
+    /// What was shown.
+    pub state: FrameState,
+    /// Bytes the reader delivered since the previous frame.
+    pub bytes_read: u64,
+    /// Bytes uploaded to the GPU this frame.
+    pub bytes_uploaded: u64,
+    /// Decoder CPU time (the decoding thread's own clock) charged to segments received
+    /// this frame, ns.
+    pub decode_ns: u64,
+    /// Time spent in `advance` on the calling thread, ns.
+    pub render_ns: u64,
+    /// Blend weight of the true state while catching up (1 otherwise).
+    pub alpha: f32,
+    /// The segment shown.
+    pub segment: usize,
+    /// The normalised time within that segment, 0 to 1.
+    pub u: f64,
+}
+
+/// A planned frame ([`Player::plan`](crate::Player::plan)): its record, and the GPU work
+/// [`Player::render`](crate::Player::render) will record for it.
+pub struct Frame {
+    /// What the frame shows.
+    pub record: FrameRecord,
+    /// The reconstruction to run: bubble slot, shader parameters, and whether to keep the
+    /// current image for blending first.
+    pub(crate) eval: Option<(usize, Params, bool)>,
+}
+
+/// Running totals since the player was opened.
+#[derive(Clone, Debug, Default)]
+pub struct Totals {
+    /// Frames displayed.
+    pub frames: u64,
+    /// Times the data ran late (a run of held or waiting frames counts once).
+    pub stalls: u64,
+    /// Bytes the reader delivered.
+    pub bytes_read: u64,
+    /// Bytes copied from staging to the GPU.
+    pub bytes_uploaded: u64,
+    /// Decoder CPU time, ns.
+    pub decode_ns: u64,
+    /// Segments uploaded to a GPU slot.
+    pub segments_uploaded: u64,
+    /// Segments that arrived too late to be shown (or whose keyframe was gone).
+    pub segments_dropped: u64,
+    /// Chunks found damaged (checksum, or the source failed), and segments that could not
+    /// be decoded.
+    pub damaged: u64,
+    /// Re-synchronisations: [`Player::set_time`](crate::Player::set_time), or a display so
+    /// far behind that reading on would only deliver the past.
+    pub seeks: u64,
+    /// The last damage reported, naming the chunk.
+    pub last_error: Option<String>,
+}
+
