@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Rate–distortion benchmark (issue 4, ../shared/PROTOCOL.md "Rate–distortion comparisons").
+# Rate–distortion benchmark (docs/CONVENTIONS.md, "Rate–distortion comparisons").
 #
 #   scripts/rd_bench.sh clear|cloudy [OUT]      (default OUT: out/rd)
 #

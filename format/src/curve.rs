@@ -1,5 +1,5 @@
 //! Transfer curves: between linear light and the coded domain the model lives in, and the
-//! protocol's 8-bit export curve used to measure error (`../shared/PROTOCOL.md`).
+//! 8-bit export curve used to measure error (docs/CONVENTIONS.md).
 
 use crate::header::Transfer;
 

@@ -1,4 +1,4 @@
-//! The protocol's error metrics (`../shared/PROTOCOL.md`, "Error metrics").
+//! The protocol's error metrics (docs/CONVENTIONS.md, "Error metrics").
 //!
 //! 8-bit sequences: PSNR over all RGB values on the 0–255 scale after rounding the decoded
 //! values to 8 bits. HDR sequences: the same PSNR on the 8-bit export curve applied to both

@@ -1,0 +1,78 @@
+#!/usr/bin/env python3
+"""Checks that the repository stands alone (run by .ci/run).
+
+1. No tracked file refers to a path outside the repository: not the team's shared folder
+   beside the checkout, and no relative path that climbs above the repository root from the file that names it.
+2. Every relative link in a Markdown file points at a file that exists.
+3. Every repository path that docs/ARCHITECTURE.md names (in backticks) exists.
+
+Exits 1 naming each offending file and line.
+"""
+
+import os
+import re
+import subprocess
+import sys
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
+TEXT = (".rs", ".md", ".toml", ".sh", ".py", ".wgsl", ".json", ".txt", ".yml", ".yaml")
+SHARED = "../" + "shared"
+CLIMB = re.compile(r"(?:\.\./)+[A-Za-z0-9_.\-/]*")
+LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")
+TICKED = re.compile(r"`([A-Za-z0-9_.\-/]+)`")
+TOP = ("bake/", "encoder/", "format/", "player/", "scene/", "src/", "samples/", "docs/",
+       "scripts/", "tests/", "assets/", ".ci/")
+
+
+def tracked():
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True,
+                         check=True).stdout
+    return [f for f in out.splitlines() if f.endswith(TEXT) and f != "Cargo.lock"]
+
+
+def inside(path):
+    return os.path.commonpath([ROOT, os.path.abspath(path)]) == ROOT
+
+
+def main():
+    bad = []
+    for f in tracked():
+        full = os.path.join(ROOT, f)
+        try:
+            lines = open(full, encoding="utf-8").read().splitlines()
+        except (UnicodeDecodeError, FileNotFoundError):
+            continue
+        here = os.path.dirname(full)
+        for n, line in enumerate(lines, 1):
+            if SHARED in line:
+                bad.append(f"{f}:{n}: refers to {SHARED}, which is outside the repository")
+            for m in CLIMB.finditer(line):
+                if not inside(os.path.join(here, m.group(0))):
+                    bad.append(f"{f}:{n}: {m.group(0)} climbs out of the repository")
+            if f.endswith(".md"):
+                for m in LINK.finditer(line):
+                    target = m.group(1)
+                    if re.match(r"[a-z]+:", target):
+                        continue
+                    p = os.path.join(here, target)
+                    if not inside(p):
+                        bad.append(f"{f}:{n}: link {target} leaves the repository")
+                    elif not os.path.exists(p):
+                        bad.append(f"{f}:{n}: link {target} does not exist")
+    arch = os.path.join(ROOT, "docs", "ARCHITECTURE.md")
+    for n, line in enumerate(open(arch, encoding="utf-8").read().splitlines(), 1):
+        for m in TICKED.finditer(line):
+            p = m.group(1)
+            if p.startswith(TOP) and not os.path.exists(os.path.join(ROOT, p)):
+                bad.append(f"docs/ARCHITECTURE.md:{n}: names {p}, which does not exist")
+    for b in bad:
+        print(b)
+    if bad:
+        print(f"check_docs: {len(bad)} problem(s)")
+        return 1
+    print("check_docs: ok")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
