@@ -29,26 +29,14 @@ fn legendre(n: usize, x: f64, out: &mut [f64; MAX_TERMS]) {
 /// Bubble function B_k(u) for k ≥ 2.
 pub fn bubble(k: usize, u: f64) -> f64 {
     debug_assert!((2..=MAX_DEGREE as usize).contains(&k));
-    let mut p = [0.0; MAX_TERMS];
-    legendre(k, 2.0 * u - 1.0, &mut p);
-    (p[k] - p[k - 2]) / ((2 * (2 * k - 1)) as f64).sqrt()
+    weights_f64(k, u)[k]
 }
 
 /// All basis weights at normalised time `u` for polynomials up to `degree`:
 /// `w[0] = 1 − u`, `w[1] = u`, `w[k] = B_k(u)` for 2 ≤ k ≤ degree, zero beyond.
 /// These f32 weights are what both the CPU reference decoder and the GPU shader use.
 pub fn weights(degree: usize, u: f64) -> [f32; MAX_TERMS] {
-    let mut w = [0f32; MAX_TERMS];
-    w[0] = (1.0 - u) as f32;
-    w[1] = u as f32;
-    if degree >= 2 {
-        let mut p = [0.0; MAX_TERMS];
-        legendre(degree, 2.0 * u - 1.0, &mut p);
-        for k in 2..=degree {
-            w[k] = ((p[k] - p[k - 2]) / ((2 * (2 * k - 1)) as f64).sqrt()) as f32;
-        }
-    }
-    w
+    weights_f64(degree, u).map(|w| w as f32)
 }
 
 /// Least-squares projection of a segment's interior samples onto its bubble functions.
@@ -59,6 +47,7 @@ pub fn weights(degree: usize, u: f64) -> [f32; MAX_TERMS] {
 /// segment length by a QR factorisation (modified Gram–Schmidt) in f64.
 #[derive(Clone, Debug)]
 pub struct Projector {
+    /// Frames in the segment.
     pub len: u32,
     /// Number of bubbles fitted: min(max_degree − 1, len − 1).
     pub bubbles: usize,
@@ -70,10 +59,12 @@ pub struct Projector {
     /// (`bubbles × bubbles`, upper triangular). Gram–Schmidt keeps spans nested, so the
     /// fit with the first d bubbles is the projection on Q's first d columns.
     pub q: Vec<f64>,
+    /// R of the QR factorisation (see `q`).
     pub r: Vec<f64>,
 }
 
 impl Projector {
+    /// The projector for segments of `len` frames fitting at most `max_degree − 1` bubbles.
     pub fn new(len: u32, max_degree: usize) -> Projector {
         assert!(len >= 1 && max_degree >= 1);
         let m = len as usize - 1;
@@ -148,6 +139,8 @@ impl Projector {
     }
 }
 
+/// The weights of [`weights`] in f64: the one place the bubble formula
+/// B_k(u) = (P_k(2u − 1) − P_{k−2}(2u − 1)) / √(2(2k − 1)) is written.
 fn weights_f64(degree: usize, u: f64) -> [f64; MAX_TERMS] {
     let mut w = [0f64; MAX_TERMS];
     w[0] = 1.0 - u;

@@ -7,7 +7,9 @@ use crate::header::Header;
 use crate::plane::{self, Onto, Plane};
 use crate::{FormatError, Result};
 
+/// Keyframe mode byte: coded on its own.
 pub const MODE_INTRA: u8 = 0;
+/// Keyframe mode byte: coded as the difference from the previous keyframe.
 pub const MODE_PREDICTED: u8 = 1;
 
 thread_local! {
@@ -150,6 +152,7 @@ pub fn read_keyframe(h: &Header, bytes: &[u8], prev: Option<&[Plane]>) -> Result
 
 /// The keyframe a predicted keyframe is coded against.
 pub enum Reference<B, O> {
+    /// An intra keyframe: no reference.
     None,
     /// Still needed by its owner: copied.
     Borrowed(B),
@@ -224,7 +227,9 @@ fn keyframe_from_raw(
 /// The per-tile polynomial degrees of one segment: luma (plane 0) and chroma (planes 1–2).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TileMap {
+    /// Degree of each luma tile, row-major.
     pub luma: Vec<u8>,
+    /// Degree of each chroma tile, row-major (empty for one channel).
     pub chroma: Vec<u8>,
 }
 
@@ -237,9 +242,11 @@ impl TileMap {
             &self.chroma
         }
     }
+    /// Degree of `tile` in `plane` (0 luma, 1–2 chroma).
     pub fn degree(&self, plane: usize, tile: usize) -> u8 {
         self.degrees(plane)[tile]
     }
+    /// The largest degree of any tile in any plane.
     pub fn max_degree(&self) -> u8 {
         self.luma
             .iter()
@@ -342,10 +349,12 @@ pub struct TileRows<'a> {
     pub degrees: &'a [u8],
     /// The term being read: tiles of degree ≥ k are members.
     pub k: u8,
+    /// Tile size in texels.
     pub tile_size: usize,
 }
 
 impl TileRows<'_> {
+    /// Whether `tile` (in this row) holds term `k`.
     pub fn is_member(&self, tile: usize) -> bool {
         self.degrees[tile] >= self.k
     }

@@ -2,6 +2,7 @@
 //! time) separately. Applied to coded values; exactly invertible in real arithmetic.
 
 #[inline]
+/// RGB to YCoCg (Y = (R + 2G + B) / 4).
 pub fn rgb_to_ycocg([r, g, b]: [f32; 3]) -> [f32; 3] {
     [
         0.25 * r + 0.5 * g + 0.25 * b,
@@ -11,6 +12,7 @@ pub fn rgb_to_ycocg([r, g, b]: [f32; 3]) -> [f32; 3] {
 }
 
 #[inline]
+/// YCoCg back to RGB: the exact inverse of [`rgb_to_ycocg`] in real arithmetic.
 pub fn ycocg_to_rgb([y, co, cg]: [f32; 3]) -> [f32; 3] {
     let t = y - cg;
     [t + co, y + cg, t - co]

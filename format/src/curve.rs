@@ -3,6 +3,7 @@
 
 use crate::header::Transfer;
 
+/// sRGB code value (0–1) to linear light.
 pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {
         c / 12.92
@@ -11,6 +12,7 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// Linear light (0–1) to sRGB code value (0–1).
 pub fn linear_to_srgb(v: f32) -> f32 {
     if v <= 0.0031308 {
         v * 12.92

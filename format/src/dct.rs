@@ -3,6 +3,7 @@
 
 use std::sync::OnceLock;
 
+/// Block size: 8×8.
 pub const N: usize = 8;
 
 /// The orthonormal DCT-II basis: `basis()[k][n]` is frequency k at sample n.

@@ -15,12 +15,17 @@ use crate::{FormatError, Result};
 /// Everything needed to evaluate any time inside one segment.
 #[derive(Clone, Debug)]
 pub struct Segment {
+    /// The segment's number.
     pub index: usize,
-    /// First and last boundary frames.
+    /// First boundary frame.
     pub start: u32,
+    /// Last boundary frame.
     pub end: u32,
+    /// The keyframe that opens the segment (K_s), one plane per channel.
     pub k0: Arc<Vec<Plane>>,
+    /// The keyframe that closes it (K_{s+1}).
     pub k1: Arc<Vec<Plane>>,
+    /// Each tile's degree.
     pub tiles: TileMap,
     /// `bubbles[k − 2][plane]`.
     pub bubbles: Vec<Vec<Plane>>,
@@ -98,6 +103,7 @@ pub struct Decoder<R> {
 }
 
 impl<R: Read + Seek> Decoder<R> {
+    /// A decoder reading from `reader`.
     pub fn new(reader: Reader<R>) -> Self {
         Decoder {
             reader,
@@ -106,9 +112,11 @@ impl<R: Read + Seek> Decoder<R> {
             segment: None,
         }
     }
+    /// The stream's header.
     pub fn header(&self) -> &Header {
         self.reader.header()
     }
+    /// The reader underneath (for metadata and raw chunks).
     pub fn reader(&mut self) -> &mut Reader<R> {
         &mut self.reader
     }

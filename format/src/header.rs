@@ -4,10 +4,15 @@ use crate::checksum::xxh3;
 use crate::limits::{MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FRAMES};
 use crate::{FormatError, Result};
 
+/// Bytes of one index entry (the index, which follows the header, is `chunk_count` of them).
+pub const ENTRY_SIZE: usize = 40;
+
 /// `«VBIM»\r\n`: a non-ASCII first byte catches 7-bit transfers, CR LF catches newline
 /// conversion (the same trick as PNG and KTX2).
 pub const MAGIC: [u8; 8] = [0xAB, b'V', b'B', b'I', b'M', 0xBB, 0x0D, 0x0A];
+/// The major version this crate reads and writes: a reader refuses any other.
 pub const VERSION_MAJOR: u16 = 1;
+/// The minor version this crate writes: a reader accepts any (they only add optional chunks).
 pub const VERSION_MINOR: u16 = 0;
 /// Bytes of a version 1.0 header. Later minor versions may append fields; readers skip them.
 pub const HEADER_SIZE: usize = 192;
@@ -30,57 +35,85 @@ pub enum Transfer {
     /// Coded value = sRGB code value / 255.
     Srgb,
     /// Coded value = log2(1 + v / v0): relative precision above `v0`, absolute below.
-    LogToe { v0: f32 },
+    LogToe {
+        /// The toe: below it the curve is nearly linear.
+        v0: f32,
+    },
 }
 
 /// One point of the buffer model: reading at `rate` bytes per second from the start of the
 /// file, a player needs `bytes` of read-ahead (ring capacity) and must buffer for
-/// `preroll_ticks` nanoseconds before starting, so that no chunk arrives after the moment
+/// `preroll_ns` nanoseconds before starting, so that no chunk arrives after the moment
 /// it is needed. Computed by the encoder like a video codec's leaky-bucket model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct ReadAhead {
+    /// Read rate, bytes per second.
     pub rate: u64,
+    /// Ring capacity needed at that rate, bytes.
     pub bytes: u64,
+    /// Buffering needed before the first frame at that rate, ns.
     pub preroll_ns: u64,
 }
+/// The file header: what the stream is (size, channels, frame rate, model) and where its parts are. `docs/FORMAT.md` gives the byte layout.
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Header {
+    /// Minor version of the writer.
     pub version_minor: u16,
+    /// Lightmap width, texels.
     pub width: u32,
+    /// Lightmap height, texels.
     pub height: u32,
     /// 3 (RGB) or 1 (Y).
     pub channels: u8,
+    /// What the values mean: linear HDR or sRGB 8-bit.
     pub color: ColorEncoding,
+    /// Whether playback wraps from the last frame to the first (the model then spans the seam).
     pub looping: bool,
+    /// Media frames in the sequence.
     pub frame_count: u32,
-    /// Media frame rate, frames per second, as `rate_num / rate_den`.
+    /// Media frame rate, frames per second, as `rate_num / rate_den`: the numerator.
     pub rate_num: u32,
+    /// The denominator.
     pub rate_den: u32,
+    /// Tile size of the per-tile degree model, texels.
     pub tile_size: u16,
+    /// Largest polynomial degree in time of any tile.
     pub max_degree: u8,
+    /// The curve between linear light and the coded domain.
     pub transfer: Transfer,
+    /// Segments (keyframe to keyframe).
     pub segment_count: u32,
+    /// Keyframes stored (segments + 1, or segments for a looping file, whose last keyframe is the first).
     pub keyframe_count: u32,
     /// Largest distance in frames between two independently decodable keyframes.
     pub intra_interval: u32,
+    /// Chunks in the index.
     pub chunk_count: u32,
+    /// Byte offset of the index.
     pub index_offset: u64,
+    /// Size of the whole file, bytes.
     pub file_size: u64,
+    /// The buffer model: read-ahead and pre-roll at several read rates.
     pub read_ahead: [ReadAhead; READ_AHEAD_POINTS],
+    /// XXH3-64 of the index's bytes.
     pub index_checksum: u64,
 }
 
 impl Header {
+    /// Tiles across.
     pub fn tiles_x(&self) -> u32 {
         self.width.div_ceil(self.tile_size as u32)
     }
+    /// Tiles down.
     pub fn tiles_y(&self) -> u32 {
         self.height.div_ceil(self.tile_size as u32)
     }
+    /// Tiles in all.
     pub fn tile_count(&self) -> usize {
         self.tiles_x() as usize * self.tiles_y() as usize
     }
+    /// Texels in one frame.
     pub fn texel_count(&self) -> usize {
         self.width as usize * self.height as usize
     }
@@ -100,6 +133,7 @@ impl Header {
             .copied()
     }
 
+    /// The header as stored, checksum included.
     pub fn to_bytes(&self) -> [u8; HEADER_SIZE] {
         let mut b = [0u8; HEADER_SIZE];
         let mut w = Cursor {
@@ -278,7 +312,7 @@ impl Header {
         if self.rate_num == 0 || self.rate_den == 0 {
             return bad(format!("frame rate {}/{}", self.rate_num, self.rate_den));
         }
-        if !(8..=256).contains(&self.tile_size) || self.tile_size % 8 != 0 {
+        if !(8..=256).contains(&self.tile_size) || !self.tile_size.is_multiple_of(8) {
             return bad(format!(
                 "tile size {} (must be a multiple of 8 from 8 to 256)",
                 self.tile_size
@@ -338,7 +372,7 @@ impl Header {
         if self.intra_interval == 0 {
             return bad("intra interval 0".into());
         }
-        let index_len = self.chunk_count as u64 * crate::index::ENTRY_SIZE as u64;
+        let index_len = self.chunk_count as u64 * ENTRY_SIZE as u64;
         if self.index_offset < header_size
             || self
                 .index_offset

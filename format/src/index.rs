@@ -2,14 +2,14 @@
 //! playback order, so that a reader knows every byte range before reading any chunk.
 
 use crate::header::Header;
+pub use crate::header::ENTRY_SIZE;
 use crate::{FormatError, Result};
-
-pub const ENTRY_SIZE: usize = 40;
 
 /// Flag bit: a reader that does not know this chunk's kind may skip it.
 pub const FLAG_OPTIONAL: u16 = 1;
 /// Flag bit: a keyframe that decodes without any earlier keyframe.
 pub const FLAG_INTRA: u16 = 2;
+/// What a chunk holds.
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ChunkKind {
@@ -26,6 +26,7 @@ pub enum ChunkKind {
 }
 
 impl ChunkKind {
+    /// The kind as stored in an index entry.
     pub fn code(self) -> u16 {
         match self {
             ChunkKind::Metadata => 1,
@@ -35,6 +36,7 @@ impl ChunkKind {
             ChunkKind::Unknown(c) => c,
         }
     }
+    /// The kind stored as `c` (unknown codes are kept, so a reader can skip them).
     pub fn from_code(c: u16) -> ChunkKind {
         match c {
             1 => ChunkKind::Metadata,
@@ -44,6 +46,7 @@ impl ChunkKind {
             c => ChunkKind::Unknown(c),
         }
     }
+    /// The kind's name in reports.
     pub fn name(self) -> String {
         match self {
             ChunkKind::Metadata => "metadata".into(),
@@ -54,31 +57,40 @@ impl ChunkKind {
         }
     }
 }
+/// One chunk of the index: what it is, which frames it covers, where it is and its checksum.
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct IndexEntry {
+    /// What the chunk holds.
     pub kind: ChunkKind,
+    /// Flag bits ([`FLAG_OPTIONAL`], and for keyframes the intra bit).
     pub flags: u16,
     /// Keyframe number for keyframes; segment number for tile maps and coefficients; 0 else.
     pub number: u32,
     /// The media frames the chunk covers, inclusive: a keyframe's single frame, a segment's
     /// two boundary frames (the last may equal the frame count in a looping file).
     pub first_frame: u32,
+    /// (the last of them)
     pub last_frame: u32,
+    /// Byte offset in the file.
     pub offset: u64,
+    /// Length in bytes as stored.
     pub length: u64,
     /// XXH3-64 of the chunk's bytes as stored.
     pub checksum: u64,
 }
 
 impl IndexEntry {
+    /// Whether a keyframe is coded on its own (decodable without the one before).
     pub fn is_intra(&self) -> bool {
         self.flags & FLAG_INTRA != 0
     }
+    /// Whether a reader that does not know the kind may skip the chunk.
     pub fn is_optional(&self) -> bool {
         self.flags & FLAG_OPTIONAL != 0
     }
 
+    /// Appends the entry as stored (40 bytes).
     pub fn write(&self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.kind.code().to_le_bytes());
         out.extend_from_slice(&self.flags.to_le_bytes());
@@ -90,6 +102,7 @@ impl IndexEntry {
         out.extend_from_slice(&self.checksum.to_le_bytes());
     }
 
+    /// Reads an entry from its 40 stored bytes.
     pub fn read(b: &[u8]) -> IndexEntry {
         let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
         let u32_at = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap());
@@ -116,6 +129,7 @@ pub struct Layout {
     pub keyframes: Vec<usize>,
     /// Index positions of each segment's tile map and coefficient chunks.
     pub segments: Vec<(usize, usize)>,
+    /// Index position of the metadata chunk, if there is one.
     pub metadata: Option<usize>,
 }
 

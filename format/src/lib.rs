@@ -8,6 +8,7 @@
 //! reference decoder ([`decode`]) that the GPU reconstruction is tested against.
 //!
 //! No threads, no GPU and no I/O beyond `Read`/`Write`/`Seek`.
+#![deny(missing_docs)]
 
 pub mod basis;
 pub mod buffer_model;

@@ -14,11 +14,16 @@ pub enum Metric {
     /// Values are sRGB code values / 255 (decoded ones are rounded to 8 bits).
     Srgb8,
     /// Values are linear light, compared through the export curve with this exposure.
-    Hdr { exposure: f32 },
+    Hdr {
+        /// The export curve's exposure e.
+        exposure: f32,
+    },
 }
 
+/// The PSNR given to identical frames.
 pub const IDENTICAL_DB: f64 = 99.0;
 
+/// PSNR in dB of a mean squared error on a 0–1 scale ([`IDENTICAL_DB`] for 0).
 pub fn psnr(mse: f64) -> f64 {
     if mse <= 0.0 {
         IDENTICAL_DB
@@ -30,7 +35,9 @@ pub fn psnr(mse: f64) -> f64 {
 /// One frame's comparison.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameError {
+    /// Sum of squared errors on the 0–1 scale.
     pub sse: f64,
+    /// Values compared.
     pub count: u64,
     /// Largest absolute error on the metric's 0–1 scale.
     pub max_abs: f64,
@@ -39,6 +46,7 @@ pub struct FrameError {
 }
 
 impl FrameError {
+    /// The frame's PSNR, dB.
     pub fn psnr(&self) -> f64 {
         psnr(self.sse / self.count.max(1) as f64)
     }
@@ -61,6 +69,7 @@ impl Metric {
         }
     }
 
+    /// Compares a source frame with a decoded one, value by value.
     pub fn compare(self, src: &[f32], dec: &[f32]) -> FrameError {
         assert_eq!(src.len(), dec.len());
         let mut e = FrameError {
@@ -86,13 +95,16 @@ impl Metric {
 /// Pooled statistics over a sequence.
 #[derive(Clone, Debug, Default)]
 pub struct SequenceError {
+    /// Each frame, in order.
     pub frames: Vec<FrameError>,
 }
 
 impl SequenceError {
+    /// Adds a frame.
     pub fn push(&mut self, f: FrameError) {
         self.frames.push(f);
     }
+    /// PSNR of the error pooled over all frames and values (the mean PSNR).
     pub fn mean_psnr(&self) -> f64 {
         let sse: f64 = self.frames.iter().map(|f| f.sse).sum();
         let n: u64 = self.frames.iter().map(|f| f.count).sum();
@@ -106,9 +118,11 @@ impl SequenceError {
             .map(|(i, f)| (i, f.psnr()))
             .fold((0, IDENTICAL_DB), |a, b| if b.1 < a.1 { b } else { a })
     }
+    /// Largest absolute error of any frame, 0–1 scale.
     pub fn max_abs(&self) -> f64 {
         self.frames.iter().map(|f| f.max_abs).fold(0.0, f64::max)
     }
+    /// Largest relative error of any frame (HDR; over texels brighter than 1% of white).
     pub fn max_rel(&self) -> f64 {
         self.frames.iter().map(|f| f.max_rel).fold(0.0, f64::max)
     }

@@ -13,12 +13,16 @@ use crate::Result;
 /// One plane of f32 values, row-major, `w × h` with both multiples of 8.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plane {
+    /// Width, texels.
     pub w: usize,
+    /// Height, texels.
     pub h: usize,
+    /// Values, row-major.
     pub data: Vec<f32>,
 }
 
 impl Plane {
+    /// A `w × h` plane of zeros.
     pub fn zeros(w: usize, h: usize) -> Plane {
         Plane {
             w,
@@ -27,6 +31,7 @@ impl Plane {
         }
     }
 
+    /// The 8×8 block at block column `bx`, block row `by`.
     pub fn read_block(&self, bx: usize, by: usize) -> [f32; N * N] {
         let mut b = [0f32; N * N];
         for y in 0..N {
@@ -36,6 +41,7 @@ impl Plane {
         b
     }
 
+    /// Writes the 8×8 block at block column `bx`, block row `by`.
     pub fn write_block(&mut self, bx: usize, by: usize, b: &[f32; N * N]) {
         for y in 0..N {
             let row = (by * N + y) * self.w + bx * N;
@@ -113,6 +119,7 @@ impl Blocks {
         self.dc.len()
     }
 
+    /// Whether no block has a coefficient.
     pub fn is_empty(&self) -> bool {
         self.dc.is_empty()
     }
@@ -282,7 +289,9 @@ fn spatial(terms: impl Iterator<Item = (usize, i32)>, step: f32) -> [f32; N * N]
 /// without clearing the plane first or reading it back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Onto {
+    /// Add onto the plane's values.
     Plane,
+    /// Write whole blocks over them.
     Zeros,
 }
 

@@ -8,6 +8,7 @@ use crate::header::{Header, HEADER_SIZE};
 use crate::index::{self, IndexEntry, Layout, ENTRY_SIZE};
 use crate::{FormatError, Result};
 
+/// A `.vbim` stream open for reading: header and index validated, chunks read on demand and verified against their checksums.
 pub struct Reader<R> {
     src: R,
     header: Header,
@@ -55,15 +56,19 @@ impl<R: Read + Seek> Reader<R> {
         })
     }
 
+    /// The stream's header.
     pub fn header(&self) -> &Header {
         &self.header
     }
+    /// The index, in playback order.
     pub fn entries(&self) -> &[IndexEntry] {
         &self.entries
     }
+    /// The index's meaning: segment boundaries, keyframes and each segment's chunks.
     pub fn layout(&self) -> &Layout {
         &self.layout
     }
+    /// The stream underneath.
     pub fn into_inner(self) -> R {
         self.src
     }

@@ -2,6 +2,7 @@
 
 use crate::{FormatError, Result};
 
+/// Appends `v` as a zig-zag LEB128 integer.
 pub fn put_i32(out: &mut Vec<u8>, v: i32) {
     put_u32(out, ((v << 1) ^ (v >> 31)) as u32);
 }

@@ -9,6 +9,7 @@ use crate::header::{Header, HEADER_SIZE};
 use crate::index::{self, ChunkKind, IndexEntry, ENTRY_SIZE};
 use crate::{buffer_model, FormatError, Result};
 
+/// Writes a `.vbim` stream chunk by chunk (see the module documentation).
 pub struct Writer<W> {
     out: W,
     header: Header,
