@@ -128,7 +128,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
             }
         } else {
             let pool: Vec<Box<SegmentData>> = recycle_rx.try_iter().collect();
-            reader_core.prepare(0);
+            reader_core.prepare();
             Mode::Inline {
                 reader: Box::new(reader_core),
                 prod,
@@ -198,7 +198,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
             } => {
                 loop {
                     let mut progress = false;
-                    reader.prepare(now);
+                    reader.prepare();
                     if reader.deliver(now, prod) {
                         progress = true;
                     }
@@ -303,11 +303,15 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 let name = th.thread().name().unwrap_or("?").to_string();
                 while !th.is_finished() {
                     if t.elapsed() > deadline {
-                        return Err(PlayerError::Stuck { thread: name, deadline });
+                        return Err(PlayerError::Stuck {
+                            thread: name,
+                            deadline,
+                        });
                     }
                     std::thread::sleep(Duration::from_millis(1));
                 }
-                th.join().map_err(|_| PlayerError::Panicked { thread: name })?;
+                th.join()
+                    .map_err(|_| PlayerError::Panicked { thread: name })?;
             }
         }
         Ok(())
@@ -356,7 +360,7 @@ fn reader_loop<R: Read + Seek>(
         while let Ok(t) = throttle.try_recv() {
             core.throttle = t;
         }
-        core.prepare(clock.now_ns());
+        core.prepare();
         let Some(arrival) = core.next_arrival() else {
             // Finished a file that does not loop.
             std::thread::sleep(Duration::from_millis(5));

@@ -388,17 +388,17 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.started = true;
         if missing {
             // Hold the end of what is on screen (its closing keyframe), or its start.
-            let held = self
-                .slots
-                .shown()
-                .and_then(|s| self.slots.slot(s))
-                .map_or(self.last_shown, |r| {
-                    if pos >= r.end {
-                        r.end - 1
-                    } else {
-                        r.start
-                    }
-                });
+            let held =
+                self.slots
+                    .shown()
+                    .and_then(|s| self.slots.slot(s))
+                    .map_or(self.last_shown, |r| {
+                        if pos >= r.end {
+                            r.end - 1
+                        } else {
+                            r.start
+                        }
+                    });
             if !self.was_missing {
                 self.totals.stalls += 1;
             }
@@ -526,7 +526,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             .rev()
             .find(|&k| self.entries[keys[k]].is_intra())
             .unwrap_or(0);
-        let restart = (keys[k], pass as u32, (self.header.looping && k > 0).then_some(keys[0]));
+        let restart = (
+            keys[k],
+            pass as u32,
+            (self.header.looping && k > 0).then_some(keys[0]),
+        );
         self.generation = self.generation.wrapping_add(1);
         if let Some(b) = self.incoming.take() {
             self.pipeline.give_back(b);
@@ -556,4 +560,3 @@ impl<R: Read + Seek + Send + 'static> Drop for Player<R> {
         let _ = self.stop(Duration::from_secs(10));
     }
 }
-

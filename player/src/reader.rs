@@ -78,7 +78,7 @@ impl<R: Read + Seek> ReaderCore<R> {
     }
 
     /// Reads the next chunk from the source (if none is pending) and schedules its arrival.
-    pub fn prepare(&mut self, now: u64) {
+    pub fn prepare(&mut self) {
         if self.pending.is_some() || self.finished {
             return;
         }
@@ -101,13 +101,12 @@ impl<R: Read + Seek> ReaderCore<R> {
             || e.is_optional() && e.kind != ChunkKind::Metadata
         {
             // Skipped: metadata after the first pass, unknown optional chunks.
-            return self.prepare(now);
+            return self.prepare();
         }
         self.buf.clear();
         self.buf.resize(e.length as usize, 0);
         let ok = self.src.seek(SeekFrom::Start(e.offset)).is_ok()
             && self.src.read_exact(&mut self.buf).is_ok();
-        let _ = now;
         let arrival = self.throttle.arrival(self.last_arrival, e.length);
         self.last_arrival = arrival;
         self.pending = Some(Pending {

@@ -25,9 +25,9 @@ struct Params {
 // Keyframes (a pool of slots, `channels` layers each) and the segment's bubble terms
 // (term k ≥ 2 at layers (k − 2)·channels …).
 @group(0) @binding(1) var keys: texture_2d_array<f32>;
-@group(0) @binding(4) var bubbles: texture_2d_array<f32>;
-@group(0) @binding(2) var held: texture_2d<f32>;
-@group(0) @binding(3) var out_tex: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(2) var bubbles: texture_2d_array<f32>;
+@group(0) @binding(3) var held: texture_2d<f32>;
+@group(0) @binding(4) var out_tex: texture_storage_2d<rgba16float, write>;
 
 fn weight(k: u32) -> f32 {
     return p.w[k / 4u][k % 4u];

@@ -95,4 +95,3 @@ pub struct Totals {
     /// The last damage reported, naming the chunk.
     pub last_error: Option<String>,
 }
-

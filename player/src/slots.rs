@@ -82,7 +82,12 @@ impl SlotTable {
 
     /// The end of the latest segment resident (0 when none is).
     pub fn known_end(&self) -> MediaTime {
-        self.slots.iter().flatten().map(|r| r.end).max().unwrap_or(0)
+        self.slots
+            .iter()
+            .flatten()
+            .map(|r| r.end)
+            .max()
+            .unwrap_or(0)
     }
 
     /// Decides where arrival `a` goes at media time `pos`, in a sequence of `n` media
@@ -240,7 +245,10 @@ mod tests {
         assert_eq!(p.key0, None, "K_1 is already resident");
         assert_eq!(p.bubbles, Some(1), "never the slot on screen");
         let k1 = p.key1.unwrap();
-        assert!(!t.slot(0).unwrap().keys.contains(&k1), "K_2 overwrote a shown keyframe");
+        assert!(
+            !t.slot(0).unwrap().keys.contains(&k1),
+            "K_2 overwrote a shown keyframe"
+        );
         assert_eq!(keyframes_of(&t, t.slot(1).unwrap()), [Some(1), Some(2)]);
         assert_eq!(keyframes_of(&t, t.slot(0).unwrap()), [Some(0), Some(1)]);
     }
@@ -287,7 +295,10 @@ mod tests {
         t.place(&seg(0, true), 0, N, true);
         t.show_covering(0);
         // Segment 0 arriving (again) when it is over: its closing keyframe is resident.
-        assert_eq!(t.place(&seg(0, true), 15 * F, N, true), Placement::Dropped(None));
+        assert_eq!(
+            t.place(&seg(0, true), 15 * F, N, true),
+            Placement::Dropped(None)
+        );
     }
 
     #[test]
@@ -321,7 +332,9 @@ mod tests {
             let at = pos.saturating_sub(F);
             let p = t.place(&seg(s, s == 0), at, N, true);
             assert!(matches!(p, Placement::Upload(_)), "segment {s}: {p:?}");
-            let shown = t.show_covering(pos).expect("the segment just uploaded covers it");
+            let shown = t
+                .show_covering(pos)
+                .expect("the segment just uploaded covers it");
             let r = t.slot(shown).unwrap();
             assert_eq!(r.index, s);
             assert_eq!(keyframes_of(&t, r), [Some(s), Some(s + 1)]);

@@ -25,7 +25,6 @@ pub fn frames_f64(t: MediaTime) -> f64 {
     (t >> 32) as f64 + (t & 0xffff_ffff) as f64 / 4_294_967_296.0
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -36,7 +35,11 @@ mod tests {
         let t = ticks_to_media(ticks, 24, 1);
         assert_eq!(t, (100 * 3600 * 24u64) << 32);
         assert_eq!(media_to_ticks(t, 24, 1), ticks);
-        assert_eq!(t % (240 << 32), 0, "100 hours are whole loops of 240 frames");
+        assert_eq!(
+            t % (240 << 32),
+            0,
+            "100 hours are whole loops of 240 frames"
+        );
         // A display step of 16 666 667 ns (60 Hz rounded up) summed 10⁶ times is exactly
         // the product: integer ticks never drift.
         let step = 16_666_667u64;
