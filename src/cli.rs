@@ -304,9 +304,12 @@ pub struct EncodeArgs {
     /// Media frame rate, frames per second as a rational (`24/1`, `1/6`) [default: the manifest's fps, else 24/1].
     #[arg(long)]
     pub fps: Option<String>,
-    /// Whether the sequence loops (frame N−1 is followed by frame 0) [default: true].
-    #[arg(long)]
-    pub looping: Option<bool>,
+    /// The sequence loops: frame N−1 is followed by frame 0 (the default).
+    #[arg(long = "loop", overrides_with = "no_loop")]
+    pub looping: bool,
+    /// The sequence plays once and holds its last frame.
+    #[arg(long = "no-loop", overrides_with = "looping")]
+    pub no_loop: bool,
     /// JSON file stored in the metadata chunk [default: manifest.json beside the frames, if any].
     #[arg(long)]
     pub meta: Option<PathBuf>,

@@ -58,8 +58,8 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Some(i) = &a.intra_interval {
         cfg.intra_interval_s = parse_duration(i)?;
     }
-    if let Some(l) = a.looping {
-        cfg.looping = l;
+    if a.looping || a.no_loop {
+        cfg.looping = !a.no_loop;
     }
     if let Some(t) = a.tile {
         cfg.tile_size = t;

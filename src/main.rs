@@ -27,6 +27,8 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    #[cfg(unix)]
+    quiet_mesa();
     let args = cli::Cli::parse();
     let res = match args.command {
         cli::Command::Bake(a) => cmd_bake::run(a),
@@ -45,5 +47,27 @@ fn main() -> ExitCode {
             eprintln!("vbim: error: {e}");
             ExitCode::from(1)
         }
+    }
+}
+
+/// Mesa's Vulkan drivers print `error: XDG_RUNTIME_DIR is invalid or not set` at every
+/// device creation when the variable is unset, though nothing is wrong (a shell without a
+/// login session, a container, CI). Give it a private directory of its own, as a login
+/// session would; an existing valid setting is kept.
+#[cfg(unix)]
+fn quiet_mesa() {
+    use std::os::unix::fs::PermissionsExt;
+    let valid = std::env::var_os("XDG_RUNTIME_DIR")
+        .map(std::path::PathBuf::from)
+        .is_some_and(|d| d.is_absolute() && d.is_dir());
+    if valid {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("vbim-runtime-{}", unsafe { libc::getuid() }));
+    let ok = std::fs::create_dir_all(&dir).is_ok()
+        && std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)).is_ok();
+    if ok {
+        // Before any thread starts: nothing else reads the environment concurrently.
+        std::env::set_var("XDG_RUNTIME_DIR", dir);
     }
 }

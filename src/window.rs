@@ -1,8 +1,8 @@
 //! `vbim play FILE --scene S` with a display: the terrain scene in a window (winit),
-//! presented through a wgpu surface, with keys for pause, scrub, loop and stall injection,
+//! presented through a wgpu surface, with keys for pause, scrub and stall injection,
 //! and the time of day, drift and bandwidth in the window title.
 //!
-//! Keys: Space pause · ←/→ scrub ∓/± 1 s · L loop on/off · S stall the reader (toggle) ·
+//! Keys: Space pause · ←/→ scrub ∓/± 1 s · S stall the reader (toggle) ·
 //! B halve / restore the bandwidth · Esc quit.
 
 use std::fs::File;
@@ -43,7 +43,6 @@ struct App {
     sky: SkyTrack,
     exposure: f32,
     paused: bool,
-    looping: bool,
     stalled: bool,
     slow: bool,
     last: Option<Instant>,
@@ -97,7 +96,6 @@ impl App {
             config.format,
         );
         self.mesh = Some(mesh);
-        self.looping = player.header().looping;
         self.gfx = Some(Gfx {
             window,
             surface,
@@ -167,7 +165,6 @@ impl App {
             Key::Named(NamedKey::ArrowLeft) => {
                 g.player.set_time(g.player.ticks().saturating_sub(second))
             }
-            Key::Character(c) if c.as_str() == "l" => self.looping = !self.looping,
             Key::Character(c) if c.as_str() == "s" => {
                 self.stalled = !self.stalled;
                 g.player.set_throttle(if self.stalled {
@@ -280,7 +277,6 @@ pub fn run(
         sky: SkyTrack::from_metadata(meta.as_deref()),
         exposure,
         paused: false,
-        looping: true,
         stalled: false,
         slow: false,
         last: None,
