@@ -206,7 +206,7 @@ impl Scene {
         if !(0.0..1.0).contains(&self.albedo) {
             return Err(format!("albedo = {} (0 to below 1)", self.albedo));
         }
-        if self.azimuths < 8 || self.azimuths % 8 != 0 || self.azimuths > 256 {
+        if self.azimuths < 8 || !self.azimuths.is_multiple_of(8) || self.azimuths > 256 {
             return Err(format!(
                 "azimuths = {} (a multiple of 8 from 8 to 256)",
                 self.azimuths

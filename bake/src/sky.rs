@@ -71,7 +71,7 @@ impl SkyVisibility {
         let texels = horizons.texels;
         let per = n / SECTORS;
         assert!(
-            per >= 1 && n % SECTORS == 0,
+            per >= 1 && n.is_multiple_of(SECTORS),
             "azimuth count must be a multiple of {SECTORS}"
         );
         let half = std::f64::consts::PI / n as f64;

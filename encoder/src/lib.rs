@@ -150,7 +150,7 @@ impl EncoderConfig {
                 self.intra_interval_s
             ));
         }
-        if !(8..=256).contains(&self.tile_size) || self.tile_size % 8 != 0 {
+        if !(8..=256).contains(&self.tile_size) || !self.tile_size.is_multiple_of(8) {
             return bad(format!(
                 "tile size {} (a multiple of 8 from 8 to 256)",
                 self.tile_size
@@ -323,7 +323,6 @@ fn encode_in_pool(
     load(&mut window, 0)?;
     let header0 = header_for(src, cfg, color, transfer, 0, 0, 1);
     let key_raw = model::code_keyframe(
-        &dom,
         &window[&0],
         None,
         KEY_SHARE * eps,
@@ -374,7 +373,6 @@ fn encode_in_pool(
             // zstd, which ranks them as zstd does at a fraction of the time.
             let code = |prev: Option<&[Plane]>| {
                 model::code_keyframe(
-                    &dom,
                     &window[&e],
                     prev,
                     KEY_SHARE * eps,

@@ -329,7 +329,6 @@ pub fn code_segment(
 /// Returns the payload before zstd (see [`compress`]); the caller decodes it with the
 /// reference decoder (closed loop).
 pub fn code_keyframe(
-    dom: &Domain,
     src: &CodedFrame,
     prev: Option<&[Plane]>,
     budget: f64,
@@ -375,7 +374,6 @@ pub fn code_keyframe(
     } else {
         chunk::MODE_INTRA
     };
-    let _ = dom;
     chunk::write_keyframe(mode, &steps, &blocks)
 }
 

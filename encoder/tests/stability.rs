@@ -159,7 +159,7 @@ fn a_segment_of_100000_frames() {
 fn hdr_from_1e_minus_4_to_6e4_and_exact_zeros_survive() {
     let (w, h) = (32, 8);
     let value = |i: usize| {
-        if i % 7 == 0 {
+        if i.is_multiple_of(7) {
             0.0
         } else {
             1e-4 * (6e8f32).powf((i % w) as f32 / (w - 1) as f32)
