@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use serde_json::json;
 use vbim_bake::{bake, BakeOptions, FrameFormat, Scene};
-use vbim_encoder::{encode, EncoderConfig, FrameSet, FrameSource, Preset};
+use vbim_encoder::{encode_file, EncoderConfig, FrameSet, FrameSource, Preset};
 
 use crate::cli::DemoArgs;
 use crate::cmd_play::{capture_scene, play, session, Outcome};
@@ -87,7 +87,9 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     cfg.rate = parse_rate(&a.fps)?;
     cfg.metadata = std::fs::read_to_string(&baked.manifest).ok();
     let file = out.join(format!("{}.vbim", scene.name));
-    let rep = encode(&fs, &cfg, &file, true, &progress).map_err(|e| e.to_string())?;
+    let mut rep = encode_file(&fs, &cfg, &file, &progress).map_err(|e| e.to_string())?;
+    rep.verify_file(&fs, &file, &progress)
+        .map_err(|e| e.to_string())?;
     stages.finish();
     rep.write_degree_map(&out.join("degree_map.png"))?;
     let lossless = lossless_bytes(&fs, &stages)?;

@@ -1,6 +1,8 @@
 //! `vbim encode INPUT --out FILE.vbim`
 
-use vbim_encoder::{encode, encode_to_tolerance, EncoderConfig, FrameSet, Preset, SegmentMode};
+use vbim_encoder::{
+    encode_file, encode_to_tolerance, ConfigError, EncoderConfig, FrameSet, Preset, SegmentMode,
+};
 
 use crate::cli::EncodeArgs;
 use crate::progress::Stages;
@@ -67,10 +69,17 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     cfg.threads = a.threads;
     let stages = Stages::new();
     let progress = |s: &str, d: u64, t: u64| stages.report(s, d, t);
+    cfg.validate()
+        .map_err(|e| format!("{}: {e}", flag_of(&e)))?;
     let rep = if a.exact {
         encode_to_tolerance(&frames, &cfg, &a.out, &progress)
     } else {
-        encode(&frames, &cfg, &a.out, !a.no_verify, &progress)
+        encode_file(&frames, &cfg, &a.out, &progress).and_then(|mut rep| {
+            if !a.no_verify {
+                rep.verify_file(&frames, &a.out, &progress)?;
+            }
+            Ok(rep)
+        })
     }
     .map_err(|e| e.to_string())?;
     stages.finish();
@@ -108,4 +117,19 @@ fn parse_segment(s: &str, current: SegmentMode) -> Result<SegmentMode, String> {
             .map_err(|_| bad());
     }
     s.parse().map(SegmentMode::Fixed).map_err(|_| bad())
+}
+
+/// The flag that sets the setting a configuration error names.
+fn flag_of(e: &ConfigError) -> &'static str {
+    match e {
+        ConfigError::Tolerance(_) => "--tolerance",
+        ConfigError::MaxDegree(_) => "--max-degree",
+        ConfigError::EmptySegments => "--segment",
+        ConfigError::ZstdLevel(_) => "--zstd-level",
+        ConfigError::IntraInterval(_) => "--intra-interval",
+        ConfigError::TileSize(_) => "--tile",
+        ConfigError::Rate(..) => "--fps",
+        ConfigError::Threads { .. } => "--threads",
+        _ => "settings",
+    }
 }

@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::{encode, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
+use crate::{encode_file, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
 
 /// Width of the accepted band above the tolerance, dB.
 pub const BAND_DB: f64 = 0.5;
@@ -49,7 +49,8 @@ pub fn encode_to_tolerance(
                 ..cfg.clone()
             };
             let path = pass_path(k);
-            let rep = encode(src, &c, &path, true, progress)?;
+            let mut rep = encode_file(src, &c, &path, progress)?;
+            rep.verify_file(src, &path, progress)?;
             let p = rep.mean_psnr.unwrap_or(f64::INFINITY);
             passes.push((internal, p, rep.bytes));
             let keep = |slot: &mut Option<(EncodeReport, PathBuf)>, better: bool| {

@@ -9,7 +9,6 @@ use vbim_format::Transfer;
 
 pub struct Domain {
     pub transfer: Transfer,
-    pub metric: Metric,
     pub channels: usize,
     pub width: usize,
     pub height: usize,
@@ -48,7 +47,6 @@ impl Domain {
             .collect();
         Domain {
             transfer,
-            metric,
             channels,
             width,
             height,

@@ -1,6 +1,7 @@
 //! What an encode did: size, rate, timing, how the terms were spent, and — measured by
 //! decoding the file with the reference decoder — the error against the input.
 
+use std::io::{Read, Seek};
 use std::path::Path;
 
 use serde::Serialize;
@@ -129,14 +130,16 @@ impl EncodeReport {
         }
     }
 
-    /// Decodes `file` with the reference decoder and measures it against the input.
-    pub fn verify(
+    /// Decodes the encoded stream with the reference decoder and measures it against the
+    /// input, filling in the error fields. `name` names the stream in errors.
+    pub fn verify<R: Read + Seek>(
         &mut self,
         src: &dyn FrameSource,
-        file: &Path,
+        encoded: R,
+        name: &str,
         progress: Progress,
     ) -> Result<(), EncodeError> {
-        let seq = measure(src, file, self.metric, progress)?;
+        let seq = measure(src, encoded, name, self.metric, progress)?;
         let (wf, wp) = seq.worst();
         self.mean_psnr = Some(seq.mean_psnr());
         self.worst_psnr = Some(wp);
@@ -145,6 +148,19 @@ impl EncodeReport {
         self.max_rel_error = matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel());
         self.frame_psnr = seq.frames.iter().map(|f| f.psnr()).collect();
         Ok(())
+    }
+
+    /// [`EncodeReport::verify`] on the file at `path`.
+    pub fn verify_file(
+        &mut self,
+        src: &dyn FrameSource,
+        path: &Path,
+        progress: Progress,
+    ) -> Result<(), EncodeError> {
+        let name = path.display().to_string();
+        let f =
+            std::fs::File::open(path).map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
+        self.verify(src, std::io::BufReader::new(f), &name, progress)
     }
 }
 
@@ -188,32 +204,24 @@ impl EncodeReport {
     }
 }
 
-/// Decodes every frame of `file` and compares it with the source frames.
-pub fn measure(
+/// Decodes every frame of `encoded` and compares it with the source frames.
+fn measure<R: Read + Seek>(
     src: &dyn FrameSource,
-    file: &Path,
+    encoded: R,
+    name: &str,
     metric: Metric,
     progress: Progress,
 ) -> Result<SequenceError, EncodeError> {
     let info = src.info();
-    let f = std::fs::File::open(file)
-        .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
-    let reader = Reader::open(std::io::BufReader::new(f))
-        .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
+    let reader = Reader::open(encoded).map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
     let h = reader.header().clone();
     if h.frame_count as usize != info.frames
         || h.width as usize != info.width
         || h.height as usize != info.height
     {
         return Err(EncodeError::Input(format!(
-            "{}: {}×{}×{} frames, the input is {}×{}×{}",
-            file.display(),
-            h.width,
-            h.height,
-            h.frame_count,
-            info.width,
-            info.height,
-            info.frames
+            "{name}: {}×{}×{} frames, the input is {}×{}×{}",
+            h.width, h.height, h.frame_count, info.width, info.height, info.frames
         )));
     }
     let mut dec = Decoder::new(reader);
@@ -221,7 +229,7 @@ pub fn measure(
     let mut out = vec![0f32; h.texel_count() * h.channels as usize];
     for i in 0..info.frames {
         dec.frame(i as f64, Output::Stored, &mut out)
-            .map_err(|e| EncodeError::Input(format!("{}: {e}", file.display())))?;
+            .map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
         let src = src.read(i)?;
         seq.push(metric.compare(&src.data, &out));
         progress("verify", i as u64 + 1, info.frames as u64);

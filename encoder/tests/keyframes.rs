@@ -32,10 +32,9 @@ fn intra_keyframes(frames: Vec<Vec<f32>>) -> Vec<bool> {
     };
     // The default intra interval (4 s) forces no keyframe of this 1-second sequence.
     assert!(cfg.intra_interval_frames() as usize > FRAMES);
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("k.vbim");
-    encode(&src, &cfg, &path, false, &|_, _, _| {}).unwrap();
-    let reader = Reader::open(Cursor::new(std::fs::read(&path).unwrap())).unwrap();
+    let mut bytes = Vec::new();
+    encode(&src, &cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
+    let reader = Reader::open(Cursor::new(bytes)).unwrap();
     let modes: Vec<bool> = reader
         .entries()
         .iter()

@@ -17,10 +17,8 @@ fn source(
 }
 
 fn run(src: &MemorySource, cfg: &EncoderConfig) -> (Vec<u8>, Vec<Vec<f32>>) {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("t.vbim");
-    encode(src, cfg, &out, false, &|_, _, _| {}).unwrap();
-    let bytes = std::fs::read(&out).unwrap();
+    let mut bytes = Vec::new();
+    encode(src, cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
     let reader = Reader::open(Cursor::new(bytes.clone())).unwrap();
     let h = reader.header().clone();
     let mut d = Decoder::new(reader);

@@ -58,10 +58,9 @@ fn noisy(w: usize, h: usize, n: usize) -> MemorySource {
 }
 
 fn encode_bytes(src: &MemorySource, cfg: &EncoderConfig) -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("t.vbim");
-    encode(src, cfg, &out, false, &|_, _, _| {}).unwrap();
-    std::fs::read(out).unwrap()
+    let mut bytes = Vec::new();
+    encode(src, cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
+    bytes
 }
 
 fn header_of(bytes: &[u8]) -> vbim_format::Header {

@@ -1,0 +1,172 @@
+//! The encoder's settings as data: every knob, the presets, and the check of their ranges.
+
+use vbim_format::limits::MAX_DEGREE;
+
+/// How segment boundaries are chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SegmentMode {
+    /// Adaptive: as long as the fit meets the budget, up to this many frames.
+    Auto {
+        /// The longest segment, frames.
+        max: u32,
+    },
+    /// Every segment this many frames (the last may be shorter).
+    Fixed(u32),
+}
+
+/// A starting point for [`EncoderConfig`]: how much encode time to spend on bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// About 2× quicker than `Default`, degree ≤ 3, for iteration.
+    Fast,
+    /// The balance measured in BENCHMARKS.md.
+    Default,
+    /// The fewest bytes: zstd 19 and a denser segment search.
+    Best,
+}
+
+/// Every knob of the encoder; `docs/MODEL.md` gives each one's measured effect.
+#[derive(Clone, Debug)]
+pub struct EncoderConfig {
+    /// Error budget: the target mean PSNR in dB of the protocol's metric.
+    pub tolerance_db: f64,
+    /// Highest polynomial degree in time (1 = keyframe interpolation only).
+    pub max_degree: usize,
+    /// How segment boundaries are chosen.
+    pub segment: SegmentMode,
+    /// zstd level of the chunk payloads (1 to 22).
+    pub zstd_level: i32,
+    /// Worker threads (0 = one per core). The output does not depend on it.
+    pub threads: usize,
+    /// Largest distance between independently decodable keyframes, in media seconds.
+    pub intra_interval_s: f64,
+    /// Side of the square tiles that each choose their own degree, texels.
+    pub tile_size: usize,
+    /// Media frame rate (num, den).
+    pub rate: (u32, u32),
+    /// Whether frame N−1 is followed by frame 0 (the model then spans the seam).
+    pub looping: bool,
+    /// JSON stored in the metadata chunk.
+    pub metadata: Option<String>,
+    /// Sub-sampling stride of the segment-length search (1 = every texel).
+    pub search_stride: usize,
+    /// Dead zone of the quantiser, in steps beyond the half step.
+    pub deadzone: f32,
+    /// Chroma steps relative to luma.
+    pub chroma_step_factor: f32,
+}
+
+impl EncoderConfig {
+    /// The settings of preset `p`.
+    pub fn preset(p: Preset) -> EncoderConfig {
+        let base = EncoderConfig {
+            tolerance_db: 45.0,
+            max_degree: 4,
+            // Longer segments fit the budget but cost more than they save (measured).
+            segment: SegmentMode::Auto { max: 32 },
+            zstd_level: 9,
+            threads: 0,
+            intra_interval_s: 4.0,
+            tile_size: 16,
+            rate: (24, 1),
+            looping: true,
+            metadata: None,
+            search_stride: 4,
+            deadzone: 0.2,
+            chroma_step_factor: 1.5,
+        };
+        match p {
+            Preset::Fast => EncoderConfig {
+                max_degree: 3,
+                segment: SegmentMode::Auto { max: 24 },
+                zstd_level: 3,
+                search_stride: 8,
+                ..base
+            },
+            Preset::Default => base,
+            // Degree 6 or 64-frame segments were measured to cost bytes: best spends its
+            // time on the entropy coder and a denser segment search instead.
+            Preset::Best => EncoderConfig {
+                zstd_level: 19,
+                search_stride: 2,
+                ..base
+            },
+        }
+    }
+
+    /// Checks every knob's range; the error names the knob and its range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(10.0..=99.0).contains(&self.tolerance_db) {
+            return Err(ConfigError::Tolerance(self.tolerance_db));
+        }
+        if !(1..=MAX_DEGREE as usize).contains(&self.max_degree) {
+            return Err(ConfigError::MaxDegree(self.max_degree));
+        }
+        if matches!(
+            self.segment,
+            SegmentMode::Auto { max: 0 } | SegmentMode::Fixed(0)
+        ) {
+            return Err(ConfigError::EmptySegments);
+        }
+        if !(1..=22).contains(&self.zstd_level) {
+            return Err(ConfigError::ZstdLevel(self.zstd_level));
+        }
+        if self.intra_interval_s.is_nan() || self.intra_interval_s <= 0.0 {
+            return Err(ConfigError::IntraInterval(self.intra_interval_s));
+        }
+        if !(8..=256).contains(&self.tile_size) || !self.tile_size.is_multiple_of(8) {
+            return Err(ConfigError::TileSize(self.tile_size));
+        }
+        if self.rate.0 == 0 || self.rate.1 == 0 {
+            return Err(ConfigError::Rate(self.rate.0, self.rate.1));
+        }
+        if self.search_stride == 0 {
+            return Err(ConfigError::SearchStride);
+        }
+        Ok(())
+    }
+
+    /// The intra interval in frames (at least 1).
+    pub fn intra_interval_frames(&self) -> u32 {
+        ((self.intra_interval_s * self.rate.0 as f64 / self.rate.1 as f64).floor() as u32).max(1)
+    }
+}
+
+/// A setting out of its range. Messages name the setting and the range, not a flag: the
+/// command line, a build script and a test all see the same error.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// `tolerance_db` outside 10 to 99.
+    #[error("tolerance {0} dB is outside 10 to 99")]
+    Tolerance(f64),
+    /// `max_degree` outside 1 to the format's largest.
+    #[error("max degree {0} is outside 1 to {MAX_DEGREE}")]
+    MaxDegree(usize),
+    /// A segment length of 0.
+    #[error("segments must be at least 1 frame long")]
+    EmptySegments,
+    /// `zstd_level` outside 1 to 22.
+    #[error("zstd level {0} is outside 1 to 22")]
+    ZstdLevel(i32),
+    /// `intra_interval_s` not positive.
+    #[error("intra interval {0} s is not positive")]
+    IntraInterval(f64),
+    /// `tile_size` not a multiple of 8 from 8 to 256.
+    #[error("tile size {0} is not a multiple of 8 from 8 to 256")]
+    TileSize(usize),
+    /// A frame rate with a zero numerator or denominator.
+    #[error("frame rate {0}/{1} is not positive")]
+    Rate(u32, u32),
+    /// `search_stride` of 0.
+    #[error("search stride 0 (1 searches every texel)")]
+    SearchStride,
+    /// The worker pool could not be started.
+    #[error("cannot start {threads} worker threads: {reason}")]
+    Threads {
+        /// Threads asked for (0: one per core).
+        threads: usize,
+        /// Why not.
+        reason: String,
+    },
+}

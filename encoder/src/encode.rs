@@ -1,0 +1,302 @@
+//! The encode itself: validate every frame, choose the coded domain, then walk the
+//! sequence front to back — segment length, closing keyframe, the segment's model — over
+//! a window of frames that holds one segment's worth at a time.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use vbim_format::chunk::TileMap;
+use vbim_format::curve::exposure_from_max_greens;
+use vbim_format::index::{FLAG_INTRA, FLAG_OPTIONAL};
+use vbim_format::metrics::Metric;
+use vbim_format::{ChunkKind, ColorEncoding, Header, Transfer};
+
+use crate::domain::Domain;
+use crate::keyframe::{self, KeyParams};
+use crate::model::{self, CodedFrame, Projectors, SegmentParams};
+use crate::output::{header_for, pack_metadata, PendingChunk};
+use crate::segment::Search;
+use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress, SegmentMode};
+
+/// Error budgets, as shares of the total RMS error the tolerance allows. They were set by
+/// measurement (BENCHMARKS.md, "What moved the encoder …"): a tight fit (long segments
+/// only where the curve really is smooth) with coarsely quantised bubble planes gives the
+/// fewest bytes at a given mean PSNR. The bubble share exceeds 1 because dead-zone
+/// quantisation of sparse planes errs far below the step²/12 the step is computed from;
+/// the measured error still stays under the tolerance (`--tolerance T` delivers T + 3 to
+/// 5 dB on the benchmark days, whose nights sit far below the budget).
+const FIT_SHARE: f64 = 0.3;
+const KEY_SHARE: f64 = 0.6;
+const BUBBLE_SHARE: f64 = 1.2;
+
+/// A coded sequence, ready to write.
+pub(crate) struct Coded {
+    /// The header, before the writer fills in sizes and checksums.
+    pub header: Header,
+    pub chunks: Vec<PendingChunk>,
+    /// Segment boundaries, frames (first 0, last the end).
+    pub boundaries: Vec<u32>,
+    /// Each segment's tile degrees.
+    pub tilemaps: Vec<TileMap>,
+    pub intra_keyframes: usize,
+    pub metric: Metric,
+    /// When coding started (after validation).
+    pub started: Instant,
+}
+
+/// Codes `src` with `cfg` (inside the worker pool).
+pub(crate) fn code_sequence(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    progress: Progress,
+) -> Result<Coded, EncodeError> {
+    let info = src.info();
+    let n = info.frames;
+    if n > vbim_format::limits::MAX_FRAMES as usize {
+        return Err(EncodeError::Input(format!(
+            "{n} frames (at most {})",
+            vbim_format::limits::MAX_FRAMES
+        )));
+    }
+    if info.width > vbim_format::limits::MAX_DIMENSION as usize
+        || info.height > vbim_format::limits::MAX_DIMENSION as usize
+    {
+        return Err(EncodeError::Input(format!(
+            "{}: {}×{} is larger than 16384²",
+            info.name, info.width, info.height
+        )));
+    }
+    // Pass 1: validate every frame before any work, and learn the exposure.
+    let done = AtomicU64::new(0);
+    let greens: Vec<f32> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let f = src.read(i)?;
+            progress(
+                "validate",
+                done.fetch_add(1, Ordering::Relaxed) + 1,
+                n as u64,
+            );
+            Ok(vbim_format::curve::max_green(&f.data, f.channels))
+        })
+        .collect::<Result<_, EncodeError>>()?;
+    let (color, transfer, metric) = match info.kind {
+        InputKind::Srgb8 => (ColorEncoding::Srgb8, Transfer::Srgb, Metric::Srgb8),
+        InputKind::Hdr => {
+            let e = exposure_from_max_greens(&greens);
+            (
+                ColorEncoding::LinearHdr,
+                Transfer::LogToe {
+                    v0: (2.0f32).powi(-10) / e,
+                },
+                Metric::Hdr { exposure: e },
+            )
+        }
+    };
+    let dom = Domain::new(
+        transfer,
+        metric,
+        info.channels,
+        info.width,
+        info.height,
+        cfg.tile_size,
+    );
+    let eps = 10f64.powf(-cfg.tolerance_db / 20.0);
+    let sp = SegmentParams {
+        max_degree: cfg.max_degree,
+        fit_budget: FIT_SHARE * eps,
+        quant_budget: BUBBLE_SHARE * eps,
+        chroma_step_factor: cfg.chroma_step_factor,
+        deadzone: cfg.deadzone,
+        zstd_level: cfg.zstd_level,
+    };
+    let kp = KeyParams {
+        budget: KEY_SHARE * eps,
+        chroma_step_factor: cfg.chroma_step_factor,
+        deadzone: cfg.deadzone,
+        zstd_level: cfg.zstd_level,
+    };
+    let started = Instant::now();
+
+    // Pass 2: segments, keyframes and models, front to back over a window of frames.
+    let looping = cfg.looping;
+    let end = if looping { n } else { n - 1 } as u32;
+    let intra_every = cfg.intra_interval_frames();
+    let mut window = Window::new(src, &dom, end);
+    let mut chunks: Vec<PendingChunk> = Vec::new();
+    if let Some(m) = &cfg.metadata {
+        chunks.push(PendingChunk {
+            kind: ChunkKind::Metadata,
+            flags: FLAG_OPTIONAL,
+            number: 0,
+            frames: (0, 0),
+            bytes: pack_metadata(m, cfg.zstd_level)?,
+        });
+    }
+    // The header keyframes are decoded against (their shape and curve only).
+    let key_header = header_for(&info, cfg, (color, transfer), 0, 0, 1);
+    window.load(0)?;
+    let first = keyframe::code(&window.frames[&0], None, &key_header, kp)?;
+    let k0 = first.decoded.clone();
+    chunks.push(keyframe_chunk(first, 0, 0));
+    let mut boundaries = vec![0u32];
+    let mut projectors = Projectors::default();
+    let mut prev_key = k0.clone();
+    let mut last_intra = 0u32;
+    let mut intra_keyframes = 1; // keyframe 0
+    let mut tilemaps = Vec::new();
+    let mut b = 0u32;
+    while b < end {
+        let max_len = match cfg.segment {
+            SegmentMode::Fixed(l) => l,
+            SegmentMode::Auto { max } => max,
+        }
+        .min(end - b);
+        window.load(b + max_len)?;
+        let len = match cfg.segment {
+            SegmentMode::Fixed(_) => max_len,
+            SegmentMode::Auto { .. } => {
+                let search = Search {
+                    dom: &dom,
+                    window: &window.frames,
+                    cfg,
+                    params: &sp,
+                };
+                search.length(b, max_len, &mut projectors)
+            }
+        };
+        let e = b + len;
+        let s = boundaries.len() as u32 - 1;
+        // The keyframe closing this segment (keyframe 0 again at a loop's end): predicted
+        // from the previous one while the intra interval allows it.
+        let k1 = if looping && e == end {
+            k0.clone()
+        } else {
+            let prev = (e - last_intra <= intra_every).then(|| prev_key.as_slice());
+            let k = keyframe::code(&window.frames[&e], prev, &key_header, kp)?;
+            if k.intra {
+                last_intra = e;
+                intra_keyframes += 1;
+            }
+            let decoded = k.decoded.clone();
+            chunks.push(keyframe_chunk(k, s + 1, e));
+            decoded
+        };
+        let inner: Vec<&CodedFrame> = (b + 1..e).map(|i| window.frames[&i].as_ref()).collect();
+        let code = model::code_segment(
+            &dom,
+            cfg.tile_size,
+            &prev_key,
+            &k1,
+            &inner,
+            &mut projectors,
+            &sp,
+        );
+        // Playback order: a segment's tile map and coefficients follow its closing keyframe.
+        let parts = [
+            (ChunkKind::TileMap, code.tilemap_bytes),
+            (ChunkKind::Coefficients, code.coeff_bytes),
+        ];
+        for (kind, bytes) in parts {
+            chunks.push(PendingChunk {
+                kind,
+                flags: 0,
+                number: s,
+                frames: (b, e),
+                bytes,
+            });
+        }
+        tilemaps.push(code.tiles);
+        boundaries.push(e);
+        prev_key = k1;
+        // Frames before the new boundary are done (frame 0 stays for a loop's end).
+        window.forget_before(e);
+        b = e;
+        progress("encode", b as u64, end as u64);
+    }
+    let segments = boundaries.len() as u32 - 1;
+    let keyframes = if looping { segments } else { segments + 1 };
+    let header = header_for(
+        &info,
+        cfg,
+        (color, transfer),
+        segments,
+        keyframes,
+        chunks.len() as u32,
+    );
+    Ok(Coded {
+        header,
+        chunks,
+        boundaries,
+        tilemaps,
+        intra_keyframes,
+        metric,
+        started,
+    })
+}
+
+/// Keyframe `number`'s chunk, at frame `frame`.
+fn keyframe_chunk(k: keyframe::CodedKeyframe, number: u32, frame: u32) -> PendingChunk {
+    PendingChunk {
+        kind: ChunkKind::Keyframe,
+        flags: if k.intra { FLAG_INTRA } else { 0 },
+        number,
+        frames: (frame, frame),
+        bytes: k.bytes,
+    }
+}
+
+/// The frames the encoder holds: read once, in order, and dropped once behind the current
+/// boundary, so that memory stays at one segment's worth of frames.
+struct Window<'a> {
+    src: &'a dyn FrameSource,
+    dom: &'a Domain,
+    frames: BTreeMap<u32, Arc<CodedFrame>>,
+    /// The first frame never loaded.
+    next: u32,
+    /// The last frame there is (frame 0 again at a loop's end).
+    end: u32,
+}
+
+impl<'a> Window<'a> {
+    fn new(src: &'a dyn FrameSource, dom: &'a Domain, end: u32) -> Self {
+        Window {
+            src,
+            dom,
+            frames: BTreeMap::new(),
+            next: 0,
+            end,
+        }
+    }
+
+    /// Reads and codes every frame up to `upto` not read yet (in parallel).
+    fn load(&mut self, upto: u32) -> Result<(), EncodeError> {
+        let upto = upto.min(self.end);
+        if upto < self.next {
+            return Ok(());
+        }
+        let n = self.src.info().frames;
+        let missing: Vec<u32> = (self.next..=upto).collect();
+        self.next = upto + 1;
+        let fresh: Vec<(u32, CodedFrame)> = missing
+            .par_iter()
+            .map(|&i| {
+                let f = self.src.read(i as usize % n)?;
+                let (planes, sens) = self.dom.code(&f.data);
+                Ok((i, CodedFrame { planes, sens }))
+            })
+            .collect::<Result<_, EncodeError>>()?;
+        for (i, f) in fresh {
+            self.frames.insert(i, Arc::new(f));
+        }
+        Ok(())
+    }
+
+    /// Drops the frames before `b`, except frame 0 (a loop's end needs it).
+    fn forget_before(&mut self, b: u32) {
+        self.frames.retain(|&i, _| i >= b || i == 0);
+    }
+}
