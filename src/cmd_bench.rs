@@ -171,24 +171,8 @@ fn bench_lossless(a: crate::cli::BenchLosslessArgs) -> Result<(), String> {
     use vbim_encoder::{FrameSet, FrameSource};
     let fs = FrameSet::open(&a.input).map_err(|e| e.to_string())?;
     let info = fs.info();
-    let sizes: Vec<u64> = (0..fs.len())
-        .into_par_iter()
-        .map(|i| {
-            let f = fs.read(i).map_err(|e| e.to_string())?;
-            let bytes: Vec<u8> = if info.kind == vbim_encoder::InputKind::Srgb8 {
-                f.data.iter().map(|v| (v * 255.0).round() as u8).collect()
-            } else {
-                f.data
-                    .iter()
-                    .flat_map(|v| half::f16::from_f32(*v).to_le_bytes())
-                    .collect()
-            };
-            Ok(zstd::bulk::compress(&bytes, a.level)
-                .map_err(|e| e.to_string())?
-                .len() as u64)
-        })
-        .collect::<Result<_, String>>()?;
-    let total: u64 = sizes.iter().sum();
+    let total =
+        vbim_encoder::lossless_baseline(&fs, a.level, &|_, _, _| {}).map_err(|e| e.to_string())?;
     let bpp = total as f64 * 8.0 / (info.width * info.height * info.frames) as f64;
     println!(
         "{total} bytes, {bpp:.4} bpp (zstd level {} per frame)",

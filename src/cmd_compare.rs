@@ -2,7 +2,6 @@
 
 use std::io::Write;
 
-use vbim_format::curve::exposure_from_max_greens;
 use vbim_format::metrics::{Metric, SequenceError};
 
 use crate::cli::CompareArgs;
@@ -36,15 +35,7 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
     } else {
         let exposure = match a.exposure {
             Some(e) => e,
-            None => {
-                let mut greens = Vec::with_capacity(n);
-                for i in 0..n {
-                    let rgb = to_rgb(&sa.read(i)?, ca);
-                    greens.push(vbim_format::curve::max_green(&rgb, 3));
-                    stages.report("exposure", i as u64 + 1, n as u64);
-                }
-                exposure_from_max_greens(&greens)
-            }
+            None => sa.exposure(&stages)?,
         };
         Metric::Hdr { exposure }
     };

@@ -1,8 +1,8 @@
 //! `vbim decode FILE --out DIR [--format exr|png8|png16]`
 
-use vbim_bake::output::{frame_name, write_atomic, write_frame};
+use vbim_bake::output::{frame_name, write_file, write_frame};
 use vbim_bake::FrameFormat;
-use vbim_format::curve::{exposure_from_max_greens, srgb_to_linear};
+use vbim_format::curve::srgb_to_linear;
 
 use crate::cli::DecodeArgs;
 use crate::progress::Stages;
@@ -17,31 +17,16 @@ pub fn run(a: DecodeArgs) -> Result<(), String> {
     }
     let (w, h, ch, srgb8) = seq.shape();
     std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
-    let meta = seq.metadata();
     let stages = Stages::new();
     let n = seq.len();
-    // The HDR 8-bit export needs the day's exposure: from the bake's manifest, or a first pass.
-    let mut exposure = meta
-        .as_ref()
-        .and_then(|m| m.get("exposure"))
-        .and_then(|v| v.as_f64())
-        .map(|v| v as f32);
-    let mut png16_scale = meta
-        .as_ref()
-        .and_then(|m| m.get("png16_scale"))
-        .and_then(|v| v.as_f64())
-        .map(|v| v as f32);
-    if !srgb8 && format != FrameFormat::Exr && (exposure.is_none() || png16_scale.is_none()) {
-        let (mut greens, mut max) = (Vec::with_capacity(n), 0f32);
-        for i in 0..n {
-            let rgb = to_rgb(&seq.read(i)?, ch);
-            greens.push(vbim_format::curve::max_green(&rgb, 3));
-            max = rgb.iter().copied().fold(max, f32::max);
-            stages.report("measure", i as u64 + 1, n as u64);
-        }
-        exposure.get_or_insert(exposure_from_max_greens(&greens));
-        png16_scale.get_or_insert(if max > 0.0 { 65535.0 / max } else { 1.0 });
-    }
+    // The HDR 8-bit and 16-bit exports need the day's scales (the EXR export and 8-bit
+    // streams need none).
+    let (exposure, png16_scale) = if !srgb8 && format != FrameFormat::Exr {
+        let s = seq.export_scales(&stages)?;
+        (Some(s.exposure), Some(s.png16_scale))
+    } else {
+        (None, None)
+    };
     let write_one = |i: usize, stored: Vec<f32>| -> Result<(), String> {
         let path = a.out.join(frame_name(i, format));
         if srgb8 && format == FrameFormat::Png8 {
@@ -50,7 +35,7 @@ pub fn run(a: DecodeArgs) -> Result<(), String> {
                 .iter()
                 .map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
                 .collect();
-            write_atomic(&path, |tmp| {
+            write_file(&path, |tmp| {
                 image::RgbImage::from_raw(w as u32, h as u32, px)
                     .unwrap()
                     .save(tmp)

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use serde_json::json;
 use vbim_bake::{bake, BakeOptions, FrameFormat, Scene};
-use vbim_encoder::{encode_file, EncoderConfig, FrameSet, FrameSource, Preset};
+use vbim_encoder::{encode_file, lossless_baseline, EncoderConfig, FrameSet, FrameSource, Preset};
 
 use crate::cli::DemoArgs;
 use crate::cmd_play::{capture_scene, play, session, Outcome};
@@ -13,34 +13,8 @@ use crate::plot::{lines, Series};
 use crate::progress::Stages;
 use crate::units::parse_rate;
 
-/// Bytes of the protocol's lossless baseline: each frame's half-float RGB, zstd-compressed.
-fn lossless_bytes(frames: &FrameSet, stages: &Stages) -> Result<u64, String> {
-    use rayon::prelude::*;
-    let n = frames.len();
-    let done = std::sync::atomic::AtomicU64::new(0);
-    let sizes: Vec<u64> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let f = frames.read(i).map_err(|e| e.to_string())?;
-            let bytes: Vec<u8> = f
-                .data
-                .iter()
-                .flat_map(|v| half::f16::from_f32(*v).to_le_bytes())
-                .collect();
-            let z = zstd::bulk::compress(&bytes, 3).map_err(|e| e.to_string())?;
-            stages.report(
-                "lossless",
-                done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
-                n as u64,
-            );
-            Ok(z.len() as u64)
-        })
-        .collect::<Result<_, String>>()?;
-    Ok(sizes.iter().sum())
-}
-
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    vbim_bake::output::write_atomic(path, |tmp| {
+    vbim_bake::output::write_file(path, |tmp| {
         std::fs::write(tmp, text).map_err(|e| e.to_string())
     })
     .map_err(|e| e.to_string())
@@ -92,7 +66,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         .map_err(|e| e.to_string())?;
     stages.finish();
     rep.write_degree_map(&out.join("degree_map.png"))?;
-    let lossless = lossless_bytes(&fs, &stages)?;
+    let lossless = lossless_baseline(&fs, 3, &progress).map_err(|e| e.to_string())?;
     stages.finish();
     let info = fs.info();
     let texel_frames = (info.width * info.height * info.frames) as f64;

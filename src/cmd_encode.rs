@@ -1,5 +1,6 @@
 //! `vbim encode INPUT --out FILE.vbim`
 
+use vbim_bake::Manifest;
 use vbim_encoder::{
     encode_file, encode_to_tolerance, ConfigError, EncoderConfig, FrameSet, Preset, SegmentMode,
 };
@@ -29,18 +30,17 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
         (None, Some(p)) => std::fs::read_to_string(p).ok(),
         (None, None) => None,
     };
-    let manifest: Option<serde_json::Value> = match &manifest_text {
-        Some(t) => Some(serde_json::from_str(t).map_err(|e| format!("metadata JSON: {e}"))?),
+    // Any JSON may be stored; a bake's manifest also gives the frame rate.
+    let manifest = match &manifest_text {
+        Some(t) => {
+            serde_json::from_str::<serde::de::IgnoredAny>(t)
+                .map_err(|e| format!("metadata JSON: {e}"))?;
+            Manifest::parse(t).ok()
+        }
         None => None,
     };
     cfg.metadata = manifest_text;
-    cfg.rate = match (
-        &a.fps,
-        manifest
-            .as_ref()
-            .and_then(|m| m.get("fps"))
-            .and_then(|v| v.as_str()),
-    ) {
+    cfg.rate = match (&a.fps, manifest.as_ref().and_then(|m| m.fps.as_deref())) {
         (Some(f), _) => parse_rate(f)?,
         (None, Some(f)) => parse_rate(f)?,
         (None, None) => (24, 1),

@@ -7,14 +7,17 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
-use vbim_format::curve::{exposure_from_max_greens, linear_to_srgb};
+use vbim_format::curve::linear_to_srgb;
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::{Metric, SequenceError};
-use vbim_format::{ColorEncoding, Header, Reader};
+use vbim_format::{Header, Reader};
 use vbim_player::{frames_csv, Summary};
 use vbim_player::{headless_device, FrameRecord, Player, PlayerConfig, Policy, Throttle};
+use vbim_scene::SkyTrack;
 
 use crate::cli::PlayArgs;
+use crate::progress::Stages;
+use crate::sequence::Sequence;
 use crate::units::{parse_bandwidth, parse_duration, parse_stall};
 
 /// Everything one playback session needs.
@@ -103,29 +106,26 @@ pub fn mean_rate(h: &Header) -> f64 {
     h.file_size as f64 / (h.frame_count as f64 / h.fps())
 }
 
-/// The metric for comparing shown frames with true ones.
-pub fn metric_for(dec: &mut Decoder<BufReader<File>>) -> Result<Metric, String> {
-    let h = dec.header().clone();
-    if h.color == ColorEncoding::Srgb8 {
+/// What the scene needs from the bake of `file`: the export curve's exposure (1 for an
+/// 8-bit stream) and the sky over the day.
+pub fn scene_look(file: &Path) -> Result<(f32, SkyTrack), String> {
+    let mut seq = Sequence::open(&file.to_string_lossy())?;
+    let exposure = if seq.shape().3 {
+        1.0
+    } else {
+        seq.exposure(&Stages::new())?
+    };
+    Ok((exposure, SkyTrack::from_manifest(seq.manifest().as_ref())))
+}
+
+/// The metric for comparing shown frames of `file` with true ones.
+pub fn metric_for(file: &Path) -> Result<Metric, String> {
+    let mut seq = Sequence::open(&file.to_string_lossy())?;
+    if seq.shape().3 {
         return Ok(Metric::Srgb8);
     }
-    let meta = dec.reader().metadata().ok().flatten();
-    if let Some(e) = meta
-        .and_then(|m| serde_json::from_str::<serde_json::Value>(&m).ok())
-        .and_then(|v| v.get("exposure").and_then(|e| e.as_f64()))
-    {
-        return Ok(Metric::Hdr { exposure: e as f32 });
-    }
-    let n = h.frame_count as usize;
-    let mut buf = vec![0f32; h.texel_count() * h.channels as usize];
-    let mut greens = Vec::new();
-    for k in (0..n).step_by((n / 48).max(1)) {
-        dec.frame(k as f64, Output::Linear, &mut buf)
-            .map_err(|e| e.to_string())?;
-        greens.push(vbim_format::curve::max_green(&buf, h.channels as usize));
-    }
     Ok(Metric::Hdr {
-        exposure: exposure_from_max_greens(&greens),
+        exposure: seq.exposure(&Stages::new())?,
     })
 }
 
@@ -148,7 +148,7 @@ pub fn play(
     let h = player.header().clone();
     let mut reference = open_reference(&s.file)?;
     let metric = if s.check_every > 0 {
-        Some(metric_for(&mut reference)?)
+        Some(metric_for(&s.file)?)
     } else {
         None
     };
@@ -388,7 +388,7 @@ pub fn capture_scene(
     size: (u32, u32),
     progress: &dyn Fn(u64, u64),
 ) -> Result<Capture, String> {
-    use vbim_scene::{orbit, SceneRenderer, SkyTrack, View, FORMAT};
+    use vbim_scene::{orbit, SceneRenderer, View, FORMAT};
     let (mesh, hf) = scene_mesh(scene_file)?;
     let (device, queue, info) = headless_device()?;
     let mut player = s.open_player(&device, &queue, s.realtime)?;
@@ -399,13 +399,7 @@ pub fn capture_scene(
             h.width, h.height, hf.w, hf.h
         );
     }
-    let mut reference = open_reference(&s.file)?;
-    let exposure = match metric_for(&mut reference)? {
-        Metric::Hdr { exposure } => exposure,
-        Metric::Srgb8 => 1.0,
-    };
-    let meta = reference.reader().metadata().ok().flatten();
-    let sky = SkyTrack::from_metadata(meta.as_deref());
+    let (exposure, sky) = scene_look(&s.file)?;
     let renderer = SceneRenderer::new(
         &device,
         &queue,
@@ -446,7 +440,7 @@ pub fn capture_scene(
             let px = renderer.read();
             let img = image::RgbaImage::from_raw(size.0, size.1, px).expect("size");
             let path = out.join(format!("frame_{captured:04}.png"));
-            vbim_bake::output::write_atomic(&path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
+            vbim_bake::output::write_file(&path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
                 .map_err(|e| e.to_string())?;
             gif_frames.push(image::imageops::resize(
                 &img,
@@ -462,7 +456,7 @@ pub fn capture_scene(
     }
     let preview = out.join("preview.gif");
     let delay = image::Delay::from_numer_denom_ms(1000, 15);
-    vbim_bake::output::write_atomic(&preview, |tmp| {
+    vbim_bake::output::write_file(&preview, |tmp| {
         let file = File::create(tmp).map_err(|e| e.to_string())?;
         let mut enc =
             image::codecs::gif::GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);

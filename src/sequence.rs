@@ -5,9 +5,13 @@
 use std::fs::File;
 use std::io::BufReader;
 
+use vbim_bake::Manifest;
 use vbim_encoder::{FrameSet, InputKind};
+use vbim_format::curve::{exposure_from_max_greens, max_green};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::{ColorEncoding, Reader};
+
+use crate::progress::Stages;
 
 pub enum Sequence {
     Frames(FrameSet),
@@ -69,16 +73,55 @@ impl Sequence {
     }
 
     /// The bake manifest in the .vbim's metadata chunk, or beside the frames.
-    pub fn metadata(&mut self) -> Option<serde_json::Value> {
-        let text = match self {
-            Sequence::Frames(f) => f
-                .manifest
-                .as_ref()
-                .and_then(|m| std::fs::read_to_string(m).ok()),
-            Sequence::Vbim { dec, .. } => dec.reader().metadata().ok().flatten(),
-        }?;
-        serde_json::from_str(&text).ok()
+    pub fn manifest(&mut self) -> Option<Manifest> {
+        match self {
+            Sequence::Frames(f) => f.manifest.as_ref().and_then(|m| Manifest::read(m).ok()),
+            Sequence::Vbim { dec, .. } => {
+                let text = dec.reader().metadata().ok().flatten()?;
+                Manifest::parse(&text).ok()
+            }
+        }
     }
+
+    /// How the 8-bit and 16-bit exports scale this (HDR) sequence: the bake's values
+    /// from its manifest; what the manifest lacks is measured in one pass over every
+    /// frame (docs/CONVENTIONS.md). The one place the command line picks an exposure.
+    pub fn export_scales(&mut self, stages: &Stages) -> Result<ExportScales, String> {
+        let m = self.manifest();
+        let (mut exposure, mut png16_scale) = (
+            m.as_ref().and_then(|m| m.exposure),
+            m.as_ref().and_then(|m| m.png16_scale),
+        );
+        if exposure.is_none() || png16_scale.is_none() {
+            let (n, ch) = (self.len(), self.shape().2);
+            let (mut greens, mut max) = (Vec::with_capacity(n), 0f32);
+            for i in 0..n {
+                let rgb = to_rgb(&self.read(i)?, ch);
+                greens.push(max_green(&rgb, 3));
+                max = rgb.iter().copied().fold(max, f32::max);
+                stages.report("measure", i as u64 + 1, n as u64);
+            }
+            exposure.get_or_insert(exposure_from_max_greens(&greens));
+            png16_scale.get_or_insert(if max > 0.0 { 65535.0 / max } else { 1.0 });
+        }
+        Ok(ExportScales {
+            exposure: exposure.expect("set above"),
+            png16_scale: png16_scale.expect("set above"),
+        })
+    }
+
+    /// The export curve's exposure ([`Sequence::export_scales`]).
+    pub fn exposure(&mut self, stages: &Stages) -> Result<f32, String> {
+        Ok(self.export_scales(stages)?.exposure)
+    }
+}
+
+/// The scales of an HDR sequence's exports.
+pub struct ExportScales {
+    /// The 8-bit export curve's exposure.
+    pub exposure: f32,
+    /// 16-bit PNG: stored value = linear × this.
+    pub png16_scale: f32,
 }
 
 /// Interleaved frame → RGB (a Y-only frame is repeated into all three channels).

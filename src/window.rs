@@ -20,7 +20,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::cmd_play::{metric_for, open_reference, scene_mesh, Session};
+use crate::cmd_play::{scene_look, scene_mesh, Session};
 
 struct Gfx {
     window: Arc<Window>,
@@ -260,12 +260,7 @@ pub fn run(
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(
         Box::new(el.owned_display_handle()),
     ));
-    let mut reference = open_reference(&s.file)?;
-    let exposure = match metric_for(&mut reference)? {
-        vbim_format::metrics::Metric::Hdr { exposure } => exposure,
-        vbim_format::metrics::Metric::Srgb8 => 1.0,
-    };
-    let meta = reference.reader().metadata().ok().flatten();
+    let (exposure, sky) = scene_look(&s.file)?;
     let mut app = App {
         session: Session { ..s.clone() },
         scene_file: scene.to_path_buf(),
@@ -274,7 +269,7 @@ pub fn run(
         instance,
         gfx: None,
         mesh: None,
-        sky: SkyTrack::from_metadata(meta.as_deref()),
+        sky,
         exposure,
         paused: false,
         stalled: false,

@@ -8,6 +8,7 @@ pub mod clouds;
 pub mod heightfield;
 pub mod horizon;
 pub mod light;
+mod manifest;
 pub mod obscurance;
 pub mod output;
 pub mod scene;
@@ -22,6 +23,7 @@ use vbim_format::curve::exposure_from_max_greens;
 
 pub use heightfield::HeightField;
 pub use light::{FrameInfo, Precomputed};
+pub use manifest::Manifest;
 pub use output::FrameFormat;
 pub use scene::Scene;
 
@@ -163,7 +165,7 @@ pub fn bake(
     let exposure = exposure.unwrap_or_else(|| exposure_from_max_greens(&greens));
     let threads = rayon::current_num_threads() as f64;
     let manifest =
-        output::write_manifest(&opts.out, scene, opts.format, exposure, png16_scale, &infos)?;
+        Manifest::of_bake(scene, opts.format, exposure, png16_scale, &infos).write(&opts.out)?;
     let contact_sheet = opts.out.join("contact_sheet.png");
     // The sheet is for people: expose so that the brightest frame's peak maps to x = 1
     // (mid-tone highlights), rather than the protocol's export exposure, which is set by the

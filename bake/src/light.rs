@@ -8,7 +8,7 @@
 //!   sky = D + D · (1 / (1 − C (1 − I/π)) − 1) · W + A · W           (paper 000, Eq. 5)
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::clouds::CloudLayer;
 use crate::heightfield::HeightField;
@@ -69,7 +69,8 @@ impl Precomputed {
 }
 
 /// What the manifest records about each frame.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct FrameInfo {
     pub index: usize,
     /// Local solar time, hours.

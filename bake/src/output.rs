@@ -2,17 +2,17 @@
 //! file is written under a temporary name and renamed, so an interrupted bake never leaves
 //! a truncated file under a final name.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use half::f16;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use vbim_format::curve::export_curve;
 
-use crate::light::{self, FrameInfo, Precomputed};
+use crate::light::{self, Precomputed};
 use crate::scene::Scene;
 use crate::{out_err, BakeError};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum FrameFormat {
     /// Half-float RGB OpenEXR, linear.
@@ -42,21 +42,42 @@ pub fn frame_name(i: usize, f: FrameFormat) -> String {
     }
 }
 
-/// Writes `path` through a temporary file beside it, renamed on success.
-pub fn write_atomic(
+/// Writes `path` through a temporary file beside it: `write` fills the temporary file,
+/// whose name ends like `path`'s (image writers pick the format from the extension); it is
+/// then synced and renamed over `path`. If anything fails the temporary file is removed
+/// and `path` is untouched, so an interrupted run never leaves a truncated file under a
+/// final name. `io_err` turns a failed sync or rename into the caller's error. The one
+/// place every `vbim` output file is written.
+pub fn write_atomic<T, E>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<T, E>,
+    io_err: impl FnOnce(std::io::Error) -> E,
+) -> Result<T, E> {
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("out");
+    let tmp = path.with_file_name(format!(".tmp-{}-{name}", std::process::id()));
+    let result = write(&tmp).and_then(|value| {
+        std::fs::File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .map_err(io_err)?;
+        Ok(value)
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// [`write_atomic`] for a writer whose errors are messages: errors name `path`.
+pub fn write_file(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), String>,
 ) -> Result<(), BakeError> {
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("out");
-    // Keep the extension last: the image writers pick the format from it.
-    let tmp = path.with_file_name(format!(".tmp-{}-{name}", std::process::id()));
-    match write(&tmp) {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| out_err(path, e)),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(out_err(path, e))
-        }
-    }
+    write_atomic(
+        path,
+        |tmp| write(tmp).map_err(|e| out_err(path, e)),
+        |e| out_err(path, e),
+    )
 }
 
 /// The protocol's 8-bit export of a linear RGB buffer.
@@ -79,7 +100,7 @@ pub fn write_frame(
     exposure: Option<f32>,
     png16_scale: Option<f32>,
 ) -> Result<(), BakeError> {
-    write_atomic(path, |tmp| match format {
+    write_file(path, |tmp| match format {
         // One thread per file: exr's parallel writer stores the blocks in the order its
         // threads finish them, so the same frame came out as different bytes from run to
         // run. Callers write frames in parallel already.
@@ -118,56 +139,6 @@ pub fn write_frame(
                 .map_err(|e| e.to_string())
         }
     })
-}
-
-#[derive(Serialize)]
-struct Manifest<'a> {
-    generator: &'static str,
-    scene: &'a Scene,
-    width: usize,
-    height: usize,
-    frames: usize,
-    fps: &'a str,
-    looping: bool,
-    format: FrameFormat,
-    /// What a texel holds (docs/CONVENTIONS.md).
-    units: &'static str,
-    /// The 8-bit export curve's exposure e = 1.5 / median of per-frame max green.
-    exposure: f32,
-    png16_scale: Option<f32>,
-    files: Vec<String>,
-    per_frame: &'a [FrameInfo],
-}
-
-pub fn write_manifest(
-    out: &Path,
-    scene: &Scene,
-    format: FrameFormat,
-    exposure: f32,
-    png16_scale: Option<f32>,
-    infos: &[FrameInfo],
-) -> Result<PathBuf, BakeError> {
-    let m = Manifest {
-        generator: concat!("vbim-bake ", env!("CARGO_PKG_VERSION")),
-        scene,
-        width: scene.size,
-        height: scene.size,
-        frames: scene.frames,
-        fps: &scene.fps,
-        looping: true,
-        format,
-        units: "linear irradiance / π, RGB; noon sun on a flat open surface ≈ 1",
-        exposure,
-        png16_scale,
-        files: (0..scene.frames).map(|i| frame_name(i, format)).collect(),
-        per_frame: infos,
-    };
-    let path = out.join("manifest.json");
-    let text = serde_json::to_string_pretty(&m).expect("manifest serialises");
-    write_atomic(&path, |tmp| {
-        std::fs::write(tmp, text).map_err(|e| e.to_string())
-    })?;
-    Ok(path)
 }
 
 /// A 4 × 3 grid of 12 moments of the day (every 2 hours from midnight), each tile a
@@ -214,7 +185,7 @@ pub fn contact_sheet(
             }
         }
     }
-    write_atomic(path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
+    write_file(path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! size and channels, finite, non-negative — with errors naming the file and texel.
 
 use std::path::{Path, PathBuf};
+use vbim_bake::Manifest;
 
 use crate::EncodeError;
 
@@ -61,7 +62,7 @@ pub fn list(spec: &str) -> Result<(Vec<PathBuf>, Vec<String>, PathBuf), EncodeEr
                 .is_some_and(|s| s.ends_with(|c: char| c.is_ascii_digit()));
             if path.is_file() && is_image(&path) && numbered && !name.starts_with('.') {
                 files.push(path);
-            } else if path.is_file() && !name.starts_with('.') && name != "manifest.json" {
+            } else if path.is_file() && !name.starts_with('.') && name != Manifest::FILE_NAME {
                 notes.push(format!(
                     "ignored {} (not a numbered EXR or PNG frame)",
                     path.display()
@@ -238,13 +239,12 @@ impl FrameSet {
     /// Lists the frames and reads the first to learn the sequence's shape.
     pub fn open(spec: &str) -> Result<FrameSet, EncodeError> {
         let (paths, notes, dir) = list(spec)?;
-        let manifest = Some(dir.join("manifest.json")).filter(|m| m.is_file());
+        let manifest = Some(dir.join(Manifest::FILE_NAME)).filter(|m| m.is_file());
         let png16_scale = manifest
             .as_ref()
-            .and_then(|m| std::fs::read_to_string(m).ok())
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v.get("png16_scale").and_then(|s| s.as_f64()))
-            .map_or(65535.0, |s| s as f32);
+            .and_then(|m| Manifest::read(m).ok())
+            .and_then(|m| m.png16_scale)
+            .unwrap_or(65535.0);
         let first = read_file(&paths[0], png16_scale)?;
         Ok(FrameSet {
             kind: first.kind,

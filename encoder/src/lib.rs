@@ -29,7 +29,9 @@ use std::path::{Path, PathBuf};
 pub use calibrate::{encode_to_tolerance, BAND_DB};
 pub use config::{ConfigError, EncoderConfig, Preset, SegmentMode};
 pub use input::{Frame, FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
-pub use report::EncodeReport;
+pub use report::{lossless_baseline, EncodeReport};
+/// Progress callback: (stage, done, total) — the bake's, so one bar serves both.
+pub use vbim_bake::Progress;
 
 /// Why an encode failed.
 #[derive(Debug, thiserror::Error)]
@@ -52,9 +54,6 @@ pub enum EncodeError {
     #[error("{0}")]
     Format(#[from] vbim_format::FormatError),
 }
-
-/// Progress callback: (stage, done, total).
-pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
 
 /// Encodes `src` with `cfg` into `out`. The report's error fields stay empty until
 /// [`EncodeReport::verify`] measures the stream.

@@ -1,6 +1,7 @@
 //! Output: the header a stream gets, its metadata chunk, and writing the chunks — to any
-//! `Write + Seek`, or to a path atomically (temporary name, sync, rename), so that an
-//! interrupted or failed encode never leaves a partial file under the final name.
+//! `Write + Seek`, or to a path atomically (temporary name, sync, rename: the bake's
+//! `write_atomic`), so that an interrupted or failed encode never leaves a partial file
+//! under the final name.
 
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
@@ -86,36 +87,24 @@ pub(crate) fn write_chunks<W: Write + Seek>(
     Ok(h)
 }
 
-/// Runs `write` on a temporary file beside `out`, then syncs it and renames it to `out`;
-/// on failure the temporary file is removed and `out` is untouched.
+/// Runs `write` on a new file that replaces `out` atomically when `write` succeeds
+/// (`vbim_bake::output::write_atomic`); on failure `out` is untouched.
 pub(crate) fn write_atomic<T>(
     out: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> Result<T, EncodeError>,
 ) -> Result<T, EncodeError> {
-    let oerr = |m: String| EncodeError::Output {
+    let oerr = |e: std::io::Error| EncodeError::Output {
         path: out.to_path_buf(),
-        msg: m,
+        msg: e.to_string(),
     };
-    let dir = out
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = out
-        .file_name()
-        .and_then(|n| n.to_str())
-        .ok_or_else(|| oerr("not a file name".into()))?;
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    let result = (|| {
-        let f = File::create(&tmp).map_err(|e| oerr(e.to_string()))?;
-        let mut buf = BufWriter::new(f);
-        let value = write(&mut buf)?;
-        let f = buf.into_inner().map_err(|e| oerr(e.to_string()))?;
-        f.sync_all().map_err(|e| oerr(e.to_string()))?;
-        std::fs::rename(&tmp, out).map_err(|e| oerr(e.to_string()))?;
-        Ok(value)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    vbim_bake::output::write_atomic(
+        out,
+        |tmp| {
+            let mut buf = BufWriter::new(File::create(tmp).map_err(oerr)?);
+            let value = write(&mut buf)?;
+            buf.flush().map_err(oerr)?;
+            Ok(value)
+        },
+        oerr,
+    )
 }

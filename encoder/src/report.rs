@@ -10,7 +10,7 @@ use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::{Metric, SequenceError};
 use vbim_format::{ColorEncoding, Header, Reader};
 
-use crate::{EncodeError, EncoderConfig, FrameSource, Progress};
+use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct EncodeReport {
@@ -331,4 +331,41 @@ impl std::fmt::Display for BTreeCount {
         let v: Vec<String> = self.0.iter().map(|(k, n)| format!("{k}×{n}")).collect();
         write!(f, "{}", v.join(" "))
     }
+}
+
+/// Bytes of the lossless baseline the reports compare with: every frame on its own
+/// through zstd at `level`, as half floats (HDR) or as its 8-bit code values (8-bit
+/// input, exactly what it holds).
+pub fn lossless_baseline(
+    src: &dyn FrameSource,
+    level: i32,
+    progress: Progress,
+) -> Result<u64, EncodeError> {
+    use rayon::prelude::*;
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let info = src.info();
+    let done = AtomicU64::new(0);
+    let sizes: Vec<u64> = (0..info.frames)
+        .into_par_iter()
+        .map(|i| {
+            let f = src.read(i)?;
+            let bytes: Vec<u8> = match info.kind {
+                InputKind::Srgb8 => f.data.iter().map(|v| (v * 255.0).round() as u8).collect(),
+                InputKind::Hdr => f
+                    .data
+                    .iter()
+                    .flat_map(|v| half::f16::from_f32(*v).to_le_bytes())
+                    .collect(),
+            };
+            let z = zstd::bulk::compress(&bytes, level)
+                .map_err(|e| EncodeError::Input(format!("zstd: {e}")))?;
+            progress(
+                "lossless",
+                done.fetch_add(1, Ordering::Relaxed) + 1,
+                info.frames as u64,
+            );
+            Ok(z.len() as u64)
+        })
+        .collect::<Result<_, EncodeError>>()?;
+    Ok(sizes.iter().sum())
 }

@@ -5,6 +5,7 @@
 pub mod mesh;
 
 use glam::{Mat4, Vec3};
+use vbim_bake::Manifest;
 use wgpu::util::DeviceExt;
 
 pub use mesh::Mesh;
@@ -374,7 +375,7 @@ impl SceneRenderer {
     }
 }
 
-/// Sky colours over the day from the bake's manifest (`per_frame[].sky_color` and
+/// Sky colours over the day from the bake's manifest (each frame's `sky_color` and
 /// `sky_horizon_sun_side`), interpolated at a fractional frame; a plain sky without one.
 pub struct SkyTrack {
     zenith: Vec<[f32; 3]>,
@@ -382,28 +383,10 @@ pub struct SkyTrack {
 }
 
 impl SkyTrack {
-    pub fn from_metadata(json: Option<&str>) -> SkyTrack {
-        let parse = |key: &str, v: &serde_json::Value| -> Option<[f32; 3]> {
-            let a = v.get(key)?.as_array()?;
-            Some([
-                a.first()?.as_f64()? as f32,
-                a.get(1)?.as_f64()? as f32,
-                a.get(2)?.as_f64()? as f32,
-            ])
-        };
-        let frames = json
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(t).ok())
-            .and_then(|v| v.get("per_frame").and_then(|p| p.as_array()).cloned())
-            .unwrap_or_default();
-        let zenith: Vec<[f32; 3]> = frames
-            .iter()
-            .filter_map(|f| parse("sky_color", f))
-            .collect();
-        let horizon: Vec<[f32; 3]> = frames
-            .iter()
-            .filter_map(|f| parse("sky_horizon_sun_side", f))
-            .collect();
-        if zenith.is_empty() || zenith.len() != horizon.len() {
+    pub fn from_manifest(manifest: Option<&Manifest>) -> SkyTrack {
+        let (zenith, horizon): (Vec<[f32; 3]>, Vec<[f32; 3]>) =
+            manifest.map(|m| m.sky().unzip()).unwrap_or_default();
+        if zenith.is_empty() {
             return SkyTrack {
                 zenith: vec![[0.046, 0.068, 0.11]],
                 horizon: vec![[0.08, 0.09, 0.11]],
