@@ -3,6 +3,9 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
+use vbim_player::Policy;
+
+use crate::units::{Bandwidth, Span, StallSpec};
 
 #[derive(Parser)]
 #[command(
@@ -72,28 +75,28 @@ pub struct PlayArgs {
     pub headless: bool,
     /// Playback duration (`60s`, `2min`, `500ms`).
     #[arg(long, default_value = "60s")]
-    pub duration: String,
+    pub duration: Span,
     /// Display refresh rate in Hz.
     #[arg(long, default_value_t = 60)]
     pub display_hz: u32,
     /// Cap the reader: SI bytes per second (`2MB/s`, `500kB/s`) or a multiple of the stream's mean bit rate (`1.2x`) [default: unlimited].
     #[arg(long)]
-    pub bandwidth: Option<String>,
+    pub bandwidth: Option<Bandwidth>,
     /// Stall the reader periodically: `300ms@5s` = 300 ms every 5 s of playback; `300ms@5s+2s` = the same, the first at 2 s [default: none].
     #[arg(long)]
-    pub stall: Option<String>,
+    pub stall: Option<StallSpec>,
     /// What to show when data is late: interpolate (hold, then blend), wait (pause the clock) or skip (hold, then jump).
     #[arg(long, default_value = "interpolate")]
-    pub policy: String,
+    pub policy: Policy,
     /// Catch-up window of the interpolate policy.
     #[arg(long, default_value = "500ms")]
-    pub catch_up: String,
+    pub catch_up: Span,
     /// Ring capacity in bytes [default: the header's read-ahead at the read rate].
     #[arg(long)]
     pub ring: Option<usize>,
     /// Added to the header's pre-roll: a reader stall this long while the ring first fills is survived (`500ms`).
     #[arg(long, default_value = "0s")]
-    pub preroll_margin: String,
+    pub preroll_margin: Span,
     /// Run in real time with the reader and decoder on their own threads (default: simulated time, stepped deterministically, as fast as the machine goes).
     #[arg(long)]
     pub realtime: bool,
@@ -145,15 +148,15 @@ pub struct DemoArgs {
     pub fps: String,
     /// Reader cap during playback, SI rate or multiple of the stream's mean.
     #[arg(long, default_value = "1.2x")]
-    pub bandwidth: String,
+    pub bandwidth: Bandwidth,
     /// Reader stalls during playback.
     #[arg(long, default_value = "500ms@4s")]
-    pub stall: String,
+    pub stall: StallSpec,
     /// Added to the header's pre-roll, as long as a stall: the header's pre-roll assumes a
     /// reader that never stalls, and a stall while the ring first fills would make the
     /// day's first transition late.
     #[arg(long, default_value = "500ms")]
-    pub preroll_margin: String,
+    pub preroll_margin: Span,
     /// Frames rendered in the terrain scene.
     #[arg(long, default_value_t = 120)]
     pub render_frames: usize,
@@ -224,10 +227,10 @@ pub struct BenchDriftArgs {
     pub out: PathBuf,
     /// Stall pattern.
     #[arg(long, default_value = "500ms@10s")]
-    pub stall: String,
+    pub stall: StallSpec,
     /// Playback per point.
     #[arg(long, default_value = "60s")]
-    pub duration: String,
+    pub duration: Span,
     /// Multiples of the mean bit rate to sweep.
     #[arg(
         long,
@@ -245,7 +248,7 @@ pub struct BenchDriftArgs {
     pub phases: u32,
     /// Added to the header's pre-roll, as `vbim play --preroll-margin`.
     #[arg(long, default_value = "0s")]
-    pub preroll_margin: String,
+    pub preroll_margin: Span,
 }
 
 #[derive(Args)]
@@ -409,12 +412,12 @@ mod tests {
         let a = PlayArgs::headless(std::path::Path::new("-odd name.vbim"));
         assert_eq!(a.file, PathBuf::from("-odd name.vbim"));
         assert!(a.headless && !a.realtime);
-        assert_eq!((a.duration.as_str(), a.display_hz), ("60s", 60));
+        assert_eq!((a.duration.ns(), a.display_hz), (60_000_000_000, 60));
         assert_eq!(
-            (a.policy.as_str(), a.catch_up.as_str()),
-            ("interpolate", "500ms")
+            (a.policy, a.catch_up.ns()),
+            (vbim_player::Policy::Interpolate, 500_000_000)
         );
         assert_eq!((a.bandwidth, a.stall, a.ring), (None, None, None));
-        assert_eq!((a.check_every, a.preroll_margin.as_str()), (30, "0s"));
+        assert_eq!((a.check_every, a.preroll_margin.ns()), (30, 0));
     }
 }

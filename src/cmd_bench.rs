@@ -226,7 +226,10 @@ fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
 }
 
 fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
-    use crate::cmd_play::{play, session};
+    use crate::cmd_play::play;
+    use crate::session::Session;
+    use crate::units::Bandwidth;
+    use vbim_player::Policy;
     if a.phases == 0 {
         return Err("--phases must be at least 1".into());
     }
@@ -236,19 +239,20 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
     let mut csv = String::from("policy,factor,first_stall_s,read_rate,ring_bytes,mean_drift,p99_drift,max_drift,late_frames,stalls,shown_mean_psnr,shown_worst_psnr\n");
     let mut drift_series = Vec::new();
     let mut psnr_series = Vec::new();
-    for policy in ["interpolate", "wait", "skip"] {
+    for policy in Policy::ALL {
+        let name = policy.name();
         let (mut dp, mut pp) = (Vec::new(), Vec::new());
         for &f in &a.factors {
             let args = crate::cli::PlayArgs {
                 duration: a.duration.clone(),
-                bandwidth: Some(format!("{f}x")),
+                bandwidth: Some(Bandwidth::TimesMean(f)),
                 stall: Some(a.stall.clone()),
-                policy: policy.into(),
+                policy,
                 preroll_margin: a.preroll_margin.clone(),
                 check_every: a.check_every,
                 ..crate::cli::PlayArgs::headless(&a.file)
             };
-            let base = session(&args)?;
+            let base = Session::from_args(&args)?;
             // The worst phase: the largest mean drift, the lowest shown PSNR.
             let (mut worst_drift, mut worst_psnr) = (f64::MIN, f64::MAX);
             for k in 0..a.phases as u64 {
@@ -262,14 +266,14 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
                 let first = s.throttle.stall.map_or(0.0, |st| st.first_ns as f64 * 1e-9);
                 let o = play(&s, &device, &queue, &adapter)?;
                 eprintln!(
-                    "{policy:>11} {f:>5}×, first stall at {first:.2} s: mean drift {:.3}, max {:.3}, late {}, shown {:.2} dB",
+                    "{name:>11} {f:>5}×, first stall at {first:.2} s: mean drift {:.3}, max {:.3}, late {}, shown {:.2} dB",
                     o.mean_drift,
                     o.max_drift,
                     o.late_frames,
                     o.shown_mean_psnr.unwrap_or(99.0)
                 );
                 csv += &format!(
-                    "{policy},{f},{first:.3},{},{},{:.4},{:.4},{:.4},{},{},{:.3},{:.3}\n",
+                    "{name},{f},{first:.3},{},{},{:.4},{:.4},{:.4},{},{},{:.3},{:.3}\n",
                     o.read_rate.unwrap_or(0),
                     o.ring_bytes,
                     o.mean_drift,
@@ -287,11 +291,11 @@ fn bench_drift(a: crate::cli::BenchDriftArgs) -> Result<(), String> {
             pp.push((f, worst_psnr));
         }
         drift_series.push(crate::plot::Series {
-            name: policy.into(),
+            name: name.into(),
             points: dp,
         });
         psnr_series.push(crate::plot::Series {
-            name: policy.into(),
+            name: name.into(),
             points: pp,
         });
     }

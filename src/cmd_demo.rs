@@ -8,10 +8,11 @@ use vbim_bake::{bake, BakeOptions, FrameFormat, Scene};
 use vbim_encoder::{encode_file, lossless_baseline, EncoderConfig, FrameSet, FrameSource, Preset};
 
 use crate::cli::DemoArgs;
-use crate::cmd_play::{capture_scene, play, session, Outcome};
+use crate::cmd_play::{capture_scene, play, Outcome};
 use crate::plot::{lines, Series};
 use crate::progress::Stages;
-use crate::units::parse_rate;
+use crate::session::Session;
+use crate::units::{parse_rate, Span};
 
 fn write(path: &Path, text: &str) -> Result<(), String> {
     vbim_bake::output::write_file(path, |tmp| {
@@ -79,15 +80,15 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     );
     let duration = 2.0 * a.frames as f64 * cfg.rate.1 as f64 / cfg.rate.0 as f64;
     let play_args = crate::cli::PlayArgs {
-        duration: format!("{duration}s"),
-        bandwidth: Some(a.bandwidth.clone()),
+        duration: Span::from_secs(duration),
+        bandwidth: Some(a.bandwidth),
         stall: Some(a.stall.clone()),
         preroll_margin: a.preroll_margin.clone(),
         check_every: 15,
         frames: a.render_frames,
         ..crate::cli::PlayArgs::headless(&file)
     };
-    let s = session(&play_args)?;
+    let s = Session::from_args(&play_args)?;
     let (device, queue, adapter) = vbim_player::headless_device()?;
     let adapter = format!("{} ({:?})", adapter.name, adapter.backend);
     let measured: Outcome = play(&s, &device, &queue, &adapter)?;

@@ -8,32 +8,13 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use vbim_format::curve::linear_to_srgb;
-use vbim_format::decode::{Decoder, Output};
+use vbim_format::decode::Output;
 use vbim_format::metrics::{Metric, SequenceError};
-use vbim_format::{Header, Reader};
 use vbim_player::{frames_csv, Summary};
-use vbim_player::{headless_device, FrameRecord, Player, PlayerConfig, Policy, Throttle};
-use vbim_scene::SkyTrack;
+use vbim_player::{headless_device, FrameRecord, Player};
 
 use crate::cli::PlayArgs;
-use crate::progress::Stages;
-use crate::sequence::Sequence;
-use crate::units::{parse_bandwidth, parse_duration, parse_stall};
-
-/// Everything one playback session needs.
-#[derive(Clone)]
-pub struct Session {
-    pub file: std::path::PathBuf,
-    pub policy: Policy,
-    pub throttle: Throttle,
-    pub catch_up_ns: u64,
-    pub ring: Option<usize>,
-    pub preroll_margin_ns: u64,
-    pub realtime: bool,
-    pub duration_ns: u64,
-    pub display_hz: u32,
-    pub check_every: u64,
-}
+use crate::session::{mean_rate, metric_for, open_reference, scene_look, scene_mesh, Session};
 
 /// What a session measured.
 #[derive(Serialize, Clone, Debug)]
@@ -63,78 +44,6 @@ pub struct Outcome {
     pub last_error: Option<String>,
     #[serde(skip)]
     pub records: Vec<FrameRecord>,
-}
-
-impl Session {
-    /// Opens the session's file in a player on `device` (reader and decoder on their own
-    /// threads when `threaded`, else stepped inside `advance`).
-    pub fn open_player(
-        &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        threaded: bool,
-    ) -> Result<Player<BufReader<File>>, String> {
-        let name = self.file.display().to_string();
-        let f = File::open(&self.file).map_err(|e| format!("{name}: {e}"))?;
-        let cfg = PlayerConfig {
-            policy: self.policy,
-            catch_up_ns: self.catch_up_ns,
-            throttle: self.throttle,
-            ring_bytes: self.ring,
-            preroll_margin_ns: self.preroll_margin_ns,
-            threaded,
-            ..Default::default()
-        };
-        Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))
-    }
-}
-
-/// The terrain mesh of a scene file, and its height field.
-pub fn scene_mesh(scene_file: &Path) -> Result<(vbim_scene::Mesh, vbim_bake::HeightField), String> {
-    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
-    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
-    let mesh = vbim_scene::Mesh::new(
-        &hf,
-        256,
-        scene.view.vertical_exaggeration as f32,
-        scene.view.snow_line as f32,
-    );
-    Ok((mesh, hf))
-}
-
-pub fn mean_rate(h: &Header) -> f64 {
-    h.file_size as f64 / (h.frame_count as f64 / h.fps())
-}
-
-/// What the scene needs from the bake of `file`: the export curve's exposure (1 for an
-/// 8-bit stream) and the sky over the day.
-pub fn scene_look(file: &Path) -> Result<(f32, SkyTrack), String> {
-    let mut seq = Sequence::open(&file.to_string_lossy())?;
-    let exposure = if seq.shape().3 {
-        1.0
-    } else {
-        seq.exposure(&Stages::new())?
-    };
-    Ok((exposure, SkyTrack::from_manifest(seq.manifest().as_ref())))
-}
-
-/// The metric for comparing shown frames of `file` with true ones.
-pub fn metric_for(file: &Path) -> Result<Metric, String> {
-    let mut seq = Sequence::open(&file.to_string_lossy())?;
-    if seq.shape().3 {
-        return Ok(Metric::Srgb8);
-    }
-    Ok(Metric::Hdr {
-        exposure: seq.exposure(&Stages::new())?,
-    })
-}
-
-pub fn open_reference(file: &Path) -> Result<Decoder<BufReader<File>>, String> {
-    let name = file.display();
-    let f = File::open(file).map_err(|e| format!("{name}: {e}"))?;
-    Ok(Decoder::new(
-        Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?,
-    ))
 }
 
 pub fn play(
@@ -221,7 +130,7 @@ fn finish(
     let sum = Summary::of(&records);
     Ok(Outcome {
         adapter: adapter.to_string(),
-        policy: format!("{:?}", s.policy).to_lowercase(),
+        policy: s.policy.name().into(),
         read_rate: s.throttle.rate,
         mean_rate: mean_rate(&h),
         ring_bytes: ring,
@@ -246,32 +155,6 @@ fn finish(
 }
 
 /// Builds the session from the command line.
-pub fn session(a: &PlayArgs) -> Result<Session, String> {
-    let h = open_reference(&a.file)?.header().clone();
-    let rate = a
-        .bandwidth
-        .as_deref()
-        .map(parse_bandwidth)
-        .transpose()?
-        .map(|b| b.bytes_per_second(h.file_size, h.frame_count as f64 / h.fps()));
-    let stall = a.stall.as_deref().map(parse_stall).transpose()?;
-    if a.display_hz == 0 {
-        return Err("--display-hz must be positive".into());
-    }
-    Ok(Session {
-        file: a.file.clone(),
-        policy: a.policy.parse()?,
-        throttle: Throttle { rate, stall },
-        catch_up_ns: (parse_duration(&a.catch_up)? * 1e9) as u64,
-        ring: a.ring,
-        preroll_margin_ns: (parse_duration(&a.preroll_margin)? * 1e9) as u64,
-        realtime: a.realtime,
-        duration_ns: (parse_duration(&a.duration)? * 1e9) as u64,
-        display_hz: a.display_hz,
-        check_every: a.check_every,
-    })
-}
-
 pub fn print(o: &Outcome, s: &Session) {
     let fmt_rate = |r: f64| format!("{:.1} kB/s", r / 1e3);
     println!(
@@ -327,7 +210,7 @@ pub fn print(o: &Outcome, s: &Session) {
 }
 
 pub fn run(a: PlayArgs) -> Result<(), String> {
-    let s = session(&a)?;
+    let s = Session::from_args(&a)?;
     if let Some(scene) = &a.scene {
         if !a.headless {
             return crate::window::run(&s, scene, (a.width, a.height), a.exit_after);

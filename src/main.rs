@@ -13,6 +13,7 @@ mod cmd_play;
 mod plot;
 mod progress;
 mod sequence;
+mod session;
 mod units;
 mod window;
 

@@ -106,6 +106,87 @@ pub fn parse_stall(s: &str) -> Result<vbim_player::Stall, String> {
     })
 }
 
+/// A duration flag (`500ms`, `4s`, `2min`), parsed once: nanoseconds, and the text it
+/// was given as (what reports print).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Span {
+    ns: u64,
+    text: String,
+}
+
+impl Span {
+    /// `secs` seconds, written as such.
+    pub fn from_secs(secs: f64) -> Span {
+        Span {
+            ns: (secs * 1e9) as u64,
+            text: format!("{secs}s"),
+        }
+    }
+    /// Nanoseconds.
+    pub fn ns(&self) -> u64 {
+        self.ns
+    }
+}
+
+impl std::str::FromStr for Span {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Span, String> {
+        Ok(Span {
+            ns: (parse_duration(s)? * 1e9) as u64,
+            text: s.to_string(),
+        })
+    }
+}
+
+impl std::fmt::Display for Span {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+impl std::str::FromStr for Bandwidth {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Bandwidth, String> {
+        parse_bandwidth(s)
+    }
+}
+
+impl std::fmt::Display for Bandwidth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Bandwidth::TimesMean(x) => write!(f, "{x}x"),
+            Bandwidth::BytesPerSecond(b) if b >= 1e9 => write!(f, "{}GB/s", b / 1e9),
+            Bandwidth::BytesPerSecond(b) if b >= 1e6 => write!(f, "{}MB/s", b / 1e6),
+            Bandwidth::BytesPerSecond(b) if b >= 1e3 => write!(f, "{}kB/s", b / 1e3),
+            Bandwidth::BytesPerSecond(b) => write!(f, "{b}B/s"),
+        }
+    }
+}
+
+/// A stall flag (`300ms@5s`, `300ms@5s+2s`), parsed once, with the text it was given as.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StallSpec {
+    /// The stall pattern.
+    pub stall: vbim_player::Stall,
+    text: String,
+}
+
+impl std::str::FromStr for StallSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<StallSpec, String> {
+        Ok(StallSpec {
+            stall: parse_stall(s)?,
+            text: s.to_string(),
+        })
+    }
+}
+
+impl std::fmt::Display for StallSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,5 +231,20 @@ mod tests {
         assert!(parse_stall("5s@1s").is_err());
         assert!(parse_stall("300ms@5s+6s").is_err());
         assert!(parse_stall("300ms@5s+soon").is_err());
+    }
+
+    #[test]
+    fn typed_flags_keep_their_text_and_values() {
+        let s: Span = "500ms".parse().unwrap();
+        assert_eq!((s.ns(), s.to_string()), (500_000_000, "500ms".to_string()));
+        assert_eq!(Span::from_secs(20.0).ns(), 20_000_000_000);
+        for b in ["1.2x", "2MB/s", "500kB/s", "800B/s", "1.5GB/s"] {
+            assert_eq!(b.parse::<Bandwidth>().unwrap().to_string(), b);
+        }
+        let st: StallSpec = "300ms@5s+2s".parse().unwrap();
+        assert_eq!(
+            (st.stall.first_ns, st.to_string()),
+            (2_000_000_000, "300ms@5s+2s".into())
+        );
     }
 }

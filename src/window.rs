@@ -20,7 +20,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::cmd_play::{scene_look, scene_mesh, Session};
+use crate::session::{mean_rate, scene_look, scene_mesh, Session};
 
 struct Gfx {
     window: Arc<Window>,
@@ -181,7 +181,7 @@ impl App {
                 let base = self.session.throttle;
                 let rate = base
                     .rate
-                    .unwrap_or((crate::cmd_play::mean_rate(g.player.header()) * 2.0) as u64);
+                    .unwrap_or((mean_rate(g.player.header()) * 2.0) as u64);
                 g.player.set_throttle(if self.slow {
                     Throttle {
                         rate: Some(rate / 2),

@@ -18,6 +18,20 @@ pub enum Policy {
     Skip,
 }
 
+impl Policy {
+    /// Every policy, in the order reports list them.
+    pub const ALL: [Policy; 3] = [Policy::Interpolate, Policy::Wait, Policy::Skip];
+
+    /// The policy's name, as `--policy` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Policy::Interpolate => "interpolate",
+            Policy::Wait => "wait",
+            Policy::Skip => "skip",
+        }
+    }
+}
+
 impl std::str::FromStr for Policy {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {

@@ -1,0 +1,131 @@
+//! A playback session: `vbim play`'s settings turned once into typed values, and what
+//! both the headless player (`cmd_play.rs`) and the window (`window.rs`) need around a
+//! player — the reference decoder, the metric, the terrain and the sky.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use vbim_format::decode::Decoder;
+use vbim_format::metrics::Metric;
+use vbim_format::{Header, Reader};
+use vbim_player::{Player, PlayerConfig, Policy, Throttle};
+use vbim_scene::SkyTrack;
+
+use crate::cli::PlayArgs;
+use crate::progress::Stages;
+use crate::sequence::Sequence;
+
+/// Everything one playback session needs.
+#[derive(Clone)]
+pub struct Session {
+    pub file: PathBuf,
+    pub policy: Policy,
+    pub throttle: Throttle,
+    pub catch_up_ns: u64,
+    pub ring: Option<usize>,
+    pub preroll_margin_ns: u64,
+    pub realtime: bool,
+    pub duration_ns: u64,
+    pub display_hz: u32,
+    pub check_every: u64,
+}
+
+impl Session {
+    /// The session `vbim play`'s flags ask for: the one place they become settings. A
+    /// bandwidth relative to the stream's mean rate needs the file's header.
+    pub fn from_args(a: &PlayArgs) -> Result<Session, String> {
+        let h = open_reference(&a.file)?.header().clone();
+        let rate = a
+            .bandwidth
+            .map(|b| b.bytes_per_second(h.file_size, h.frame_count as f64 / h.fps()));
+        if a.display_hz == 0 {
+            return Err("--display-hz must be positive".into());
+        }
+        Ok(Session {
+            file: a.file.clone(),
+            policy: a.policy,
+            throttle: Throttle {
+                rate,
+                stall: a.stall.as_ref().map(|s| s.stall),
+            },
+            catch_up_ns: a.catch_up.ns(),
+            ring: a.ring,
+            preroll_margin_ns: a.preroll_margin.ns(),
+            realtime: a.realtime,
+            duration_ns: a.duration.ns(),
+            display_hz: a.display_hz,
+            check_every: a.check_every,
+        })
+    }
+
+    /// Opens the session's file in a player on `device` (reader and decoder on their own
+    /// threads when `threaded`, else stepped inside `advance`).
+    pub fn open_player(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        threaded: bool,
+    ) -> Result<Player<BufReader<File>>, String> {
+        let name = self.file.display().to_string();
+        let f = File::open(&self.file).map_err(|e| format!("{name}: {e}"))?;
+        let cfg = PlayerConfig {
+            policy: self.policy,
+            catch_up_ns: self.catch_up_ns,
+            throttle: self.throttle,
+            ring_bytes: self.ring,
+            preroll_margin_ns: self.preroll_margin_ns,
+            threaded,
+            ..Default::default()
+        };
+        Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))
+    }
+}
+
+/// The terrain mesh of a scene file, and its height field.
+pub fn scene_mesh(scene_file: &Path) -> Result<(vbim_scene::Mesh, vbim_bake::HeightField), String> {
+    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
+    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
+    let mesh = vbim_scene::Mesh::new(
+        &hf,
+        256,
+        scene.view.vertical_exaggeration as f32,
+        scene.view.snow_line as f32,
+    );
+    Ok((mesh, hf))
+}
+
+pub fn mean_rate(h: &Header) -> f64 {
+    h.file_size as f64 / (h.frame_count as f64 / h.fps())
+}
+
+/// What the scene needs from the bake of `file`: the export curve's exposure (1 for an
+/// 8-bit stream) and the sky over the day.
+pub fn scene_look(file: &Path) -> Result<(f32, SkyTrack), String> {
+    let mut seq = Sequence::open(&file.to_string_lossy())?;
+    let exposure = if seq.shape().3 {
+        1.0
+    } else {
+        seq.exposure(&Stages::new())?
+    };
+    Ok((exposure, SkyTrack::from_manifest(seq.manifest().as_ref())))
+}
+
+/// The metric for comparing shown frames of `file` with true ones.
+pub fn metric_for(file: &Path) -> Result<Metric, String> {
+    let mut seq = Sequence::open(&file.to_string_lossy())?;
+    if seq.shape().3 {
+        return Ok(Metric::Srgb8);
+    }
+    Ok(Metric::Hdr {
+        exposure: seq.exposure(&Stages::new())?,
+    })
+}
+
+pub fn open_reference(file: &Path) -> Result<Decoder<BufReader<File>>, String> {
+    let name = file.display();
+    let f = File::open(file).map_err(|e| format!("{name}: {e}"))?;
+    Ok(Decoder::new(
+        Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?,
+    ))
+}
