@@ -25,6 +25,7 @@ mod clock;
 mod config;
 mod cpu_time;
 mod decoder;
+mod display;
 mod gpu;
 mod pipeline;
 mod player;

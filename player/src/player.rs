@@ -12,12 +12,13 @@ use vbim_format::{Header, IndexEntry, Reader, Transfer};
 
 use crate::config::{PlayerConfig, Policy};
 use crate::decoder::SegmentData;
+use crate::display::{Display, Step};
 use crate::gpu::{Gpu, Params, UploadPlan};
 use crate::pipeline::Pipeline;
 use crate::record::{Frame, FrameRecord, FrameState, Totals};
 use crate::slots::{Arrival, Placement, SlotTable};
 use crate::throttle::Throttle;
-use crate::time::{frames_f64, media_to_ticks, ticks_to_media, MediaTime, ONE_FRAME};
+use crate::time::{frames_f64, ticks_to_media, MediaTime, ONE_FRAME};
 use crate::PlayerError;
 
 /// After a re-synchronisation, how long to let the reader catch up before another.
@@ -42,16 +43,15 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     /// The box uploaded by the last `render_into`, until its encoder is submitted.
     awaiting_submit: Option<Box<SegmentData>>,
     slots: SlotTable,
+    /// The display's clock and stall policy.
+    display: Display,
+    /// Playback clock, ns.
     ticks: u64,
-    paused: u64,
-    /// Start of a catch-up (ticks) and the lag the data arrived with.
-    catch_start: Option<(u64, MediaTime)>,
-    last_shown: MediaTime,
-    was_missing: bool,
+    /// Seek generation: boxes decoded before the last seek are not shown.
     generation: u32,
+    /// Clock at the last re-synchronisation.
     last_seek: u64,
-    started: bool,
-    startup: u64,
+    /// Bytes read already reported in a frame record.
     read_reported: u64,
     frame: u64,
     totals: Totals,
@@ -114,6 +114,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             header.channels as u32,
         );
         let pipeline = Pipeline::start(src, &header, &layout, &entries, &cfg, ring_bytes, device)?;
+        let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         Ok(Player {
             header,
             layout,
@@ -126,15 +127,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             remapping: Vec::with_capacity(2),
             awaiting_submit: None,
             slots: SlotTable::default(),
+            display,
             ticks: 0,
-            paused: 0,
-            catch_start: None,
-            last_shown: 0,
-            was_missing: false,
             generation: 0,
             last_seek: 0,
-            started: false,
-            startup: 0,
             read_reported: 0,
             frame: 0,
             totals: Totals::default(),
@@ -185,6 +181,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Changes the stall policy from the next frame on.
     pub fn set_policy(&mut self, p: Policy) {
         self.cfg.policy = p;
+        self.display.set_policy(p);
     }
 
     /// Changes the reader's bandwidth cap and stalls from now on (inline mode: at once;
@@ -333,11 +330,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let decode_ns = self
             .pipeline
             .pump(self.ticks, &mut self.incoming, &mut self.totals);
-        let (num, den) = (self.header.rate_num, self.header.rate_den);
+        let rate = (self.header.rate_num, self.header.rate_den);
         let n = self.n_frames() << 32;
-        // Playback starts when the first segment is resident (pre-roll is not drift).
-        let wall = ticks_to_media(self.ticks - self.startup, num, den);
-        let mut pos = ticks_to_media(self.ticks - self.startup - self.paused, num, den);
+        let (wall, mut pos) = self.display.clock(self.ticks, rate);
         if !self.header.looping {
             pos = pos.min(n - ONE_FRAME);
         }
@@ -352,7 +347,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 uploaded = self.take_incoming(b, pos, n);
             }
         }
-        let mut state = FrameState::Exact;
         let missing = self.slots.show_covering(pos).is_none();
         if missing && self.ticks.saturating_sub(self.last_seek) > SEEK_COOLDOWN_NS {
             // So far behind that reading on would only deliver the past: re-synchronise
@@ -362,77 +356,47 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 self.seek(pos);
             }
         }
-        let mut shown = pos;
-        let mut alpha = 1.0f32;
-        let mut hold_first = false;
-        if !self.started && (missing || self.ticks < self.preroll) {
-            // Start-up (pre-roll): the buffer model's pre-roll, and at least the first
-            // segment, before the clock starts, whatever the policy; reported as waiting.
-            self.startup = self.ticks;
-            self.was_missing = false;
-            // Target and shown are both the start: pre-roll is not drift (`wall` still
-            // counted this frame's step).
-            let record = self.record(
-                t0,
-                0,
-                0,
-                FrameState::Waiting,
-                1.0,
-                0,
-                0.0,
-                uploaded,
-                decode_ns,
-            );
-            return Frame { record, eval: None };
-        }
-        self.started = true;
-        if missing {
-            // Hold the end of what is on screen (its closing keyframe), or its start.
-            let held =
-                self.slots
-                    .shown()
-                    .and_then(|s| self.slots.slot(s))
-                    .map_or(self.last_shown, |r| {
-                        if pos >= r.end {
-                            r.end - 1
-                        } else {
-                            r.start
-                        }
-                    });
-            if !self.was_missing {
-                self.totals.stalls += 1;
+        // Data late: hold the end of what is on screen (its closing keyframe), or its start.
+        let held = missing.then(|| {
+            self.slots.shown().and_then(|s| self.slots.slot(s)).map_or(
+                self.display.last_shown(),
+                |r| {
+                    if pos >= r.end {
+                        r.end - 1
+                    } else {
+                        r.start
+                    }
+                },
+            )
+        });
+        let (state, shown, alpha, hold_first) = match self.display.step(self.ticks, pos, held, rate)
+        {
+            Step::Preroll => {
+                // Target and shown are both the start: pre-roll is not drift.
+                let record = self.record(
+                    t0,
+                    0,
+                    0,
+                    FrameState::Waiting,
+                    1.0,
+                    0,
+                    0.0,
+                    uploaded,
+                    decode_ns,
+                );
+                return Frame { record, eval: None };
             }
-            shown = held.min(pos);
-            if self.cfg.policy == Policy::Wait {
-                // Pause the clock at the held time.
-                let run = self.ticks - self.startup;
-                self.paused = run - media_to_ticks(shown, num, den).min(run);
-                state = FrameState::Waiting;
-            } else {
-                state = FrameState::Held;
+            Step::Show {
+                state,
+                shown,
+                alpha,
+                hold_first,
+                new_stall,
+            } => {
+                self.totals.stalls += new_stall as u64;
+                (state, shown, alpha, hold_first)
             }
-            self.catch_start = None;
-        } else if self.was_missing && self.cfg.policy == Policy::Interpolate && self.frame > 0 {
-            // The data arrived: blend from the held image over the catch-up window.
-            let held_shown = self.last_shown;
-            self.catch_start = Some((self.ticks, pos.saturating_sub(held_shown)));
-            hold_first = true;
-        }
-        if !missing {
-            if let Some((start, lag)) = self.catch_start {
-                let a = ((self.ticks - start) as f64 / self.cfg.catch_up_ns.max(1) as f64).min(1.0);
-                if a >= 1.0 {
-                    self.catch_start = None;
-                } else {
-                    alpha = a.max(1e-3) as f32;
-                    state = FrameState::CatchingUp;
-                    // The lag the data arrived with fades out with the blend: a short
-                    // stall leaves a short lag, however long the blend.
-                    shown = pos.saturating_sub(((1.0 - a) * lag as f64) as u64);
-                }
-            }
-        }
-        self.was_missing = missing;
+        };
         // Evaluate the shown slot at the (clamped) time.
         let (mut seg, mut u) = (0, 0.0);
         let mut eval = None;
@@ -468,7 +432,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 eval = Some((s, params, hold_first));
             }
         }
-        self.last_shown = shown;
         let record = self.record(t0, wall, shown, state, alpha, seg, u, uploaded, decode_ns);
         Frame { record, eval }
     }
@@ -543,8 +506,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Jumps playback to `ticks` ns (of the playback clock).
     pub fn set_time(&mut self, ticks: u64) {
         self.ticks = ticks;
-        self.paused = 0;
-        self.startup = 0;
+        self.display.restart_clock();
         let pos = ticks_to_media(ticks, self.header.rate_num, self.header.rate_den);
         self.seek(pos);
     }
