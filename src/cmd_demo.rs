@@ -190,9 +190,9 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         lossless, lossless_bpp, texel_frames * 6.0 / lossless as f64, cfg.max_degree,
         a.bandwidth, measured.read_rate.unwrap_or(0) as f64 / 1e3, measured.mean_rate / 1e3, a.stall, measured.ring_bytes, measured.preroll_ms, a.preroll_margin, duration, measured.adapter,
         measured.mean_drift, measured.p99_drift, measured.max_drift, measured.late_frames, measured.stalls,
-        verdict,
         measured.shown_mean_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),
         measured.shown_worst_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),
+        verdict,
         cap.frames.len(), t0.elapsed().as_secs_f64(),
     );
     write(&out.join("report.md"), &md)?;
@@ -230,7 +230,7 @@ fn drift_verdict(late: usize, max_drift: f64, stalls: usize) -> String {
     if late == 0 && max_drift <= 1.0 {
         format!(
             "No frame was late: the ring absorbed every reader stall (largest drift {max_drift:.2} \
-             media frames, {stalls} held stretches), so the plot below stays near zero. \
+             media frames, {stalls} held stretches), so the drift plot (drift.png) stays at zero. \
              `vbim bench drift` plays the same stream under tighter caps and longer stalls, \
              where the display holds and catches up."
         )
