@@ -247,6 +247,42 @@ fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
 }
 
 #[test]
+fn outputs_never_replace_what_is_not_a_regular_file_or_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("f");
+    bake(&frames, "16", "4", &["--format", "png8"]);
+    let fifo = dir.path().join("fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let o = vbim(&["encode", s(&frames), "-o", s(&fifo), "--no-verify"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(s(&fifo)) && err.contains("a FIFO"), "{err}");
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+    // An output naming one of the input frames: refused, the frame untouched.
+    let frame = frames.join("frame_0002.png");
+    let before = std::fs::read(&frame).unwrap();
+    let o = vbim(&["encode", s(&frames), "-o", s(&frame), "--no-verify"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("frame_0002.png") && err.contains("input"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&frame).unwrap(), before);
+    // Nothing left beside them.
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+}
+
+#[test]
 fn the_window_opens_renders_and_closes_under_xvfb() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("f");

@@ -46,13 +46,17 @@ pub fn frame_name(i: usize, f: FrameFormat) -> String {
 /// whose name ends like `path`'s (image writers pick the format from the extension); it is
 /// then synced and renamed over `path`. If anything fails the temporary file is removed
 /// and `path` is untouched, so an interrupted run never leaves a truncated file under a
-/// final name. `io_err` turns a failed sync or rename into the caller's error. The one
-/// place every `vbim` output file is written.
+/// final name. Only a regular file (or nothing) is ever replaced ([`check_output`]).
+/// `io_err` turns a refused path, a failed sync or a failed rename into the caller's error.
+/// The one place every `vbim` output file is written.
 pub fn write_atomic<T, E>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<T, E>,
     io_err: impl FnOnce(std::io::Error) -> E,
 ) -> Result<T, E> {
+    if let Err(e) = check_output(path) {
+        return Err(io_err(e));
+    }
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("out");
     let tmp = path.with_file_name(format!(".tmp-{}-{name}", std::process::id()));
     let result = write(&tmp).and_then(|value| {
@@ -66,6 +70,48 @@ pub fn write_atomic<T, E>(
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Refuses an output path that exists and is not a regular file. Renaming over a device,
+/// a FIFO, a socket, a directory or a symbolic link would replace what is not ours: as
+/// root, `-o /dev/null` would have turned the machine's null device into a file.
+pub fn check_output(path: &Path) -> std::io::Result<()> {
+    let kind = match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+        Ok(m) => m.file_type(),
+    };
+    let what = if kind.is_file() {
+        return Ok(());
+    } else if kind.is_dir() {
+        "a directory"
+    } else if kind.is_symlink() {
+        "a symbolic link (name the file it points to)"
+    } else {
+        special_kind(kind)
+    };
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("is {what}: vbim only creates or replaces regular files"),
+    ))
+}
+
+/// What a file that is neither a regular file, a directory nor a link is.
+#[cfg(unix)]
+fn special_kind(kind: std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if kind.is_char_device() || kind.is_block_device() {
+        "a device"
+    } else if kind.is_fifo() {
+        "a FIFO"
+    } else {
+        "not a regular file"
+    }
+}
+
+#[cfg(not(unix))]
+fn special_kind(_: std::fs::FileType) -> &'static str {
+    "not a regular file"
 }
 
 /// [`write_atomic`] for a writer whose errors are messages: errors name `path`.
@@ -190,6 +236,53 @@ pub fn contact_sheet(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn only_regular_files_are_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("fifo");
+        assert!(std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let link = dir.path().join("link");
+        let target = dir.path().join("target");
+        std::fs::write(&target, b"keep").unwrap();
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        for (path, what) in [
+            (&fifo, "a FIFO"),
+            (&link, "a symbolic link"),
+            (&sub, "a directory"),
+        ] {
+            let err = super::write_file(path, |tmp| {
+                std::fs::write(tmp, b"x").map_err(|e| e.to_string())
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(err.contains(what), "{err}");
+        }
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo());
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"keep");
+        // Nothing left behind, and a regular file is replaced as before.
+        let names = std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(names, 4);
+        super::write_file(&target, |tmp| {
+            std::fs::write(tmp, b"new").map_err(|e| e.to_string())
+        })
+        .unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
+
     use super::*;
 
     /// A frame written twice is the same bytes (exr's parallel writer stored blocks in

@@ -291,6 +291,11 @@ pub trait FrameSource: Sync {
     fn info(&self) -> SourceInfo;
     /// Frame `i`, interleaved; implementations check it with [`check`].
     fn read(&self, i: usize) -> Result<Frame, EncodeError>;
+    /// The files the frames are read from (none for frames in memory): an output must
+    /// not be one of them.
+    fn files(&self) -> &[PathBuf] {
+        &[]
+    }
 }
 
 impl FrameSource for FrameSet {
@@ -310,6 +315,9 @@ impl FrameSource for FrameSet {
     }
     fn read(&self, i: usize) -> Result<Frame, EncodeError> {
         FrameSet::read(self, i)
+    }
+    fn files(&self) -> &[PathBuf] {
+        &self.paths
     }
 }
 

@@ -96,5 +96,18 @@ pub fn encode_file(
     path: &Path,
     progress: Progress,
 ) -> Result<EncodeReport, EncodeError> {
+    // Writing over an input frame would destroy it before the encode reads it.
+    if let Ok(out) = std::fs::canonicalize(path) {
+        let input = src
+            .files()
+            .iter()
+            .any(|f| std::fs::canonicalize(f).is_ok_and(|f| f == out));
+        if input {
+            return Err(EncodeError::Output {
+                path: path.to_path_buf(),
+                msg: "is one of the input frames".into(),
+            });
+        }
+    }
     output::write_atomic(path, |out| encode(src, cfg, out, progress))
 }
