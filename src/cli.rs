@@ -183,6 +183,15 @@ pub enum BenchCommand {
     /// waiting for the GPU between frames so that its execution is not counted), and the
     /// GPU time apart; real time, 60 Hz, reader and decoder on their own threads.
     Render(BenchRenderArgs),
+    /// What the runtime costs as the lightmap grows: for each size, a day baked and encoded
+    /// (default preset, 24/1 fps), then played in a process of its own: file bytes, the
+    /// player's GPU memory and the process's peak per texel, bytes uploaded against bytes
+    /// read over a loop, the decoder's share of a core, render-thread CPU and GPU time per
+    /// frame. A table, `scale.csv` and three plots.
+    Scale(BenchScaleArgs),
+    /// One stream of `bench scale`, measured in this process (JSON on stdout).
+    #[command(hide = true)]
+    ScaleOne(BenchScaleOneArgs),
 }
 
 #[derive(Args)]
@@ -195,6 +204,42 @@ pub struct BenchRenderArgs {
     /// Runs (each a fresh player); the figures are the median over runs and their spread.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
+}
+
+#[derive(Args)]
+pub struct BenchScaleArgs {
+    /// Scene file.
+    #[arg(default_value = "samples/jacksboro.toml")]
+    pub scene: PathBuf,
+    /// Lightmap sizes, texels per side (a 64² stream is always measured as the baseline).
+    #[arg(long, default_value = "512,1024,2048", value_delimiter = ',')]
+    pub sizes: Vec<usize>,
+    /// Frames per day.
+    #[arg(long, default_value_t = 240)]
+    pub frames: usize,
+    /// Moving cloud shadows (the cloudy day is the harder one to stream).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub clouds: bool,
+    /// Display rate while measuring, Hz (uploads do not depend on it; GPU time per
+    /// displayed frame does not either, but the run's length does).
+    #[arg(long, default_value_t = 24)]
+    pub display_hz: u32,
+    /// Directory for the streams (kept for the next run), the measurements
+    /// (`costs.json`), the CSV and the plots.
+    #[arg(short, long, default_value = "out/scale")]
+    pub out: PathBuf,
+    /// Only draw the table and plots again from `costs.json`.
+    #[arg(long)]
+    pub replot: bool,
+}
+
+#[derive(Args)]
+pub struct BenchScaleOneArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Display rate, Hz.
+    #[arg(long, default_value_t = 24)]
+    pub display_hz: u32,
 }
 
 #[derive(Args)]

@@ -18,6 +18,8 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::PlotRd(a) => plot_rd(a),
         BenchCommand::Drift(a) => bench_drift(a),
         BenchCommand::Render(a) => bench_render(a),
+        BenchCommand::Scale(a) => crate::bench_scale::run(a),
+        BenchCommand::ScaleOne(a) => crate::bench_scale::run_one(a),
     }
 }
 

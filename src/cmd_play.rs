@@ -24,6 +24,8 @@ pub struct Outcome {
     pub read_rate: Option<u64>,
     pub mean_rate: f64,
     pub ring_bytes: usize,
+    /// GPU memory the player holds, bytes (`Player::gpu_bytes`).
+    pub gpu_bytes: u64,
     /// Buffering before the first frame (the header's pre-roll and the margin), ms.
     pub preroll_ms: f64,
     pub frames: usize,
@@ -122,6 +124,7 @@ fn finish(
 ) -> Result<Outcome, String> {
     let totals = player.totals().clone();
     let ring = player.ring_bytes();
+    let gpu_bytes = player.gpu_bytes();
     let preroll_ms = player.preroll_ns() as f64 / 1e6;
     let h = player.header().clone();
     player
@@ -134,6 +137,7 @@ fn finish(
         read_rate: s.throttle.rate,
         mean_rate: mean_rate(&h),
         ring_bytes: ring,
+        gpu_bytes,
         preroll_ms,
         frames: sum.frames,
         mean_drift: sum.mean_drift,
@@ -175,7 +179,11 @@ pub fn print(o: &Outcome, s: &Session) {
         o.ring_bytes,
         o.preroll_ms
     );
-    println!("uploaded    {:.2} MB/s", o.bytes_uploaded_per_s / 1e6);
+    println!(
+        "uploaded    {:.2} MB/s; GPU memory {:.1} MB",
+        o.bytes_uploaded_per_s / 1e6,
+        o.gpu_bytes as f64 / 1e6
+    );
     println!(
         "drift       mean {:.3}, p99 {:.3}, max {:.3} media frames; {} frames late by > 1; {} stalls",
         o.mean_drift, o.p99_drift, o.max_drift, o.late_frames, o.stalls

@@ -283,6 +283,52 @@ fn outputs_never_replace_what_is_not_a_regular_file_or_an_input() {
 }
 
 #[test]
+fn bench_scale_measures_each_size_in_a_process_of_its_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scale");
+    let text = ok(&[
+        "bench",
+        "scale",
+        "--sizes",
+        "128",
+        "--frames",
+        "8",
+        "-o",
+        s(&out),
+    ]);
+    assert!(text.contains("| 128² |"), "{text}");
+    let csv = std::fs::read_to_string(out.join("scale.csv")).unwrap();
+    let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+    // 128-texel rows need no padding: the player's 256 bytes per texel, and its 96-byte
+    // uniform buffer.
+    assert_eq!(row[0], "128", "{csv}");
+    let per_texel: f64 = row[4].parse().unwrap();
+    assert!((per_texel - (256.0 + 96.0 / 16384.0)).abs() < 1e-3, "{csv}");
+    let upload_over_read: f64 = row[9].parse().unwrap();
+    assert!(upload_over_read > 1.0, "{csv}");
+    for f in [
+        "costs.json",
+        "scale_memory.png",
+        "scale_upload.png",
+        "scale_render.png",
+        "scale_gpu.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    // The streams are kept and the plots can be drawn again without measuring.
+    assert!(out.join("128.vbim").is_file() && !out.join("frames-128").exists());
+    ok(&[
+        "bench",
+        "scale",
+        "--sizes",
+        "128",
+        "-o",
+        s(&out),
+        "--replot",
+    ]);
+}
+
+#[test]
 fn the_window_opens_renders_and_closes_under_xvfb() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("f");

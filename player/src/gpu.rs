@@ -97,6 +97,8 @@ pub(crate) struct Gpu {
     pub height: u32,
     pub max_layers: u32,
     pub channels: u32,
+    /// Bytes of the textures and buffers above (the budget's figure).
+    pub bytes: u64,
 }
 
 impl Gpu {
@@ -268,6 +270,11 @@ impl Gpu {
             })
         };
         let bind_groups = [bind(&slots[0]), bind(&slots[1])];
+        let bytes = [&keys, &slots[0], &slots[1], &display, &held]
+            .iter()
+            .map(|t| texture_bytes(t))
+            .sum::<u64>()
+            + params.size();
         Gpu {
             device: device.clone(),
             queue: queue.clone(),
@@ -283,6 +290,7 @@ impl Gpu {
             height,
             max_layers,
             channels,
+            bytes,
         }
     }
 
@@ -431,6 +439,12 @@ impl Params {
     pub fn zeroed_params() -> Params {
         bytemuck::Zeroable::zeroed()
     }
+}
+
+/// Bytes a texture holds (one mip level, every layer).
+fn texture_bytes(t: &wgpu::Texture) -> u64 {
+    let texel = t.format().block_copy_size(None).unwrap_or(0) as u64;
+    t.width() as u64 * t.height() as u64 * t.depth_or_array_layers() as u64 * texel
 }
 
 /// Copies a 2D texture to the CPU, rows tightly packed (`bytes_per_texel` per texel):

@@ -153,6 +153,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.gpu.read_display()
     }
 
+    /// Bytes of GPU memory the player holds: its textures (keyframe and bubble slots, the
+    /// lightmap and its held copy), its uniform buffer and its two staging buffers. The
+    /// runtime's budget is stated in these bytes per texel of the lightmap.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.gpu.bytes
+            + 2 * (self.header.max_degree as u64 + 1) * crate::decoder::term_bytes(&self.header)
+    }
+
     /// Blocks until the GPU has finished what was submitted (to time the GPU's share).
     pub fn wait_for_gpu(&self) {
         self.gpu.wait();

@@ -113,6 +113,17 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
             inline(Policy::Interpolate, Throttle::UNLIMITED),
         )
         .unwrap();
+        // The budget's figure, counted by hand: keyframe slots 4 × ch R32Float layers,
+        // two bubble slots of (degree − 1) × ch, the lightmap and its held copy
+        // (Rgba16Float), the 96-byte uniform buffer, and two staging buffers of
+        // (degree + 1) × ch layers whose rows are padded to 256 bytes.
+        let (texels, d) = (40 * 24u64, player.header().max_degree as u64);
+        let staging_layer = 256 * 24;
+        let expect = texels * 4 * ch as u64 * (4 + 2 * (d - 1))
+            + 2 * texels * 8
+            + 96
+            + 2 * (d + 1) * ch as u64 * staging_layer;
+        assert_eq!(player.gpu_bytes(), expect, "degree {d}, {ch} channel(s)");
         let mut cpu = vec![0f32; 40 * 24 * ch];
         let mut checked = 0;
         for _ in 0..90 {
