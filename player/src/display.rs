@@ -72,6 +72,11 @@ impl Display {
         }
     }
 
+    /// The policy in force.
+    pub fn policy(&self) -> Policy {
+        self.policy
+    }
+
     /// Changes the policy from the next frame on.
     pub fn set_policy(&mut self, p: Policy) {
         self.policy = p;

@@ -29,7 +29,6 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     header: Header,
     layout: Layout,
     entries: Vec<IndexEntry>,
-    cfg: PlayerConfig,
     gpu: Gpu,
     pipeline: Pipeline<R>,
     /// The box received but not yet uploaded.
@@ -69,8 +68,34 @@ fn ring_capacity(h: &Header, entries: &[IndexEntry], cfg: &PlayerConfig) -> usiz
             .map(|p| p.bytes)
             .unwrap_or_else(|| h.read_ahead.iter().map(|p| p.bytes).max().unwrap_or(0)),
         None => h.read_ahead.iter().map(|p| p.bytes).max().unwrap_or(0),
-    } as usize;
-    cfg.ring_bytes.unwrap_or(model).max(largest) + crate::reader::MSG_HEADER * 4
+    };
+    // Never more than the whole file and its message headers: a read-ahead (stated by the
+    // header, or asked for) beyond that buys nothing, and a hostile header's 2^62 bytes
+    // would abort the allocation.
+    let whole = entries
+        .iter()
+        .map(|e| e.length.saturating_add(crate::reader::MSG_HEADER as u64))
+        .fold(0u64, u64::saturating_add);
+    let ring = cfg.ring_bytes.map_or(model, |r| r as u64).min(whole) as usize;
+    ring.max(largest) + crate::reader::MSG_HEADER * 4
+}
+
+/// Buffering before the first frame, ns: the header's pre-roll at the reader's rate (none
+/// when unthrottled) and the caller's margin. Never longer than reading the whole file at
+/// that rate, which is all a pre-roll can be for.
+fn preroll_ns(h: &Header, cfg: &PlayerConfig) -> u64 {
+    let model = cfg.preroll_ns.unwrap_or_else(|| {
+        cfg.throttle.rate.map_or(0, |r| {
+            let stated = h.read_ahead_at(r).map_or_else(
+                || h.read_ahead.iter().map(|p| p.preroll_ns).max().unwrap_or(0),
+                |p| p.preroll_ns,
+            );
+            let whole_file = (h.file_size as u128 * 1_000_000_000 / r.max(1) as u128)
+                .min(u64::MAX as u128) as u64;
+            stated.min(whole_file)
+        })
+    });
+    model.saturating_add(cfg.preroll_margin_ns)
 }
 
 impl<R: Read + Seek + Send + 'static> Player<R> {
@@ -90,21 +115,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             return Err(PlayerError::NothingToPlay);
         }
         let ring_bytes = ring_capacity(&header, &entries, &cfg);
-        let preroll = cfg.preroll_ns.unwrap_or_else(|| {
-            cfg.throttle.rate.map_or(0, |r| {
-                header.read_ahead_at(r).map_or_else(
-                    || {
-                        header
-                            .read_ahead
-                            .iter()
-                            .map(|p| p.preroll_ns)
-                            .max()
-                            .unwrap_or(0)
-                    },
-                    |p| p.preroll_ns,
-                )
-            })
-        }) + cfg.preroll_margin_ns;
+        let preroll = preroll_ns(&header, &cfg);
         let gpu = Gpu::new(
             device,
             queue,
@@ -119,7 +130,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             header,
             layout,
             entries,
-            cfg,
             gpu,
             pipeline,
             incoming: None,
@@ -184,18 +194,16 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     }
     /// The stall policy in force.
     pub fn policy(&self) -> Policy {
-        self.cfg.policy
+        self.display.policy()
     }
     /// Changes the stall policy from the next frame on.
     pub fn set_policy(&mut self, p: Policy) {
-        self.cfg.policy = p;
         self.display.set_policy(p);
     }
 
     /// Changes the reader's bandwidth cap and stalls from now on (inline mode: at once;
     /// threaded mode: at the reader's next chunk).
     pub fn set_throttle(&mut self, t: Throttle) {
-        self.cfg.throttle = t;
         self.pipeline.set_throttle(t);
     }
 

@@ -865,3 +865,49 @@ fn recording_into_the_callers_encoder_shows_what_advance_shows() {
         assert!(states.contains(&s), "{s:?} was shown");
     }
 }
+
+/// A header whose checksum is valid but whose buffer model claims 2^62 bytes of read-ahead
+/// and a pre-roll of 584 years: the ring is sized from the file instead (it used to abort
+/// the allocation), and playback starts within the time it takes to read the whole file.
+#[test]
+fn a_hostile_buffer_model_is_bounded_by_the_file() {
+    let (device, queue) = device();
+    let src = sequence(32, 16, 48, InputKind::Hdr);
+    let mut bytes = encode_bytes(&src, &config(SegmentMode::Fixed(8)));
+    let mut h = header_of(&bytes);
+    for p in &mut h.read_ahead {
+        p.bytes = 1 << 62;
+        p.preroll_ns = u64::MAX;
+    }
+    let raw = h.to_bytes();
+    bytes[..raw.len()].copy_from_slice(&raw);
+    let file_size = bytes.len();
+    let rate = h.read_ahead[0].rate.max(1);
+    let throttle = Throttle {
+        rate: Some(rate),
+        stall: None,
+    };
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, throttle),
+    )
+    .unwrap();
+    // The whole file and a 16-byte header per chunk, at most.
+    assert!(
+        player.ring_bytes() <= file_size + 16 * (h.chunk_count as usize + 4),
+        "ring {} for a {file_size}-byte file",
+        player.ring_bytes()
+    );
+    let whole_file_ns = file_size as u64 * 1_000_000_000 / rate;
+    assert!(
+        player.preroll_ns() <= whole_file_ns,
+        "{}",
+        player.preroll_ns()
+    );
+    let shown = (0..(whole_file_ns / DISPLAY + 120))
+        .filter(|_| player.advance(DISPLAY).state != FrameState::Waiting)
+        .count();
+    assert!(shown > 60, "only {shown} frames shown");
+}
