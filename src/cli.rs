@@ -76,8 +76,8 @@ pub struct PlayArgs {
     /// Playback duration (`60s`, `2min`, `500ms`).
     #[arg(long, default_value = "60s")]
     pub duration: Span,
-    /// Display refresh rate in Hz.
-    #[arg(long, default_value_t = 60)]
+    /// Display refresh rate in Hz (1 to 1000).
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub display_hz: u32,
     /// Cap the reader: SI bytes per second (`2MB/s`, `500kB/s`) or a multiple of the stream's mean bit rate (`1.2x`) [default: unlimited].
     #[arg(long)]

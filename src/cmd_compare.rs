@@ -56,6 +56,13 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
         stages.report("compare", i as u64 + 1, n as u64);
     }
     stages.finish();
+    if let Some(i) = seq.first_not_a_number() {
+        // A NaN or an infinity has no PSNR: reporting one would call garbage a match.
+        return Err(format!(
+            "frame {i}: {} or {} holds values that are not finite numbers (NaN or infinity)",
+            a.a, a.b
+        ));
+    }
     if let Some(path) = &a.csv {
         let mut text = String::from("frame,psnr_db,max_abs_error,max_rel_error\n");
         for (i, f) in seq.frames.iter().enumerate() {

@@ -63,8 +63,8 @@ pub fn play(
     } else {
         None
     };
-    let frames = s.duration_ns * s.display_hz as u64 / 1_000_000_000;
-    let mut records = Vec::with_capacity(frames as usize);
+    let frames = s.display_frames();
+    let mut records = Vec::with_capacity(frames.min(RESERVED_RECORDS) as usize);
     let mut err = SequenceError::default();
     let mut truth = vec![0f32; h.texel_count() * h.channels as usize];
     let (n, ch) = (h.frame_count as f64, h.channels as usize);
@@ -113,6 +113,10 @@ pub fn play(
     }
     finish(player, s, adapter, records, &err)
 }
+
+/// Frame records reserved up front: a long session grows its record buffer as it plays,
+/// never by a size an argument alone asks for.
+const RESERVED_RECORDS: u64 = 1 << 20;
 
 /// Stops the player and summarises the session.
 fn finish(
@@ -301,9 +305,9 @@ pub fn capture_scene(
         FORMAT,
     );
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let total = s.duration_ns * s.display_hz as u64 / 1_000_000_000;
+    let total = s.display_frames();
     let n = n.max(1) as u64;
-    let mut records = Vec::with_capacity(total as usize);
+    let mut records = Vec::with_capacity(total.min(RESERVED_RECORDS) as usize);
     let mut frames = Vec::new();
     let mut gif_frames = Vec::new();
     let (gw, gh) = (size.0 / 3, size.1 / 3);

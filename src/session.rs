@@ -32,6 +32,12 @@ pub struct Session {
 }
 
 impl Session {
+    /// Displayed frames in the session (duration × display rate, saturating).
+    pub fn display_frames(&self) -> u64 {
+        (self.duration_ns as u128 * self.display_hz as u128 / 1_000_000_000).min(u64::MAX as u128)
+            as u64
+    }
+
     /// The session `vbim play`'s flags ask for: the one place they become settings. A
     /// bandwidth relative to the stream's mean rate needs the file's header.
     pub fn from_args(a: &PlayArgs) -> Result<Session, String> {
@@ -39,9 +45,6 @@ impl Session {
         let rate = a
             .bandwidth
             .map(|b| b.bytes_per_second(h.file_size, h.frame_count as f64 / h.fps()));
-        if a.display_hz == 0 {
-            return Err("--display-hz must be positive".into());
-        }
         Ok(Session {
             file: a.file.clone(),
             policy: a.policy,

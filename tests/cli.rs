@@ -283,6 +283,39 @@ fn outputs_never_replace_what_is_not_a_regular_file_or_an_input() {
 }
 
 #[test]
+fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("f");
+    bake(&frames, "16", "4", &[]);
+    let file = dir.path().join("a.vbim");
+    ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
+    // A log toe of 3e38 is positive and finite, so the header passes, but every texel
+    // decodes to +inf: compare must not call that a match (it printed 99 dB).
+    let mut bytes = std::fs::read(&file).unwrap();
+    let mut h = vbim_format::Reader::open(std::io::Cursor::new(&bytes))
+        .unwrap()
+        .header()
+        .clone();
+    h.transfer = vbim_format::Transfer::LogToe { v0: 3e38 };
+    let raw = h.to_bytes();
+    bytes[..raw.len()].copy_from_slice(&raw);
+    let bad = dir.path().join("inf.vbim");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = vbim(&["compare", s(&frames), s(&bad)]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("not finite") && err.contains("inf.vbim"),
+        "{err}"
+    );
+    // A display rate no display has is an argument error (it used to abort the process
+    // reserving records for duration × rate frames).
+    let o = vbim(&["play", s(&file), "--headless", "--display-hz", "4294967295"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--display-hz"));
+}
+
+#[test]
 fn bench_scale_measures_each_size_in_a_process_of_its_own() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scale");

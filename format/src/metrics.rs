@@ -23,9 +23,13 @@ pub enum Metric {
 /// The PSNR given to identical frames.
 pub const IDENTICAL_DB: f64 = 99.0;
 
-/// PSNR in dB of a mean squared error on a 0–1 scale ([`IDENTICAL_DB`] for 0).
+/// PSNR in dB of a mean squared error on a 0–1 scale ([`IDENTICAL_DB`] for 0). NaN when
+/// the error is NaN: values that are not numbers (an infinity through the export curve is
+/// one) never pass for a perfect match.
 pub fn psnr(mse: f64) -> f64 {
-    if mse <= 0.0 {
+    if mse.is_nan() {
+        f64::NAN
+    } else if mse <= 0.0 {
         IDENTICAL_DB
     } else {
         (10.0 * (1.0 / mse).log10()).min(IDENTICAL_DB)
@@ -81,14 +85,28 @@ impl Metric {
             Metric::Srgb8 => f32::INFINITY,
         };
         for (&s, &d) in src.iter().zip(dec) {
-            let diff = self.display(s, false) - self.display(d, true);
+            // A NaN or an infinity anywhere makes the frame's error NaN: `max` would drop it.
+            let diff = if d.is_finite() && s.is_finite() {
+                self.display(s, false) - self.display(d, true)
+            } else {
+                f64::NAN
+            };
             e.sse += diff * diff;
-            e.max_abs = e.max_abs.max(diff.abs());
+            e.max_abs = nan_max(e.max_abs, diff.abs());
             if s > bright {
-                e.max_rel = e.max_rel.max(((d - s) / s).abs() as f64);
+                e.max_rel = nan_max(e.max_rel, ((d - s) / s).abs() as f64);
             }
         }
         e
+    }
+}
+
+/// The larger of two errors, NaN if either is (`f64::max` drops a NaN).
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
     }
 }
 
@@ -110,27 +128,62 @@ impl SequenceError {
         let n: u64 = self.frames.iter().map(|f| f.count).sum();
         psnr(sse / n.max(1) as f64)
     }
-    /// Lowest per-frame PSNR and its frame.
+    /// Lowest per-frame PSNR and its frame; a frame whose PSNR is NaN (values that are not
+    /// numbers) is the worst.
     pub fn worst(&self) -> (usize, f64) {
         self.frames
             .iter()
             .enumerate()
             .map(|(i, f)| (i, f.psnr()))
-            .fold((0, IDENTICAL_DB), |a, b| if b.1 < a.1 { b } else { a })
+            .fold((0, IDENTICAL_DB), |a, b| {
+                if a.1.is_nan() || !(b.1.is_nan() || b.1 < a.1) {
+                    a
+                } else {
+                    b
+                }
+            })
     }
-    /// Largest absolute error of any frame, 0–1 scale.
+    /// The first frame whose values are not all numbers, if any.
+    pub fn first_not_a_number(&self) -> Option<usize> {
+        self.frames.iter().position(|f| f.sse.is_nan())
+    }
+    /// Largest absolute error of any frame, 0–1 scale (NaN if any frame's is).
     pub fn max_abs(&self) -> f64 {
-        self.frames.iter().map(|f| f.max_abs).fold(0.0, f64::max)
+        self.frames.iter().map(|f| f.max_abs).fold(0.0, nan_max)
     }
-    /// Largest relative error of any frame (HDR; over texels brighter than 1% of white).
+    /// Largest relative error of any frame (HDR; over texels brighter than 1% of white;
+    /// NaN if any frame's is).
     pub fn max_rel(&self) -> f64 {
-        self.frames.iter().map(|f| f.max_rel).fold(0.0, f64::max)
+        self.frames.iter().map(|f| f.max_rel).fold(0.0, nan_max)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn values_that_are_not_numbers_are_never_a_perfect_match() {
+        assert!(psnr(f64::NAN).is_nan());
+        let src = [0.5f32; 6];
+        let mut seq = SequenceError::default();
+        for (k, bad) in [0.5f32, f32::INFINITY, f32::NAN, 0.25]
+            .into_iter()
+            .enumerate()
+        {
+            let mut dec = [0.5f32; 6];
+            dec[k] = bad;
+            for m in [Metric::Srgb8, Metric::Hdr { exposure: 1.5 }] {
+                let e = m.compare(&src, &dec);
+                assert_eq!(e.psnr().is_nan(), !bad.is_finite(), "{bad} through {m:?}");
+            }
+            seq.push(Metric::Hdr { exposure: 1.5 }.compare(&src, &dec));
+        }
+        assert!(seq.mean_psnr().is_nan() && seq.max_abs().is_nan());
+        assert_eq!(seq.first_not_a_number(), Some(1));
+        let (frame, worst) = seq.worst();
+        assert!(frame == 1 && worst.is_nan());
+    }
 
     #[test]
     fn identical_is_99_db_and_one_code_value_is_48() {
