@@ -123,6 +123,15 @@ impl EncoderConfig {
         if self.search_stride == 0 {
             return Err(ConfigError::SearchStride);
         }
+        if self.threads > max_threads() {
+            return Err(ConfigError::Threads {
+                threads: self.threads,
+                reason: format!(
+                    "more than {} (4 per core, at least 16) only adds switching",
+                    max_threads()
+                ),
+            });
+        }
         Ok(())
     }
 
@@ -130,6 +139,14 @@ impl EncoderConfig {
     pub fn intra_interval_frames(&self) -> u32 {
         ((self.intra_interval_s * self.rate.0 as f64 / self.rate.1 as f64).floor() as u32).max(1)
     }
+}
+
+/// The most worker threads an encode may ask for: 4 per core, at least 16. (3,000
+/// threads took 10 s just to start; the work is CPU-bound, so more than the cores buys
+/// nothing.)
+pub fn max_threads() -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    (4 * cores).max(16)
 }
 
 /// A setting out of its range. Messages name the setting and the range, not a flag: the
@@ -169,4 +186,41 @@ pub enum ConfigError {
         /// Why not.
         reason: String,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_setting_out_of_range_is_named() {
+        let ok = EncoderConfig::preset(Preset::Default);
+        assert_eq!(ok.validate(), Ok(()));
+        let bad = |f: &dyn Fn(&mut EncoderConfig)| {
+            let mut c = ok.clone();
+            f(&mut c);
+            c.validate().unwrap_err()
+        };
+        assert!(matches!(
+            bad(&|c| c.tolerance_db = f64::NAN),
+            ConfigError::Tolerance(t) if t.is_nan()
+        ));
+        assert_eq!(bad(&|c| c.max_degree = 9), ConfigError::MaxDegree(9));
+        assert_eq!(
+            bad(&|c| c.segment = SegmentMode::Fixed(0)),
+            ConfigError::EmptySegments
+        );
+        assert_eq!(bad(&|c| c.tile_size = 12), ConfigError::TileSize(12));
+        assert_eq!(bad(&|c| c.rate = (24, 0)), ConfigError::Rate(24, 0));
+        assert!(matches!(
+            bad(&|c| c.threads = 100_000),
+            ConfigError::Threads {
+                threads: 100_000,
+                ..
+            }
+        ));
+        let mut c = ok.clone();
+        c.threads = max_threads();
+        assert_eq!(c.validate(), Ok(()));
+    }
 }
