@@ -117,7 +117,18 @@ fn printf_pattern(spec: &str) -> Result<Option<Vec<PathBuf>>, EncodeError> {
     if !rest[digits.len()..].starts_with('d') {
         return Ok(None);
     }
-    let width: usize = digits.trim_start_matches('0').parse().unwrap_or(0);
+    // A frame number has at most 20 digits; a wider field is a mistake (and Rust's
+    // formatting panics on widths past 65535).
+    let width = match digits.trim_start_matches('0') {
+        "" => 0,
+        w => w
+            .parse::<usize>()
+            .ok()
+            .filter(|&w| w <= 20)
+            .ok_or_else(|| {
+                EncodeError::Input(format!("{spec}: field width {w} (at most 20 digits)"))
+            })?,
+    };
     let (head, tail) = (&spec[..start], &rest[digits.len() + 1..]);
     let name = |i: usize| PathBuf::from(format!("{head}{i:0width$}{tail}"));
     let first = if name(0).is_file() { 0 } else { 1 };
@@ -399,4 +410,20 @@ pub fn check(info: &SourceInfo, name: &str, i: usize, f: &Frame) -> Result<(), E
         )));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_printf_pattern_with_an_absurd_width_is_refused() {
+        for spec in ["frames/%70000d.exr", "frames/%99999999999999999999999d.exr"] {
+            let e = super::printf_pattern(spec).unwrap_err().to_string();
+            assert!(e.contains(spec) && e.contains("at most 20"), "{e}");
+        }
+        // An ordinary one that matches nothing says what it tried.
+        let e = super::printf_pattern("/nonexistent/%04d.exr")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("0000.exr"), "{e}");
+    }
 }
