@@ -121,7 +121,7 @@ fn stream_for(a: &BenchScaleArgs, size: usize) -> Result<PathBuf, String> {
 pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
     let (device, queue, _) = vbim_player::headless_device()?;
-    let f = std::fs::File::open(&a.file).map_err(|e| format!("{name}: {e}"))?;
+    let f = crate::sequence::open_input(&a.file)?;
     let file_bytes = f.metadata().map_err(|e| format!("{name}: {e}"))?.len();
     let cfg = PlayerConfig {
         threaded: false,

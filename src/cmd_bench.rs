@@ -355,7 +355,7 @@ fn bench_render(a: crate::cli::BenchRenderArgs) -> Result<(), String> {
     let mut runs: Vec<[f64; 8]> = Vec::new();
     let mut h = None;
     for _ in 0..a.runs.max(1) {
-        let f = std::fs::File::open(&a.file).map_err(|e| format!("{name}: {e}"))?;
+        let f = crate::sequence::open_input(&a.file)?;
         let mut player = Player::open(
             &device,
             &queue,

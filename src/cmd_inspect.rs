@@ -1,7 +1,6 @@
 //! `vbim inspect FILE [--json]`: the header, the chunk index with each chunk's checksum
 //! status, and a summary of the model (segments, degrees, colour split).
 
-use std::fs::File;
 use std::io::BufReader;
 
 use serde_json::json;
@@ -12,7 +11,7 @@ use crate::cli::InspectArgs;
 
 pub fn run(a: InspectArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
-    let f = File::open(&a.file).map_err(|e| format!("{name}: {e}"))?;
+    let f = crate::sequence::open_input(&a.file)?;
     let mut r = Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?;
     let h = r.header().clone();
     let entries = r.entries().to_vec();

@@ -4,6 +4,7 @@
 
 use std::fs::File;
 use std::io::BufReader;
+use std::path::Path;
 
 use vbim_bake::Manifest;
 use vbim_encoder::{FrameSet, InputKind};
@@ -24,7 +25,7 @@ pub enum Sequence {
 impl Sequence {
     pub fn open(spec: &str) -> Result<Sequence, String> {
         if spec.ends_with(".vbim") {
-            let f = File::open(spec).map_err(|e| format!("{spec}: {e}"))?;
+            let f = open_input(Path::new(spec))?;
             let r = Reader::open(BufReader::new(f)).map_err(|e| format!("{spec}: {e}"))?;
             return Ok(Sequence::Vbim {
                 name: spec.to_string(),
@@ -131,4 +132,17 @@ pub fn to_rgb(data: &[f32], channels: usize) -> Vec<f32> {
     } else {
         data.iter().flat_map(|&v| [v, v, v]).collect()
     }
+}
+
+/// Opens an input file, refusing anything but a regular file first: opening a FIFO for
+/// reading blocks until a writer comes, and a device or a directory is no `.vbim`.
+pub fn open_input(path: &Path) -> Result<File, String> {
+    let name = path.display();
+    let meta = std::fs::metadata(path).map_err(|e| format!("{name}: {e}"))?;
+    if !meta.is_file() {
+        return Err(format!(
+            "{name}: not a regular file (a FIFO, a device or a directory cannot be read)"
+        ));
+    }
+    File::open(path).map_err(|e| format!("{name}: {e}"))
 }

@@ -14,7 +14,7 @@ use vbim_scene::SkyTrack;
 
 use crate::cli::PlayArgs;
 use crate::progress::Stages;
-use crate::sequence::Sequence;
+use crate::sequence::{open_input, Sequence};
 
 /// Everything one playback session needs.
 #[derive(Clone)]
@@ -71,7 +71,7 @@ impl Session {
         threaded: bool,
     ) -> Result<Player<BufReader<File>>, String> {
         let name = self.file.display().to_string();
-        let f = File::open(&self.file).map_err(|e| format!("{name}: {e}"))?;
+        let f = open_input(&self.file)?;
         let cfg = PlayerConfig {
             policy: self.policy,
             catch_up_ns: self.catch_up_ns,
@@ -127,7 +127,7 @@ pub fn metric_for(file: &Path) -> Result<Metric, String> {
 
 pub fn open_reference(file: &Path) -> Result<Decoder<BufReader<File>>, String> {
     let name = file.display();
-    let f = File::open(file).map_err(|e| format!("{name}: {e}"))?;
+    let f = open_input(file)?;
     Ok(Decoder::new(
         Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?,
     ))

@@ -247,7 +247,7 @@ fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
 }
 
 #[test]
-fn outputs_never_replace_what_is_not_a_regular_file_or_an_input() {
+fn files_that_are_not_regular_are_never_replaced_nor_read_and_inputs_never_overwritten() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("f");
     bake(&frames, "16", "4", &["--format", "png8"]);
@@ -277,9 +277,27 @@ fn outputs_never_replace_what_is_not_a_regular_file_or_an_input() {
         "{err}"
     );
     assert_eq!(std::fs::read(&frame).unwrap(), before);
+    // A FIFO as an input is refused at once instead of blocking in open.
+    let input = dir.path().join("in.vbim");
+    assert!(Command::new("mkfifo")
+        .arg(&input)
+        .status()
+        .unwrap()
+        .success());
+    let out = dir.path().join("d");
+    for cmd in [
+        vec!["inspect", s(&input)],
+        vec!["decode", s(&input), "-o", s(&out)],
+        vec!["play", s(&input), "--headless"],
+    ] {
+        let o = vbim(&cmd);
+        assert_eq!(o.status.code(), Some(1), "{cmd:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("not a regular file"), "{cmd:?}: {err}");
+    }
     // Nothing left beside them.
     let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
-    assert_eq!(names.len(), 2, "{names:?}");
+    assert_eq!(names.len(), 3, "{names:?}");
 }
 
 #[test]

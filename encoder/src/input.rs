@@ -154,6 +154,12 @@ pub struct Frame {
 /// Reads one frame file, whatever its format.
 pub fn read_file(path: &Path, png16_scale: f32) -> Result<Frame, EncodeError> {
     let err = |m: String| EncodeError::Input(format!("{}: {m}", path.display()));
+    // Opening a FIFO for reading blocks until a writer comes: refuse it first.
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => return Err(err("not a regular file".into())),
+        Err(e) => return Err(err(e.to_string())),
+        Ok(_) => {}
+    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
