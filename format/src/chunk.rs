@@ -77,23 +77,40 @@ pub fn padded_size(h: &Header) -> (usize, usize) {
 
 /// Decompresses a zstd frame, refusing output larger than `limit` bytes.
 pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
-    let mut capacity = limit;
-    if let Ok(Some(n)) = zstd::zstd_safe::get_frame_content_size(bytes) {
-        if n > limit as u64 {
+    let zstd_error = |e: std::io::Error| FormatError::Invalid(format!("zstd: {e}"));
+    let capacity = match zstd::zstd_safe::get_frame_content_size(bytes) {
+        Ok(Some(n)) if n > limit as u64 => {
             return Err(FormatError::Invalid(format!(
                 "payload claims {n} bytes decompressed (limit {limit})"
             )));
         }
         // The encoder's frames state their size: allocate that, not the limit.
-        capacity = n as usize;
-    }
+        Ok(Some(n)) => n as usize,
+        _ => {
+            // A frame that does not state its size (not one this encoder writes) grows its
+            // output as it decompresses, up to the limit: allocating the limit up front let
+            // a 431-byte file ask for 28 GB.
+            use std::io::Read;
+            let mut out = Vec::new();
+            zstd::stream::read::Decoder::new(bytes)
+                .map_err(zstd_error)?
+                .take(limit as u64 + 1)
+                .read_to_end(&mut out)
+                .map_err(zstd_error)?;
+            if out.len() > limit {
+                return Err(FormatError::Invalid(format!(
+                    "payload decompresses to more than {limit} bytes"
+                )));
+            }
+            return Ok(out);
+        }
+    };
     // One decompression context per thread, kept: creating one per chunk cost ~1% of the
     // player's decode.
     thread_local! {
         static DCTX: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
             const { std::cell::RefCell::new(None) };
     }
-    let zstd_error = |e: std::io::Error| FormatError::Invalid(format!("zstd: {e}"));
     DCTX.with_borrow_mut(|d| {
         let d = match d {
             Some(d) => d,
@@ -549,7 +566,28 @@ impl<'t> CoeffReader<'t> {
 
 #[cfg(test)]
 mod tests {
-    use super::spans;
+    use super::{decompress, spans};
+
+    #[test]
+    fn a_frame_that_does_not_state_its_size_is_bounded_by_what_it_holds() {
+        // zstd's streaming encoder does not know the size, so its frame does not state it.
+        let data = vec![7u8; 100_000];
+        let frame = zstd::stream::encode_all(&data[..], 3).unwrap();
+        assert!(matches!(
+            zstd::zstd_safe::get_frame_content_size(&frame),
+            Ok(None)
+        ));
+        // A limit far beyond any memory: allocating it up front aborted the process.
+        assert_eq!(decompress(&frame, usize::MAX / 4).unwrap(), data);
+        let e = decompress(&frame, 99_999).unwrap_err().to_string();
+        assert!(e.contains("more than 99999"), "{e}");
+        // A frame that states more than the limit is refused before decompressing.
+        let stated = zstd::bulk::compress(&data, 3).unwrap();
+        assert!(decompress(&stated, 1000)
+            .unwrap_err()
+            .to_string()
+            .contains("claims"));
+    }
 
     #[test]
     fn spans_are_the_maximal_runs() {
