@@ -168,12 +168,14 @@ impl<R: Read + Seek> Decoder<R> {
         for j in start..=k {
             let ci = layout.keyframes[j];
             let bytes = self.reader.read_chunk(ci)?;
-            let planes = chunk::read_keyframe(
-                self.reader.header(),
-                &bytes,
-                prev.as_deref().map(|v| &v[..]),
-            )
-            .map_err(|e| self.chunk_error(ci, e))?;
+            // An intra keyframe (by its index entry) has no reference, whatever its payload
+            // says: a payload that disagrees is refused (the player does the same).
+            let reference = match entries[ci].is_intra() {
+                true => None,
+                false => prev.as_deref().map(|v| &v[..]),
+            };
+            let planes = chunk::read_keyframe(self.reader.header(), &bytes, reference)
+                .map_err(|e| self.chunk_error(ci, e))?;
             let planes = Arc::new(planes);
             if j == 0 {
                 self.key0 = Some(planes.clone());

@@ -245,6 +245,10 @@ impl DecoderCore {
                     other => self.chain = other,
                 }
                 let prev = match (owned, &held) {
+                    // The index says intra: no reference, whatever the payload says (the
+                    // CPU decoder starts such a keyframe without one too, so a payload
+                    // that disagrees is refused by both).
+                    _ if e.is_intra() => chunk::Reference::None,
                     (Some(planes), _) => chunk::Reference::Owned(planes),
                     (None, Some(p)) => chunk::Reference::Borrowed(&p[..]),
                     (None, None) if !e.is_intra() => {

@@ -196,11 +196,19 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 ready,
                 read_seen,
             } => {
+                // At most two passes over the file per frame: a stream in which nothing can
+                // be decoded (a damaged chain that never recovers) never fills a staging
+                // box, and an unthrottled reader would otherwise wrap around it forever
+                // inside this one call. A playable stream never needs as much: what the
+                // decoder takes before both boxes are full, plus a ring no larger than the
+                // file.
+                let mut budget = 2 * reader.chunk_count() + 4;
                 loop {
                     let mut progress = false;
                     reader.prepare();
-                    if reader.deliver(now, prod) {
+                    if budget > 0 && reader.deliver(now, prod) {
                         progress = true;
+                        budget -= 1;
                     }
                     // Decode only while a staging buffer is free (the render thread returns
                     // them after upload): the natural back-pressure of double buffering.

@@ -77,6 +77,11 @@ impl<R: Read + Seek> ReaderCore<R> {
         self.last_arrival = now;
     }
 
+    /// Chunks in the file.
+    pub fn chunk_count(&self) -> usize {
+        self.entries.len()
+    }
+
     /// Reads the next chunk from the source (if none is pending) and schedules its arrival.
     pub fn prepare(&mut self) {
         if self.pending.is_some() || self.finished {

@@ -911,3 +911,49 @@ fn a_hostile_buffer_model_is_bounded_by_the_file() {
         .count();
     assert!(shown > 60, "only {shown} frames shown");
 }
+
+/// An index that calls a predicted keyframe intra (checksums recomputed): the CPU decoder
+/// and the player both refuse the keyframe instead of the player decoding it against its
+/// predecessor and showing a different picture from the reference (27 dB against 92 dB).
+#[test]
+fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
+    use vbim_format::index::FLAG_INTRA;
+    let (device, queue) = device();
+    let src = sequence(32, 16, 48, InputKind::Hdr);
+    let mut bytes = encode_bytes(&src, &config(SegmentMode::Fixed(8)));
+    let r = Reader::open(Cursor::new(&bytes)).unwrap();
+    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
+    let k = entries
+        .iter()
+        .position(|e| e.kind == vbim_format::ChunkKind::Keyframe && !e.is_intra())
+        .expect("a smooth day has predicted keyframes");
+    entries[k].flags |= FLAG_INTRA;
+    let frame = entries[k].first_frame;
+    let mut index = Vec::new();
+    entries.iter().for_each(|e| e.write(&mut index));
+    let at = h.index_offset as usize;
+    bytes[at..at + index.len()].copy_from_slice(&index);
+    h.index_checksum = vbim_format::checksum::xxh3(&index);
+    let raw = h.to_bytes();
+    bytes[..raw.len()].copy_from_slice(&raw);
+    // The CPU reference decoder refuses the frame the keyframe stands at.
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut out = vec![0f32; 32 * 16 * 3];
+    let e = reference
+        .frame(frame as f64, Output::Linear, &mut out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("reference"), "{e}");
+    // The player reports the chunk damaged.
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, Throttle::UNLIMITED),
+    )
+    .unwrap();
+    for _ in 0..240 {
+        player.advance(DISPLAY);
+    }
+    assert!(player.totals().damaged > 0, "{:?}", player.totals());
+}
