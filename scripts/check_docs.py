@@ -44,8 +44,9 @@ def main():
             continue
         here = os.path.dirname(full)
         for n, line in enumerate(lines, 1):
-            if SHARED in line:
-                bad.append(f"{f}:{n}: refers to {SHARED}, which is outside the repository")
+            if SHARED in line or ("PROTOCOL" + ".md") in line:
+                bad.append(f"{f}:{n}: refers to a file outside the repository "
+                           "(the conventions are docs/CONVENTIONS.md)")
             for m in CLIMB.finditer(line):
                 if not inside(os.path.join(here, m.group(0))):
                     bad.append(f"{f}:{n}: {m.group(0)} climbs out of the repository")

@@ -1,5 +1,5 @@
 //! `vbim bench …`: timings reported as the median of several runs with their spread
-//! (PROTOCOL.md, "Timings").
+//! (docs/CONVENTIONS.md, "Units, flags and exit codes").
 
 use std::time::Instant;
 

@@ -69,8 +69,16 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     cfg.threads = a.threads;
     let stages = Stages::new();
     let progress = |s: &str, d: u64, t: u64| stages.report(s, d, t);
-    cfg.validate()
-        .map_err(|e| format!("{}: {e}", flag_of(&e)))?;
+    if let Err(e) = cfg.validate() {
+        // A setting out of range is a bad argument: clap's message and exit status 2.
+        use clap::CommandFactory;
+        crate::cli::Cli::command()
+            .error(
+                clap::error::ErrorKind::ValueValidation,
+                format!("{}: {e}", flag_of(&e)),
+            )
+            .exit();
+    }
     let rep = if a.exact {
         encode_to_tolerance(&frames, &cfg, &a.out, &progress)
     } else {

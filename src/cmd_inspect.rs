@@ -207,7 +207,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
     Ok(())
 }
 
-/// A rate in SI units (PROTOCOL.md): B/s, kB/s, MB/s or GB/s.
+/// A rate in SI units (docs/CONVENTIONS.md): B/s, kB/s, MB/s or GB/s.
 fn rate_text(r: u64) -> String {
     let r = r as f64;
     if r >= 1e9 {

@@ -45,7 +45,7 @@ fn main() -> ExitCode {
     match res {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // One line naming the culprit; exit status 1 for a user error (PROTOCOL.md).
+            // One line naming the culprit; exit status 1 for a user error (docs/CONVENTIONS.md).
             eprintln!("vbim: error: {e}");
             ExitCode::from(1)
         }

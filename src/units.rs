@@ -1,4 +1,4 @@
-//! Units on the command line (PROTOCOL.md, "Units and flags"): SI sizes and rates,
+//! Units on the command line (docs/CONVENTIONS.md, "Units, flags and exit codes"): SI sizes and rates,
 //! durations in ms, s or min, rationals for frame rates.
 
 /// `500ms`, `4s`, `2min` or a bare number of seconds → seconds.

@@ -236,8 +236,17 @@ fn damaged_and_bad_input_fail_with_a_message_naming_the_culprit() {
         !dir.path().join("b.vbim").exists(),
         "no output file after a failed encode"
     );
-    // Bad arguments: exit status 2.
+    // Bad arguments: exit status 2, naming the flag; a value out of range too.
     assert_eq!(vbim(&["encode"]).status.code(), Some(2));
+    let o = vbim(&["encode", s(&frames), "-o", "x.vbim", "--tolerance", "5"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--tolerance") && err.contains("10 to 99"),
+        "{err}"
+    );
+    let o = vbim(&["encode", s(&frames), "-o", "x.vbim", "--threads", "100000"]);
+    assert_eq!(o.status.code(), Some(2));
     assert_eq!(
         vbim(&["encode", s(&frames), "-o", "x.vbim", "--tolerance", "abc"])
             .status
