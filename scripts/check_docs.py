@@ -4,7 +4,8 @@
 1. No tracked file refers to a path outside the repository: not the team's shared folder
    beside the checkout, and no relative path that climbs above the repository root from the file that names it.
 2. Every relative link in a Markdown file points at a file that exists.
-3. Every repository path that docs/ARCHITECTURE.md names (in backticks) exists.
+3. Every repository path that docs/ARCHITECTURE.md names (in backticks) exists, and every
+   source file (`*/src/*.rs`, `*.wgsl`) is named there: the tour stays complete.
 
 Exits 1 naming each offending file and line.
 """
@@ -66,6 +67,10 @@ def main():
             p = m.group(1)
             if p.startswith(TOP) and not os.path.exists(os.path.join(ROOT, p)):
                 bad.append(f"docs/ARCHITECTURE.md:{n}: names {p}, which does not exist")
+    tour = open(arch, encoding="utf-8").read()
+    for f in tracked():
+        if re.fullmatch(r"([a-z]+/)?src/[a-z_0-9]+\.(rs|wgsl)", f) and f not in tour:
+            bad.append(f"docs/ARCHITECTURE.md does not name {f}")
     for b in bad:
         print(b)
     if bad:

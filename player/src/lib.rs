@@ -17,8 +17,9 @@
 //!
 //! Modules, in the order a chunk meets them: `reader` (source → ring), `decoder` (ring →
 //! staging), `pipeline` (the two threads and the staging boxes between them), `slots`
-//! (which GPU slot holds what), `gpu` (copies and the reconstruction shader), `player` (the
-//! render-thread state machine); `config`, `record` and `stats` are its inputs and outputs.
+//! (which GPU slot holds what), `gpu` (copies and the reconstruction shader), `display`
+//! (the clock and the stall policies), `player` (the render thread's frame);
+//! `config`, `record` and `stats` are its inputs and outputs.
 #![deny(missing_docs)]
 
 mod clock;
