@@ -69,12 +69,12 @@ pub fn list(spec: &str) -> Result<(Vec<PathBuf>, Vec<String>, PathBuf), EncodeEr
                 ));
             }
         }
-        files.sort();
         if files.is_empty() {
             return Err(EncodeError::Input(format!(
                 "{spec}: no .exr or .png frames in this directory"
             )));
         }
+        sort_and_check_numbering(spec, &mut files)?;
         return Ok((files, notes, p.to_path_buf()));
     }
     let dir = p
@@ -105,6 +105,41 @@ pub fn list(spec: &str) -> Result<(Vec<PathBuf>, Vec<String>, PathBuf), EncodeEr
     Err(EncodeError::Input(format!(
         "{spec}: no such directory, file or pattern"
     )))
+}
+
+/// A numbered file's name before its number, and the number (`frame_0012.exr` →
+/// (`frame_`, 12)).
+fn numbering(p: &Path) -> (String, u64) {
+    let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+    let prefix = stem.trim_end_matches(|c: char| c.is_ascii_digit());
+    let number = stem[prefix.len()..].parse().unwrap_or(u64::MAX);
+    (prefix.to_string(), number)
+}
+
+/// Orders a directory's frames by number (`frame_2` before `frame_10`) and refuses a gap
+/// or two sequences in one directory: either would silently shift the day's timing.
+fn sort_and_check_numbering(spec: &str, files: &mut [PathBuf]) -> Result<(), EncodeError> {
+    files.sort_by_cached_key(|p| numbering(p));
+    for pair in files.windows(2) {
+        let ((pa, a), (pb, b)) = (numbering(&pair[0]), numbering(&pair[1]));
+        if pa != pb {
+            return Err(EncodeError::Input(format!(
+                "{spec}: two sequences in one directory ({} and {}); name one with a pattern",
+                pair[0].display(),
+                pair[1].display()
+            )));
+        }
+        if b != a + 1 {
+            return Err(EncodeError::Input(format!(
+                "{spec}: frame {} is missing between {} and {} (a gap would shift the timing \
+                 of every later frame)",
+                a + 1,
+                pair[0].display(),
+                pair[1].display()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// `frames/%04d.exr`: frames from 0 (or 1) upwards until the first missing number.
@@ -420,6 +455,27 @@ pub fn check(info: &SourceInfo, name: &str, i: usize, f: &Frame) -> Result<(), E
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_directory_of_frames_is_ordered_by_number_and_a_gap_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = image::RgbImage::new(2, 2);
+        for i in [1, 2, 10, 3, 4, 5, 6, 7, 8, 9] {
+            img.save(dir.path().join(format!("f_{i}.png"))).unwrap();
+        }
+        let (files, _, _) = super::list(dir.path().to_str().unwrap()).unwrap();
+        let names: Vec<_> = files
+            .iter()
+            .map(|f| f.file_name().unwrap().to_str().unwrap().to_string())
+            .collect();
+        assert_eq!(names[..3], ["f_1.png", "f_2.png", "f_3.png"]);
+        assert_eq!(names[9], "f_10.png");
+        std::fs::remove_file(dir.path().join("f_5.png")).unwrap();
+        let e = super::list(dir.path().to_str().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("frame 5 is missing"), "{e}");
+    }
+
     #[test]
     fn a_printf_pattern_with_an_absurd_width_is_refused() {
         for spec in ["frames/%70000d.exr", "frames/%99999999999999999999999d.exr"] {
