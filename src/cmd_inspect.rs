@@ -50,7 +50,13 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                             }
                         }
                     } else {
-                        "ok".into()
+                        match payload_status(&mut r, i, e.kind, &bytes) {
+                            Ok(()) => "ok".into(),
+                            Err(err) => {
+                                damaged += 1;
+                                format!("bad: {err}")
+                            }
+                        }
                     }
                 }
                 Err(err) => {
@@ -218,5 +224,31 @@ fn rate_text(r: u64) -> String {
         format!("{:.2} kB/s", r / 1e3)
     } else {
         format!("{r:.0} B/s")
+    }
+}
+
+/// Whether a chunk whose checksum is right holds what its kind says: the metadata
+/// decompresses (within its limit) to UTF-8 text; a keyframe or coefficient chunk is a zstd
+/// frame (its header is read, not the payload: decoding needs the chain). A checksum only
+/// says the bytes are the ones written, not that they were ever a payload.
+fn payload_status(
+    r: &mut Reader<BufReader<std::fs::File>>,
+    i: usize,
+    kind: ChunkKind,
+    bytes: &[u8],
+) -> Result<(), String> {
+    match kind {
+        ChunkKind::Metadata => r.metadata().map(|_| ()).map_err(|e| e.to_string()),
+        ChunkKind::Keyframe | ChunkKind::Coefficients => {
+            match zstd::zstd_safe::get_frame_content_size(bytes) {
+                Err(_) => Err(format!("chunk {i}: not a zstd frame")),
+                Ok(Some(n)) if n > vbim_format::limits::MAX_CHUNK_DECODED => Err(format!(
+                    "chunk {i}: claims {n} bytes decompressed (at most {})",
+                    vbim_format::limits::MAX_CHUNK_DECODED
+                )),
+                Ok(_) => Ok(()),
+            }
+        }
+        _ => Ok(()),
     }
 }

@@ -343,6 +343,43 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
 }
 
 #[test]
+fn inspect_checks_that_a_chunk_with_a_valid_checksum_holds_a_payload() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("f");
+    bake(&frames, "16", "4", &[]);
+    let file = dir.path().join("a.vbim");
+    ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
+    // Zero a coefficient chunk and give it the checksum of its new bytes (the index's and
+    // the header's recomputed): every checksum holds, and inspect used to say "ok".
+    let mut bytes = std::fs::read(&file).unwrap();
+    let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
+    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
+    let c = entries
+        .iter()
+        .position(|e| e.kind == vbim_format::ChunkKind::Coefficients)
+        .unwrap();
+    let (at, len) = (entries[c].offset as usize, entries[c].length as usize);
+    bytes[at..at + len].fill(0);
+    entries[c].checksum = vbim_format::checksum::xxh3(&bytes[at..at + len]);
+    let mut index = Vec::new();
+    entries.iter().for_each(|e| e.write(&mut index));
+    let i = h.index_offset as usize;
+    bytes[i..i + index.len()].copy_from_slice(&index);
+    h.index_checksum = vbim_format::checksum::xxh3(&index);
+    let raw = h.to_bytes();
+    bytes[..raw.len()].copy_from_slice(&raw);
+    let bad = dir.path().join("zeroed.vbim");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = vbim(&["inspect", s(&bad)]);
+    assert_eq!(o.status.code(), Some(1));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains(&format!("chunk {c}: not a zstd frame")),
+        "{out}"
+    );
+}
+
+#[test]
 fn bench_scale_measures_each_size_in_a_process_of_its_own() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scale");
