@@ -309,23 +309,43 @@ fn files_that_are_not_regular_are_never_replaced_nor_read_and_inputs_never_overw
     assert_eq!(names.len(), 3, "{names:?}");
 }
 
+/// A small HDR stream (16², 4 frames) baked and encoded in `dir`: its frames and its file.
+fn small_stream(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let frames = dir.join("f");
+    bake(&frames, "16", "4", &[]);
+    let file = dir.join("a.vbim");
+    ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
+    (frames, file)
+}
+
+/// Rewrites a stream's header and index through `edit`, recomputing both checksums, as an
+/// adversary who read FORMAT.md would: only semantic checks stand in the way.
+fn rewrite(
+    bytes: &mut [u8],
+    edit: impl FnOnce(&mut vbim_format::Header, &mut [vbim_format::IndexEntry]),
+) {
+    let r = vbim_format::Reader::open(std::io::Cursor::new(&*bytes)).unwrap();
+    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
+    edit(&mut h, &mut entries);
+    let mut index = Vec::new();
+    entries.iter().for_each(|e| e.write(&mut index));
+    let at = h.index_offset as usize;
+    bytes[at..at + index.len()].copy_from_slice(&index);
+    h.index_checksum = vbim_format::checksum::xxh3(&index);
+    let raw = h.to_bytes();
+    bytes[..raw.len()].copy_from_slice(&raw);
+}
+
 #[test]
 fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let frames = dir.path().join("f");
-    bake(&frames, "16", "4", &[]);
-    let file = dir.path().join("a.vbim");
-    ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
+    let (frames, file) = small_stream(dir.path());
     // A log toe of 3e38 is positive and finite, so the header passes, but every texel
     // decodes to +inf: compare must not call that a match (it printed 99 dB).
     let mut bytes = std::fs::read(&file).unwrap();
-    let mut h = vbim_format::Reader::open(std::io::Cursor::new(&bytes))
-        .unwrap()
-        .header()
-        .clone();
-    h.transfer = vbim_format::Transfer::LogToe { v0: 3e38 };
-    let raw = h.to_bytes();
-    bytes[..raw.len()].copy_from_slice(&raw);
+    rewrite(&mut bytes, |h, _| {
+        h.transfer = vbim_format::Transfer::LogToe { v0: 3e38 }
+    });
     let bad = dir.path().join("inf.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let o = vbim(&["compare", s(&frames), s(&bad)]);
@@ -345,29 +365,23 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
 #[test]
 fn inspect_checks_that_a_chunk_with_a_valid_checksum_holds_a_payload() {
     let dir = tempfile::tempdir().unwrap();
-    let frames = dir.path().join("f");
-    bake(&frames, "16", "4", &[]);
-    let file = dir.path().join("a.vbim");
-    ok(&["encode", s(&frames), "-o", s(&file), "--no-verify"]);
+    let (_, file) = small_stream(dir.path());
     // Zero a coefficient chunk and give it the checksum of its new bytes (the index's and
     // the header's recomputed): every checksum holds, and inspect used to say "ok".
     let mut bytes = std::fs::read(&file).unwrap();
     let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
-    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
-    let c = entries
+    let c = r
+        .entries()
         .iter()
         .position(|e| e.kind == vbim_format::ChunkKind::Coefficients)
         .unwrap();
-    let (at, len) = (entries[c].offset as usize, entries[c].length as usize);
+    let (at, len) = (
+        r.entries()[c].offset as usize,
+        r.entries()[c].length as usize,
+    );
     bytes[at..at + len].fill(0);
-    entries[c].checksum = vbim_format::checksum::xxh3(&bytes[at..at + len]);
-    let mut index = Vec::new();
-    entries.iter().for_each(|e| e.write(&mut index));
-    let i = h.index_offset as usize;
-    bytes[i..i + index.len()].copy_from_slice(&index);
-    h.index_checksum = vbim_format::checksum::xxh3(&index);
-    let raw = h.to_bytes();
-    bytes[..raw.len()].copy_from_slice(&raw);
+    let zeros = vbim_format::checksum::xxh3(&bytes[at..at + len]);
+    rewrite(&mut bytes, |_, entries| entries[c].checksum = zeros);
     let bad = dir.path().join("zeroed.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let o = vbim(&["inspect", s(&bad)]);
