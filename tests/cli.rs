@@ -318,24 +318,6 @@ fn small_stream(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     (frames, file)
 }
 
-/// Rewrites a stream's header and index through `edit`, recomputing both checksums, as an
-/// adversary who read FORMAT.md would: only semantic checks stand in the way.
-fn rewrite(
-    bytes: &mut [u8],
-    edit: impl FnOnce(&mut vbim_format::Header, &mut [vbim_format::IndexEntry]),
-) {
-    let r = vbim_format::Reader::open(std::io::Cursor::new(&*bytes)).unwrap();
-    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
-    edit(&mut h, &mut entries);
-    let mut index = Vec::new();
-    entries.iter().for_each(|e| e.write(&mut index));
-    let at = h.index_offset as usize;
-    bytes[at..at + index.len()].copy_from_slice(&index);
-    h.index_checksum = vbim_format::checksum::xxh3(&index);
-    let raw = h.to_bytes();
-    bytes[..raw.len()].copy_from_slice(&raw);
-}
-
 #[test]
 fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -343,9 +325,10 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     // A log toe of 3e38 is positive and finite, so the header passes, but every texel
     // decodes to +inf: compare must not call that a match (it printed 99 dB).
     let mut bytes = std::fs::read(&file).unwrap();
-    rewrite(&mut bytes, |h, _| {
+    vbim_format::writer::rewrite(&mut bytes, |h, _| {
         h.transfer = vbim_format::Transfer::LogToe { v0: 3e38 }
-    });
+    })
+    .unwrap();
     let bad = dir.path().join("inf.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let o = vbim(&["compare", s(&frames), s(&bad)]);
@@ -381,7 +364,7 @@ fn inspect_checks_that_a_chunk_with_a_valid_checksum_holds_a_payload() {
     );
     bytes[at..at + len].fill(0);
     let zeros = vbim_format::checksum::xxh3(&bytes[at..at + len]);
-    rewrite(&mut bytes, |_, entries| entries[c].checksum = zeros);
+    vbim_format::writer::rewrite(&mut bytes, |_, entries| entries[c].checksum = zeros).unwrap();
     let bad = dir.path().join("zeroed.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let o = vbim(&["inspect", s(&bad)]);

@@ -92,3 +92,26 @@ impl<W: Write + Seek> Writer<W> {
         Ok((self.header, self.out))
     }
 }
+
+/// Edits the header and index of a whole stream held in memory, then stores them back with
+/// their checksums recomputed (the index keeps its length). For tools and tests that craft
+/// streams — a repair, a fuzzing seed, a hostile file: after it, only the semantic checks
+/// stand between the bytes and a decoder.
+pub fn rewrite(
+    bytes: &mut [u8],
+    edit: impl FnOnce(&mut Header, &mut [IndexEntry]),
+) -> Result<Header> {
+    let r = crate::Reader::open(std::io::Cursor::new(&*bytes))?;
+    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
+    edit(&mut h, &mut entries);
+    let mut index = Vec::with_capacity(entries.len() * ENTRY_SIZE);
+    entries.iter().for_each(|e| e.write(&mut index));
+    let at = h.index_offset as usize;
+    let room = bytes
+        .get_mut(at..at + index.len())
+        .ok_or_else(|| FormatError::Invalid("the index no longer fits the stream".into()))?;
+    room.copy_from_slice(&index);
+    h.index_checksum = xxh3(&index);
+    bytes[..HEADER_SIZE].copy_from_slice(&h.to_bytes());
+    Ok(h)
+}

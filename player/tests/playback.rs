@@ -866,25 +866,6 @@ fn recording_into_the_callers_encoder_shows_what_advance_shows() {
     }
 }
 
-/// Rewrites a stream's header and index through `edit`, recomputing both checksums, as an
-/// adversary who read FORMAT.md would: only semantic checks stand in the way.
-fn rewrite(
-    bytes: &mut [u8],
-    edit: impl FnOnce(&mut vbim_format::Header, &mut [vbim_format::IndexEntry]),
-) -> vbim_format::Header {
-    let r = Reader::open(Cursor::new(&*bytes)).unwrap();
-    let (mut h, mut entries) = (r.header().clone(), r.entries().to_vec());
-    edit(&mut h, &mut entries);
-    let mut index = Vec::new();
-    entries.iter().for_each(|e| e.write(&mut index));
-    let at = h.index_offset as usize;
-    bytes[at..at + index.len()].copy_from_slice(&index);
-    h.index_checksum = vbim_format::checksum::xxh3(&index);
-    let raw = h.to_bytes();
-    bytes[..raw.len()].copy_from_slice(&raw);
-    h
-}
-
 /// A header whose checksum is valid but whose buffer model claims 2^62 bytes of read-ahead
 /// and a pre-roll of 584 years: the ring is sized from the file instead (it used to abort
 /// the allocation), and playback starts within the time it takes to read the whole file.
@@ -893,12 +874,13 @@ fn a_hostile_buffer_model_is_bounded_by_the_file() {
     let (device, queue) = device();
     let src = sequence(32, 16, 48, InputKind::Hdr);
     let mut bytes = encode_bytes(&src, &config(SegmentMode::Fixed(8)));
-    let h = rewrite(&mut bytes, |h, _| {
+    let h = vbim_format::writer::rewrite(&mut bytes, |h, _| {
         for p in &mut h.read_ahead {
             p.bytes = 1 << 62;
             p.preroll_ns = u64::MAX;
         }
-    });
+    })
+    .unwrap();
     let file_size = bytes.len();
     let rate = h.read_ahead[0].rate.max(1);
     let throttle = Throttle {
@@ -940,14 +922,15 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
     let src = sequence(32, 16, 48, InputKind::Hdr);
     let mut bytes = encode_bytes(&src, &config(SegmentMode::Fixed(8)));
     let mut frame = None;
-    rewrite(&mut bytes, |_, entries| {
+    vbim_format::writer::rewrite(&mut bytes, |_, entries| {
         let k = entries
             .iter()
             .position(|e| e.kind == vbim_format::ChunkKind::Keyframe && !e.is_intra())
             .expect("a smooth day has predicted keyframes");
         entries[k].flags |= FLAG_INTRA;
         frame = Some(entries[k].first_frame);
-    });
+    })
+    .unwrap();
     let frame = frame.unwrap();
     // The CPU reference decoder refuses the frame the keyframe stands at.
     let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
