@@ -310,8 +310,5 @@ fn report(a: &BenchScaleArgs, costs: &[Cost]) -> Result<(), String> {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    vbim_bake::output::write_file(path, |tmp| {
-        std::fs::write(tmp, text).map_err(|e| e.to_string())
-    })
-    .map_err(|e| e.to_string())
+    vbim_bake::output::write_text(path, text).map_err(|e| e.to_string())
 }

@@ -15,10 +15,7 @@ use crate::session::Session;
 use crate::units::{parse_rate, Span};
 
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    vbim_bake::output::write_file(path, |tmp| {
-        std::fs::write(tmp, text).map_err(|e| e.to_string())
-    })
-    .map_err(|e| e.to_string())
+    vbim_bake::output::write_text(path, text).map_err(|e| e.to_string())
 }
 
 pub fn run(a: DemoArgs) -> Result<(), String> {

@@ -10,6 +10,7 @@ use vbim_bake::Manifest;
 use vbim_encoder::{FrameSet, InputKind};
 use vbim_format::curve::{exposure_from_max_greens, max_green};
 use vbim_format::decode::{Decoder, Output};
+use vbim_format::metrics::Metric;
 use vbim_format::{ColorEncoding, Reader};
 
 use crate::progress::Stages;
@@ -108,6 +109,17 @@ impl Sequence {
         Ok(ExportScales {
             exposure: exposure.expect("set above"),
             png16_scale: png16_scale.expect("set above"),
+        })
+    }
+
+    /// The metric this sequence is measured with: 8-bit code values, or the export curve
+    /// at the sequence's exposure.
+    pub fn metric(&mut self, stages: &Stages) -> Result<Metric, String> {
+        if self.shape().3 {
+            return Ok(Metric::Srgb8);
+        }
+        Ok(Metric::Hdr {
+            exposure: self.exposure(stages)?,
         })
     }
 

@@ -106,23 +106,16 @@ pub fn mean_rate(h: &Header) -> f64 {
 /// 8-bit stream) and the sky over the day.
 pub fn scene_look(file: &Path) -> Result<(f32, SkyTrack), String> {
     let mut seq = Sequence::open(&file.to_string_lossy())?;
-    let exposure = if seq.shape().3 {
-        1.0
-    } else {
-        seq.exposure(&Stages::new())?
+    let exposure = match seq.metric(&Stages::new())? {
+        Metric::Hdr { exposure } => exposure,
+        Metric::Srgb8 => 1.0,
     };
     Ok((exposure, SkyTrack::from_manifest(seq.manifest().as_ref())))
 }
 
 /// The metric for comparing shown frames of `file` with true ones.
 pub fn metric_for(file: &Path) -> Result<Metric, String> {
-    let mut seq = Sequence::open(&file.to_string_lossy())?;
-    if seq.shape().3 {
-        return Ok(Metric::Srgb8);
-    }
-    Ok(Metric::Hdr {
-        exposure: seq.exposure(&Stages::new())?,
-    })
+    Sequence::open(&file.to_string_lossy())?.metric(&Stages::new())
 }
 
 pub fn open_reference(file: &Path) -> Result<Decoder<BufReader<File>>, String> {

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::light::FrameInfo;
-use crate::output::{frame_name, write_file, FrameFormat};
+use crate::output::{frame_name, write_text, FrameFormat};
 use crate::scene::Scene;
 use crate::BakeError;
 
@@ -91,9 +91,7 @@ impl Manifest {
     pub fn write(&self, dir: &Path) -> Result<PathBuf, BakeError> {
         let path = dir.join(Self::FILE_NAME);
         let text = serde_json::to_string_pretty(self).expect("a manifest serialises");
-        write_file(&path, |tmp| {
-            std::fs::write(tmp, text).map_err(|e| e.to_string())
-        })?;
+        write_text(&path, &text)?;
         Ok(path)
     }
 

@@ -96,6 +96,13 @@ pub fn check_output(path: &Path) -> std::io::Result<()> {
     ))
 }
 
+/// Writes `text` to `path` through [`write_file`].
+pub fn write_text(path: &Path, text: &str) -> Result<(), BakeError> {
+    write_file(path, |tmp| {
+        std::fs::write(tmp, text).map_err(|e| e.to_string())
+    })
+}
+
 /// What a file that is neither a regular file, a directory nor a link is.
 #[cfg(unix)]
 fn special_kind(kind: std::fs::FileType) -> &'static str {

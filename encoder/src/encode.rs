@@ -255,6 +255,8 @@ struct Window<'a> {
     src: &'a dyn FrameSource,
     dom: &'a Domain,
     frames: BTreeMap<u32, Arc<CodedFrame>>,
+    /// Frames in the sequence (the window's frame numbers run past it at a loop's end).
+    frames_in_source: usize,
     /// The first frame never loaded.
     next: u32,
     /// The last frame there is (frame 0 again at a loop's end).
@@ -267,6 +269,7 @@ impl<'a> Window<'a> {
             src,
             dom,
             frames: BTreeMap::new(),
+            frames_in_source: src.info().frames,
             next: 0,
             end,
         }
@@ -278,7 +281,7 @@ impl<'a> Window<'a> {
         if upto < self.next {
             return Ok(());
         }
-        let n = self.src.info().frames;
+        let n = self.frames_in_source;
         let missing: Vec<u32> = (self.next..=upto).collect();
         self.next = upto + 1;
         let fresh: Vec<(u32, CodedFrame)> = missing
