@@ -393,13 +393,16 @@ fn bench_scale_measures_each_size_in_a_process_of_its_own() {
     assert!(text.contains("| 128² |"), "{text}");
     let csv = std::fs::read_to_string(out.join("scale.csv")).unwrap();
     let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
-    // 128-texel rows need no padding: the player's 256 bytes per texel, and its 96-byte
-    // uniform buffer.
+    // 128-texel rows need no padding. At degree 4: two f32 keyframe slots of 3 planes
+    // (24 B per texel), 3 × 3 bubble planes of 16 bits (18 B), the lightmap and its held
+    // copy (16 B); then the decode buffers, a few hundred kB at most (at most 16 B per
+    // texel of this small stream, nothing at real sizes).
     assert_eq!(row[0], "128", "{csv}");
     let per_texel: f64 = row[4].parse().unwrap();
-    assert!((per_texel - (256.0 + 96.0 / 16384.0)).abs() < 1e-3, "{csv}");
+    assert!((58.0..74.0).contains(&per_texel), "{csv}");
+    // Parsed coefficients go up, not decoded planes.
     let upload_over_read: f64 = row[9].parse().unwrap();
-    assert!(upload_over_read > 1.0, "{csv}");
+    assert!(upload_over_read > 1.0 && upload_over_read < 5.0, "{csv}");
     for f in [
         "costs.json",
         "scale_memory.png",

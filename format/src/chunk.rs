@@ -241,6 +241,52 @@ fn keyframe_from_raw(
     Ok(out)
 }
 
+/// A keyframe chunk (checksum-verified) parsed as far as its quantised blocks, for a
+/// decoder that dequantises and transforms them elsewhere (the GPU player): calls
+/// `each(plane, step, blocks)` for every plane in order, with the plane's blocks in raster
+/// order over the padded plane. Returns the mode byte ([`MODE_INTRA`] or
+/// [`MODE_PREDICTED`]). Refuses everything [`read_keyframe`] refuses except a missing
+/// reference, which only the caller can know about.
+pub fn keyframe_blocks(
+    h: &Header,
+    bytes: &[u8],
+    mut each: impl FnMut(usize, f32, &plane::Blocks),
+) -> Result<u8> {
+    let (w, ht) = padded_size(h);
+    let planes = h.channels as usize;
+    let nblocks = (w / N) * (ht / N);
+    let raw = decompress(bytes, stream_limit(nblocks * planes, planes))?;
+    let mut r = Bytes { b: &raw, pos: 0 };
+    let head = r.take(4)?;
+    let (mode, np) = (head[0], head[1] as usize);
+    if np != planes {
+        return Err(FormatError::Invalid(format!(
+            "{np} planes, expected {planes}"
+        )));
+    }
+    if mode != MODE_INTRA && mode != MODE_PREDICTED {
+        return Err(FormatError::Invalid(format!(
+            "unknown keyframe mode {mode}"
+        )));
+    }
+    let steps: Vec<f32> = (0..planes).map(|_| r.f32()).collect::<Result<_>>()?;
+    let mut pos = r.pos;
+    BLOCKS.with_borrow_mut(|q| -> Result<()> {
+        for (p, &step) in steps.iter().enumerate() {
+            plane::read_blocks(&raw, &mut pos, nblocks, q)?;
+            each(p, step, q);
+        }
+        Ok(())
+    })?;
+    if pos != raw.len() {
+        return Err(FormatError::Invalid(format!(
+            "{} stray bytes after the planes",
+            raw.len() - pos
+        )));
+    }
+    Ok(mode)
+}
+
 /// The per-tile polynomial degrees of one segment: luma (plane 0) and chroma (planes 1–2).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TileMap {
@@ -542,6 +588,39 @@ impl<'t> CoeffReader<'t> {
                     tile_size: ts,
                 });
             }
+            Ok(())
+        })
+    }
+
+    /// Parses bubble plane (`k`, `p`) — in stream order, as [`CoeffReader::read_plane`] —
+    /// as far as its quantised blocks, for a decoder that dequantises and transforms them
+    /// elsewhere (the GPU player): calls `each(step, blocks)` once, the blocks being those
+    /// of the tiles whose degree reaches `k`, tile by tile in raster order, each tile's
+    /// blocks as [`plane::tile_blocks`] orders them.
+    pub fn read_plane_blocks(
+        &mut self,
+        k: u8,
+        p: usize,
+        each: impl FnOnce(f32, &plane::Blocks),
+    ) -> Result<()> {
+        if (k, p) != self.next || k > self.dmax {
+            return Err(FormatError::Invalid(format!(
+                "bubble plane {k}/{p} read out of order (next is {}/{})",
+                self.next.0, self.next.1
+            )));
+        }
+        self.next = if p + 1 < self.planes {
+            (k, p + 1)
+        } else {
+            (k + 1, 0)
+        };
+        let per = self.tile_size / N;
+        let step = self.steps[(k as usize - 2) * self.planes + p];
+        let members = self.tiles.degrees(p).iter().filter(|&&d| d >= k).count();
+        let (raw, pos) = (&self.raw, &mut self.pos);
+        BLOCKS.with_borrow_mut(|q| {
+            plane::read_blocks(raw, pos, members * per * per, q)?;
+            each(step, q);
             Ok(())
         })
     }

@@ -1,44 +1,43 @@
-//! The decoder: takes chunks from the ring, verifies them, keeps the keyframe chain, and
-//! when a segment's keyframes, tile map and coefficients are all there decodes it into a
-//! staging buffer laid out for upload (one f32 layer per plane of each term).
+//! The decoder: takes chunks from the ring, verifies them, parses keyframes and
+//! coefficients down to their quantised terms, and when a segment's keyframes, tile map
+//! and coefficients are all there packs what the GPU needs for it into a box
+//! ([`SegmentData`]): the keyframe steps that bring the GPU's keyframe slots to the
+//! segment's K_s and K_{s+1}, and the segment's bubble planes, all in the compact form of
+//! `compact.rs`. Dequantisation, the inverse DCT and predicted keyframes are the GPU's.
 //!
 //! A damaged chunk (checksum mismatch, or the source failed) is reported and makes what
 //! depends on it undecodable: a keyframe breaks the predicted chain until the next intra
 //! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
 //! first segment whose parts are all good.
 
+use crate::compact::{bubble_scale, Compact, PlaneSpan};
 use crate::cpu_time::thread_cpu_ns;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::index::Layout;
-use vbim_format::plane::Plane;
+use vbim_format::plane;
 use vbim_format::reader::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
-/// Where the decoder writes a segment's layers.
-#[cfg_attr(not(feature = "bench"), allow(dead_code))]
-pub enum Staging {
-    /// Host memory (the decoder measured on its own, `vbim bench decode`).
-    Host(Vec<f32>),
-    /// A GPU staging buffer (`MAP_WRITE | COPY_SRC`), mapped while the decoder thread
-    /// writes into it: the render thread then only unmaps it and records one copy into
-    /// the texture slot — the bytes are never touched on the render thread.
-    Mapped(wgpu::Buffer),
+/// One keyframe for the GPU to build in a keyframe slot: from zeros (intra) or from the
+/// keyframe before it, which the slot built last holds (predicted).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KeyStep {
+    /// The keyframe's number.
+    pub number: usize,
+    /// Coded on its own.
+    pub intra: bool,
+    /// Its first plane in [`SegmentData::planes`] (`channels` planes follow).
+    pub plane: usize,
 }
 
-/// A decoded segment, ready to upload: for each term (0 = K_s, 1 = K_{s+1}, 2.. = bubble
-/// coefficients) one f32 layer per plane of the coded domain (Y, Co, Cg, or Y alone), of
-/// width × height texels, rows `row_pitch` bytes apart (a multiple of 256, as
-/// buffer-to-texture copies require). Planar, so that the decoder copies plane rows as
-/// they are instead of interleaving texels, and no padding channel is uploaded.
+/// A segment ready for the GPU: the keyframe steps (in order; the last two built are
+/// its K_s and K_{s+1}) and its bubble planes, as records and terms in `data`.
 ///
-/// Term 0 is left unwritten (`k0_staged == false`) when the segment the decoder sent just
-/// before was the one this segment follows: its closing keyframe is this segment's opening
-/// one, and the render thread has it on the GPU already (it uploads every segment's
-/// closing keyframe, even one it drops). That saves a term's copy per segment, on the
-/// decoder and on the GPU.
+/// After the first segment, a box holds one step, K_{s+1}: the segment the decoder sent
+/// before closed on K_s, which the GPU built then. After a seek, damage or a failed
+/// segment it holds the chain from the last intra keyframe (the GPU cannot have it).
 pub struct SegmentData {
     /// The seek generation it was decoded in: a box from before a seek is not shown.
     pub generation: u32,
@@ -50,46 +49,35 @@ pub struct SegmentData {
     pub start: u32,
     /// The frame after its last (its closing keyframe's frame).
     pub end: u32,
-    /// Terms (each `channels` layers).
+    /// Terms: 2 keyframes + bubbles (1 + the segment's highest degree).
     pub layers: usize,
     /// Keyframe numbers of K_s and K_{s+1}.
     pub keys: [usize; 2],
-    /// Whether term 0 (K_s) is in staging; if not, the GPU has it from the segment before.
-    pub k0_staged: bool,
-    /// Where its layers are written.
-    pub staging: Staging,
-    /// Set once a `Mapped` staging buffer is mapped again after its upload (by wgpu's
-    /// callback): only then may it go back to the decoder.
-    pub mapped: Arc<AtomicBool>,
-    /// CPU nanoseconds (the decoding thread's own clock) spent on this segment and its
-    /// closing keyframe.
+    /// Keyframes to build, in order.
+    pub steps: Vec<KeyStep>,
+    /// The segment's tile map or coefficients were damaged: the box carries its
+    /// keyframes only, so that the GPU's chain goes on to the next segment.
+    pub keys_only: bool,
+    /// Every plane: the steps' keyframe planes, then bubble planes from `bubbles` on
+    /// (term k ≥ 2, plane p at `bubbles + (k − 2)·channels + p`).
+    pub(crate) planes: Vec<PlaneSpan>,
+    /// Where the bubble planes start in `planes`.
+    pub bubbles: usize,
+    pub(crate) data: Compact,
+    /// CPU nanoseconds (the decoding thread's own clock) spent on this segment and the
+    /// keyframes it carries.
     pub decode_ns: u64,
-    /// For each bubble layer's tiles (`[(term · channels + plane) · tiles + tile]`):
-    /// whether staging holds zeros there. A staging buffer keeps its contents from one
-    /// segment to the next (it is mapped again, not replaced), and a tile whose degree
-    /// is below a term is zero in that term's layer: such a tile is written only when the
-    /// box's last segment left something else there. On the cloudy benchmark days 44–52%
-    /// of the bubble layers' tiles are zero.
-    zero_tiles: Vec<bool>,
 }
 
-/// Bytes between rows of a staging layer (one plane of one term).
-pub fn row_pitch(width: u32) -> u64 {
-    (width as u64 * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64)
-}
-
-/// Bytes of one staging layer (one plane of one term).
-pub fn layer_bytes(h: &Header) -> u64 {
-    row_pitch(h.width) * h.height as u64
-}
-
-/// Bytes of one term: all its planes.
-pub fn term_bytes(h: &Header) -> u64 {
-    h.channels as u64 * layer_bytes(h)
+impl Default for SegmentData {
+    fn default() -> Self {
+        SegmentData::new()
+    }
 }
 
 impl SegmentData {
-    fn empty(staging: Staging) -> SegmentData {
+    /// An empty box (its buffers grow to the largest segment and are then reused).
+    pub fn new() -> SegmentData {
         SegmentData {
             generation: 0,
             pass: 0,
@@ -98,40 +86,25 @@ impl SegmentData {
             end: 0,
             layers: 0,
             keys: [0, 0],
-            k0_staged: true,
-            staging,
-            mapped: Arc::new(AtomicBool::new(true)),
+            steps: Vec::new(),
+            keys_only: false,
+            planes: Vec::new(),
+            bubbles: 0,
+            data: Compact::default(),
             decode_ns: 0,
-            // Both kinds of staging start zeroed (a new buffer is zero-initialised).
-            zero_tiles: Vec::new(),
         }
     }
 
-    /// A host-memory staging box (for measuring the decoder without a GPU).
+    /// Bytes the GPU upload of this box moves (records and terms).
     #[cfg_attr(not(feature = "bench"), allow(dead_code))]
-    pub fn with_capacity(h: &Header) -> SegmentData {
-        let layers = h.max_degree as usize + 1;
-        let floats = layers as u64 * term_bytes(h) / 4;
-        SegmentData::empty(Staging::Host(Vec::with_capacity(floats as usize)))
+    pub fn bytes(&self) -> u64 {
+        self.data.bytes()
     }
 
-    /// A staging box backed by a mapped GPU buffer large enough for any segment of `h`.
-    pub fn mapped(h: &Header, device: &wgpu::Device) -> SegmentData {
-        let layers = h.max_degree as u64 + 1;
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vbim staging"),
-            size: layers * term_bytes(h),
-            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: true,
-        });
-        SegmentData::empty(Staging::Mapped(buffer))
-    }
-
-    /// Bytes of the segment's layers written into staging (at most what its upload
-    /// copies).
+    /// Number of planes (keyframe and bubble) the box holds.
     #[cfg_attr(not(feature = "bench"), allow(dead_code))]
-    pub fn bytes(&self, h: &Header) -> u64 {
-        (self.layers as u64 - !self.k0_staged as u64) * term_bytes(h)
+    pub fn plane_count(&self) -> usize {
+        self.planes.len()
     }
 }
 
@@ -145,34 +118,31 @@ pub enum Event {
     Damaged(String),
 }
 
-/// A keyframe the decoder has.
-#[derive(Clone)]
-enum Key {
-    Planes(Arc<Vec<Plane>>),
-    /// Its planes became the next predicted keyframe's. Only done when the segment it
-    /// opens will not stage it: the segment before, which it closes, was filled, and the
-    /// render thread has it on the GPU.
-    OnGpu,
+/// A keyframe parsed to its terms.
+struct KeyData {
+    intra: bool,
+    planes: Vec<PlaneSpan>,
+    data: Compact,
 }
 
-/// The decoder's state between chunks: the keyframe chain, and each segment's parts
-/// until all have arrived.
+/// The decoder's state between chunks: parsed keyframes back to the last intra one, and
+/// each segment's parts until all have arrived.
 pub struct DecoderCore {
     header: Header,
     layout: Layout,
     entries: Vec<IndexEntry>,
-    /// Keyframes still needed: by keyframe number.
-    keys: Vec<Option<Key>>,
+    /// Parsed keyframes still needed, by number: keyframe 0 (a loop's end), and the chain
+    /// from the last intra keyframe on.
+    keys: Vec<Option<Arc<KeyData>>>,
     tiles: Vec<Option<TileMap>>,
     coeffs: Vec<Option<Vec<u8>>>,
-    /// The last keyframe decoded, for the predicted chain.
-    chain: Option<(usize, Arc<Vec<Plane>>)>,
-    /// Keyframe decoding time not yet charged to a segment.
+    /// Segments whose tile map or coefficients were damaged: sent with their keyframes
+    /// only, once the keyframe after their closing one shows they are complete.
+    lost: Vec<bool>,
+    /// Keyframe parsing time not yet charged to a segment.
     key_ns: u64,
-    /// Scratch band for decoding bubble planes row band by row band.
-    band: Plane,
-    /// Generation and closing keyframe of the last segment filled: the next segment,
-    /// if it opens with that keyframe, need not stage it again.
+    /// Generation and closing keyframe of the last segment filled: the GPU built that
+    /// keyframe last, so the next segment, if it opens with it, need not carry its chain.
     last_closing: Option<(u32, usize)>,
 }
 
@@ -185,12 +155,11 @@ impl DecoderCore {
             header,
             layout,
             entries,
-            keys: vec![None; k],
+            keys: (0..k).map(|_| None).collect(),
             tiles: vec![None; s],
             coeffs: vec![None; s],
-            chain: None,
+            lost: vec![false; s],
             key_ns: 0,
-            band: Plane::zeros(0, 0),
             last_closing: None,
         }
     }
@@ -200,7 +169,7 @@ impl DecoderCore {
         self.keys.iter_mut().for_each(|k| *k = None);
         self.tiles.iter_mut().for_each(|k| *k = None);
         self.coeffs.iter_mut().for_each(|k| *k = None);
-        self.chain = None;
+        self.lost.iter_mut().for_each(|l| *l = false);
         self.last_closing = None;
     }
 
@@ -226,54 +195,62 @@ impl DecoderCore {
         let n = e.number as usize;
         match e.kind {
             ChunkKind::Keyframe => {
-                // The reference: K_{n−1}, if the chain holds it. When the segment K_{n−1}
-                // opens will not stage it (the segment before, closed by it, was filled),
-                // no one needs its planes on the CPU any more — except keyframe 0, kept
-                // for a loop's end — and K_n is built in them instead of a copy.
-                let (mut owned, mut held) = (None, None);
-                match self.chain.take() {
-                    Some((k, p)) if k + 1 == n => {
-                        if k > 0 && self.last_closing.is_some_and(|(_, c)| c == k) {
-                            self.keys[k] = Some(Key::OnGpu);
-                        }
-                        // Unique unless `keys[k]` still holds it.
-                        match Arc::try_unwrap(p) {
-                            Ok(planes) => owned = Some(planes),
-                            Err(p) => held = Some(p),
-                        }
-                    }
-                    other => self.chain = other,
-                }
-                let prev = match (owned, &held) {
-                    // The index says intra: no reference, whatever the payload says (the
-                    // CPU decoder starts such a keyframe without one too, so a payload
-                    // that disagrees is refused by both).
-                    _ if e.is_intra() => chunk::Reference::None,
-                    (Some(planes), _) => chunk::Reference::Owned(planes),
-                    (None, Some(p)) => chunk::Reference::Borrowed(&p[..]),
-                    (None, None) if !e.is_intra() => {
-                        // The chain is broken (damage, or we started mid-stream): wait for
-                        // an intra keyframe.
-                        self.keys[n] = None;
-                        return Event::Nothing;
-                    }
-                    (None, None) => chunk::Reference::None,
-                };
                 let t = thread_cpu_ns();
-                match chunk::read_keyframe_from(&self.header, bytes, prev) {
-                    Ok(planes) => {
-                        self.key_ns += thread_cpu_ns() - t;
-                        let planes = Arc::new(planes);
-                        self.keys[n] = Some(Key::Planes(planes.clone()));
-                        self.chain = Some((n, planes));
-                        // Drop keyframes no segment ahead needs (keyframe 0 stays for a loop).
-                        for k in 1..n.saturating_sub(1) {
-                            self.keys[k] = None;
-                        }
-                        self.ready_after_key(n)
-                    }
-                    Err(err) => self.fail(i, &err.to_string()),
+                let mut data = Compact::default();
+                let mut planes = Vec::with_capacity(self.header.channels as usize);
+                let (w, _) = chunk::padded_size(&self.header);
+                let bw = w / vbim_format::dct::N;
+                let mode = chunk::keyframe_blocks(&self.header, bytes, |_, step, blocks| {
+                    let at = (0..blocks.len()).map(|b| (b % bw, b / bw));
+                    planes.push(data.push_plane(step, blocks, at));
+                });
+                self.key_ns += thread_cpu_ns() - t;
+                let mode = match mode {
+                    Ok(m) => m,
+                    Err(err) => return self.fail(i, &err.to_string()),
+                };
+                let intra = mode == chunk::MODE_INTRA;
+                // The index says intra: the payload must not need a reference (the CPU
+                // decoder refuses such a keyframe too).
+                if e.is_intra() && !intra {
+                    return self.fail(i, "predicted keyframe without its reference");
                 }
+                if !intra && (n == 0 || self.keys[n - 1].is_none()) {
+                    // The chain is broken (damage, or we started mid-stream): wait for an
+                    // intra keyframe.
+                    self.keys[n] = None;
+                    return Event::Nothing;
+                }
+                self.keys[n] = Some(Arc::new(KeyData {
+                    intra,
+                    planes,
+                    data,
+                }));
+                // Segments before n − 1 are complete or lost by now (their chunks come
+                // first). Segment n − 1 may need its chain from the last intra keyframe
+                // before it: keep that one on (and keyframe 0, for a loop's end).
+                let last_intra = (0..n)
+                    .rev()
+                    .find(|&k| self.keys[k].as_ref().is_some_and(|key| key.intra))
+                    .unwrap_or(0);
+                for k in 1..last_intra {
+                    self.keys[k] = None;
+                }
+                for s in 0..n.saturating_sub(1) {
+                    self.tiles[s] = None;
+                    self.coeffs[s] = None;
+                }
+                // Segment n − 2 lost its tile map or coefficients: its chunks are all
+                // past, so send its keyframes alone now.
+                if n >= 2 && self.lost[n - 2] && self.keys[n - 2].is_some() {
+                    return Event::Ready(n - 2);
+                }
+                // A keyframe can complete the segment it closes (the last of a looping
+                // file is closed by keyframe 0, which arrives first).
+                if n > 0 && self.complete(n - 1) {
+                    return Event::Ready(n - 1);
+                }
+                Event::Nothing
             }
             ChunkKind::TileMap => {
                 let len = e.last_frame - e.first_frame;
@@ -297,27 +274,29 @@ impl DecoderCore {
         }
     }
 
-    fn ready_after_key(&self, k: usize) -> Event {
-        // A keyframe can complete the segment it closes (the last of a looping file is
-        // closed by keyframe 0, which arrives first).
-        if k > 0 && self.complete(k - 1) {
-            return Event::Ready(k - 1);
+    /// The intra keyframe that starts the chain to keyframe `k`, if the decoder holds
+    /// every keyframe of it.
+    fn chain_start(&self, k: usize) -> Option<usize> {
+        let mut j = k;
+        loop {
+            let key = self.keys.get(j)?.as_ref()?;
+            if key.intra {
+                return Some(j);
+            }
+            j = j.checked_sub(1)?;
         }
-        Event::Nothing
     }
 
     fn fail(&mut self, i: usize, what: &str) -> Event {
         let e = self.entries[i];
         let n = e.number as usize;
         match e.kind {
-            ChunkKind::Keyframe => {
-                self.keys[n] = None;
-                if self.chain.as_ref().is_some_and(|(k, _)| *k + 1 == n) {
-                    self.chain = None;
-                }
+            ChunkKind::Keyframe => self.keys[n] = None,
+            ChunkKind::TileMap | ChunkKind::Coefficients => {
+                self.tiles[n] = None;
+                self.coeffs[n] = None;
+                self.lost[n] = true;
             }
-            ChunkKind::TileMap => self.tiles[n] = None,
-            ChunkKind::Coefficients => self.coeffs[n] = None,
             _ => {}
         }
         self.damaged(i, what)
@@ -331,7 +310,7 @@ impl DecoderCore {
             && self.coeffs[s].is_some()
     }
 
-    /// Decodes segment `s` into `out`. Its coefficient bytes are consumed.
+    /// Packs segment `s` into `out`. Its coefficient bytes are consumed.
     pub fn fill(
         &mut self,
         s: usize,
@@ -340,24 +319,41 @@ impl DecoderCore {
         out: &mut SegmentData,
     ) -> Result<(), String> {
         let t0 = thread_cpu_ns();
-        // wgpu panics on writing a buffer that is not mapped: a box only comes back to
-        // the decoder once its buffer is mapped again, so this is a broken contract.
-        if matches!(out.staging, Staging::Mapped(_)) && !out.mapped.load(Ordering::Acquire) {
-            return Err("staging buffer not mapped".into());
-        }
         let h = &self.header;
+        let ch = h.channels as usize;
         let k1n = self.layout.keyframe_of_boundary(s + 1);
-        let k0_staged = self.last_closing != Some((generation, s));
-        let planes = |k: usize| match &self.keys[k] {
-            Some(Key::Planes(p)) => Ok(p.clone()),
-            Some(Key::OnGpu) => Err(format!("keyframe {k} is no longer decoded")),
-            None => Err(format!("keyframe {k} missing")),
+        out.steps.clear();
+        out.planes.clear();
+        out.data.clear();
+        // The keyframes: K_{s+1} alone when the GPU built K_s last, else the chain.
+        let first = if self.last_closing == Some((generation, s)) {
+            None
+        } else {
+            Some(
+                self.chain_start(s)
+                    .ok_or_else(|| format!("keyframe {s}: its chain is not decoded"))?,
+            )
         };
-        let k1 = planes(k1n)?;
-        // K_s only when it is staged.
-        let k0 = if k0_staged { Some(planes(s)?) } else { None };
-        // Whatever happens below, the box's old contents are not what it is about to hold.
+        // Whatever happens below, the GPU will not have built what this box closes on.
         self.last_closing = None;
+        let chain = first.map_or(0..0, |f| f..s + 1);
+        for k in chain.chain(std::iter::once(k1n)) {
+            let key = self.keys[k]
+                .as_ref()
+                .ok_or_else(|| format!("keyframe {k} missing"))?;
+            out.steps.push(KeyStep {
+                number: k,
+                intra: key.intra,
+                plane: out.planes.len(),
+            });
+            out.data.push_copy(&key.data, &key.planes, &mut out.planes);
+        }
+        out.keys_only = std::mem::take(&mut self.lost[s]);
+        out.bubbles = out.planes.len();
+        if out.keys_only {
+            self.finish_box(s, generation, pass, 2, k1n, t0, out);
+            return Ok(());
+        }
         let tiles = self.tiles[s].take().ok_or("tile map missing")?;
         let bytes = self.coeffs[s].take().ok_or("coefficients missing")?;
         let context = |e: vbim_format::FormatError| {
@@ -369,48 +365,42 @@ impl DecoderCore {
             )
         };
         let mut bubbles = chunk::CoeffReader::open(h, &bytes, &tiles).map_err(context)?;
-        let (w, ht) = (h.width as usize, h.height as usize);
-        let ch = h.channels as usize;
         let layers = 1 + bubbles.max_degree() as usize;
-        let stride = row_pitch(h.width) as usize / 4;
-        let layer = layer_bytes(h) as usize;
-        let tile_count = h.tile_count();
-        let flags = (h.max_degree as usize + 1) * ch * tile_count;
-        if out.zero_tiles.len() != flags {
-            out.zero_tiles = vec![true; flags];
-        }
-        // Term `l`, plane `p` is staging layer l·channels + p: each row is written as it is
-        // (the padding columns and rows of the coded planes are left out).
-        for (l, key) in [(0, k0.as_ref()), (1, Some(&k1))] {
-            let Some(key) = key else {
-                continue;
-            };
-            for (p, plane) in key.iter().enumerate().take(ch) {
-                with_layer(&mut out.staging, (l * ch + p) * layer, layer, |o| {
-                    for y in 0..ht {
-                        o.copy(y * stride, &plane.data[y * plane.w..y * plane.w + w]);
-                    }
-                    Ok(())
-                })?;
-            }
-        }
-        let band = &mut self.band;
-        for l in 2..layers {
+        let (tx, ts) = (h.tiles_x() as usize, h.tile_size as usize);
+        for k in 2..layers {
             for p in 0..ch {
-                let li = l * ch + p;
-                let zero = &mut out.zero_tiles[li * tile_count..(li + 1) * tile_count];
-                with_layer(&mut out.staging, li * layer, layer, |o| {
-                    bubbles
-                        .read_plane(l as u8, p, band, |r| {
-                            write_tile_row(o, (w, ht, stride), &r, zero)
-                        })
-                        .map_err(context)
-                })?;
+                let degrees = tiles.degrees(p);
+                let data = &mut out.data;
+                let planes = &mut out.planes;
+                bubbles
+                    .read_plane_blocks(k as u8, p, |step, blocks| {
+                        let at = (0..degrees.len())
+                            .filter(|&t| degrees[t] >= k as u8)
+                            .flat_map(|t| plane::tile_blocks(t, tx, ts));
+                        let mut span = data.push_plane(step, blocks, at);
+                        span.scale = bubble_scale(span.bound);
+                        planes.push(span);
+                    })
+                    .map_err(context)?;
             }
         }
         bubbles.finish().map_err(context)?;
-        // The box goes to the render thread next.
-        fence_streaming();
+        self.finish_box(s, generation, pass, layers, k1n, t0, out);
+        Ok(())
+    }
+
+    /// Fills in a packed box's description and forgets what the GPU now has.
+    #[allow(clippy::too_many_arguments)]
+    fn finish_box(
+        &mut self,
+        s: usize,
+        generation: u32,
+        pass: u32,
+        layers: usize,
+        k1n: usize,
+        t0: u64,
+        out: &mut SegmentData,
+    ) {
         out.generation = generation;
         out.pass = pass;
         out.index = s;
@@ -418,160 +408,13 @@ impl DecoderCore {
         out.end = self.layout.boundaries[s + 1];
         out.layers = layers;
         out.keys = [s, k1n];
-        out.k0_staged = k0_staged;
         self.last_closing = Some((generation, k1n));
         out.decode_ns = thread_cpu_ns() - t0 + std::mem::take(&mut self.key_ns);
-        // Keyframe s is no longer needed unless it is keyframe 0 (a loop's end).
-        if s > 0 {
-            self.keys[s] = None;
-        }
-        Ok(())
-    }
-}
-
-/// One staging layer open for writing, addressed in texels. Write-only: a mapped
-/// buffer may be write-combined memory, where reading back is slow.
-enum LayerOut<'a> {
-    Host(&'a mut [f32]),
-    Mapped(wgpu::BufferViewMut),
-}
-
-impl LayerOut<'_> {
-    fn copy(&mut self, at: usize, src: &[f32]) {
-        match self {
-            // SAFETY: both ranges are `src.len()` f32 values, bounds-checked by `slice`.
-            LayerOut::Host(t) => unsafe { copy_streaming(t[at..at + src.len()].as_mut_ptr(), src) },
-            LayerOut::Mapped(v) => unsafe {
-                let mut range = v.slice(at * 4..(at + src.len()) * 4);
-                copy_streaming(range.as_raw_ptr().cast::<f32>().as_ptr(), src)
-            },
-        }
-    }
-
-    fn zero(&mut self, at: usize, len: usize) {
-        match self {
-            LayerOut::Host(t) => t[at..at + len].fill(0.0),
-            // All-zero bytes are 0.0f32.
-            LayerOut::Mapped(v) => v.slice(at * 4..(at + len) * 4).fill(0),
-        }
-    }
-}
-
-/// Copies `src` to `dst` with non-temporal stores: the decoder never reads staging back,
-/// so its lines need not displace the band, the keyframes and the coefficient stream from
-/// the cache, nor be read from memory before being overwritten.
-///
-/// # Safety
-/// `dst` must be valid for writing `src.len()` f32 values (any alignment).
-unsafe fn copy_streaming(dst: *mut f32, src: &[f32]) {
-    let n = src.len();
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: every write is inside dst[0..n] (the caller's promise); the streamed ones are
-    // 16-byte aligned (`head` aligns them, steps are 16 bytes); SSE is part of x86-64.
-    unsafe {
-        use std::arch::x86_64::{_mm_loadu_ps, _mm_stream_ps};
-        let head = dst.align_offset(16).min(n);
-        let body = head + (n - head) / 4 * 4;
-        for i in (0..head).chain(body..n) {
-            dst.add(i).write_unaligned(src[i]);
-        }
-        for i in (head..body).step_by(4) {
-            _mm_stream_ps(dst.add(i), _mm_loadu_ps(src.as_ptr().add(i)));
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    // SAFETY: as the caller promises; bytes have no alignment.
-    unsafe {
-        std::ptr::copy_nonoverlapping(src.as_ptr().cast::<u8>(), dst.cast::<u8>(), n * 4)
-    };
-}
-
-/// Non-temporal stores are weakly ordered: this makes the ones before it visible before
-/// any store after it (such as handing the staging box to another thread).
-fn fence_streaming() {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: SSE is part of x86-64.
-    unsafe {
-        std::arch::x86_64::_mm_sfence()
-    };
-}
-
-/// Runs `write` on the staging layer at byte `base` (`len` bytes).
-fn with_layer(
-    staging: &mut Staging,
-    base: usize,
-    len: usize,
-    write: impl FnOnce(&mut LayerOut) -> Result<(), String>,
-) -> Result<(), String> {
-    match staging {
-        Staging::Host(v) => {
-            if v.len() < (base + len) / 4 {
-                v.resize((base + len) / 4, 0.0);
-            }
-            write(&mut LayerOut::Host(&mut v[base / 4..(base + len) / 4]))
-        }
-        Staging::Mapped(b) => {
-            // Mapped: `fill` refuses a box whose `mapped` flag is not set.
-            let view = b.get_mapped_range_mut(base as u64..(base + len) as u64);
-            write(&mut LayerOut::Mapped(view))
-        }
-    }
-}
-
-/// Writes one row of tiles of a bubble layer into staging (`w` × `ht` texels, rows
-/// `stride` texels apart, the coded plane's padding left out): member tiles from the band,
-/// zeros where the layer's last contents were not zero, nothing where they were.
-fn write_tile_row(
-    out: &mut LayerOut,
-    (w, ht, stride): (usize, usize, usize),
-    r: &chunk::TileRows<'_>,
-    zero: &mut [bool],
-) {
-    let ts = r.tile_size;
-    let rows = r.y0..(r.y0 + ts).min(ht);
-    let first_tile = (r.y0 / ts) * r.degrees.len();
-    let zero = &mut zero[first_tile..first_tile + r.degrees.len()];
-    for (y, x0, values) in r.member_rows() {
-        if y < ht && x0 < w {
-            out.copy(y * stride + x0, &values[..values.len().min(w - x0)]);
-        }
-    }
-    for (a, b) in chunk::spans(zero.len(), |t| !r.is_member(t) && !zero[t]) {
-        let (a, b) = ((a * ts).min(w), (b * ts).min(w));
-        for y in rows.clone() {
-            out.zero(y * stride + a, b - a);
-        }
-    }
-    for (t, z) in zero.iter_mut().enumerate() {
-        *z = !r.is_member(t);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::{copy_streaming, fence_streaming};
-
-    #[test]
-    fn streaming_copy_writes_exactly_its_range_at_any_alignment() {
-        let src: Vec<f32> = (0..67).map(|i| i as f32 * 1.5 - 20.0).collect();
-        for offset in 0..5 {
-            for len in [0, 1, 3, 4, 5, 8, 13, 16, 31, 60] {
-                // Destination bytes start at `offset` bytes past a 16-byte boundary (so
-                // also at addresses f32 would not be aligned to), between guard values.
-                let mut bytes = vec![0xA5u8; 16 * 20];
-                let base = bytes.as_ptr().align_offset(16) + offset;
-                // SAFETY: base + 4·len lies inside `bytes` (16·20 bytes).
-                unsafe {
-                    copy_streaming(bytes.as_mut_ptr().add(base).cast::<f32>(), &src[..len]);
-                }
-                fence_streaming();
-                let got: Vec<f32> = bytes[base..base + 4 * len]
-                    .chunks_exact(4)
-                    .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-                    .collect();
-                assert_eq!(got, &src[..len], "offset {offset}, length {len}");
-                assert!(bytes[..base].iter().all(|&b| b == 0xA5));
-                assert!(bytes[base + 4 * len..].iter().all(|&b| b == 0xA5));
+        // The GPU holds the chain up to K_{s+1} now: only keyframe 0 (a loop's end) and
+        // the ones ahead are needed here.
+        for k in 1..=s {
+            if k != k1n {
+                self.keys[k] = None;
             }
         }
     }

@@ -1,18 +1,19 @@
-//! The GPU side: a pool of keyframe slots and two slots of bubble terms (double
-//! buffering: what is being displayed is never written), the display texture the renderer
-//! samples, a held copy for catch-up blending, and the compute pass that evaluates the
-//! basis per texel.
+//! The GPU side: what stays resident — two keyframe slots (R32Float, one layer per
+//! plane), one set of bubble planes (16-bit signed integers with a scale per plane, two
+//! to an R32Uint texel), the display texture the renderer samples and a held copy for
+//! catch-up blending — and the passes that fill them: the segment decode of
+//! `decode.wgsl` (dequantisation, inverse DCT, predicted keyframes) and the per-frame
+//! reconstruction of `reconstruct.wgsl`.
 //!
-//! Keyframes live apart from the bubbles because consecutive segments share one: K_{s+1}
-//! closes segment s and opens s + 1, so it is uploaded once. Four keyframe slots are
-//! enough for any upload: the segment on screen holds at most two, the one being uploaded
-//! needs at most two more.
+//! Keyframes stay f32: a predicted keyframe is built from the one before it, and a 16-bit
+//! keyframe would add its rounding at every step of the chain (docs/FORMAT.md, "What the
+//! GPU decoder guarantees"). Bubble planes are rebuilt for every segment from their
+//! coefficients, so they carry one rounding, well inside the protocol's bound.
 
 use wgpu::util::DeviceExt;
 
-use std::sync::atomic::Ordering;
-
-use crate::decoder::{row_pitch, SegmentData, Staging};
+use crate::decoder::SegmentData;
+use crate::slots::MAX_BUBBLE_PLANES;
 
 /// Finds an adapter and opens a device without a window. With no adapter, the error says
 /// what to install.
@@ -32,7 +33,8 @@ pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("vbim"),
         required_features: wgpu::Features::empty(),
-        required_limits: adapter.limits(),
+        // WebGPU's defaults, not the adapter's maxima: what Bevy and browsers give.
+        required_limits: wgpu::Limits::default(),
         ..Default::default()
     }))
     .map_err(|e| {
@@ -59,115 +61,187 @@ pub(crate) struct Params {
     pub key0: u32,
     pub key1: u32,
     pub _pad: [u32; 2],
+    /// Scale of each bubble plane.
+    pub scales: [f32; MAX_BUBBLE_PLANES],
 }
 
-/// Keyframe slots on the GPU.
-pub(crate) const KEY_SLOTS: usize = 4;
-
-impl UploadPlan {
-    /// Bytes the upload copies from staging.
-    pub fn bytes(&self, seg: &SegmentData, h: &vbim_format::Header) -> u64 {
-        let bubbles = self.bubbles.map_or(0, |_| seg.layers.saturating_sub(2));
-        let terms = self.key0.is_some() as usize + self.key1.is_some() as usize + bubbles;
-        terms as u64 * crate::decoder::term_bytes(h)
-    }
+/// One decode pass's parameters (`Job` in decode.wgsl), at a 256-byte stride in a uniform
+/// buffer bound with a dynamic offset.
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct Job {
+    step: f32,
+    inv_scale: f32,
+    records: u32,
+    count: u32,
+    terms: u32,
+    terms_end: u32,
+    layer: u32,
+    groups_x: u32,
+    size: [u32; 2],
+    _pad: [u32; 2],
 }
 
-/// What one upload copies from a segment's staging buffer: its K_s and K_{s+1} into
-/// keyframe slots (`None`: already there, or not wanted), its bubbles into a bubble slot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct UploadPlan {
-    pub key0: Option<usize>,
-    pub key1: Option<usize>,
-    pub bubbles: Option<usize>,
+const JOB_STRIDE: u64 = 256;
+/// Bytes [`Gpu::decode`] uploads for `seg`: its records and terms, and one job's
+/// parameters per plane decoded (and the bubbles' zero pass).
+pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool) -> u64 {
+    let planes = if bubbles {
+        seg.planes.len()
+    } else {
+        seg.bubbles
+    };
+    seg.data.bytes() + (planes as u64 + 1) * JOB_STRIDE
+}
+
+/// Workgroups per dispatch row: WebGPU's default limit per dimension.
+const GROUPS_X: u32 = 65_535;
+
+/// The DCT basis and zig-zag order (`Tables` in decode.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Tables {
+    basis: [f32; 64],
+    zigzag: [u32; 64],
 }
 
 pub(crate) struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
+    key_add: wgpu::ComputePipeline,
+    key_zero: wgpu::ComputePipeline,
+    bubble_write: wgpu::ComputePipeline,
+    bubble_zero: wgpu::ComputePipeline,
+    key_layout: wgpu::BindGroupLayout,
+    bubble_layout: wgpu::BindGroupLayout,
     params: wgpu::Buffer,
+    tables: wgpu::Buffer,
+    /// Decode pass parameters, `JOB_STRIDE` apart; grows with the longest keyframe chain.
+    jobs: wgpu::Buffer,
+    /// A segment's records and terms; grows with the largest segment.
+    words: wgpu::Buffer,
     keys: wgpu::Texture,
-    slots: [wgpu::Texture; 2],
+    /// One view per keyframe layer (slot · channels + plane), for the decode passes.
+    key_views: Vec<wgpu::TextureView>,
+    bubbles: wgpu::Texture,
+    bubble_view: wgpu::TextureView,
     display: wgpu::Texture,
     pub display_view: wgpu::TextureView,
     held: wgpu::Texture,
-    bind_groups: [wgpu::BindGroup; 2],
+    bind_group: wgpu::BindGroup,
+    /// Decode bind groups (per keyframe layer, and the bubbles'): remade when `words` or
+    /// `jobs` grow.
+    key_groups: Vec<wgpu::BindGroup>,
+    bubble_group: Option<wgpu::BindGroup>,
+    /// Scratch for the jobs of one segment (kept: no allocation per segment).
+    job_bytes: Vec<u8>,
     pub width: u32,
     pub height: u32,
-    pub max_layers: u32,
+    /// The padded planes' size (whole tiles).
+    plane: [u32; 2],
     pub channels: u32,
-    /// Bytes of the textures and buffers above (the budget's figure).
-    pub bytes: u64,
+}
+
+/// Bytes a buffer of at least `need` bytes is given: a power of two (at least 64 KiB), so
+/// that it grows a few times at the start of a stream and then never.
+fn grown(need: u64) -> u64 {
+    need.max(1 << 16).next_power_of_two()
 }
 
 impl Gpu {
-    /// `max_layers` terms of `channels` planes each.
+    /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
+    /// planes of `plane` texels (whole tiles), with bubble terms up to `max_degree`.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        width: u32,
-        height: u32,
-        max_layers: u32,
+        (width, height): (u32, u32),
+        plane: [u32; 2],
+        max_degree: u32,
         channels: u32,
     ) -> Gpu {
-        let size = wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        };
-        // One R32Float layer per plane of each term: term k, plane p is layer
-        // k·channels + p of its texture (the staging layout, copied as it is).
-        let array = |label: &'static str, terms: u32| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: terms.max(1) * channels,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::R32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            })
-        };
-        let keys = array("vbim keyframes", KEY_SLOTS as u32);
-        let bubbles = max_layers.saturating_sub(2);
-        let slots = [
-            array("vbim bubbles A", bubbles),
-            array("vbim bubbles B", bubbles),
-        ];
-        let image = |label: &str, usage: wgpu::TextureUsages| {
+        use wgpu::TextureUsages as U;
+        let texture = |label: &str, size: wgpu::Extent3d, format, usage| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size,
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba16Float,
+                format,
                 usage,
                 view_formats: &[],
             })
         };
-        use wgpu::TextureUsages as U;
-        let display = image(
+        let extent = |width, height, depth_or_array_layers| wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers,
+        };
+        let keys = texture(
+            "vbim keyframes",
+            extent(plane[0], plane[1], 2 * channels),
+            wgpu::TextureFormat::R32Float,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC | U::COPY_DST,
+        );
+        let bubble_layers = (max_degree.saturating_sub(1) * channels).max(1);
+        let bubbles = texture(
+            "vbim bubbles",
+            extent(plane[0] / 2, plane[1], bubble_layers),
+            wgpu::TextureFormat::R32Uint,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING,
+        );
+        let display = texture(
             "vbim lightmap",
+            extent(width, height, 1),
+            wgpu::TextureFormat::Rgba16Float,
             U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
         );
-        let held = image("vbim held", U::TEXTURE_BINDING | U::COPY_DST);
+        let held = texture(
+            "vbim held",
+            extent(width, height, 1),
+            wgpu::TextureFormat::Rgba16Float,
+            U::TEXTURE_BINDING | U::COPY_DST,
+        );
         let display_view = display.create_view(&Default::default());
         let held_view = held.create_view(&Default::default());
+        let array_view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let keys_view = array_view(&keys);
+        let bubble_view = array_view(&bubbles);
+        let key_views = (0..2 * channels)
+            .map(|l| {
+                keys.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: l,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("vbim params"),
             contents: bytemuck::bytes_of(&Params::zeroed_params()),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("vbim reconstruct"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("reconstruct.wgsl").into()),
+        let mut t = Tables {
+            basis: [0.0; 64],
+            zigzag: [0; 64],
+        };
+        for (k, row) in vbim_format::dct::basis().iter().enumerate() {
+            t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
+        }
+        for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
+            t.zigzag[i] = z as u32;
+        }
+        let tables = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vbim dct tables"),
+            contents: bytemuck::bytes_of(&t),
+            usage: wgpu::BufferUsages::UNIFORM,
         });
         let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
             binding,
@@ -175,33 +249,25 @@ impl Gpu {
             ty,
             count: None,
         };
+        let uniform = |dynamic| wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        };
+        let sampled = |sample_type| wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        };
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vbim"),
+            label: Some("vbim reconstruct"),
             entries: &[
-                entry(
-                    0,
-                    wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                ),
+                entry(0, uniform(false)),
                 entry(
                     1,
-                    wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
+                    sampled(wgpu::TextureSampleType::Float { filterable: false }),
                 ),
-                entry(
-                    2,
-                    wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                ),
+                entry(2, sampled(wgpu::TextureSampleType::Uint)),
                 entry(
                     3,
                     wgpu::BindingType::Texture {
@@ -220,161 +286,379 @@ impl Gpu {
                 ),
             ],
         });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("vbim"),
-            bind_group_layouts: &[Some(&bgl)],
-            immediate_size: 0,
+        let words_entry = entry(
+            2,
+            wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+        );
+        let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim keyframe decode"),
+            entries: &[
+                entry(0, uniform(true)),
+                entry(1, uniform(false)),
+                words_entry,
+                entry(
+                    3,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::ReadWrite,
+                        format: wgpu::TextureFormat::R32Float,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                ),
+            ],
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim bubble decode"),
+            entries: &[
+                entry(0, uniform(true)),
+                entry(1, uniform(false)),
+                words_entry,
+                entry(
+                    4,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::R32Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                    },
+                ),
+            ],
+        });
+        let pipeline_for =
+            |label: &str, source: &str, layout: &wgpu::BindGroupLayout, entry: &str| {
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(label),
+                    source: wgpu::ShaderSource::Wgsl(source.into()),
+                });
+                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some(label),
+                    bind_group_layouts: &[Some(layout)],
+                    immediate_size: 0,
+                });
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(label),
+                    layout: Some(&layout),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+            };
+        let decode = include_str!("decode.wgsl");
+        let pipeline = pipeline_for(
+            "vbim reconstruct",
+            include_str!("reconstruct.wgsl"),
+            &bgl,
+            "main",
+        );
+        let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
+        let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
+        let bubble_write =
+            pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
+        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("vbim reconstruct"),
-            layout: Some(&layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
+            layout: &bgl,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&keys_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&bubble_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&held_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&display_view),
+                },
+            ],
         });
-        let array_view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
+        let buffer = |label: &str, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
             })
         };
-        let keys_view = array_view(&keys);
-        let bind = |t: &wgpu::Texture| {
-            let v = array_view(t);
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("vbim"),
-                layout: &bgl,
+        use wgpu::BufferUsages as B;
+        let jobs = buffer(
+            "vbim decode jobs",
+            64 * JOB_STRIDE,
+            B::UNIFORM | B::COPY_DST,
+        );
+        let words = buffer("vbim coefficients", grown(0), B::STORAGE | B::COPY_DST);
+        let mut gpu = Gpu {
+            device: device.clone(),
+            queue: queue.clone(),
+            pipeline,
+            key_add,
+            key_zero,
+            bubble_write,
+            bubble_zero,
+            key_layout,
+            bubble_layout,
+            params,
+            tables,
+            jobs,
+            words,
+            keys,
+            key_views,
+            bubbles,
+            bubble_view,
+            display,
+            display_view,
+            held,
+            bind_group,
+            key_groups: Vec::new(),
+            bubble_group: None,
+            job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
+            width,
+            height,
+            plane,
+            channels,
+        };
+        gpu.bind_decode();
+        gpu
+    }
+
+    /// (Re)makes the decode passes' bind groups over the current `jobs` and `words`.
+    fn bind_decode(&mut self) {
+        let job = wgpu::BufferBinding {
+            buffer: &self.jobs,
+            offset: 0,
+            size: wgpu::BufferSize::new(std::mem::size_of::<Job>() as u64),
+        };
+        let group = |layout: &wgpu::BindGroupLayout, binding: u32, view: &wgpu::TextureView| {
+            self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vbim decode"),
+                layout,
                 entries: &[
                     wgpu::BindGroupEntry {
                         binding: 0,
-                        resource: params.as_entire_binding(),
+                        resource: wgpu::BindingResource::Buffer(job.clone()),
                     },
                     wgpu::BindGroupEntry {
                         binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&keys_view),
+                        resource: self.tables.as_entire_binding(),
                     },
                     wgpu::BindGroupEntry {
                         binding: 2,
-                        resource: wgpu::BindingResource::TextureView(&v),
+                        resource: self.words.as_entire_binding(),
                     },
                     wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: wgpu::BindingResource::TextureView(&held_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: wgpu::BindingResource::TextureView(&display_view),
+                        binding,
+                        resource: wgpu::BindingResource::TextureView(view),
                     },
                 ],
             })
         };
-        let bind_groups = [bind(&slots[0]), bind(&slots[1])];
-        let bytes = [&keys, &slots[0], &slots[1], &display, &held]
+        self.key_groups = self
+            .key_views
+            .iter()
+            .map(|v| group(&self.key_layout, 3, v))
+            .collect();
+        self.bubble_group = Some(group(&self.bubble_layout, 4, &self.bubble_view));
+    }
+
+    /// Bytes of the textures and buffers the player holds on the GPU (the budget's figure).
+    pub fn bytes(&self) -> u64 {
+        [&self.keys, &self.bubbles, &self.display, &self.held]
             .iter()
             .map(|t| texture_bytes(t))
             .sum::<u64>()
-            + params.size();
-        Gpu {
-            device: device.clone(),
-            queue: queue.clone(),
-            pipeline,
-            params,
-            keys,
-            slots,
-            display,
-            display_view,
-            held,
-            bind_groups,
-            width,
-            height,
-            max_layers,
-            channels,
-            bytes,
-        }
+            + self.params.size()
+            + self.tables.size()
+            + self.jobs.size()
+            + self.words.size()
     }
 
-    /// Records the copies of a decoded segment that `plan` asks for: its keyframes into
-    /// keyframe slots, its bubble terms into a bubble slot. A mapped staging buffer is
-    /// unmapped and copied by the GPU (nothing but the commands is recorded here); host
-    /// staging goes through `write_texture`. ([`UploadPlan::bytes`] is what it moves.)
-    pub fn upload(&self, enc: &mut wgpu::CommandEncoder, plan: UploadPlan, seg: &SegmentData) {
-        let (w, h) = (self.width, self.height);
-        let ch = self.channels;
-        let pitch = row_pitch(w) as u32;
-        let term = pitch as u64 * h as u64 * ch as u64;
-        // (staging term, texture, first layer, terms)
-        let mut copies: [Option<(u32, &wgpu::Texture, u32, u32)>; 3] = [None; 3];
-        if let Some(k) = plan.key0 {
-            copies[0] = Some((0, &self.keys, k as u32 * ch, 1));
+    /// Whether a segment's coefficients fit one storage binding of this device.
+    pub fn fits(&self, seg: &SegmentData) -> Result<(), String> {
+        let limit = self.device.limits().max_storage_buffer_binding_size;
+        let need = seg.data.bytes();
+        if need > limit {
+            return Err(format!(
+                "segment {}: {need} bytes of coefficients, more than one storage binding holds ({limit})",
+                seg.index
+            ));
         }
-        if let Some(k) = plan.key1 {
-            copies[1] = Some((1, &self.keys, k as u32 * ch, 1));
+        Ok(())
+    }
+
+    /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn in
+    /// alternating keyframe slots starting with `first_slot`, then (with `bubbles`) its
+    /// bubble planes. The records and terms go through `Queue::write_buffer`, which takes
+    /// effect at the queue's next submission: the one that carries `enc`. Returns the
+    /// bytes uploaded.
+    pub fn decode(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        seg: &SegmentData,
+        first_slot: usize,
+        bubbles: bool,
+    ) -> u64 {
+        let ch = self.channels as usize;
+        let rec_bytes = seg.data.records.len() as u64 * 4;
+        let term_bytes = seg.data.terms.len().next_multiple_of(2) as u64 * 2;
+        let words = rec_bytes + term_bytes;
+        let planes = if bubbles {
+            seg.planes.len()
+        } else {
+            seg.bubbles
+        };
+        // One job per plane, and one for the bubbles' zero pass.
+        let jobs = (planes as u64 + 1) * JOB_STRIDE;
+        debug_assert_eq!(upload_bytes(seg, bubbles), words + jobs);
+        if words > self.words.size() || jobs > self.jobs.size() {
+            use wgpu::BufferUsages as B;
+            if words > self.words.size() {
+                self.words = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("vbim coefficients"),
+                    size: grown(words),
+                    usage: B::STORAGE | B::COPY_DST,
+                    mapped_at_creation: false,
+                });
+            }
+            if jobs > self.jobs.size() {
+                self.jobs = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("vbim decode jobs"),
+                    size: grown(jobs),
+                    usage: B::UNIFORM | B::COPY_DST,
+                    mapped_at_creation: false,
+                });
+            }
+            self.bind_decode();
         }
-        if let Some(b) = plan.bubbles {
-            let n = (seg.layers.min(self.max_layers as usize) as u32).saturating_sub(2);
-            if n > 0 {
-                copies[2] = Some((2, &self.slots[b], 0, n));
+        if rec_bytes > 0 {
+            self.queue
+                .write_buffer(&self.words, 0, bytemuck::cast_slice(&seg.data.records));
+        }
+        if !seg.data.terms.is_empty() {
+            let t: &[u8] = bytemuck::cast_slice(&seg.data.terms);
+            if t.len().is_multiple_of(4) {
+                self.queue.write_buffer(&self.words, rec_bytes, t);
+            } else {
+                // Whole words only: the last entry goes with a zero beside it.
+                let (body, last) = t.split_at(t.len() - 2);
+                if !body.is_empty() {
+                    self.queue.write_buffer(&self.words, rec_bytes, body);
+                }
+                let tail = [last[0], last[1], 0, 0];
+                self.queue
+                    .write_buffer(&self.words, rec_bytes + body.len() as u64, &tail);
             }
         }
-        if let Staging::Mapped(buffer) = &seg.staging {
-            buffer.unmap();
-        }
-        for (t, texture, layer, terms) in copies.into_iter().flatten() {
-            let layout = wgpu::TexelCopyBufferLayout {
-                offset: t as u64 * term,
-                bytes_per_row: Some(pitch),
-                rows_per_image: Some(h),
-            };
-            let dst = wgpu::TexelCopyTextureInfo {
-                texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d {
-                    x: 0,
-                    y: 0,
-                    z: layer,
+        // Terms are addressed in u16 entries from the start of `words`.
+        let term0 = (rec_bytes / 2) as u32;
+        let (pw, ph) = (self.plane[0], self.plane[1]);
+        self.job_bytes.clear();
+        for (i, span) in seg.planes[..planes].iter().enumerate() {
+            let job = Job {
+                step: span.step,
+                inv_scale: if span.scale > 0.0 {
+                    1.0 / span.scale
+                } else {
+                    0.0
                 },
-                aspect: wgpu::TextureAspect::All,
+                records: span.records,
+                count: span.count,
+                terms: term0 + span.terms,
+                terms_end: term0 + span.terms_end,
+                // A bubble plane's layer (a keyframe pass writes the layer it is bound to).
+                layer: i.saturating_sub(seg.bubbles) as u32,
+                groups_x: GROUPS_X,
+                size: [pw, ph],
+                _pad: [0; 2],
             };
-            let size = wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: terms * ch,
-            };
-            match &seg.staging {
-                Staging::Mapped(buffer) => {
-                    enc.copy_buffer_to_texture(
-                        wgpu::TexelCopyBufferInfo { buffer, layout },
-                        dst,
-                        size,
+            self.push_job(job);
+        }
+        let bubble_layers = ((seg.layers.saturating_sub(2)) * ch) as u32;
+        self.push_job(Job {
+            layer: bubble_layers,
+            size: [pw / 2, ph],
+            ..Job::default()
+        });
+        self.queue.write_buffer(&self.jobs, 0, &self.job_bytes);
+        let dispatch = |pass: &mut wgpu::ComputePass, count: u32| {
+            if count > 0 {
+                pass.dispatch_workgroups(count.min(GROUPS_X), count.div_ceil(GROUPS_X), 1);
+            }
+        };
+        let mut slot = first_slot;
+        for st in &seg.steps {
+            for p in 0..ch {
+                let layer = slot * ch + p;
+                let plane = st.plane + p;
+                let offset = (plane as u64 * JOB_STRIDE) as u32;
+                if !st.intra {
+                    // Start from the reference keyframe: the other slot's plane.
+                    let from = (1 - slot) * ch + p;
+                    let at = |z: usize| wgpu::TexelCopyTextureInfo {
+                        texture: &self.keys,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d {
+                            x: 0,
+                            y: 0,
+                            z: z as u32,
+                        },
+                        aspect: wgpu::TextureAspect::All,
+                    };
+                    enc.copy_texture_to_texture(
+                        at(from),
+                        at(layer),
+                        wgpu::Extent3d {
+                            width: pw,
+                            height: ph,
+                            depth_or_array_layers: 1,
+                        },
                     );
                 }
-                Staging::Host(data) => {
-                    let b: &[u8] = bytemuck::cast_slice(data);
-                    let at = layout.offset as usize;
-                    let data = &b[at..at + (terms as u64 * term) as usize];
-                    let layout = wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        ..layout
-                    };
-                    self.queue.write_texture(dst, data, layout, size);
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_bind_group(0, &self.key_groups[layer], &[offset]);
+                if st.intra {
+                    pass.set_pipeline(&self.key_zero);
+                    pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
                 }
+                pass.set_pipeline(&self.key_add);
+                dispatch(&mut pass, seg.planes[plane].count);
+            }
+            slot = 1 - slot;
+        }
+        if bubbles {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            let zero = (planes as u64 * JOB_STRIDE) as u32;
+            let bubble_group = self.bubble_group.as_ref().expect("made at creation");
+            pass.set_bind_group(0, bubble_group, &[zero]);
+            pass.set_pipeline(&self.bubble_zero);
+            if bubble_layers > 0 {
+                pass.dispatch_workgroups((pw / 2).div_ceil(8), ph.div_ceil(8), bubble_layers);
+            }
+            pass.set_pipeline(&self.bubble_write);
+            for (i, span) in seg.planes[seg.bubbles..planes].iter().enumerate() {
+                let plane = seg.bubbles + i;
+                pass.set_bind_group(0, bubble_group, &[(plane as u64 * JOB_STRIDE) as u32]);
+                dispatch(&mut pass, span.count);
             }
         }
+        words + self.job_bytes.len() as u64
     }
 
-    /// After the submission that copied `seg`, asks for its staging buffer to be mapped
-    /// again; `seg.mapped` turns true when it is (wgpu calls back from a later submit or
-    /// poll), and only then may the decoder write into it.
-    pub fn remap(&self, seg: &SegmentData) {
-        if let Staging::Mapped(buffer) = &seg.staging {
-            seg.mapped.store(false, Ordering::Release);
-            let flag = seg.mapped.clone();
-            buffer.map_async(wgpu::MapMode::Write, .., move |_| {
-                // On failure too: the decoder then reports that the buffer is not mapped.
-                flag.store(true, Ordering::Release);
-            });
-        }
+    fn push_job(&mut self, job: Job) {
+        let at = self.job_bytes.len();
+        self.job_bytes.extend_from_slice(bytemuck::bytes_of(&job));
+        self.job_bytes.resize(at + JOB_STRIDE as usize, 0);
     }
 
     /// Keeps what is on screen for blending (at the start of a catch-up).
@@ -390,34 +674,22 @@ impl Gpu {
         );
     }
 
-    /// Records one frame into `enc`: an optional segment upload, then the reconstruction
-    /// from bubble slot `eval.0` and the keyframe slots in its parameters. The parameters
-    /// go through `Queue::write_buffer`, which takes effect at the queue's next submission:
-    /// the one that carries `enc`. An uploaded staging buffer may be mapped again
-    /// ([`Gpu::remap`]) only after that submission.
-    pub fn record(
-        &self,
-        enc: &mut wgpu::CommandEncoder,
-        upload: Option<(UploadPlan, &SegmentData)>,
-        eval: Option<(usize, &Params, bool)>,
-    ) {
-        if let Some((plan, seg)) = upload {
-            self.upload(enc, plan, seg);
+    /// Records the reconstruction of one frame into `enc`. The parameters go through
+    /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
+    /// that carries `enc`.
+    pub fn reconstruct(&self, enc: &mut wgpu::CommandEncoder, params: &Params, hold_first: bool) {
+        self.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+        if hold_first {
+            self.hold(enc);
         }
-        if let Some((slot, params, hold_first)) = eval {
-            self.queue
-                .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
-            if hold_first {
-                self.hold(enc);
-            }
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: None,
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_groups[slot], &[]);
-            pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
-        }
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: None,
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
     }
 
     /// Reads the display texture back (RGBA, f32). For tests and error measurement.

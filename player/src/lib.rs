@@ -5,9 +5,10 @@
 //! nanoseconds, and sample [`Player::view`] — the reconstructed lightmap, linear RGB in an
 //! `Rgba16Float` texture the player owns. Reading and decoding run on two threads of their
 //! own (paper 001's figure 13): a reader pulls chunks into a bounded ring of compressed
-//! bytes, reading ahead and wrapping at the loop point; a decoder writes them into one of
-//! two mapped GPU staging buffers; the render thread only records the copy into the GPU
-//! slot it is not sampling and evaluates the time basis in a compute shader. When data is
+//! bytes, reading ahead and wrapping at the loop point; a decoder parses them down to
+//! their quantised coefficients; the render thread uploads a segment's coefficients when
+//! it goes on screen, and compute shaders dequantise, inverse-transform and build the
+//! predicted keyframes into compact resident textures, then evaluate the time basis. When data is
 //! late the chosen [`Policy`] decides what is shown, and every frame's [`FrameRecord`] says
 //! how bandwidth turned into drift. A renderer that submits once per frame records the
 //! player's work into its own encoder with [`Player::advance_into`] and calls
@@ -16,13 +17,15 @@
 //! The player depends on `vbim-format` only, never on the encoder.
 //!
 //! Modules, in the order a chunk meets them: `reader` (source → ring), `decoder` (ring →
-//! staging), `pipeline` (the two threads and the staging boxes between them), `slots`
-//! (which GPU slot holds what), `gpu` (copies and the reconstruction shader), `display`
+//! parsed coefficients, in the form of `compact`), `pipeline` (the two threads and the
+//! boxes between them), `slots` (what the GPU holds), `gpu` (the decode and
+//! reconstruction passes), `display`
 //! (the clock and the stall policies), `player` (the render thread's frame);
 //! `config`, `record` and `stats` are its inputs and outputs.
 #![deny(missing_docs)]
 
 mod clock;
+mod compact;
 mod config;
 mod cpu_time;
 mod decoder;
@@ -50,9 +53,7 @@ pub use throttle::{Stall, Throttle};
 /// that check what it stages. Not a stable API.
 #[cfg(feature = "bench")]
 pub mod bench {
-    pub use crate::decoder::{
-        layer_bytes, row_pitch, term_bytes, DecoderCore, Event, SegmentData, Staging,
-    };
+    pub use crate::decoder::{DecoderCore, Event, KeyStep, SegmentData};
 }
 
 /// Why a player could not be opened or stopped.

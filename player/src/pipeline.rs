@@ -1,5 +1,6 @@
 //! The pipeline behind the render thread: a reader and a decoder joined by a ring of
-//! compressed bytes, and two staging boxes that travel decoder → render thread → decoder.
+//! compressed bytes, and two boxes of parsed coefficients that travel decoder → render
+//! thread → decoder.
 //! They run on threads of their own (paper 001's figure 13), or are stepped inline inside
 //! `advance` so that simulated time is deterministic.
 
@@ -27,9 +28,15 @@ use crate::PlayerError;
 /// the loop's start must be read again first.
 type Restart = (usize, u32, Option<usize>);
 
-/// The reader and decoder, and the way staging boxes go back to the decoder.
+/// Boxes of parsed segments between the decoder and the render thread: one waiting for
+/// its time on the render thread, one ready behind it, one being filled. (The segment on
+/// screen needs none: its data is on the GPU.) Two boxes held one decoded segment less
+/// ahead and dropped half again as many segments after a stall.
+const BOXES: usize = 3;
+
+/// The reader and decoder, and the way boxes go back to the decoder.
 pub(crate) struct Pipeline<R> {
-    /// Staging boxes going back to the decoder after upload.
+    /// Boxes going back to the decoder after upload.
     recycle: Sender<Box<SegmentData>>,
     mode: Mode<R>,
 }
@@ -60,8 +67,7 @@ enum Mode<R> {
 }
 
 impl<R: Read + Seek + Send + 'static> Pipeline<R> {
-    /// Starts reading `src` into a ring of `ring_bytes`, with two staging boxes mapped on
-    /// `device`.
+    /// Starts reading `src` into a ring of `ring_bytes`, with two boxes for the decoder.
     pub fn start(
         src: R,
         header: &Header,
@@ -69,21 +75,20 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
         entries: &[IndexEntry],
         cfg: &PlayerConfig,
         ring_bytes: usize,
-        device: &wgpu::Device,
     ) -> Result<Self, PlayerError> {
         let (prod, cons) = HeapRb::<u8>::new(ring_bytes).split();
         let mut reader_core = ReaderCore::new(src, entries.to_vec(), header.looping, cfg.throttle);
         let decoder = DecoderCore::new(header.clone(), layout.clone(), entries.to_vec());
-        let (recycle_tx, recycle_rx) = bounded::<Box<SegmentData>>(2);
-        for _ in 0..2 {
+        let (recycle_tx, recycle_rx) = bounded::<Box<SegmentData>>(BOXES);
+        for _ in 0..BOXES {
             recycle_tx
-                .send(Box::new(SegmentData::mapped(header, device)))
+                .send(Box::new(SegmentData::new()))
                 .expect("room for two");
         }
         let mode = if cfg.threaded {
             let stop = Arc::new(AtomicBool::new(false));
             let bytes_read = Arc::new(AtomicU64::new(0));
-            let (ready_tx, ready_rx) = bounded::<Box<SegmentData>>(2);
+            let (ready_tx, ready_rx) = bounded::<Box<SegmentData>>(BOXES);
             let (err_tx, err_rx) = bounded::<String>(64);
             let (seek_tx, seek_rx) = bounded::<Restart>(16);
             let (throttle_tx, throttle_rx) = bounded::<Throttle>(16);
@@ -135,7 +140,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 cons,
                 decoder: Box::new(decoder),
                 msg: Vec::with_capacity(1 << 20),
-                ready: Vec::with_capacity(2),
+                ready: Vec::with_capacity(BOXES),
                 pool,
                 read_seen: 0,
             }
@@ -144,11 +149,6 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
             recycle: recycle_tx,
             mode,
         })
-    }
-
-    /// Whether the reader and decoder are stepped inside `advance` (simulated time).
-    pub fn is_inline(&self) -> bool {
-        matches!(self.mode, Mode::Inline { .. })
     }
 
     /// Moves the pipeline forward to playback time `now` (inline mode) and takes a decoded
@@ -210,7 +210,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                         progress = true;
                         budget -= 1;
                     }
-                    // Decode only while a staging buffer is free (the render thread returns
+                    // Decode only while a box is free (the render thread returns
                     // them after upload): the natural back-pressure of double buffering.
                     while !pool.is_empty() {
                         let Some(m) = pop_message(cons, msg) else {
@@ -255,7 +255,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
         decode_ns
     }
 
-    /// Gives a staging box back to the decoder.
+    /// Gives a box back to the decoder.
     pub fn give_back(&mut self, b: Box<SegmentData>) {
         match &mut self.mode {
             Mode::Inline { pool, .. } => pool.push(b),
@@ -417,7 +417,7 @@ fn decoder_loop(
         }
         match core.take(m.chunk as usize, m.ok.then_some(&msg[..])) {
             Event::Ready(s) => {
-                // A free staging buffer: the render thread has uploaded one.
+                // A free box: the render thread has uploaded one.
                 let mut b = loop {
                     if let Some(b) = spare.take() {
                         break b;

@@ -4,7 +4,6 @@
 //! slot bookkeeping in `slots.rs`.
 
 use std::io::{Read, Seek};
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use vbim_format::index::Layout;
@@ -13,10 +12,10 @@ use vbim_format::{Header, IndexEntry, Reader, Transfer};
 use crate::config::{PlayerConfig, Policy};
 use crate::decoder::SegmentData;
 use crate::display::{Display, Step};
-use crate::gpu::{Gpu, Params, UploadPlan};
+use crate::gpu::{Gpu, Params};
 use crate::pipeline::Pipeline;
 use crate::record::{Frame, FrameRecord, FrameState, Totals};
-use crate::slots::{Arrival, Placement, SlotTable};
+use crate::slots::{place, KeySlots, Placement, Resident, MAX_BUBBLE_PLANES};
 use crate::throttle::Throttle;
 use crate::time::{frames_f64, ticks_to_media, MediaTime, ONE_FRAME};
 use crate::PlayerError;
@@ -31,17 +30,18 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     entries: Vec<IndexEntry>,
     gpu: Gpu,
     pipeline: Pipeline<R>,
-    /// The box received but not yet uploaded.
+    /// The box received but not yet decoded on the GPU.
     incoming: Option<Box<SegmentData>>,
-    /// A box planned for upload this frame, and what to copy from it.
-    to_upload: Option<(UploadPlan, Box<SegmentData>)>,
-    /// Uploaded boxes whose staging buffers are not mapped again yet (at most two; the
-    /// boxes themselves travel back to the decoder, so they stay boxed).
-    #[allow(clippy::vec_box)]
-    remapping: Vec<Box<SegmentData>>,
-    /// The box uploaded by the last `render_into`, until its encoder is submitted.
-    awaiting_submit: Option<Box<SegmentData>>,
-    slots: SlotTable,
+    /// A box to decode on the GPU this frame: from which keyframe slot its keyframe
+    /// steps start, and whether its bubbles are wanted (not for a dropped segment).
+    to_decode: Option<(Box<SegmentData>, usize, bool)>,
+    /// What the keyframe slots hold.
+    keys: KeySlots,
+    /// The segment the GPU can evaluate (its bubbles and keyframes are resident).
+    resident: Option<Resident>,
+    /// The end of the last segment whose keyframes the GPU built (shown or dropped): how
+    /// far the data has come.
+    known_end: MediaTime,
     /// The display's clock and stall policy.
     display: Display,
     /// Playback clock, ns.
@@ -116,15 +116,25 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         }
         let ring_bytes = ring_capacity(&header, &entries, &cfg);
         let preroll = preroll_ns(&header, &cfg);
+        if header.max_degree as usize - 1 > MAX_BUBBLE_PLANES / 3 {
+            return Err(PlayerError::Format(vbim_format::FormatError::Invalid(
+                format!(
+                    "degree {} is beyond the player's {}",
+                    header.max_degree,
+                    MAX_BUBBLE_PLANES / 3 + 1
+                ),
+            )));
+        }
+        let (pw, ph) = vbim_format::chunk::padded_size(&header);
         let gpu = Gpu::new(
             device,
             queue,
-            header.width,
-            header.height,
-            header.max_degree as u32 + 1,
+            (header.width, header.height),
+            [pw as u32, ph as u32],
+            header.max_degree as u32,
             header.channels as u32,
         );
-        let pipeline = Pipeline::start(src, &header, &layout, &entries, &cfg, ring_bytes, device)?;
+        let pipeline = Pipeline::start(src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         Ok(Player {
             header,
@@ -133,10 +143,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             gpu,
             pipeline,
             incoming: None,
-            to_upload: None,
-            remapping: Vec::with_capacity(2),
-            awaiting_submit: None,
-            slots: SlotTable::default(),
+            to_decode: None,
+            keys: KeySlots::default(),
+            resident: None,
+            known_end: 0,
             display,
             ticks: 0,
             generation: 0,
@@ -163,12 +173,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.gpu.read_display()
     }
 
-    /// Bytes of GPU memory the player holds: its textures (keyframe and bubble slots, the
-    /// lightmap and its held copy), its uniform buffer and its two staging buffers. The
-    /// runtime's budget is stated in these bytes per texel of the lightmap.
+    /// Bytes of GPU memory the player holds: its textures (the two keyframe slots, the
+    /// bubble planes, the lightmap and its held copy) and its buffers (the coefficients of
+    /// the segment being decoded, the passes' parameters). The runtime's budget is stated
+    /// in these bytes per texel of the lightmap.
     pub fn gpu_bytes(&self) -> u64 {
-        self.gpu.bytes
-            + 2 * (self.header.max_degree as u64 + 1) * crate::decoder::term_bytes(&self.header)
+        self.gpu.bytes()
     }
 
     /// Blocks until the GPU has finished what was submitted (to time the GPU's share).
@@ -211,46 +221,70 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.header.frame_count as u64
     }
 
-    /// Puts an arrived segment in the bubble slot that is not on screen and its
-    /// keyframes in keyframe slots the other bubble slot does not use, or drops it when it
-    /// is already in the past (keeping its closing keyframe: the decoder does not stage it
-    /// again for the next segment). Returns the bytes its upload will copy.
+    /// Decides what an arrived segment gets (see `slots.rs`): shown (its keyframes built
+    /// and bubbles decoded on the GPU this frame), kept for later, or dropped (its
+    /// keyframes still built: the next segment starts from them). Returns the bytes its
+    /// upload will move.
     fn take_incoming(&mut self, b: Box<SegmentData>, pos: MediaTime, n: u64) -> u64 {
         let base = b.pass as u64 * n;
-        let arrival = Arrival {
-            index: b.index,
-            start: base + ((b.start as u64) << 32),
-            end: base + ((b.end as u64) << 32),
-            layers: b.layers,
-            keyframes: b.keys,
-            k0_staged: b.k0_staged,
-        };
-        let plan = match self.slots.place(&arrival, pos, n, self.header.looping) {
-            Placement::NotYet => {
-                self.incoming = Some(b);
-                return 0;
-            }
-            Placement::Upload(plan) => {
-                self.totals.segments_uploaded += 1;
-                Some(plan)
-            }
-            Placement::Dropped(plan) => {
-                self.totals.segments_dropped += 1;
-                plan
-            }
-        };
-        match plan {
-            Some(plan) => {
-                let bytes = plan.bytes(&b, &self.header);
-                // Copied to the GPU in `render`, after which the box goes back to the decoder.
-                self.to_upload = Some((plan, b));
-                bytes
-            }
-            None => {
-                self.pipeline.give_back(b);
-                0
-            }
+        let range = (
+            base + ((b.start as u64) << 32),
+            base + ((b.end as u64) << 32),
+        );
+        let placement = place(self.resident.as_ref(), range, pos, n, self.header.looping);
+        if placement == Placement::NotYet {
+            self.incoming = Some(b);
+            return 0;
         }
+        // A segment whose own data was damaged cannot be shown; its keyframes are built.
+        let placement = match placement {
+            Placement::Show if b.keys_only => Placement::Drop,
+            p => p,
+        };
+        if let Err(e) = self.gpu.fits(&b) {
+            self.totals.damaged += 1;
+            self.totals.last_error = Some(e);
+            self.pipeline.give_back(b);
+            return 0;
+        }
+        let first_slot = self.keys.next_slot();
+        if let Err(k) = self.keys.build(&b.steps) {
+            // The GPU's keyframes are not the ones this segment's chain continues (it
+            // follows one that never reached the GPU): read again from an intra keyframe.
+            self.totals.last_error = Some(format!(
+                "keyframe {k} does not follow the keyframes on the GPU: re-reading from an intra keyframe"
+            ));
+            self.pipeline.give_back(b);
+            self.seek(pos);
+            return 0;
+        }
+        // The keyframe slots changed: the segment on screen is gone.
+        self.resident = None;
+        self.known_end = range.1;
+        let show = placement == Placement::Show;
+        if show {
+            if let Some(keys) = self.keys.slots_of(b.keys) {
+                let mut scales = [0f32; MAX_BUBBLE_PLANES];
+                for (s, p) in scales.iter_mut().zip(&b.planes[b.bubbles..]) {
+                    *s = p.scale;
+                }
+                self.resident = Some(Resident {
+                    index: b.index,
+                    start: range.0,
+                    end: range.1,
+                    layers: b.layers,
+                    keys,
+                    scales,
+                });
+                self.totals.segments_uploaded += 1;
+            }
+        } else {
+            self.totals.segments_dropped += 1;
+        }
+        let show = show && self.resident.is_some();
+        let bytes = crate::gpu::upload_bytes(&b, show);
+        self.to_decode = Some((b, first_slot, show));
+        bytes
     }
 
     /// Advances playback by `dt` ns and renders the lightmap for the new time: [`plan`]
@@ -267,8 +301,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         r
     }
 
-    /// Records the GPU work of a planned frame: the upload of a newly arrived segment into
-    /// the slot not on screen, and the reconstruction, in one submission of its own.
+    /// Records the GPU work of a planned frame: the decode of a newly arrived segment, and
+    /// the reconstruction, in one submission of its own.
     pub fn render(&mut self, frame: &Frame) {
         let mut encoder = self
             .gpu
@@ -281,9 +315,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 
     /// Like [`advance`], but records the frame's GPU work into the caller's encoder instead
     /// of submitting a command buffer of its own, for a renderer that submits once per
-    /// frame. Submit `encoder` (it must be the next submission on the player's queue that
-    /// carries this work), then call [`submitted`] before the next frame: only then can
-    /// the staging buffer of an upload be mapped again for the decoder.
+    /// frame. Submit `encoder` before the next frame: it must be the next submission on
+    /// the player's queue, because the frame's coefficients and parameters go through
+    /// `Queue::write_buffer`, which lands at the next submission. Then call [`submitted`].
     ///
     /// [`advance`]: Player::advance
     /// [`submitted`]: Player::submitted
@@ -298,51 +332,27 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 
     /// Records the GPU work of a planned frame into `encoder` (see [`Player::advance_into`]).
     pub fn render_into(&mut self, frame: &Frame, encoder: &mut wgpu::CommandEncoder) {
-        // A caller that skipped `submitted` for the last frame: catch up now (right if
-        // that frame's encoder was submitted, which the contract asks for).
-        self.submitted();
-        let up = self.to_upload.take();
-        let eval = frame.eval.as_ref().map(|(s, p, h)| (*s, p, *h));
-        self.gpu
-            .record(encoder, up.as_ref().map(|(plan, b)| (*plan, &**b)), eval);
-        self.awaiting_submit = up.map(|(_, b)| b);
+        if let Some((b, first_slot, bubbles)) = self.to_decode.take() {
+            self.gpu.decode(encoder, &b, first_slot, bubbles);
+            // Its bytes are with wgpu now (`write_buffer` copies them): the box goes back.
+            self.pipeline.give_back(b);
+        }
+        if let Some((params, hold_first)) = &frame.eval {
+            self.gpu.reconstruct(encoder, params, *hold_first);
+        }
     }
 
     /// Tells the player that the encoder of its last [`Player::advance_into`] was
-    /// submitted: a staging buffer it uploaded from is mapped again, and goes back to the
-    /// decoder once it is. Harmless when there is nothing to do.
-    pub fn submitted(&mut self) {
-        if let Some(b) = self.awaiting_submit.take() {
-            self.gpu.remap(&b);
-            if self.pipeline.is_inline() {
-                // Simulated time stays deterministic: the buffer is mapped again now
-                // rather than at whichever later submission the GPU happens to finish by.
-                self.gpu.wait();
-            }
-            self.remapping.push(b);
-            self.return_mapped();
-        }
-    }
-
-    /// Gives the staging boxes whose buffers are mapped again back to the decoder.
-    fn return_mapped(&mut self) {
-        let mut i = 0;
-        while i < self.remapping.len() {
-            if self.remapping[i].mapped.load(Ordering::Acquire) {
-                let b = self.remapping.swap_remove(i);
-                self.pipeline.give_back(b);
-            } else {
-                i += 1;
-            }
-        }
-    }
+    /// submitted. The player needs nothing after a submission since it decodes on the GPU
+    /// (its uploads go through `Queue::write_buffer`); renderers written for earlier
+    /// versions, which had to call it, keep working unchanged.
+    pub fn submitted(&mut self) {}
 
     /// The CPU side of a frame, allocation-free: takes what the reader and decoder
     /// produced, decides what is shown under the policy, and computes the shader's weights.
     pub fn plan(&mut self, dt: u64) -> Frame {
         let t0 = Instant::now();
         self.ticks += dt;
-        self.return_mapped();
         let decode_ns = self
             .pipeline
             .pump(self.ticks, &mut self.incoming, &mut self.totals);
@@ -363,27 +373,24 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 uploaded = self.take_incoming(b, pos, n);
             }
         }
-        let missing = self.slots.show_covering(pos).is_none();
+        let missing = !self.resident.is_some_and(|r| r.start <= pos && pos < r.end);
         if missing && self.ticks.saturating_sub(self.last_seek) > SEEK_COOLDOWN_NS {
             // So far behind that reading on would only deliver the past: re-synchronise
             // at the last intra keyframe before the target.
-            if pos.saturating_sub(self.slots.known_end()) > (n / 2).max(ONE_FRAME) {
+            if pos.saturating_sub(self.known_end) > (n / 2).max(ONE_FRAME) {
                 self.last_seek = self.ticks;
                 self.seek(pos);
             }
         }
         // Data late: hold the end of what is on screen (its closing keyframe), or its start.
         let held = missing.then(|| {
-            self.slots.shown().and_then(|s| self.slots.slot(s)).map_or(
-                self.display.last_shown(),
-                |r| {
-                    if pos >= r.end {
-                        r.end - 1
-                    } else {
-                        r.start
-                    }
-                },
-            )
+            self.resident.map_or(self.display.last_shown(), |r| {
+                if pos >= r.end {
+                    r.end - 1
+                } else {
+                    r.start
+                }
+            })
         });
         let (state, shown, alpha, hold_first) = match self.display.step(self.ticks, pos, held, rate)
         {
@@ -413,11 +420,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 (state, shown, alpha, hold_first)
             }
         };
-        // Evaluate the shown slot at the (clamped) time.
+        // Evaluate the resident segment at the (clamped) time. With none (its keyframes
+        // went to a dropped segment's), the display keeps the image it has.
         let (mut seg, mut u) = (0, 0.0);
         let mut eval = None;
-        if let Some(s) = self.slots.shown() {
-            if let Some(r) = self.slots.slot(s) {
+        {
+            if let Some(r) = self.resident {
                 let t = if missing {
                     shown.clamp(r.start, r.end)
                 } else {
@@ -440,12 +448,13 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 params.channels = self.header.channels as u32;
                 params.key0 = r.keys[0] as u32;
                 params.key1 = r.keys[1] as u32;
+                params.scales = r.scales;
                 params.alpha = alpha;
                 params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
                 if hold_first {
                     params.alpha = 1e-3;
                 }
-                eval = Some((s, params, hold_first));
+                eval = Some((params, hold_first));
             }
         }
         let record = self.record(t0, wall, shown, state, alpha, seg, u, uploaded, decode_ns);
@@ -514,7 +523,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         if let Some(b) = self.incoming.take() {
             self.pipeline.give_back(b);
         }
-        self.slots.clear();
+        if let Some((b, _, _)) = self.to_decode.take() {
+            self.pipeline.give_back(b);
+        }
+        self.resident = None;
+        self.known_end = 0;
+        self.keys.clear();
         self.pipeline.restart(restart, self.ticks);
         self.totals.seeks += 1;
     }

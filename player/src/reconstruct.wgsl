@@ -19,13 +19,16 @@ struct Params {
     key1: u32,
     pad0: u32,
     pad1: u32,
+    // Scale of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
+    scales: array<vec4<f32>, 6>,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-// Keyframes (a pool of slots, `channels` layers each) and the segment's bubble terms
-// (term k ≥ 2 at layers (k − 2)·channels …).
+// Keyframes (two slots, `channels` R32Float layers each) and the segment's bubble terms
+// (term k ≥ 2 at layers (k − 2)·channels …), 16-bit signed integers times the layer's
+// scale, two to an R32Uint texel.
 @group(0) @binding(1) var keys: texture_2d_array<f32>;
-@group(0) @binding(2) var bubbles: texture_2d_array<f32>;
+@group(0) @binding(2) var bubbles: texture_2d_array<u32>;
 @group(0) @binding(3) var held: texture_2d<f32>;
 @group(0) @binding(4) var out_tex: texture_storage_2d<rgba16float, write>;
 
@@ -47,24 +50,43 @@ fn decode(c: f32) -> f32 {
     return p.v0 * (exp2(clamp(c, 0.0, 120.0)) - 1.0);
 }
 
-// One term at a texel from `channels` consecutive R32Float layers starting at `b`.
-fn planes(t: texture_2d_array<f32>, xy: vec2<i32>, b: i32) -> vec3<f32> {
+fn key(xy: vec2<i32>, slot: u32) -> vec3<f32> {
+    let b = i32(slot * p.channels);
     if (p.channels == 3u) {
         return vec3<f32>(
-            textureLoad(t, xy, b, 0).x,
-            textureLoad(t, xy, b + 1, 0).x,
-            textureLoad(t, xy, b + 2, 0).x,
+            textureLoad(keys, xy, b, 0).x,
+            textureLoad(keys, xy, b + 1, 0).x,
+            textureLoad(keys, xy, b + 2, 0).x,
         );
     }
-    return vec3<f32>(textureLoad(t, xy, b, 0).x, 0.0, 0.0);
+    return vec3<f32>(textureLoad(keys, xy, b, 0).x, 0.0, 0.0);
 }
 
-fn key(xy: vec2<i32>, slot: u32) -> vec3<f32> {
-    return planes(keys, xy, i32(slot * p.channels));
+fn bubble_layer(xy: vec2<i32>, layer: u32) -> f32 {
+    let w = textureLoad(bubbles, vec2<i32>(xy.x >> 1u, xy.y), i32(layer), 0).x;
+    let half = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
+    let q = bitcast<i32>(half << 16u) >> 16u;
+    return f32(q) * p.scales[layer / 4u][layer % 4u];
 }
 
 fn bubble(xy: vec2<i32>, k: u32) -> vec3<f32> {
-    return planes(bubbles, xy, i32((k - 2u) * p.channels));
+    let b = (k - 2u) * p.channels;
+    if (p.channels == 3u) {
+        return vec3<f32>(bubble_layer(xy, b), bubble_layer(xy, b + 1u), bubble_layer(xy, b + 2u));
+    }
+    return vec3<f32>(bubble_layer(xy, b), 0.0, 0.0);
+}
+
+// The nearest half float, as an f32 that the Rgba16Float store converts exactly: how a
+// store rounds is up to the implementation (lavapipe truncates, a whole half-float step
+// of error — 2^-10 relative, the protocol's entire GPU budget for HDR), so the shader
+// rounds itself and the display is within half a step of what it computed.
+fn nearest_half(x: f32) -> f32 {
+    if (abs(x) < 6.103515625e-5) {
+        // Below the smallest normal half float: steps of 2^-24.
+        return round(x * 16777216.0) / 16777216.0;
+    }
+    return bitcast<f32>((bitcast<u32>(x) + 0x1000u) & 0xFFFFE000u);
 }
 
 @compute @workgroup_size(8, 8)
@@ -89,5 +111,6 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (p.blend == 1u) {
         rgb = mix(textureLoad(held, xy, 0).xyz, rgb, p.alpha);
     }
-    textureStore(out_tex, xy, vec4<f32>(rgb, 1.0));
+    let out = vec3<f32>(nearest_half(rgb.x), nearest_half(rgb.y), nearest_half(rgb.z));
+    textureStore(out_tex, xy, vec4<f32>(out, 1.0));
 }

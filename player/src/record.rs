@@ -64,9 +64,9 @@ pub struct FrameRecord {
 pub struct Frame {
     /// What the frame shows.
     pub record: FrameRecord,
-    /// The reconstruction to run: bubble slot, shader parameters, and whether to keep the
-    /// current image for blending first.
-    pub(crate) eval: Option<(usize, Params, bool)>,
+    /// The reconstruction to run: shader parameters, and whether to keep the current
+    /// image for blending first.
+    pub(crate) eval: Option<(Params, bool)>,
 }
 
 /// Running totals since the player was opened.

@@ -113,22 +113,30 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
             inline(Policy::Interpolate, Throttle::UNLIMITED),
         )
         .unwrap();
-        // The budget's figure, counted by hand: keyframe slots 4 × ch R32Float layers,
-        // two bubble slots of (degree − 1) × ch, the lightmap and its held copy
-        // (Rgba16Float), the 96-byte uniform buffer, and two staging buffers of
-        // (degree + 1) × ch layers whose rows are padded to 256 bytes.
-        let (texels, d) = (40 * 24u64, player.header().max_degree as u64);
-        let staging_layer = 256 * 24;
-        let expect = texels * 4 * ch as u64 * (4 + 2 * (d - 1))
-            + 2 * texels * 8
-            + 96
-            + 2 * (d + 1) * ch as u64 * staging_layer;
-        assert_eq!(player.gpu_bytes(), expect, "degree {d}, {ch} channel(s)");
+        // The budget's figure, counted by hand: two keyframe slots of ch R32Float layers
+        // and (degree − 1) × ch bubble layers of 16 bits, over the padded planes (48 × 32,
+        // whole 16-texel tiles), the lightmap and its held copy (Rgba16Float); then the
+        // buffers: the 192-byte uniform of the reconstruction, the 512-byte DCT tables,
+        // and the decode jobs and coefficients, each a power of two of at least 16 KiB.
+        let (planes, d) = (48 * 32u64, player.header().max_degree as u64);
+        let textures = planes * ch as u64 * (2 * 4 + (d - 1) * 2) + 2 * 40 * 24 * 8;
+        let buffers = player.gpu_bytes() - textures - 192 - 512;
+        assert!(
+            buffers.count_ones() <= 2 && buffers >= 1 << 15,
+            "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",
+            player.gpu_bytes()
+        );
         let mut cpu = vec![0f32; 40 * 24 * ch];
         let mut checked = 0;
         for _ in 0..90 {
             let r = player.advance(DISPLAY);
-            assert_eq!(r.state, FrameState::Exact, "unthrottled playback is exact");
+            assert_eq!(
+                r.state,
+                FrameState::Exact,
+                "unthrottled playback is exact: {kind:?} {ch} frame {} {:?}",
+                r.index,
+                player.totals()
+            );
             if r.index % 7 != 0 {
                 continue;
             }
@@ -585,12 +593,19 @@ fn stream(
 }
 
 #[test]
-fn keyframes_shared_by_consecutive_segments_are_staged_once() {
+fn keyframes_shared_by_consecutive_segments_are_sent_once() {
     use vbim_player::bench::{DecoderCore, Event, SegmentData};
     let (bytes, h, entries, layout) = stream(32, 16, 48, 6);
-    let mut dec = DecoderCore::new(h.clone(), layout, entries.clone());
-    let mut staging = SegmentData::with_capacity(&h);
-    let mut staged = Vec::new();
+    let intra: Vec<usize> = (0..layout.keyframes.len())
+        .filter(|&k| entries[layout.keyframes[k]].is_intra())
+        .collect();
+    assert!(
+        intra.len() < layout.keyframes.len(),
+        "no predicted keyframe: {intra:?}"
+    );
+    let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
+    let mut b = SegmentData::new();
+    let mut sent = Vec::new();
     let mut generation = 0;
     // The whole stream, then a seek back to its start: what was sent before no longer
     // counts.
@@ -603,19 +618,24 @@ fn keyframes_shared_by_consecutive_segments_are_staged_once() {
         }
         let chunk = &bytes[e.offset as usize..(e.offset + e.length) as usize];
         if let Event::Ready(s) = dec.take(i, Some(chunk)) {
-            dec.fill(s, generation, 0, &mut staging).unwrap();
-            assert_eq!(staging.keys[0], s);
-            staged.push((s, staging.k0_staged, staging.layers, staging.bytes(&h)));
+            dec.fill(s, generation, 0, &mut b).unwrap();
+            assert_eq!(b.keys, [s, layout.keyframe_of_boundary(s + 1)]);
+            assert!(b.bytes() > 0 && b.plane_count() == b.steps.len() * 3 + (b.layers - 2) * 3);
+            let steps: Vec<usize> = b.steps.iter().map(|st| st.number).collect();
+            sent.push((s, steps));
         }
     }
-    assert!(staged.len() >= 4, "{staged:?}");
-    // The first segment, and the first after the reset, stage K_s; the others do not.
-    let restarts: Vec<usize> = staged.iter().filter(|x| x.1).map(|x| x.0).collect();
-    assert_eq!(restarts.len(), 2, "{staged:?}");
-    assert_eq!(restarts, [0, 0]);
-    for (_, k0, layers, bytes) in &staged {
-        let terms = *layers as u64 - !k0 as u64;
-        assert_eq!(*bytes, terms * vbim_player::bench::term_bytes(&h));
+    assert!(sent.len() >= 4, "{sent:?}");
+    // The first segment, and the first after the reset, carry K_0 and K_1; the others
+    // only their closing keyframe.
+    for (n, (s, steps)) in sent.iter().enumerate() {
+        let restart = n == 0 || sent[n - 1].0 > *s;
+        let closing = layout.keyframe_of_boundary(s + 1);
+        if restart {
+            assert_eq!(steps, &[0, 1], "{sent:?}");
+        } else {
+            assert_eq!(steps, &[closing], "{sent:?}");
+        }
     }
 }
 
@@ -630,14 +650,18 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
     let header = header_of(&bytes);
     let mean_rate = header.file_size as f64 / (n as f64 / 24.0);
     let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
-    for (policy, factor) in [(Policy::Skip, 2.0), (Policy::Interpolate, 1.5)] {
+    // (Each keeps up on average: 2 × 2.5/4 and 1.5 × 3/4 of the mean rate.)
+    for (policy, factor, stall) in [
+        (Policy::Skip, 2.0, 1_500_000_000),
+        (Policy::Interpolate, 1.5, 1_000_000_000),
+    ] {
         let cfg = PlayerConfig {
             preroll_ns: Some(0),
             ..inline(
                 policy,
                 Throttle {
                     rate: Some((mean_rate * factor) as u64),
-                    stall: Some(Stall::every(1_000_000_000, 4_000_000_000)),
+                    stall: Some(Stall::every(stall, 4_000_000_000)),
                 },
             )
         };
@@ -665,18 +689,22 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
             t.segments_dropped >= 5,
             "{policy:?}: segments were dropped: {t:?}"
         );
-        // A dropped segment still leaves its closing keyframe on the GPU, so the next one
-        // plays: drops do not cascade (without that upload, 40 and 67 drops here).
+        // A dropped segment still has its keyframes built on the GPU, so the next one
+        // plays: drops do not cascade. A 1 or 1.5 s stall misses 6 or 9 segments of 4
+        // frames; at most a few of them arrive late (a broken chain would drop every one until the
+        // next intra keyframe).
         assert!(
-            t.segments_dropped <= 2 * t.stalls,
+            t.segments_dropped <= 4 * t.stalls,
             "{policy:?}: drops cascade: {t:?}"
         );
         assert!(exact >= 60, "{policy:?}: {exact} exact frames");
-        // Most uploads shared K_s with the segment before.
-        let full = t.segments_uploaded
-            * (header.max_degree as u64 + 1)
-            * vbim_player::bench::term_bytes(&header);
-        assert!(t.bytes_uploaded < full, "{} of {full}", t.bytes_uploaded);
+        // Parsed coefficients go up, not decoded planes: a few times the bytes read.
+        let ratio = t.bytes_uploaded as f64 / t.bytes_read as f64;
+        eprintln!("{policy:?}: uploaded {:.2}× the bytes read", ratio);
+        assert!(
+            ratio < 4.0,
+            "{policy:?}: uploaded {ratio:.2}× the bytes read: {t:?}"
+        );
     }
 }
 
@@ -756,67 +784,58 @@ fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
     assert!(t.segments_uploaded >= 24, "two loops and more: {t:?}");
 }
 
-/// A staging box reused from segment to segment holds exactly each segment's bubble
-/// planes, although tiles below a term's degree are only written when the box's last
-/// segment left something there (the moving edge takes tiles in and out of each term).
+/// A moving edge takes tiles in and out of each bubble term from segment to segment: the
+/// GPU's bubble planes (one set, rebuilt for every segment) must never keep a tile's
+/// terms from the segment before, at any frame — checked against the reference decoder.
 #[test]
-fn a_reused_staging_box_holds_each_segments_bubbles_exactly() {
-    use vbim_format::chunk::{read_coeffs, read_tilemap};
-    use vbim_player::bench::{layer_bytes, row_pitch, DecoderCore, Event, SegmentData, Staging};
+fn tiles_that_leave_a_term_are_zero_in_the_next_segment() {
+    use vbim_format::chunk::read_tilemap;
+    let (device, queue) = device();
     let (bytes, h, entries, layout) = stream(96, 32, 96, 8);
     let chunk = |i: usize| {
         let e = &entries[i];
         &bytes[e.offset as usize..(e.offset + e.length) as usize]
     };
-    let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
-    let mut staging = SegmentData::with_capacity(&h);
-    let (w, ht, ch) = (h.width as usize, h.height as usize, h.channels as usize);
-    let (stride, layer) = (
-        row_pitch(h.width) as usize / 4,
-        layer_bytes(&h) as usize / 4,
-    );
-    // (term k, plane p, tile) members of the segment before, to count tiles that leave.
-    let mut before: Option<Vec<bool>> = None;
-    let (mut checked, mut left) = (0, 0);
-    for i in 0..entries.len() {
-        let Event::Ready(s) = dec.take(i, Some(chunk(i))) else {
-            continue;
-        };
-        dec.fill(s, 0, 0, &mut staging).unwrap();
-        let (ti, ci) = layout.segments[s];
+    // Otherwise the test could not tell a stale tile from a zero one.
+    let members = |s: usize| {
+        let (ti, _) = layout.segments[s];
         let len = layout.boundaries[s + 1] - layout.boundaries[s];
         let tiles = read_tilemap(&h, chunk(ti), len).unwrap();
-        let want = read_coeffs(&h, chunk(ci), &tiles).unwrap();
-        let Staging::Host(got) = &staging.staging else {
-            unreachable!()
-        };
-        let n = h.tile_count();
-        let members: Vec<bool> = (2..=h.max_degree)
-            .flat_map(|k| (0..ch).flat_map(move |p| (0..n).map(move |t| (k, p, t))))
-            .map(|(k, p, t)| tiles.degree(p, t) >= k)
-            .collect();
-        for (k, planes) in want.iter().enumerate() {
-            for (p, plane) in planes.iter().enumerate().take(ch) {
-                let base = ((k + 2) * ch + p) * layer;
-                for y in 0..ht {
-                    let row = &got[base + y * stride..base + y * stride + w];
-                    assert!(
-                        row == &plane.data[y * plane.w..y * plane.w + w],
-                        "segment {s}, term {}, plane {p}, row {y}",
-                        k + 2
-                    );
-                }
-            }
-        }
-        if let Some(b) = &before {
-            left += b.iter().zip(&members).filter(|(a, b)| **a && !**b).count();
-        }
-        before = Some(members);
+        (0..h.tile_count())
+            .flat_map(|t| (0..3).map(move |p| (p, t)))
+            .map(|(p, t)| tiles.degree(p, t))
+            .collect::<Vec<u8>>()
+    };
+    let left: usize = (1..layout.segments.len())
+        .map(|s| {
+            let (a, b) = (members(s - 1), members(s));
+            a.iter().zip(&b).filter(|(x, y)| x > y).count()
+        })
+        .sum();
+    assert!(left > 0, "no tile left a term between segments");
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut player = Player::open(
+        &device,
+        &queue,
+        Cursor::new(bytes.clone()),
+        inline(Policy::Interpolate, Throttle::UNLIMITED),
+    )
+    .unwrap();
+    // Media frames at 24 fps, one display frame each: every media frame of the loop.
+    let mut checked = 0;
+    for _ in 0..96 {
+        let r = player.advance(41_666_667);
+        assert_eq!(r.state, FrameState::Exact);
+        assert_display_matches(
+            &player,
+            &mut reference,
+            r.shown % 96.0,
+            96 * 32,
+            "moving edge",
+        );
         checked += 1;
     }
-    assert!(checked >= 8, "{checked} segments");
-    // Otherwise the test could not tell a stale tile from a zero one.
-    assert!(left > 0, "no tile left a term between segments");
+    assert_eq!(checked, 96);
 }
 
 #[test]
