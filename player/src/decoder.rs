@@ -141,6 +141,10 @@ pub struct DecoderCore {
     lost: Vec<bool>,
     /// Keyframe parsing time not yet charged to a segment.
     key_ns: u64,
+    /// After a seek, the segment it is for: the ones before it get no box (the first box
+    /// carries their keyframes in its chain), so that the GPU is not sent them one frame
+    /// at a time only to drop them.
+    first_segment: usize,
     /// Generation and closing keyframe of the last segment filled: the GPU built that
     /// keyframe last, so the next segment, if it opens with it, need not carry its chain.
     last_closing: Option<(u32, usize)>,
@@ -160,12 +164,21 @@ impl DecoderCore {
             coeffs: vec![None; s],
             lost: vec![false; s],
             key_ns: 0,
+            first_segment: 0,
             last_closing: None,
         }
     }
 
     /// Forgets everything (after a seek).
+    #[cfg_attr(not(feature = "bench"), allow(dead_code))]
     pub fn reset(&mut self) {
+        self.reset_from(0);
+    }
+
+    /// Forgets everything, after a seek to segment `first`: no box is sent for the
+    /// segments before it.
+    pub fn reset_from(&mut self, first: usize) {
+        self.first_segment = first;
         self.keys.iter_mut().for_each(|k| *k = None);
         self.tiles.iter_mut().for_each(|k| *k = None);
         self.coeffs.iter_mut().for_each(|k| *k = None);
@@ -183,6 +196,13 @@ impl DecoderCore {
 
     /// Takes chunk `i` (its bytes, or `None` if the source failed to deliver it).
     pub fn take(&mut self, i: usize, bytes: Option<&[u8]>) -> Event {
+        match self.take_chunk(i, bytes) {
+            Event::Ready(s) if s < self.first_segment => Event::Nothing,
+            e => e,
+        }
+    }
+
+    fn take_chunk(&mut self, i: usize, bytes: Option<&[u8]>) -> Event {
         let Some(&e) = self.entries.get(i) else {
             return Event::Nothing;
         };
@@ -401,6 +421,8 @@ impl DecoderCore {
         t0: u64,
         out: &mut SegmentData,
     ) {
+        // Past the seek's segment: later passes play from segment 0 again.
+        self.first_segment = 0;
         out.generation = generation;
         out.pass = pass;
         out.index = s;

@@ -28,6 +28,11 @@ use crate::PlayerError;
 /// the loop's start must be read again first.
 type Restart = (usize, u32, Option<usize>);
 
+/// The segment a seek is for, with the seek generation it belongs to (generation << 32 |
+/// segment): the decoder sends no box for the segments before it, only their keyframes
+/// in the first box's chain.
+type SeekTarget = Arc<AtomicU64>;
+
 /// Boxes of parsed segments between the decoder and the render thread: one waiting for
 /// its time on the render thread, one ready behind it, one being filled. (The segment on
 /// screen needs none: its data is on the GPU.) Two boxes held one decoded segment less
@@ -47,6 +52,7 @@ enum Mode<R> {
     Threaded {
         stop: Arc<AtomicBool>,
         seek: Sender<Restart>,
+        target: SeekTarget,
         throttle: Sender<Throttle>,
         threads: Vec<JoinHandle<()>>,
         ready: Receiver<Box<SegmentData>>,
@@ -92,6 +98,8 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
             let (err_tx, err_rx) = bounded::<String>(64);
             let (seek_tx, seek_rx) = bounded::<Restart>(16);
             let (throttle_tx, throttle_rx) = bounded::<Throttle>(16);
+            let target = SeekTarget::default();
+            let decoder_target = target.clone();
             let clock = cfg.clock.clone();
             let (s1, s2) = (stop.clone(), stop.clone());
             let br = bytes_read.clone();
@@ -117,13 +125,25 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
             let mut dec = decoder;
             let decoder_thread = std::thread::Builder::new()
                 .name("vbim-decoder".into())
-                .spawn(move || decoder_loop(&mut dec, cons, recycle_rx, ready_tx, err_tx, &s2, &wr))
+                .spawn(move || {
+                    decoder_loop(
+                        &mut dec,
+                        cons,
+                        recycle_rx,
+                        ready_tx,
+                        err_tx,
+                        &s2,
+                        &wr,
+                        &decoder_target,
+                    )
+                })
                 .map_err(PlayerError::Thread)?;
             let _ = wake_reader.set(reader_thread.thread().clone());
             let _ = wake_decoder.set(decoder_thread.thread().clone());
             Mode::Threaded {
                 stop,
                 seek: seek_tx,
+                target,
                 throttle: throttle_tx,
                 threads: vec![reader_thread, decoder_thread],
                 ready: ready_rx,
@@ -280,8 +300,14 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
     }
 
     /// Restarts reading at chunk `chunk` of pass `pass` (after reading chunk `first`
-    /// when given) at playback time `now`; what was decoded before is forgotten.
-    pub fn restart(&mut self, (chunk, pass, first): Restart, now: u64) {
+    /// when given) at playback time `now`, for segment `segment` in seek generation
+    /// `generation`; what was decoded before is forgotten.
+    pub fn restart(
+        &mut self,
+        (chunk, pass, first): Restart,
+        (segment, generation): (usize, u32),
+        now: u64,
+    ) {
         match &mut self.mode {
             Mode::Inline {
                 reader,
@@ -291,10 +317,19 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 ..
             } => {
                 reader.restart(chunk, pass, first, now);
-                decoder.reset();
+                decoder.reset_from(segment);
                 pool.append(ready);
             }
-            Mode::Threaded { seek, threads, .. } => {
+            Mode::Threaded {
+                seek,
+                target,
+                threads,
+                ..
+            } => {
+                target.store(
+                    (generation as u64) << 32 | segment as u32 as u64,
+                    Ordering::Release,
+                );
                 let _ = seek.send((chunk, pass, first));
                 unpark_reader(threads);
             }
@@ -390,6 +425,7 @@ fn reader_loop<R: Read + Seek>(
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn decoder_loop(
     core: &mut DecoderCore,
     mut cons: HeapCons<u8>,
@@ -398,6 +434,7 @@ fn decoder_loop(
     errors: Sender<String>,
     stop: &AtomicBool,
     wake_reader: &Waker,
+    target: &SeekTarget,
 ) {
     let mut msg = Vec::with_capacity(1 << 20);
     let mut generation = 0;
@@ -413,7 +450,14 @@ fn decoder_loop(
         wake(wake_reader);
         if m.generation != generation {
             generation = m.generation;
-            core.reset();
+            // The segment this generation's seek is for, if the seek was not overtaken.
+            let t = target.load(Ordering::Acquire);
+            let first = if (t >> 32) as u32 == generation {
+                t as u32 as usize
+            } else {
+                0
+            };
+            core.reset_from(first);
         }
         match core.take(m.chunk as usize, m.ok.then_some(&msg[..])) {
             Event::Ready(s) => {

@@ -529,7 +529,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.resident = None;
         self.known_end = 0;
         self.keys.clear();
-        self.pipeline.restart(restart, self.ticks);
+        self.pipeline
+            .restart(restart, (s, self.generation), self.ticks);
         self.totals.seeks += 1;
     }
 

@@ -972,3 +972,109 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
     }
     assert!(player.totals().damaged > 0, "{:?}", player.totals());
 }
+
+/// The GPU decode against the reference decoder at every media frame of a looping day and
+/// past its loop seam, then after a `set_time` into the middle of its keyframe chain: 8-bit
+/// and HDR, 1 and 3 channels, at an odd size and a long thin one. Segments of 2 frames
+/// and an intra interval longer than the day make the chain nearly as long as the day
+/// (22–23 predicted keyframes), longer than the default 4 s interval allows at 24 fps
+/// with segments of 8 frames or more.
+#[test]
+fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop() {
+    let (device, queue) = device();
+    let n = 48;
+    for (kind, ch, (w, h)) in [
+        (InputKind::Hdr, 3, (1000, 600)),
+        (InputKind::Srgb8, 3, (4096, 64)),
+        (InputKind::Hdr, 1, (4096, 64)),
+        (InputKind::Srgb8, 1, (1000, 600)),
+    ] {
+        let mut src = sequence(w, h, n, kind);
+        if ch == 1 {
+            for f in &mut src.frames {
+                *f = f.iter().step_by(3).copied().collect();
+            }
+            src.info.channels = 1;
+        }
+        let mut cfg = config(SegmentMode::Fixed(2));
+        cfg.intra_interval_s = 1000.0;
+        let bytes = encode_bytes(&src, &cfg);
+        let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
+        // The longest run of predicted keyframes (the encoder may still code one intra
+        // where that is cheaper).
+        let (mut run, mut longest) = (0, 0);
+        for &k in &r.layout().keyframes {
+            run = if r.entries()[k].is_intra() {
+                0
+            } else {
+                run + 1
+            };
+            longest = longest.max(run);
+        }
+        assert!(longest >= 12, "a chain of {longest} predicted keyframes");
+        let mut reference = Decoder::new(r);
+        let mut player = Player::open(
+            &device,
+            &queue,
+            Cursor::new(bytes),
+            inline(Policy::Interpolate, Throttle::UNLIMITED),
+        )
+        .unwrap();
+        let what = format!("{kind:?}, {ch} channel(s), {w}×{h}");
+        let mode = if kind == InputKind::Srgb8 {
+            Output::Stored
+        } else {
+            Output::Linear
+        };
+        let mut cpu = vec![0f32; w * h * ch];
+        let mut worst = 0f32;
+        let mut check = |player: &Player<Cursor<Vec<u8>>>, t: f64| {
+            let gpu = player.read_display();
+            reference.frame(t, mode, &mut cpu).unwrap();
+            for i in 0..w * h {
+                for c in 0..3 {
+                    let (g, want) = (gpu[i * 4 + c], cpu[i * ch + c.min(ch - 1)]);
+                    let err = match kind {
+                        // In 8-bit codes; at most 0.5.
+                        InputKind::Srgb8 => (linear_to_srgb(g) - want).abs() * 255.0 / 0.5,
+                        // As a fraction of the HDR bound.
+                        _ => {
+                            (g - want).abs()
+                                / (want * 2f32.powi(-10) + if want < 1e-3 { 1e-6 } else { 0.0 })
+                        }
+                    };
+                    worst = worst.max(err);
+                    assert!(
+                        err <= 1.0,
+                        "{what}, media time {t:.3}, texel {i} channel {c}: GPU {g} vs CPU {want}"
+                    );
+                }
+            }
+        };
+        // Every media frame of a loop and a quarter (one display frame per media frame).
+        let step = 1_000_000_000 / 24 + 1;
+        for _ in 0..n + n / 4 {
+            let r = player.advance(step);
+            assert_eq!(r.state, FrameState::Exact, "{what}, frame {}", r.index);
+            check(&player, r.shown % n as f64);
+        }
+        // Into the middle of the chain, halfway between two frames; the display jumps to
+        // the data as soon as it is there (the policy that blends would not be exact).
+        player.set_policy(Policy::Skip);
+        player.set_time(37_500_000_000 / 24);
+        let mut exact = 0;
+        for _ in 0..8 {
+            let r = player.advance(step);
+            if r.state == FrameState::Exact {
+                check(&player, r.shown % n as f64);
+                exact += 1;
+            }
+        }
+        assert!(exact >= 6, "{what}: {exact} exact frames after the seek");
+        assert!(player.totals().seeks >= 1);
+        eprintln!(
+            "{what}: chain of {longest}, largest GPU difference {:.2} of the protocol's bound",
+            worst
+        );
+    }
+}
