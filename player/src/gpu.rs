@@ -130,6 +130,12 @@ pub(crate) struct Gpu {
     pub display_view: wgpu::TextureView,
     held: wgpu::Texture,
     bind_group: wgpu::BindGroup,
+    /// The reconstruction's layout and inputs, for a bind group over a caller's texture.
+    reconstruct_layout: wgpu::BindGroupLayout,
+    keys_view: wgpu::TextureView,
+    held_view: wgpu::TextureView,
+    /// A texture of the caller's that the reconstruction writes instead of `display`.
+    output: Option<(wgpu::Texture, wgpu::BindGroup)>,
     /// Decode bind groups (per keyframe layer, and the bubbles'): remade when `words` or
     /// `jobs` grow.
     key_groups: Vec<wgpu::BindGroup>,
@@ -358,32 +364,12 @@ impl Gpu {
         let bubble_write =
             pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
         let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vbim reconstruct"),
-            layout: &bgl,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&keys_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&bubble_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&held_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::TextureView(&display_view),
-                },
-            ],
-        });
+        let bind_group = reconstruct_group(
+            device,
+            &bgl,
+            [&keys_view, &bubble_view, &held_view, &display_view],
+            &params,
+        );
         let buffer = |label: &str, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -421,6 +407,10 @@ impl Gpu {
             display_view,
             held,
             bind_group,
+            reconstruct_layout: bgl,
+            keys_view,
+            held_view,
+            output: None,
             key_groups: Vec::new(),
             bubble_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
@@ -661,10 +651,54 @@ impl Gpu {
         self.job_bytes.resize(at + JOB_STRIDE as usize, 0);
     }
 
+    /// Makes the reconstruction write into `texture` (the caller's) instead of the
+    /// player's own lightmap, or into its own again with `None`.
+    pub fn set_output(&mut self, texture: Option<&wgpu::Texture>) -> Result<(), String> {
+        let Some(t) = texture else {
+            self.output = None;
+            return Ok(());
+        };
+        use wgpu::TextureUsages as U;
+        let need = U::STORAGE_BINDING | U::COPY_SRC;
+        if t.format() != wgpu::TextureFormat::Rgba16Float
+            || (t.width(), t.height()) != (self.width, self.height)
+            || t.depth_or_array_layers() != 1
+            || t.dimension() != wgpu::TextureDimension::D2
+            || !t.usage().contains(need)
+        {
+            return Err(format!(
+                "the output must be a {}×{} 2D Rgba16Float texture with STORAGE_BINDING | \
+                 COPY_SRC usage (COPY_SRC keeps the image on screen for catch-up blending); \
+                 got {}×{}×{} {:?} with {:?}",
+                self.width,
+                self.height,
+                t.width(),
+                t.height(),
+                t.depth_or_array_layers(),
+                t.format(),
+                t.usage()
+            ));
+        }
+        let view = t.create_view(&Default::default());
+        let group = reconstruct_group(
+            &self.device,
+            &self.reconstruct_layout,
+            [&self.keys_view, &self.bubble_view, &self.held_view, &view],
+            &self.params,
+        );
+        self.output = Some((t.clone(), group));
+        Ok(())
+    }
+
+    /// The texture the reconstruction writes: the caller's, or the player's own.
+    fn target(&self) -> &wgpu::Texture {
+        self.output.as_ref().map_or(&self.display, |(t, _)| t)
+    }
+
     /// Keeps what is on screen for blending (at the start of a catch-up).
     pub fn hold(&self, encoder: &mut wgpu::CommandEncoder) {
         encoder.copy_texture_to_texture(
-            self.display.as_image_copy(),
+            self.target().as_image_copy(),
             self.held.as_image_copy(),
             wgpu::Extent3d {
                 width: self.width,
@@ -688,13 +722,15 @@ impl Gpu {
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
+        let group = self.output.as_ref().map_or(&self.bind_group, |(_, g)| g);
+        pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
     }
 
-    /// Reads the display texture back (RGBA, f32). For tests and error measurement.
+    /// Reads the texture the reconstruction writes back (RGBA, f32). For tests and error
+    /// measurement.
     pub fn read_display(&self) -> Vec<f32> {
-        let raw = read_texture(&self.device, &self.queue, &self.display, 8);
+        let raw = read_texture(&self.device, &self.queue, self.target(), 8);
         bytemuck::cast_slice::<u8, half::f16>(&raw)
             .iter()
             .map(|v| v.to_f32())
@@ -711,6 +747,31 @@ impl Params {
     pub fn zeroed_params() -> Params {
         bytemuck::Zeroable::zeroed()
     }
+}
+
+/// The reconstruction's bind group: its parameters, then the keyframes, bubble planes,
+/// held image and output views.
+fn reconstruct_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    views: [&wgpu::TextureView; 4],
+    params: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    let mut entries = vec![wgpu::BindGroupEntry {
+        binding: 0,
+        resource: params.as_entire_binding(),
+    }];
+    for (i, v) in views.into_iter().enumerate() {
+        entries.push(wgpu::BindGroupEntry {
+            binding: i as u32 + 1,
+            resource: wgpu::BindingResource::TextureView(v),
+        });
+    }
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("vbim reconstruct"),
+        layout,
+        entries: &entries,
+    })
 }
 
 /// Bytes a texture holds (one mip level, every layer).

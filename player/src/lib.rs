@@ -77,6 +77,9 @@ pub enum PlayerError {
         /// How long it was given.
         deadline: std::time::Duration,
     },
+    /// A texture given to [`Player::set_output`] does not fit the stream.
+    #[error("{0}")]
+    Output(String),
     /// A player thread panicked (a bug).
     #[error("thread {thread} panicked")]
     Panicked {

@@ -167,6 +167,16 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn view(&self) -> &wgpu::TextureView {
         &self.gpu.display_view
     }
+    /// Reconstructs into `texture`, a texture of the caller's, from the next frame on,
+    /// instead of the player's own lightmap ([`Player::view`] then stops changing); `None`
+    /// goes back to the player's own. For an engine whose materials keep the texture they
+    /// were built with. The texture must be `width × height`, 2D, `Rgba16Float`, with
+    /// `STORAGE_BINDING | COPY_SRC` usage (the copy keeps the image on screen for the
+    /// catch-up blend); the player keeps a clone of the handle while it writes it.
+    pub fn set_output(&mut self, texture: Option<&wgpu::Texture>) -> Result<(), PlayerError> {
+        self.gpu.set_output(texture).map_err(PlayerError::Output)
+    }
+
     /// Reads the lightmap back to the CPU: RGBA, f32, row by row. Blocks until the GPU is
     /// done; for tests, checks and captures, never per frame.
     pub fn read_display(&self) -> Vec<f32> {

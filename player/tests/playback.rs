@@ -1078,3 +1078,72 @@ fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_lo
         );
     }
 }
+
+/// An engine keeps the texture its materials were built with: the player reconstructs
+/// into the caller's texture, bit for bit what its own would show, through a stall and
+/// the catch-up blend (whose held image then comes from the caller's texture).
+#[test]
+fn a_callers_texture_gets_what_the_players_own_would_show() {
+    let (device, queue) = device();
+    // Noisy content and no pre-roll: the ring holds little, so stalls show.
+    let (w, h, n) = (48u32, 32u32, 96);
+    let bytes = encode_bytes(
+        &noisy(w as usize, h as usize, n),
+        &config(SegmentMode::Fixed(4)),
+    );
+    let rate = header_of(&bytes).file_size as f64 / (n as f64 / 24.0) * 1.5;
+    let cfg = || PlayerConfig {
+        preroll_ns: Some(0),
+        ..inline(
+            Policy::Interpolate,
+            Throttle {
+                rate: Some(rate as u64),
+                stall: Some(Stall::every(1_000_000_000, 4_000_000_000)),
+            },
+        )
+    };
+    let open = || Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg()).unwrap();
+    let texture = |w, h, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("the engine's lightmap"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage,
+            view_formats: &[],
+        })
+    };
+    use wgpu::TextureUsages as U;
+    let (mut own, mut theirs) = (open(), open());
+    let e = theirs
+        .set_output(Some(&texture(w, h - 1, U::STORAGE_BINDING | U::COPY_SRC)))
+        .unwrap_err();
+    assert!(e.to_string().contains("48×32"), "{e}");
+    let e = theirs
+        .set_output(Some(&texture(w, h, U::STORAGE_BINDING)))
+        .unwrap_err();
+    assert!(e.to_string().contains("COPY_SRC"), "{e}");
+    let engine = texture(w, h, U::STORAGE_BINDING | U::COPY_SRC | U::TEXTURE_BINDING);
+    theirs.set_output(Some(&engine)).unwrap();
+    let mut states = std::collections::HashSet::new();
+    for i in 0..900 {
+        let (a, b) = (own.advance(DISPLAY), theirs.advance(DISPLAY));
+        assert_eq!((a.state, a.shown), (b.state, b.shown), "frame {i}");
+        states.insert(format!("{:?}", a.state));
+        if i % 7 == 0 || a.state == FrameState::CatchingUp {
+            let raw = vbim_player::read_texture(&device, &queue, &engine, 8);
+            let got: Vec<f32> = bytemuck::cast_slice::<u8, half::f16>(&raw)
+                .iter()
+                .map(|v| v.to_f32())
+                .collect();
+            assert!(got == own.read_display(), "frame {i} ({:?})", a.state);
+        }
+    }
+    assert!(states.contains("CatchingUp"), "{states:?}");
+}
