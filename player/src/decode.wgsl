@@ -1,14 +1,16 @@
 // Decodes a segment's coefficients on the GPU: dequantises the quantised DCT terms of
 // one plane (a "job") and inverse-transforms them into its resident texture.
 //
-// A job's blocks come as records of two words, one per block that has a term:
-//   word 0: block column | block row << 16 (in blocks of the padded plane)
-//   word 1: where the block's terms start, in u16 units from the job's first term
-// and its terms as a stream of u16, a block's terms ending where the next block's start:
-//   zig-zag index << 10 | value (10-bit two's complement), or, for a value outside
-//   −511…511, zig-zag index << 10 | 0x200 followed by the value's low and high halves.
-// One workgroup decodes one block. Each texel sums its terms in increasing zig-zag order,
-// (value · step · T[ky][y]) · T[kx][x], as the reference decoder's sparse path does.
+// A job's blocks come in runs (player/src/compact.rs), a record of two words each:
+//   word 0: first block column | block row << 11 | (blocks − 1) << 22
+//   word 1: where the run's entries start, in u16 units from the job's first entry
+// and the blocks' terms as a stream of u16 entries, each block's last entry flagged:
+//   zig-zag index << 10 | last << 9 | value (9-bit two's complement), or, for a value
+//   outside −255…255, index << 10 | last << 9 | 0x100 followed by the value's low and
+//   high halves; an empty block is one entry of value 0 with `last` set.
+// One workgroup decodes one run, block after block; each texel sums its block's terms in
+// increasing zig-zag order, (value · step · T[ky][y]) · T[kx][x], as the reference
+// decoder's sparse path does.
 
 struct Job {
     // Quantiser step of the plane.
@@ -63,32 +65,56 @@ fn record_index(wg: vec3<u32>) -> u32 {
     return wg.y * job.groups_x + wg.x;
 }
 
-// Adds block `r`'s terms at sample (x, y) onto `acc`.
-fn block_sum(r: u32, x: u32, y: u32, acc: f32) -> f32 {
-    var v = acc;
-    var i = job.terms + words[job.records + 2u * r + 1u];
-    var end = job.terms_end;
-    if (r + 1u < job.count) {
-        end = job.terms + words[job.records + 2u * r + 3u];
-    }
-    loop {
-        if (i >= end) {
-            break;
-        }
+// The sums at two texels of a block, (x, y) and (x + 1, y), onto `acc`, and where the
+// next block's entries start. (One texel is the pair's first with `pair` false.)
+struct Sums {
+    a: f32,
+    b: f32,
+    next: u32,
+}
+
+// Adds the terms of the block whose entries start at `start` at samples (x, y) and, with
+// `pair`, (x + 1, y).
+fn block_sum(start: u32, x: u32, y: u32, acc: f32, pair: bool) -> Sums {
+    var a = acc;
+    var b = 0.0;
+    var i = start;
+    var more = true;
+    while (more) {
         let e = term16(i);
-        var q = i32(e & 0x3FFu);
         i = i + 1u;
-        if (q == 0x200) {
+        var q = i32(e & 0x1FFu);
+        if (q == 0x100) {
             q = bitcast<i32>(term16(i) | (term16(i + 1u) << 16u));
             i = i + 2u;
-        } else if (q >= 0x200) {
-            q = q - 0x400;
+        } else if (q > 0x100) {
+            q = q - 0x200;
         }
-        let pos = zigzag(e >> 10u);
-        let c = f32(q) * job.step;
-        v = v + (c * basis(pos / 8u, y)) * basis(pos % 8u, x);
+        if (q != 0) {
+            let pos = zigzag(e >> 10u);
+            let kx = pos % 8u;
+            let c = f32(q) * job.step * basis(pos / 8u, y);
+            a = a + c * basis(kx, x);
+            if (pair) {
+                b = b + c * basis(kx, x + 1u);
+            }
+        }
+        more = (e & 0x200u) == 0u;
     }
-    return v;
+    return Sums(a, b, i);
+}
+
+struct Run {
+    x0: u32,
+    y0: u32,
+    blocks: u32,
+    first: u32,
+}
+
+fn run_of(r: u32) -> Run {
+    let w = words[job.records + 2u * r];
+    let first = job.terms + words[job.records + 2u * r + 1u];
+    return Run((w & 0x7FFu) * 8u, ((w >> 11u) & 0x7FFu) * 8u, (w >> 22u) + 1u, first);
 }
 
 // A keyframe plane's blocks added onto what the plane holds: the reference keyframe
@@ -99,10 +125,14 @@ fn key_add(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) l
     if (r >= job.count) {
         return;
     }
-    let b = words[job.records + 2u * r];
-    let xy = vec2<u32>((b & 0xFFFFu) * 8u + l.x, (b >> 16u) * 8u + l.y);
-    let old = textureLoad(key_plane, xy).x;
-    textureStore(key_plane, xy, vec4<f32>(block_sum(r, l.x, l.y, old), 0.0, 0.0, 0.0));
+    let run = run_of(r);
+    var i = run.first;
+    for (var j = 0u; j < run.blocks; j = j + 1u) {
+        let xy = vec2<u32>(run.x0 + j * 8u + l.x, run.y0 + l.y);
+        let s = block_sum(i, l.x, l.y, textureLoad(key_plane, xy).x, false);
+        textureStore(key_plane, xy, vec4<f32>(s.a, 0.0, 0.0, 0.0));
+        i = s.next;
+    }
 }
 
 @compute @workgroup_size(8, 8)
@@ -119,19 +149,26 @@ fn quantize(x: f32) -> u32 {
 }
 
 // A bubble plane's blocks, written whole (every other texel of the plane is zero): each
-// invocation makes two horizontally adjacent texels, one R32Uint texel of the layer.
-@compute @workgroup_size(4, 8)
+// of the first four columns of invocations makes two horizontally adjacent texels, one
+// R32Uint texel of the layer. (Eight columns, half of them idle: with a workgroup of 4 × 8
+// lavapipe ran the loop over a run's blocks once only. Idle lanes cost what working ones
+// do on a SIMD machine, so the work is the same as 64 invocations of one texel.)
+@compute @workgroup_size(8, 8)
 fn bubble_write(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>) {
     let r = record_index(wg);
-    if (r >= job.count) {
+    if (r >= job.count || l.x >= 4u) {
         return;
     }
-    let b = words[job.records + 2u * r];
-    let x0 = 2u * l.x;
-    let a = block_sum(r, x0, l.y, 0.0);
-    let c = block_sum(r, x0 + 1u, l.y, 0.0);
-    let at = vec2<u32>((b & 0xFFFFu) * 4u + l.x, (b >> 16u) * 8u + l.y);
-    textureStore(bubble_planes, at, job.layer, vec4<u32>(quantize(a) | (quantize(c) << 16u), 0u, 0u, 0u));
+    let run = run_of(r);
+    let x = 2u * l.x;
+    var i = run.first;
+    for (var j = 0u; j < run.blocks; j = j + 1u) {
+        let s = block_sum(i, x, l.y, 0.0, true);
+        let at = vec2<u32>(run.x0 / 2u + j * 4u + l.x, run.y0 + l.y);
+        let packed = quantize(s.a) | (quantize(s.b) << 16u);
+        textureStore(bubble_planes, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
+        i = s.next;
+    }
 }
 
 // Zeros the first `job.layer` layers of the bubble planes (`job.size` R32Uint texels each).

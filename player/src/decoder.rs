@@ -16,7 +16,6 @@ use std::sync::Arc;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::index::Layout;
-use vbim_format::plane;
 use vbim_format::reader::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
@@ -141,6 +140,8 @@ pub struct DecoderCore {
     lost: Vec<bool>,
     /// Keyframe parsing time not yet charged to a segment.
     key_ns: u64,
+    /// Scratch: each tile's rank among a bubble plane's member tiles.
+    ranks: Vec<u32>,
     /// After a seek, the segment it is for: the ones before it get no box (the first box
     /// carries their keyframes in its chain), so that the GPU is not sent them one frame
     /// at a time only to drop them.
@@ -164,6 +165,7 @@ impl DecoderCore {
             coeffs: vec![None; s],
             lost: vec![false; s],
             key_ns: 0,
+            ranks: Vec::new(),
             first_segment: 0,
             last_closing: None,
         }
@@ -218,11 +220,11 @@ impl DecoderCore {
                 let t = thread_cpu_ns();
                 let mut data = Compact::default();
                 let mut planes = Vec::with_capacity(self.header.channels as usize);
-                let (w, _) = chunk::padded_size(&self.header);
-                let bw = w / vbim_format::dct::N;
+                let (w, ht) = chunk::padded_size(&self.header);
+                let (bw, bh) = (w / vbim_format::dct::N, ht / vbim_format::dct::N);
                 let mode = chunk::keyframe_blocks(&self.header, bytes, |_, step, blocks| {
-                    let at = (0..blocks.len()).map(|b| (b % bw, b / bw));
-                    planes.push(data.push_plane(step, blocks, at));
+                    let at = |bx, by| Some(by * bw + bx);
+                    planes.push(data.push_plane(step, blocks, (bw, bh), at));
                 });
                 self.key_ns += thread_cpu_ns() - t;
                 let mode = match mode {
@@ -386,18 +388,34 @@ impl DecoderCore {
         };
         let mut bubbles = chunk::CoeffReader::open(h, &bytes, &tiles).map_err(context)?;
         let layers = 1 + bubbles.max_degree() as usize;
-        let (tx, ts) = (h.tiles_x() as usize, h.tile_size as usize);
+        let tx = h.tiles_x() as usize;
+        let per = h.tile_size as usize / vbim_format::dct::N;
+        let (bw, bh) = (tx * per, h.tiles_y() as usize * per);
         for k in 2..layers {
             for p in 0..ch {
+                // The plane's blocks are those of the tiles of degree ≥ k, tile by tile:
+                // a member tile's rank among them says where its blocks start.
                 let degrees = tiles.degrees(p);
+                let ranks = &mut self.ranks;
+                ranks.clear();
+                let mut r = 0;
+                ranks.extend(degrees.iter().map(|&d| {
+                    if d >= k as u8 {
+                        r += 1;
+                        r - 1
+                    } else {
+                        u32::MAX
+                    }
+                }));
+                let at = |bx: usize, by: usize| {
+                    let rank = ranks[(by / per) * tx + bx / per];
+                    (rank != u32::MAX).then(|| (rank as usize * per + by % per) * per + bx % per)
+                };
                 let data = &mut out.data;
                 let planes = &mut out.planes;
                 bubbles
                     .read_plane_blocks(k as u8, p, |step, blocks| {
-                        let at = (0..degrees.len())
-                            .filter(|&t| degrees[t] >= k as u8)
-                            .flat_map(|t| plane::tile_blocks(t, tx, ts));
-                        let mut span = data.push_plane(step, blocks, at);
+                        let mut span = data.push_plane(step, blocks, (bw, bh), at);
                         span.scale = bubble_scale(span.bound);
                         planes.push(span);
                     })

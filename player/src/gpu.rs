@@ -195,7 +195,8 @@ impl Gpu {
             "vbim bubbles",
             extent(plane[0] / 2, plane[1], bubble_layers),
             wgpu::TextureFormat::R32Uint,
-            U::TEXTURE_BINDING | U::STORAGE_BINDING,
+            // (COPY_SRC: tests read it back.)
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
         );
         let display = texture(
             "vbim lightmap",
@@ -825,4 +826,173 @@ pub fn read_texture(
         out.extend_from_slice(&data[start..start + (w * bytes_per_texel) as usize]);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compact::Compact;
+    use crate::decoder::KeyStep;
+    use vbim_format::plane::{self, Blocks, Onto, Plane};
+
+    fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
+        let mut next = || {
+            *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            *seed >> 8
+        };
+        (0..n)
+            .map(|_| {
+                let mut q = [0i32; 64];
+                let density = [0, 0, 1, 1, 2, 9, 40][(next() % 7) as usize];
+                for _ in 0..density {
+                    let v = (next() % 2001) as i32 - 1000;
+                    q[(next() % 64) as usize] = if next() % 5 == 0 { v * 4001 } else { v / 100 };
+                }
+                q
+            })
+            .collect()
+    }
+
+    /// The keyframe passes on a real adapter: an intra keyframe, then a predicted one
+    /// built on it in the other slot, against the reference decoder's block kernel.
+    #[test]
+    fn keyframe_passes_match_the_reference_kernel() {
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let (pw, ph) = (96u32, 24u32);
+        let (bw, bh) = (pw as usize / 8, ph as usize / 8);
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1);
+        let mut seed = 3;
+        let mut want = Plane::zeros(pw as usize, ph as usize);
+        let mut seg = SegmentData::new();
+        for (n, step) in [(0usize, 0.01f32), (1, 0.002)] {
+            let blocks = random_blocks(bw * bh, &mut seed);
+            let mut raw = Vec::new();
+            plane::write_coefficients(&blocks, &mut raw);
+            let mut parsed = Blocks::default();
+            plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
+            let at = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+            plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
+            let mut c = Compact::default();
+            let span = c.push_plane(step, &parsed, (bw, bh), |x, y| Some(y * bw + x));
+            seg.steps = vec![KeyStep {
+                number: n,
+                intra: n == 0,
+                plane: 0,
+            }];
+            seg.planes = vec![span];
+            seg.bubbles = 1;
+            seg.data = c;
+            seg.layers = 2;
+            let mut enc = device.create_command_encoder(&Default::default());
+            gpu.decode(&mut enc, &seg, n % 2, false);
+            queue.submit([enc.finish()]);
+        }
+        // The predicted keyframe went into slot 1.
+        let raw = read_texture_layer(&device, &queue, &gpu.keys, 1);
+        let got: &[f32] = bytemuck::cast_slice(&raw);
+        let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+            assert!(
+                (g - w).abs() <= 1e-5 * peak,
+                "texel {i}: GPU {g} against {w}"
+            );
+        }
+    }
+
+    /// The bubble pass: a plane whose tiles of columns 4–7 are absent, written as
+    /// 16-bit integers times its scale, zeros outside its blocks.
+    #[test]
+    fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let (pw, ph) = (96u32, 24u32);
+        let (bw, bh) = (pw as usize / 8, ph as usize / 8);
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1);
+        let blocks = random_blocks(bw * bh, &mut 11);
+        let mut raw = Vec::new();
+        plane::write_coefficients(&blocks, &mut raw);
+        let mut parsed = Blocks::default();
+        plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
+        let step = 0.004;
+        let order = |x: usize, y: usize| (!(4..8).contains(&x)).then_some(y * bw + x);
+        let mut want = Plane::zeros(pw as usize, ph as usize);
+        for (x, y) in (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y))) {
+            if let Some(b) = order(x, y) {
+                let at = std::iter::once((x, y));
+                plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, b, step);
+            }
+        }
+        let mut c = Compact::default();
+        let mut span = c.push_plane(step, &parsed, (bw, bh), order);
+        span.scale = crate::compact::bubble_scale(span.bound);
+        let mut seg = SegmentData::new();
+        seg.steps = Vec::new();
+        seg.planes = vec![span];
+        seg.bubbles = 0;
+        seg.data = c;
+        seg.layers = 3;
+        let mut enc = device.create_command_encoder(&Default::default());
+        gpu.decode(&mut enc, &seg, 0, true);
+        queue.submit([enc.finish()]);
+        let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 0);
+        let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
+            .iter()
+            .map(|&q| q as f32 * span.scale)
+            .collect();
+        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+            assert!(
+                (g - w).abs() <= 0.5001 * span.scale,
+                "texel {i}: GPU {g} against {w} (scale {})",
+                span.scale
+            );
+        }
+    }
+
+    fn read_texture_layer(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        t: &wgpu::Texture,
+        layer: u32,
+    ) -> Vec<u8> {
+        let (w, h) = (t.width(), t.height());
+        let row = (w * 4).next_multiple_of(256);
+        let buf = device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: (row * h) as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut enc = device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: t,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: layer,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buf,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(h),
+                },
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+        );
+        queue.submit([enc.finish()]);
+        buf.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let data = buf.slice(..).get_mapped_range();
+        (0..h as usize)
+            .flat_map(|y| data[y * row as usize..y * row as usize + w as usize * 4].to_vec())
+            .collect()
+    }
 }
