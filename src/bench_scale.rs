@@ -32,8 +32,11 @@ pub struct Cost {
     /// Over the second loop: bytes read, and bytes uploaded to the GPU.
     pub loop_read: u64,
     pub loop_uploaded: u64,
-    /// Over the second loop: decoder CPU time, and the loop's media duration, ns.
+    /// Over the second loop: decoder CPU time, reader CPU time, and the loop's media
+    /// duration, ns.
     pub loop_decode_ns: u64,
+    #[serde(default)]
+    pub loop_read_ns: u64,
     pub loop_media_ns: u64,
     /// Means per displayed frame over the second loop: the render thread's CPU time in
     /// recording and submitting (`render`), and the GPU's execution (waited for apart), ns.
@@ -168,6 +171,7 @@ pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
         loop_read: after.bytes_read - before.bytes_read,
         loop_uploaded: after.bytes_uploaded - before.bytes_uploaded,
         loop_decode_ns: after.decode_ns - before.decode_ns,
+        loop_read_ns: after.read_ns - before.read_ns,
         loop_media_ns: loop_ns,
         render_cpu_ns: mean(&cpu),
         gpu_ns: mean(&gpu),
@@ -205,10 +209,10 @@ fn report(a: &BenchScaleArgs, costs: &[Cost]) -> Result<(), String> {
         .filter(|c| c.size as usize != BASELINE)
         .collect();
     let mut csv = String::from(
-        "size,texels,file_bytes,gpu_bytes,gpu_bytes_per_texel,peak_rss,peak_above_64_per_texel,loop_read,loop_uploaded,upload_over_read,decoder_core_share,render_cpu_ms,gpu_ms\n",
+        "size,texels,file_bytes,gpu_bytes,gpu_bytes_per_texel,peak_rss,peak_above_64_per_texel,loop_read,loop_uploaded,upload_over_read,decoder_core_share,reader_core_share,render_cpu_ms,gpu_ms\n",
     );
     println!(
-        "| size | file | GPU resident, B/texel | peak above 64², B/texel | upload / read over a loop | decoder, share of a core | render thread CPU per frame | GPU per frame |"
+        "| size | file | GPU resident, B/texel | peak above 64², B/texel | upload / read over a loop | reader + decoder, share of a core | render thread CPU per frame | GPU per frame |"
     );
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     let per_texel = |b: u64, c: &Cost| b as f64 / c.texels as f64;
@@ -216,19 +220,21 @@ fn report(a: &BenchScaleArgs, costs: &[Cost]) -> Result<(), String> {
         let above = c.peak_rss.saturating_sub(base);
         let ratio = c.loop_uploaded as f64 / c.loop_read.max(1) as f64;
         let share = c.loop_decode_ns as f64 / c.loop_media_ns as f64;
+        let read_share = c.loop_read_ns as f64 / c.loop_media_ns as f64;
         println!(
-            "| {}² | {:.2} MB | {:.1} | {:.1} | {:.1}× | {:.2}% | {:.3} ms | {:.1} ms |",
+            "| {}² | {:.2} MB | {:.1} | {:.1} | {:.1}× | {:.2}% + {:.2}% | {:.3} ms | {:.1} ms |",
             c.size,
             c.file_bytes as f64 / 1e6,
             per_texel(c.gpu_bytes, c),
             per_texel(above, c),
             ratio,
+            read_share * 100.0,
             share * 100.0,
             c.render_cpu_ns * 1e-6,
             c.gpu_ns * 1e-6
         );
         csv += &format!(
-            "{},{},{},{},{:.3},{},{:.3},{},{},{:.4},{:.6},{:.4},{:.3}\n",
+            "{},{},{},{},{:.3},{},{:.3},{},{},{:.4},{:.6},{:.6},{:.4},{:.3}\n",
             c.size,
             c.texels,
             c.file_bytes,
@@ -240,6 +246,7 @@ fn report(a: &BenchScaleArgs, costs: &[Cost]) -> Result<(), String> {
             c.loop_uploaded,
             ratio,
             share,
+            read_share,
             c.render_cpu_ns * 1e-6,
             c.gpu_ns * 1e-6
         );

@@ -39,6 +39,9 @@ pub struct Outcome {
     pub mean_render_ms: f64,
     pub p99_render_ms: f64,
     pub decode_core_share: f64,
+    /// Reader CPU time per second of playback (share of one core).
+    #[serde(default)]
+    pub read_core_share: f64,
     /// PSNR of what was shown against the true state at the target time (protocol metric).
     pub shown_mean_psnr: Option<f64>,
     pub shown_worst_psnr: Option<f64>,
@@ -154,6 +157,7 @@ fn finish(
         mean_render_ms: sum.mean_render_ms,
         p99_render_ms: sum.p99_render_ms,
         decode_core_share: sum.decode_core_share,
+        read_core_share: sum.read_core_share,
         shown_mean_psnr: (!err.frames.is_empty()).then(|| err.mean_psnr()),
         shown_worst_psnr: (!err.frames.is_empty()).then(|| err.worst().1),
         damaged_chunks: totals.damaged,
@@ -196,7 +200,7 @@ pub fn print(o: &Outcome, s: &Session) {
     // time the reader and decoder run inside `advance` and the GPU is waited for, so it is
     // not the render thread's cost (`vbim bench render` measures that).
     println!(
-        "advance     {:.3} ms mean, {:.3} ms p99 per frame, wall clock ({}); decoder {:.2}% of a core (block kernel {})",
+        "advance     {:.3} ms mean, {:.3} ms p99 per frame, wall clock ({}); reader {:.2}% + decoder {:.2}% of a core",
         o.mean_render_ms,
         o.p99_render_ms,
         if s.realtime {
@@ -204,8 +208,8 @@ pub fn print(o: &Outcome, s: &Session) {
         } else {
             "simulated time: includes reading, decoding and GPU waits"
         },
+        o.read_core_share * 100.0,
         o.decode_core_share * 100.0,
-        vbim_format::plane::kernel_build()
     );
     if let (Some(m), Some(w)) = (o.shown_mean_psnr, o.shown_worst_psnr) {
         println!(

@@ -18,6 +18,7 @@ use vbim_format::{Header, IndexEntry};
 
 use crate::clock::Clock;
 use crate::config::PlayerConfig;
+use crate::cpu_time::thread_cpu_ns;
 use crate::decoder::{DecoderCore, Event, SegmentData};
 use crate::reader::{pop_message, ReaderCore};
 use crate::record::Totals;
@@ -59,6 +60,10 @@ enum Mode<R> {
         errors: Receiver<String>,
         bytes_read: Arc<AtomicU64>,
         read_seen: u64,
+        /// Each thread's own CPU time so far (stored by the thread), and what was
+        /// reported: reader, decoder.
+        cpu: [Arc<AtomicU64>; 2],
+        cpu_seen: [u64; 2],
     },
     Inline {
         reader: Box<ReaderCore<R>>,
@@ -103,6 +108,8 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
             let clock = cfg.clock.clone();
             let (s1, s2) = (stop.clone(), stop.clone());
             let br = bytes_read.clone();
+            let cpu = [Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0))];
+            let (reader_cpu, decoder_cpu) = (cpu[0].clone(), cpu[1].clone());
             // Each thread wakes the other through the ring: the reader after a chunk goes
             // in, the decoder after one comes out (set once both threads exist).
             let (wake_reader, wake_decoder) = (Waker::default(), Waker::default());
@@ -119,6 +126,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                         &seek_rx,
                         &throttle_rx,
                         &wd,
+                        &reader_cpu,
                     )
                 })
                 .map_err(PlayerError::Thread)?;
@@ -135,6 +143,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                         &s2,
                         &wr,
                         &decoder_target,
+                        &decoder_cpu,
                     )
                 })
                 .map_err(PlayerError::Thread)?;
@@ -150,6 +159,8 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 errors: err_rx,
                 bytes_read,
                 read_seen: 0,
+                cpu,
+                cpu_seen: [0; 2],
             }
         } else {
             let pool: Vec<Box<SegmentData>> = recycle_rx.try_iter().collect();
@@ -173,20 +184,23 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
 
     /// Moves the pipeline forward to playback time `now` (inline mode) and takes a decoded
     /// segment into `incoming` if it is empty (never blocks). Counts bytes read and
-    /// damaged chunks into `totals`; returns the decoder CPU time of what it took, ns.
+    /// damaged chunks into `totals`; returns the CPU time the reader and the decoder
+    /// spent since the last call, ns, each on its own thread's clock (inline: the time
+    /// this call spent in each).
     pub fn pump(
         &mut self,
         now: u64,
         incoming: &mut Option<Box<SegmentData>>,
         totals: &mut Totals,
-    ) -> u64 {
-        let mut decode_ns = 0;
+    ) -> [u64; 2] {
         match &mut self.mode {
             Mode::Threaded {
                 ready,
                 errors,
                 bytes_read,
                 read_seen,
+                cpu,
+                cpu_seen,
                 ..
             } => {
                 while let Ok(e) = errors.try_recv() {
@@ -195,16 +209,19 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 }
                 if incoming.is_none() {
                     match ready.try_recv() {
-                        Ok(b) => {
-                            decode_ns += b.decode_ns;
-                            *incoming = Some(b);
-                        }
+                        Ok(b) => *incoming = Some(b),
                         Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => {}
                     }
                 }
                 let r = bytes_read.load(Ordering::Relaxed);
                 totals.bytes_read += r - *read_seen;
                 *read_seen = r;
+                std::array::from_fn(|i| {
+                    let t = cpu[i].load(Ordering::Relaxed);
+                    let d = t.saturating_sub(cpu_seen[i]);
+                    cpu_seen[i] = cpu_seen[i].max(t);
+                    d
+                })
             }
             Mode::Inline {
                 reader,
@@ -223,13 +240,17 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 // decoder takes before both boxes are full, plus a ring no larger than the
                 // file.
                 let mut budget = 2 * reader.chunk_count() + 4;
+                let (mut read_ns, mut decode_ns) = (0, 0);
                 loop {
                     let mut progress = false;
+                    let t = thread_cpu_ns();
                     reader.prepare();
                     if budget > 0 && reader.deliver(now, prod) {
                         progress = true;
                         budget -= 1;
                     }
+                    let t1 = thread_cpu_ns();
+                    read_ns += t1 - t;
                     // Decode only while a box is free (the render thread returns
                     // them after upload): the natural back-pressure of double buffering.
                     while !pool.is_empty() {
@@ -259,20 +280,19 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                             Event::Nothing => {}
                         }
                     }
+                    decode_ns += thread_cpu_ns() - t1;
                     if !progress {
                         break;
                     }
                 }
                 if incoming.is_none() && !ready.is_empty() {
-                    let b = ready.remove(0);
-                    decode_ns += b.decode_ns;
-                    *incoming = Some(b);
+                    *incoming = Some(ready.remove(0));
                 }
                 totals.bytes_read += reader.bytes_read - *read_seen;
                 *read_seen = reader.bytes_read;
+                [read_ns, decode_ns]
             }
         }
-        decode_ns
     }
 
     /// Gives a box back to the decoder.
@@ -394,6 +414,7 @@ fn reader_loop<R: Read + Seek>(
     seek: &Receiver<(usize, u32, Option<usize>)>,
     throttle: &Receiver<Throttle>,
     wake_decoder: &Waker,
+    cpu: &AtomicU64,
 ) {
     let give_up = || stop.load(Ordering::Relaxed) || !seek.is_empty();
     while !stop.load(Ordering::Relaxed) {
@@ -422,6 +443,7 @@ fn reader_loop<R: Read + Seek>(
         }
         wake(wake_decoder);
         bytes_read.store(core.bytes_read, Ordering::Relaxed);
+        cpu.store(thread_cpu_ns(), Ordering::Relaxed);
     }
 }
 
@@ -435,6 +457,7 @@ fn decoder_loop(
     stop: &AtomicBool,
     wake_reader: &Waker,
     target: &SeekTarget,
+    cpu: &AtomicU64,
 ) {
     let mut msg = Vec::with_capacity(1 << 20);
     let mut generation = 0;
@@ -448,6 +471,10 @@ fn decoder_loop(
             continue;
         };
         wake(wake_reader);
+        // What this thread has spent so far, up to the message before this one (stored
+        // here rather than after the message: a `continue` or a blocked send skips the end
+        // of the loop).
+        cpu.store(thread_cpu_ns(), Ordering::Relaxed);
         if m.generation != generation {
             generation = m.generation;
             // The segment this generation's seek is for, if the seek was not overtaken.

@@ -42,6 +42,8 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     /// The end of the last segment whose keyframes the GPU built (shown or dropped): how
     /// far the data has come.
     known_end: MediaTime,
+    /// The parameters of the last reconstruction, while the GPU's data is unchanged.
+    last_eval: Option<Params>,
     /// The display's clock and stall policy.
     display: Display,
     /// Playback clock, ns.
@@ -147,6 +149,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             keys: KeySlots::default(),
             resident: None,
             known_end: 0,
+            last_eval: None,
             display,
             ticks: 0,
             generation: 0,
@@ -174,6 +177,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// `STORAGE_BINDING | COPY_SRC` usage (the copy keeps the image on screen for the
     /// catch-up blend); the player keeps a clone of the handle while it writes it.
     pub fn set_output(&mut self, texture: Option<&wgpu::Texture>) -> Result<(), PlayerError> {
+        self.last_eval = None;
         self.gpu.set_output(texture).map_err(PlayerError::Output)
     }
 
@@ -346,9 +350,20 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             self.gpu.decode(encoder, &b, first_slot, bubbles);
             // Its bytes are with wgpu now (`write_buffer` copies them): the box goes back.
             self.pipeline.give_back(b);
+            self.last_eval = None;
         }
         if let Some((params, hold_first)) = &frame.eval {
-            self.gpu.reconstruct(encoder, params, *hold_first);
+            // The same parameters over the same resident data give the same image (a
+            // hold, a pause, the Wait policy): the texture already holds it.
+            let same = self.last_eval.as_ref().is_some_and(|p| {
+                bytemuck::bytes_of(p) == bytemuck::bytes_of(params) && !*hold_first
+            });
+            if same {
+                self.totals.frames_unchanged += 1;
+            } else {
+                self.gpu.reconstruct(encoder, params, *hold_first);
+                self.last_eval = Some(*params);
+            }
         }
     }
 
@@ -363,7 +378,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn plan(&mut self, dt: u64) -> Frame {
         let t0 = Instant::now();
         self.ticks += dt;
-        let decode_ns = self
+        let cpu = self
             .pipeline
             .pump(self.ticks, &mut self.incoming, &mut self.totals);
         let rate = (self.header.rate_num, self.header.rate_den);
@@ -406,17 +421,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         {
             Step::Preroll => {
                 // Target and shown are both the start: pre-roll is not drift.
-                let record = self.record(
-                    t0,
-                    0,
-                    0,
-                    FrameState::Waiting,
-                    1.0,
-                    0,
-                    0.0,
-                    uploaded,
-                    decode_ns,
-                );
+                let record = self.record(t0, 0, 0, FrameState::Waiting, 1.0, 0, 0.0, uploaded, cpu);
                 return Frame { record, eval: None };
             }
             Step::Show {
@@ -467,7 +472,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 eval = Some((params, hold_first));
             }
         }
-        let record = self.record(t0, wall, shown, state, alpha, seg, u, uploaded, decode_ns);
+        let record = self.record(t0, wall, shown, state, alpha, seg, u, uploaded, cpu);
         Frame { record, eval }
     }
 
@@ -482,7 +487,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         segment: usize,
         u: f64,
         uploaded: u64,
-        decode_ns: u64,
+        [read_ns, decode_ns]: [u64; 2],
     ) -> FrameRecord {
         let read = self.totals.bytes_read - self.read_reported;
         self.read_reported = self.totals.bytes_read;
@@ -495,6 +500,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             state,
             bytes_read: read,
             bytes_uploaded: uploaded,
+            read_ns,
             decode_ns,
             render_ns: t0.elapsed().as_nanos() as u64,
             alpha,
@@ -504,6 +510,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.frame += 1;
         self.totals.frames += 1;
         self.totals.bytes_uploaded += uploaded;
+        self.totals.read_ns += read_ns;
         self.totals.decode_ns += decode_ns;
         record
     }

@@ -46,8 +46,11 @@ pub struct FrameRecord {
     pub bytes_read: u64,
     /// Bytes uploaded to the GPU this frame.
     pub bytes_uploaded: u64,
-    /// Decoder CPU time (the decoding thread's own clock) charged to segments received
-    /// this frame, ns.
+    /// CPU time the reader spent since the previous frame, on its thread's own clock (in
+    /// inline mode: inside this frame's `advance`), ns.
+    pub read_ns: u64,
+    /// CPU time the decoder spent since the previous frame, likewise, ns: checksums,
+    /// zstd, parsing and packing.
     pub decode_ns: u64,
     /// Time spent in `advance` on the calling thread, ns.
     pub render_ns: u64,
@@ -78,11 +81,16 @@ pub struct Totals {
     pub stalls: u64,
     /// Bytes the reader delivered.
     pub bytes_read: u64,
-    /// Bytes copied from staging to the GPU.
+    /// Bytes uploaded to the GPU (parsed coefficients and the decode passes' parameters).
     pub bytes_uploaded: u64,
+    /// Reader CPU time, ns.
+    pub read_ns: u64,
     /// Decoder CPU time, ns.
     pub decode_ns: u64,
-    /// Segments uploaded to a GPU slot.
+    /// Frames whose reconstruction was skipped: the same time over the same data as the
+    /// frame before (a hold, a pause), so the lightmap already showed it.
+    pub frames_unchanged: u64,
+    /// Segments decoded on the GPU and shown.
     pub segments_uploaded: u64,
     /// Segments that arrived too late to be shown (or whose keyframe was gone).
     pub segments_dropped: u64,

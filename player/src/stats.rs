@@ -35,6 +35,8 @@ pub struct Summary {
     pub p99_render_ms: f64,
     /// Decoder time per second of playback (share of one core).
     pub decode_core_share: f64,
+    /// Reader time per second of playback (share of one core).
+    pub read_core_share: f64,
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -91,6 +93,7 @@ impl Summary {
             mean_render_ms: render.iter().sum::<f64>() / rs.len() as f64,
             p99_render_ms: percentile(&mut render, 0.99),
             decode_core_share: rs.iter().map(|r| r.decode_ns as f64).sum::<f64>() * 1e-9 / seconds,
+            read_core_share: rs.iter().map(|r| r.read_ns as f64).sum::<f64>() * 1e-9 / seconds,
         }
     }
 }
@@ -98,12 +101,12 @@ impl Summary {
 /// Per-frame records as CSV.
 pub fn frames_csv(records: &[FrameRecord]) -> String {
     let mut s = String::from(
-        "frame,clock_ns,target_frames,shown_frames,drift_frames,state,bytes_read,bytes_uploaded,decode_ns,render_ns,alpha,segment,u\n",
+        "frame,clock_ns,target_frames,shown_frames,drift_frames,state,bytes_read,bytes_uploaded,read_ns,decode_ns,render_ns,alpha,segment,u\n",
     );
     for r in records {
         let _ = writeln!(
             s,
-            "{},{},{:.6},{:.6},{:.6},{},{},{},{},{},{:.4},{},{:.6}",
+            "{},{},{:.6},{:.6},{:.6},{},{},{},{},{},{},{:.4},{},{:.6}",
             r.index,
             r.clock_ns,
             r.target,
@@ -112,6 +115,7 @@ pub fn frames_csv(records: &[FrameRecord]) -> String {
             r.state.name(),
             r.bytes_read,
             r.bytes_uploaded,
+            r.read_ns,
             r.decode_ns,
             r.render_ns,
             r.alpha,
