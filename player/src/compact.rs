@@ -50,8 +50,8 @@ pub(crate) struct PlaneSpan {
 /// Records and terms of several planes, appended one after another.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Compact {
-    /// Two words per run: `first column | row << 11 | (blocks − 1) << 22 | layer << 26`
-    /// (in blocks), and its first entry relative to the plane's first.
+    /// Two words per run: `first column | row << 11 | (blocks − 1) << 22` (in blocks),
+    /// and its first entry relative to the plane's first.
     pub records: Vec<u32>,
     /// Term entries.
     pub terms: Vec<u16>,
@@ -74,46 +74,40 @@ impl Compact {
         self.records.len() as u64 * 4 + self.terms.len().next_multiple_of(2) as u64 * 2
     }
 
-    /// Appends a plane's blocks, block rows `rows` of `width` blocks each (a row is a
-    /// layer and a row in it: keyframes have one layer, a bubble atlas may have several),
-    /// the block at column `bx` of row `(layer, by)` being `blocks`' block
-    /// `index(layer, bx, by)`, or absent (`None`: not part of this plane). With `bound`,
-    /// also a bound on the plane's texels (what a bubble plane's 16-bit scale needs).
+    /// Appends a plane of `bw × bh` blocks whose block at column `bx`, row `by` is
+    /// `blocks`' block `index(bx, by)`, or absent (`None`: not part of this plane, as a
+    /// bubble plane's tiles below its degree are not); returns where it went.
     pub fn push_plane(
         &mut self,
         step: f32,
         blocks: &Blocks,
-        rows: impl Iterator<Item = (u32, usize)>,
-        width: usize,
-        index: impl Fn(u32, usize, usize) -> Option<usize>,
-        bound: bool,
+        (bw, bh): (usize, usize),
+        index: impl Fn(usize, usize) -> Option<usize>,
     ) -> PlaneSpan {
         let (records, terms) = (self.records.len() as u32, self.terms.len() as u32);
-        let mut peak = 0f32;
+        let mut bound = 0f32;
         let mut row = std::mem::take(&mut self.row);
-        for (layer, by) in rows {
+        for by in 0..bh {
             row.clear();
-            row.extend((0..width).map(|bx| match index(layer, bx, by) {
+            row.extend((0..bw).map(|bx| match index(bx, by) {
                 None => ABSENT,
                 Some(b) if blocks.nonzero(b) == 0 => EMPTY,
                 Some(_) => FULL,
             }));
             let mut x = 0;
-            while x < width {
+            while x < bw {
                 if row[x] != FULL {
                     x += 1;
                     continue;
                 }
                 let end = run_end(&row, x);
-                self.records.push(
-                    x as u32 | (by as u32) << 11 | ((end - x - 1) as u32) << 22 | layer << 26,
-                );
+                self.records
+                    .push(x as u32 | (by as u32) << 11 | ((end - x - 1) as u32) << 22);
                 self.records.push(self.terms.len() as u32 - terms);
                 for (bx, &kind) in row.iter().enumerate().take(end).skip(x) {
-                    match index(layer, bx, by) {
+                    match index(bx, by) {
                         Some(b) if kind == FULL => {
-                            let p = self.push_block(blocks, b, bound);
-                            peak = peak.max(p);
+                            bound = bound.max(self.push_block(blocks, b));
                         }
                         _ => self.terms.push(LAST),
                     }
@@ -128,7 +122,7 @@ impl Compact {
             count: (self.records.len() as u32 - records) / 2,
             terms,
             terms_end: self.terms.len() as u32,
-            bound: peak * step,
+            bound: bound * step,
             scale: 0.0,
         }
     }
@@ -138,18 +132,16 @@ impl Compact {
     /// largest possible value, |Σ_kx col[kx][y] · T[kx][x]| ≤ Σ_kx |col[kx][y]| ·
     /// max |T[kx]| — exact down the columns, so within a small factor of the true peak
     /// rather than the sum of every term's.
-    fn push_block(&mut self, blocks: &Blocks, b: usize, bound: bool) -> f32 {
+    fn push_block(&mut self, blocks: &Blocks, b: usize) -> f32 {
         let t = dct::basis();
         let z = dct::zigzag();
         let amax = row_max();
         let mut col = [[0f32; dct::N]; dct::N];
         let mut head = self.terms.len();
         for (i, v) in blocks.terms(b) {
-            if bound {
-                let (ky, kx) = (z[i] / dct::N, z[i] % dct::N);
-                for (c, &ty) in col[kx].iter_mut().zip(&t[ky]) {
-                    *c += v as f32 * ty;
-                }
+            let (ky, kx) = (z[i] / dct::N, z[i] % dct::N);
+            for (c, &ty) in col[kx].iter_mut().zip(&t[ky]) {
+                *c += v as f32 * ty;
             }
             head = self.terms.len();
             let e = (i as u16) << 10;
@@ -162,9 +154,6 @@ impl Compact {
             }
         }
         self.terms[head] |= LAST;
-        if !bound {
-            return 0.0;
-        }
         (0..dct::N)
             .map(|y| {
                 col.iter()
@@ -251,7 +240,7 @@ mod tests {
             let (bx0, by, n) = (
                 (w & 0x7FF) as usize,
                 (w >> 11 & 0x7FF) as usize,
-                (w >> 22 & 0xF) as usize + 1,
+                (w >> 22) as usize + 1,
             );
             let mut i = (s.terms + c.records[s.records as usize + 2 * r + 1]) as usize;
             for bx in bx0..bx0 + n {
@@ -314,25 +303,23 @@ mod tests {
         let step = 0.013;
         // A keyframe's plane (every block present), and a bubble plane's (the blocks of
         // columns 8–15 and from 30 on absent).
-        let all = |_: u32, bx: usize, by: usize| Some(by * bw + bx);
-        let some = |_: u32, bx: usize, by: usize| {
-            (!(8..16).contains(&bx) && bx < 30).then_some(by * bw + bx)
-        };
-        let rows = || (0..bh).map(|y| (0, y));
+        let all = |bx: usize, by: usize| Some(by * bw + bx);
+        let some =
+            |bx: usize, by: usize| (!(8..16).contains(&bx) && bx < 30).then_some(by * bw + bx);
         for (name, order) in [
-            ("all", &all as &dyn Fn(u32, usize, usize) -> Option<usize>),
+            ("all", &all as &dyn Fn(usize, usize) -> Option<usize>),
             ("some", &some),
         ] {
             let mut want = Plane::zeros(bw * 8, bh * 8);
             for (x, y) in (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y))) {
-                if let Some(b) = order(0, x, y) {
+                if let Some(b) = order(x, y) {
                     let at = std::iter::once((x, y));
                     plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, b, step);
                 }
             }
             let mut c = Compact::default();
-            c.push_plane(1.0, &parsed, rows(), bw, all, false); // before it: the offsets
-            let span = c.push_plane(step, &parsed, rows(), bw, order, true);
+            c.push_plane(1.0, &parsed, (bw, bh), all); // something before: the offsets
+            let span = c.push_plane(step, &parsed, (bw, bh), order);
             assert!(c.terms.iter().any(|&e| e & 0x1FF == ESCAPE), "{name}");
             assert!(
                 span.count * 2 < (bw * bh) as u32,
@@ -354,7 +341,7 @@ mod tests {
             );
             // A copy keeps the spans' contents.
             let mut d = Compact::default();
-            d.push_plane(1.0, &parsed, rows(), bw, all, false);
+            d.push_plane(1.0, &parsed, (bw, bh), all);
             let mut spans = Vec::new();
             d.push_copy(&c, &[span], &mut spans);
             let mut again = Plane::zeros(bw * 8, bh * 8);

@@ -27,12 +27,10 @@ struct Job {
     layer: u32,
     // Workgroups per row of the dispatch (records beyond 65 535 use more rows).
     groups_x: u32,
-    // Texels of the plane (zero passes); tiles and channels (the tile-slot pass).
+    // Texels of the plane (zero passes).
     size: vec2<u32>,
-    // A bubble plane's first atlas slot, and where the segment's tile map starts in
-    // `words` (4 bits a degree, luma then chroma).
-    base: u32,
-    tilemap: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 // The DCT basis T[k][n] (row k, sample n) and the zig-zag order, from the reference
@@ -47,10 +45,8 @@ struct Tables {
 @group(0) @binding(2) var<storage, read> words: array<u32>;
 // A keyframe plane (one layer of the keyframe slots).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
-// The bubble atlas (player/src/atlas.rs): two 16-bit texels per R32Uint texel.
+// The bubble planes: two 16-bit texels per R32Uint texel, one layer per (term, plane).
 @group(0) @binding(4) var bubble_planes: texture_storage_2d_array<r32uint, write>;
-// Each bubble plane's map from a tile to its atlas slot (0xFFFFFFFF: none).
-@group(0) @binding(5) var<storage, read_write> slot_of: array<u32>;
 
 fn basis(k: u32, n: u32) -> f32 {
     let i = k * 8u + n;
@@ -118,7 +114,7 @@ struct Run {
 fn run_of(r: u32) -> Run {
     let w = words[job.records + 2u * r];
     let first = job.terms + words[job.records + 2u * r + 1u];
-    return Run((w & 0x7FFu) * 8u, ((w >> 11u) & 0x7FFu) * 8u, ((w >> 22u) & 0xFu) + 1u, first);
+    return Run((w & 0x7FFu) * 8u, ((w >> 11u) & 0x7FFu) * 8u, (w >> 22u) + 1u, first);
 }
 
 // A keyframe plane's blocks added onto what the plane holds: the reference keyframe
@@ -164,75 +160,22 @@ fn bubble_write(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
         return;
     }
     let run = run_of(r);
-    // The run's atlas layer.
-    let layer = words[job.records + 2u * r] >> 26u;
     let x = 2u * l.x;
     var i = run.first;
     for (var j = 0u; j < run.blocks; j = j + 1u) {
         let s = block_sum(i, x, l.y, 0.0, true);
         let at = vec2<u32>(run.x0 / 2u + j * 4u + l.x, run.y0 + l.y);
         let packed = quantize(s.a) | (quantize(s.b) << 16u);
-        textureStore(bubble_planes, at, layer, vec4<u32>(packed, 0u, 0u, 0u));
+        textureStore(bubble_planes, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
         i = s.next;
     }
 }
 
-// Zeros the first `job.layer` layers of the bubble atlas (`job.size` R32Uint texels each).
+// Zeros the first `job.layer` layers of the bubble planes (`job.size` R32Uint texels each).
 @compute @workgroup_size(8, 8)
 fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= job.size.x || id.y >= job.size.y || id.z >= job.layer) {
         return;
     }
     textureStore(bubble_planes, id.xy, id.z, vec4<u32>(0u));
-}
-
-// Degree of tile `i` in the tile map at word `src`.
-fn degree(src: u32, i: u32) -> u32 {
-    return (words[src + i / 8u] >> ((i % 8u) * 4u)) & 0xFu;
-}
-
-var<workgroup> counts: array<u32, 256>;
-
-// Maps every tile of bubble plane `job.layer` (term k, plane p) to its atlas slot: the
-// tiles of degree ≥ k, in raster order, take slots from `job.base` on. One workgroup
-// scans the whole plane: each invocation counts a stretch of tiles, a prefix sum over
-// the counts gives each stretch its first rank.
-@compute @workgroup_size(256)
-fn tile_slots(@builtin(local_invocation_index) t: u32) {
-    let n = job.size.x;
-    let ch = job.size.y;
-    let k = job.layer / ch + 2u;
-    var src = job.tilemap;
-    if (job.layer % ch > 0u) {
-        src = src + (n + 7u) / 8u;
-    }
-    let stretch = (n + 255u) / 256u;
-    let a = min(t * stretch, n);
-    let b = min(a + stretch, n);
-    var c = 0u;
-    for (var i = a; i < b; i = i + 1u) {
-        if (degree(src, i) >= k) {
-            c = c + 1u;
-        }
-    }
-    counts[t] = c;
-    workgroupBarrier();
-    for (var d = 1u; d < 256u; d = d * 2u) {
-        var v = 0u;
-        if (t >= d) {
-            v = counts[t - d];
-        }
-        workgroupBarrier();
-        counts[t] = counts[t] + v;
-        workgroupBarrier();
-    }
-    var slot = job.base + counts[t] - c;
-    for (var i = a; i < b; i = i + 1u) {
-        var s = 0xFFFFFFFFu;
-        if (degree(src, i) >= k) {
-            s = slot;
-            slot = slot + 1u;
-        }
-        slot_of[job.layer * n + i] = s;
-    }
 }

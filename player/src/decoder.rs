@@ -10,7 +10,6 @@
 //! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
 //! first segment whose parts are all good.
 
-use crate::atlas::Atlas;
 use crate::compact::{bubble_scale, Compact, PlaneSpan};
 use crate::cpu_time::thread_cpu_ns;
 use std::sync::Arc;
@@ -63,13 +62,6 @@ pub struct SegmentData {
     pub(crate) planes: Vec<PlaneSpan>,
     /// Where the bubble planes start in `planes`.
     pub bubbles: usize,
-    /// Bubble plane i's first atlas slot.
-    pub(crate) slot_base: Vec<u32>,
-    /// Atlas slots the segment's bubble planes take (their member tiles).
-    pub slots: usize,
-    /// Where the segment's tile map (4 bits a degree, luma then chroma) starts in the
-    /// records' words.
-    pub(crate) tilemap: u32,
     pub(crate) data: Compact,
     /// CPU nanoseconds (the decoding thread's own clock) spent on this segment and the
     /// keyframes it carries.
@@ -97,9 +89,6 @@ impl SegmentData {
             keys_only: false,
             planes: Vec::new(),
             bubbles: 0,
-            slot_base: Vec::new(),
-            slots: 0,
-            tilemap: 0,
             data: Compact::default(),
             decode_ns: 0,
         }
@@ -151,8 +140,8 @@ pub struct DecoderCore {
     lost: Vec<bool>,
     /// Keyframe parsing time not yet charged to a segment.
     key_ns: u64,
-    /// Where the bubble planes' tiles go on the GPU.
-    atlas: Atlas,
+    /// Scratch: each tile's rank among a bubble plane's member tiles.
+    ranks: Vec<u32>,
     /// After a seek, the segment it is for: the ones before it get no box (the first box
     /// carries their keyframes in its chain), so that the GPU is not sent them one frame
     /// at a time only to drop them.
@@ -165,7 +154,6 @@ pub struct DecoderCore {
 impl DecoderCore {
     /// A decoder for the stream described by `header`, `layout` and `entries`.
     pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
-        let atlas = Atlas::new(&header);
         let k = layout.keyframes.len();
         let s = layout.segments.len();
         DecoderCore {
@@ -177,7 +165,7 @@ impl DecoderCore {
             coeffs: vec![None; s],
             lost: vec![false; s],
             key_ns: 0,
-            atlas,
+            ranks: Vec::new(),
             first_segment: 0,
             last_closing: None,
         }
@@ -235,9 +223,8 @@ impl DecoderCore {
                 let (w, ht) = chunk::padded_size(&self.header);
                 let (bw, bh) = (w / vbim_format::dct::N, ht / vbim_format::dct::N);
                 let mode = chunk::keyframe_blocks(&self.header, bytes, |_, step, blocks| {
-                    let rows = (0..bh).map(|by| (0, by));
-                    let at = |_, bx, by| Some(by * bw + bx);
-                    planes.push(data.push_plane(step, blocks, rows, bw, at, false));
+                    let at = |bx, by| Some(by * bw + bx);
+                    planes.push(data.push_plane(step, blocks, (bw, bh), at));
                 });
                 self.key_ns += thread_cpu_ns() - t;
                 let mode = match mode {
@@ -360,8 +347,6 @@ impl DecoderCore {
         out.steps.clear();
         out.planes.clear();
         out.data.clear();
-        out.slot_base.clear();
-        out.slots = 0;
         // The keyframes: K_{s+1} alone when the GPU built K_s last, else the chain.
         let first = if self.last_closing == Some((generation, s)) {
             None
@@ -403,46 +388,40 @@ impl DecoderCore {
         };
         let mut bubbles = chunk::CoeffReader::open(h, &bytes, &tiles).map_err(context)?;
         let layers = 1 + bubbles.max_degree() as usize;
-        // The segment's tile map for the GPU, which maps each tile to its atlas slot from
-        // it: 4 bits a degree, luma then chroma.
-        out.tilemap = out.data.records.len() as u32;
-        for p in 0..ch.min(2) {
-            let degrees = tiles.degrees(p);
-            out.data.records.extend(degrees.chunks(8).map(|c| {
-                c.iter()
-                    .enumerate()
-                    .fold(0u32, |w, (i, &d)| w | (d as u32 & 0xF) << (4 * i))
-            }));
-        }
-        // Each bubble plane's tiles take the next slots of the atlas.
-        let atlas = self.atlas;
-        let mut base = 0;
-        out.slot_base.clear();
+        let tx = h.tiles_x() as usize;
+        let per = h.tile_size as usize / vbim_format::dct::N;
+        let (bw, bh) = (tx * per, h.tiles_y() as usize * per);
         for k in 2..layers {
             for p in 0..ch {
-                let n = tiles.degrees(p).iter().filter(|&&d| d >= k as u8).count();
+                // The plane's blocks are those of the tiles of degree ≥ k, tile by tile:
+                // a member tile's rank among them says where its blocks start.
+                let degrees = tiles.degrees(p);
+                let ranks = &mut self.ranks;
+                ranks.clear();
+                let mut r = 0;
+                ranks.extend(degrees.iter().map(|&d| {
+                    if d >= k as u8 {
+                        r += 1;
+                        r - 1
+                    } else {
+                        u32::MAX
+                    }
+                }));
+                let at = |bx: usize, by: usize| {
+                    let rank = ranks[(by / per) * tx + bx / per];
+                    (rank != u32::MAX).then(|| (rank as usize * per + by % per) * per + bx % per)
+                };
                 let data = &mut out.data;
                 let planes = &mut out.planes;
-                let rows = atlas.rows(base, n);
-                let at = |layer, bx, by| atlas.block((base, n), layer, bx, by);
                 bubbles
                     .read_plane_blocks(k as u8, p, |step, blocks| {
-                        let mut span = data.push_plane(step, blocks, rows, atlas.width(), at, true);
+                        let mut span = data.push_plane(step, blocks, (bw, bh), at);
                         span.scale = bubble_scale(span.bound);
                         planes.push(span);
                     })
                     .map_err(context)?;
-                out.slot_base.push(base as u32);
-                base += n;
             }
         }
-        if base > atlas.max_slots() {
-            return Err(format!(
-                "segment {s}: {base} bubble tiles, more than the atlas addresses ({})",
-                atlas.max_slots()
-            ));
-        }
-        out.slots = base;
         bubbles.finish().map_err(context)?;
         self.finish_box(s, generation, pass, layers, k1n, t0, out);
         Ok(())

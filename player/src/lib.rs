@@ -24,7 +24,6 @@
 //! `config`, `record` and `stats` are its inputs and outputs.
 #![deny(missing_docs)]
 
-mod atlas;
 mod clock;
 mod compact;
 mod config;

@@ -135,7 +135,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             [pw as u32, ph as u32],
             header.max_degree as u32,
             header.channels as u32,
-            crate::atlas::Atlas::new(&header),
         );
         let pipeline = Pipeline::start(src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
@@ -464,11 +463,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 params.channels = self.header.channels as u32;
                 params.key0 = r.keys[0] as u32;
                 params.key1 = r.keys[1] as u32;
-                let atlas = crate::atlas::Atlas::new(&self.header);
-                params.tile = atlas.tile as u32;
-                params.tiles_x = atlas.cols as u32;
-                params.tiles = self.header.tile_count() as u32;
-                params.rows_per_layer = atlas.rows_per_layer as u32;
                 params.scales = r.scales;
                 params.alpha = alpha;
                 params.blend = (state == FrameState::CatchingUp || hold_first) as u32;

@@ -17,26 +17,18 @@ struct Params {
     // Keyframe slots of K_s and K_{s+1}.
     key0: u32,
     key1: u32,
-    // The bubble atlas: tile size, tiles per row (= slots per atlas row), tiles, slot
-    // rows per array layer.
-    tile: u32,
-    tiles_x: u32,
-    tiles: u32,
-    rows_per_layer: u32,
     pad0: u32,
     pad1: u32,
-    // Scale of each bubble plane (term k ≥ 2, plane p: (k − 2)·channels + p).
+    // Scale of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
     scales: array<vec4<f32>, 6>,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
 // Keyframes (two slots, `channels` R32Float layers each) and the segment's bubble terms
-// (term k ≥ 2, plane p: bubble plane (k − 2)·channels + p) in an atlas of tile slots
-// (player/src/atlas.rs), 16-bit signed integers times the plane's scale, two to an
-// R32Uint texel; `slot_of` maps each bubble plane's tiles to their slots.
+// (term k ≥ 2 at layers (k − 2)·channels …), 16-bit signed integers times the layer's
+// scale, two to an R32Uint texel.
 @group(0) @binding(1) var keys: texture_2d_array<f32>;
 @group(0) @binding(2) var bubbles: texture_2d_array<u32>;
-@group(0) @binding(5) var<storage, read> slot_of: array<u32>;
 @group(0) @binding(3) var held: texture_2d<f32>;
 @group(0) @binding(4) var out_tex: texture_storage_2d<rgba16float, write>;
 
@@ -71,20 +63,8 @@ fn key(xy: vec2<i32>, slot: u32) -> vec3<f32> {
 }
 
 fn bubble_layer(xy: vec2<i32>, layer: u32) -> f32 {
-    let x = u32(xy.x);
-    let y = u32(xy.y);
-    let s = slot_of[layer * p.tiles + (y / p.tile) * p.tiles_x + x / p.tile];
-    if (s == 0xFFFFFFFFu) {
-        // A tile below this term's degree.
-        return 0.0;
-    }
-    let row = s / p.tiles_x;
-    let at = vec2<u32>(
-        (s % p.tiles_x) * (p.tile / 2u) + (x % p.tile) / 2u,
-        (row % p.rows_per_layer) * p.tile + y % p.tile,
-    );
-    let w = textureLoad(bubbles, at, row / p.rows_per_layer, 0).x;
-    let half = (w >> ((x & 1u) * 16u)) & 0xFFFFu;
+    let w = textureLoad(bubbles, vec2<i32>(xy.x >> 1u, xy.y), i32(layer), 0).x;
+    let half = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
     let q = bitcast<i32>(half << 16u) >> 16u;
     return f32(q) * p.scales[layer / 4u][layer % 4u];
 }
