@@ -76,16 +76,19 @@ impl Compact {
 
     /// Appends a plane of `bw × bh` blocks whose block at column `bx`, row `by` is
     /// `blocks`' block `index(bx, by)`, or absent (`None`: not part of this plane, as a
-    /// bubble plane's tiles below its degree are not); returns where it went.
+    /// bubble plane's tiles below its degree are not); returns where it went. With
+    /// `bound`, also a bound on the plane's texels (what a bubble plane's 16-bit scale
+    /// needs; keyframes, which stay f32, do not).
     pub fn push_plane(
         &mut self,
         step: f32,
         blocks: &Blocks,
         (bw, bh): (usize, usize),
         index: impl Fn(usize, usize) -> Option<usize>,
+        bound: bool,
     ) -> PlaneSpan {
         let (records, terms) = (self.records.len() as u32, self.terms.len() as u32);
-        let mut bound = 0f32;
+        let mut peak = 0f32;
         let mut row = std::mem::take(&mut self.row);
         for by in 0..bh {
             row.clear();
@@ -107,7 +110,7 @@ impl Compact {
                 for (bx, &kind) in row.iter().enumerate().take(end).skip(x) {
                     match index(bx, by) {
                         Some(b) if kind == FULL => {
-                            bound = bound.max(self.push_block(blocks, b));
+                            peak = peak.max(self.push_block(blocks, b, bound));
                         }
                         _ => self.terms.push(LAST),
                     }
@@ -122,7 +125,7 @@ impl Compact {
             count: (self.records.len() as u32 - records) / 2,
             terms,
             terms_end: self.terms.len() as u32,
-            bound: bound * step,
+            bound: peak * step,
             scale: 0.0,
         }
     }
@@ -132,16 +135,18 @@ impl Compact {
     /// largest possible value, |Σ_kx col[kx][y] · T[kx][x]| ≤ Σ_kx |col[kx][y]| ·
     /// max |T[kx]| — exact down the columns, so within a small factor of the true peak
     /// rather than the sum of every term's.
-    fn push_block(&mut self, blocks: &Blocks, b: usize) -> f32 {
+    fn push_block(&mut self, blocks: &Blocks, b: usize, bound: bool) -> f32 {
         let t = dct::basis();
         let z = dct::zigzag();
         let amax = row_max();
         let mut col = [[0f32; dct::N]; dct::N];
         let mut head = self.terms.len();
         for (i, v) in blocks.terms(b) {
-            let (ky, kx) = (z[i] / dct::N, z[i] % dct::N);
-            for (c, &ty) in col[kx].iter_mut().zip(&t[ky]) {
-                *c += v as f32 * ty;
+            if bound {
+                let (ky, kx) = (z[i] / dct::N, z[i] % dct::N);
+                for (c, &ty) in col[kx].iter_mut().zip(&t[ky]) {
+                    *c += v as f32 * ty;
+                }
             }
             head = self.terms.len();
             let e = (i as u16) << 10;
@@ -154,6 +159,9 @@ impl Compact {
             }
         }
         self.terms[head] |= LAST;
+        if !bound {
+            return 0.0;
+        }
         (0..dct::N)
             .map(|y| {
                 col.iter()
@@ -318,8 +326,8 @@ mod tests {
                 }
             }
             let mut c = Compact::default();
-            c.push_plane(1.0, &parsed, (bw, bh), all); // something before: the offsets
-            let span = c.push_plane(step, &parsed, (bw, bh), order);
+            c.push_plane(1.0, &parsed, (bw, bh), all, false); // before it: the offsets
+            let span = c.push_plane(step, &parsed, (bw, bh), order, true);
             assert!(c.terms.iter().any(|&e| e & 0x1FF == ESCAPE), "{name}");
             assert!(
                 span.count * 2 < (bw * bh) as u32,
@@ -341,7 +349,7 @@ mod tests {
             );
             // A copy keeps the spans' contents.
             let mut d = Compact::default();
-            d.push_plane(1.0, &parsed, (bw, bh), all);
+            d.push_plane(1.0, &parsed, (bw, bh), all, false);
             let mut spans = Vec::new();
             d.push_copy(&c, &[span], &mut spans);
             let mut again = Plane::zeros(bw * 8, bh * 8);

@@ -224,7 +224,7 @@ impl DecoderCore {
                 let (bw, bh) = (w / vbim_format::dct::N, ht / vbim_format::dct::N);
                 let mode = chunk::keyframe_blocks(&self.header, bytes, |_, step, blocks| {
                     let at = |bx, by| Some(by * bw + bx);
-                    planes.push(data.push_plane(step, blocks, (bw, bh), at));
+                    planes.push(data.push_plane(step, blocks, (bw, bh), at, false));
                 });
                 self.key_ns += thread_cpu_ns() - t;
                 let mode = match mode {
@@ -415,7 +415,7 @@ impl DecoderCore {
                 let planes = &mut out.planes;
                 bubbles
                     .read_plane_blocks(k as u8, p, |step, blocks| {
-                        let mut span = data.push_plane(step, blocks, (bw, bh), at);
+                        let mut span = data.push_plane(step, blocks, (bw, bh), at, true);
                         span.scale = bubble_scale(span.bound);
                         planes.push(span);
                     })

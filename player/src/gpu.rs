@@ -149,10 +149,13 @@ pub(crate) struct Gpu {
     pub channels: u32,
 }
 
-/// Bytes a buffer of at least `need` bytes is given: a power of two (at least 64 KiB), so
-/// that it grows a few times at the start of a stream and then never.
+/// Bytes a buffer of at least `need` bytes is given: an eighth more (at least 64 KiB), so
+/// that it grows a few times at the start of a stream and then never, without the up to
+/// 2× of rounding to a power of two (2 bytes per texel of a 2048² stream's coefficients).
 fn grown(need: u64) -> u64 {
-    need.max(1 << 16).next_power_of_two()
+    (need + need / 8)
+        .max(1 << 16)
+        .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
 }
 
 impl Gpu {
@@ -873,7 +876,7 @@ mod tests {
             let at = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
             plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
             let mut c = Compact::default();
-            let span = c.push_plane(step, &parsed, (bw, bh), |x, y| Some(y * bw + x));
+            let span = c.push_plane(step, &parsed, (bw, bh), |x, y| Some(y * bw + x), false);
             seg.steps = vec![KeyStep {
                 number: n,
                 intra: n == 0,
@@ -922,7 +925,7 @@ mod tests {
             }
         }
         let mut c = Compact::default();
-        let mut span = c.push_plane(step, &parsed, (bw, bh), order);
+        let mut span = c.push_plane(step, &parsed, (bw, bh), order, true);
         span.scale = crate::compact::bubble_scale(span.bound);
         let mut seg = SegmentData::new();
         seg.steps = Vec::new();
