@@ -25,7 +25,8 @@ for sample in jacksboro aletsch; do
             [ "$sky" = cloudy ] && clouds=true
             "$vbim" bake "samples/$sample.toml" --out "$dir/exr" --size 512 --frames 240 \
                 --clouds "$clouds" >/dev/null
-            "$vbim" encode "$dir/exr" -o "$file" --fps 24/1 >/dev/null
+            # (stderr: notes about files beside the frames, such as the contact sheet)
+            "$vbim" encode "$dir/exr" -o "$file" --fps 24/1 >/dev/null 2>&1
             rm -rf "$dir/exr"
         fi
         reads=() decodes=() sums=()

@@ -122,7 +122,7 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
         let textures = planes * ch as u64 * (2 * 4 + (d - 1) * 2) + 2 * 40 * 24 * 8;
         let buffers = player.gpu_bytes() - textures - 192 - 512;
         assert!(
-            (16 << 10) + (64 << 10) <= buffers && buffers < 1 << 20,
+            ((16 << 10) + (64 << 10)..1 << 20).contains(&buffers),
             "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",
             player.gpu_bytes()
         );
