@@ -19,8 +19,9 @@
 use vbim_format::dct;
 use vbim_format::plane::Blocks;
 
-/// Most blocks in one run (the 4 bits of a record that say how many).
-pub(crate) const RUN: usize = 16;
+/// Most blocks in one run (a record says how many in 10 bits; a GPU workgroup decodes a
+/// run's blocks one after another, so a bound keeps enough runs to spread the work).
+pub(crate) const RUN: usize = 64;
 /// Most empty blocks a run goes on through (each costs one entry; a new record costs
 /// four).
 const GAP: usize = 3;
@@ -359,7 +360,7 @@ mod tests {
     }
 
     #[test]
-    fn runs_go_through_short_gaps_and_stop_at_absent_blocks_and_sixteen() {
+    fn runs_go_through_short_gaps_and_stop_at_absent_blocks_and_the_limit() {
         let row = |s: &str| -> Vec<u8> {
             s.bytes()
                 .map(|c| match c {
@@ -372,7 +373,7 @@ mod tests {
         assert_eq!(run_end(&row("##..#....#"), 0), 5);
         assert_eq!(run_end(&row("##_#"), 0), 2);
         assert_eq!(run_end(&row("###."), 0), 3);
-        assert_eq!(run_end(&row(&"#".repeat(40)), 0), RUN);
+        assert_eq!(run_end(&row(&"#".repeat(100)), 0), RUN);
         assert_eq!(run_end(&row("#...#"), 0), 5);
     }
 }
