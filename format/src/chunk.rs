@@ -538,17 +538,7 @@ impl<'t> CoeffReader<'t> {
         band: &mut Plane,
         mut rows: impl FnMut(TileRows<'_>),
     ) -> Result<()> {
-        if (k, p) != self.next || k > self.dmax {
-            return Err(FormatError::Invalid(format!(
-                "bubble plane {k}/{p} read out of order (next is {}/{})",
-                self.next.0, self.next.1
-            )));
-        }
-        self.next = if p + 1 < self.planes {
-            (k, p + 1)
-        } else {
-            (k + 1, 0)
-        };
+        self.take_plane(k, p)?;
         let ts = self.tile_size;
         let per = ts / N;
         let w = self.tiles_x * ts;
@@ -603,6 +593,20 @@ impl<'t> CoeffReader<'t> {
         p: usize,
         each: impl FnOnce(f32, &plane::Blocks),
     ) -> Result<()> {
+        self.take_plane(k, p)?;
+        let per = self.tile_size / N;
+        let step = self.steps[(k as usize - 2) * self.planes + p];
+        let members = self.tiles.degrees(p).iter().filter(|&&d| d >= k).count();
+        let (raw, pos) = (&self.raw, &mut self.pos);
+        BLOCKS.with_borrow_mut(|q| {
+            plane::read_blocks(raw, pos, members * per * per, q)?;
+            each(step, q);
+            Ok(())
+        })
+    }
+
+    /// Moves past bubble plane (`k`, `p`), which must be the next in stream order.
+    fn take_plane(&mut self, k: u8, p: usize) -> Result<()> {
         if (k, p) != self.next || k > self.dmax {
             return Err(FormatError::Invalid(format!(
                 "bubble plane {k}/{p} read out of order (next is {}/{})",
@@ -614,15 +618,7 @@ impl<'t> CoeffReader<'t> {
         } else {
             (k + 1, 0)
         };
-        let per = self.tile_size / N;
-        let step = self.steps[(k as usize - 2) * self.planes + p];
-        let members = self.tiles.degrees(p).iter().filter(|&&d| d >= k).count();
-        let (raw, pos) = (&self.raw, &mut self.pos);
-        BLOCKS.with_borrow_mut(|q| {
-            plane::read_blocks(raw, pos, members * per * per, q)?;
-            each(step, q);
-            Ok(())
-        })
+        Ok(())
     }
 
     /// Checks that every plane was read and nothing follows them.

@@ -792,6 +792,17 @@ pub fn read_texture(
     texture: &wgpu::Texture,
     bytes_per_texel: u32,
 ) -> Vec<u8> {
+    read_texture_layer(device, queue, texture, bytes_per_texel, 0)
+}
+
+/// [`read_texture`] for one layer of an array texture.
+fn read_texture_layer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    bytes_per_texel: u32,
+    layer: u32,
+) -> Vec<u8> {
     let (w, h) = (texture.width(), texture.height());
     let row = (w * bytes_per_texel).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
         * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
@@ -803,7 +814,16 @@ pub fn read_texture(
     });
     let mut enc = device.create_command_encoder(&Default::default());
     enc.copy_texture_to_buffer(
-        texture.as_image_copy(),
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: 0,
+                y: 0,
+                z: layer,
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
         wgpu::TexelCopyBufferInfo {
             buffer: &buf,
             layout: wgpu::TexelCopyBufferLayout {
@@ -891,7 +911,7 @@ mod tests {
             queue.submit([enc.finish()]);
         }
         // The predicted keyframe went into slot 1.
-        let raw = read_texture_layer(&device, &queue, &gpu.keys, 1);
+        let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 1);
         let got: &[f32] = bytemuck::cast_slice(&raw);
         let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
         for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
@@ -936,7 +956,7 @@ mod tests {
         let mut enc = device.create_command_encoder(&Default::default());
         gpu.decode(&mut enc, &seg, 0, true);
         queue.submit([enc.finish()]);
-        let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 0);
+        let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
         let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
             .iter()
             .map(|&q| q as f32 * span.scale)
@@ -948,54 +968,5 @@ mod tests {
                 span.scale
             );
         }
-    }
-
-    fn read_texture_layer(
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        t: &wgpu::Texture,
-        layer: u32,
-    ) -> Vec<u8> {
-        let (w, h) = (t.width(), t.height());
-        let row = (w * 4).next_multiple_of(256);
-        let buf = device.create_buffer(&wgpu::BufferDescriptor {
-            label: None,
-            size: (row * h) as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut enc = device.create_command_encoder(&Default::default());
-        enc.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: t,
-                mip_level: 0,
-                origin: wgpu::Origin3d {
-                    x: 0,
-                    y: 0,
-                    z: layer,
-                },
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buf,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(h),
-                },
-            },
-            wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-        );
-        queue.submit([enc.finish()]);
-        buf.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        let data = buf.slice(..).get_mapped_range();
-        (0..h as usize)
-            .flat_map(|y| data[y * row as usize..y * row as usize + w as usize * 4].to_vec())
-            .collect()
     }
 }

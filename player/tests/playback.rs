@@ -85,6 +85,21 @@ fn inline(policy: Policy, throttle: Throttle) -> PlayerConfig {
     }
 }
 
+/// A player of `bytes`, stepped inline, unthrottled, interpolating.
+fn unthrottled(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    bytes: Vec<u8>,
+) -> Player<Cursor<Vec<u8>>> {
+    Player::open(
+        device,
+        queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, Throttle::UNLIMITED),
+    )
+    .unwrap()
+}
+
 /// 1/60 s in ns; 60 Hz display over 24 fps media.
 const DISPLAY: u64 = 16_666_667;
 
@@ -106,13 +121,7 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
         }
         let bytes = encode_bytes(&src, &config(SegmentMode::Auto { max: 12 }));
         let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
-        let mut player = Player::open(
-            &device,
-            &queue,
-            Cursor::new(bytes),
-            inline(Policy::Interpolate, Throttle::UNLIMITED),
-        )
-        .unwrap();
+        let mut player = unthrottled(&device, &queue, bytes);
         // The budget's figure, counted by hand: two keyframe slots of ch R32Float layers
         // and (degree − 1) × ch bubble layers of 16 bits, over the padded planes (48 × 32,
         // whole 16-texel tiles), the lightmap and its held copy (Rgba16Float); then the
@@ -137,7 +146,7 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
                 r.index,
                 player.totals()
             );
-            if r.index % 7 != 0 {
+            if !r.index.is_multiple_of(7) {
                 continue;
             }
             let gpu = player.read_display();
@@ -239,13 +248,7 @@ fn loops_are_seamless_and_100_hours_land_on_the_exact_frame() {
         &config(SegmentMode::Auto { max: 8 }),
     );
     let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, Throttle::UNLIMITED),
-    )
-    .unwrap();
+    let mut player = unthrottled(&device, &queue, bytes);
     // Across three loop seams at 60 Hz, every frame is exact.
     for _ in 0..(3 * 60 + 10) {
         let r = player.advance(DISPLAY);
@@ -295,13 +298,7 @@ fn a_damaged_chunk_mid_stream_is_reported_and_playback_recovers() {
     let (_, ci) = r.layout().segments[5];
     let e = r.entries()[ci];
     bytes[(e.offset + e.length / 2) as usize] ^= 0xff;
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, Throttle::UNLIMITED),
-    )
-    .unwrap();
+    let mut player = unthrottled(&device, &queue, bytes);
     let mut saw_hold = false;
     for _ in 0..200 {
         let rec = player.advance(DISPLAY);
@@ -447,13 +444,7 @@ fn the_loop_seam_in_a_sunrise_adds_no_error() {
     );
     let bytes = encode_bytes(&src, &config(SegmentMode::Auto { max: 32 }));
     let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, Throttle::UNLIMITED),
-    )
-    .unwrap();
+    let mut player = unthrottled(&device, &queue, bytes);
     let metric = vbim_format::metrics::Metric::Hdr { exposure };
     // Per media frame: MSE of the displayed frame against the source; per display frame,
     // the largest difference against the reference decoder (what the player itself adds).
@@ -814,13 +805,7 @@ fn tiles_that_leave_a_term_are_zero_in_the_next_segment() {
         .sum();
     assert!(left > 0, "no tile left a term between segments");
     let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes.clone()),
-        inline(Policy::Interpolate, Throttle::UNLIMITED),
-    )
-    .unwrap();
+    let mut player = unthrottled(&device, &queue, bytes.clone());
     // Media frames at 24 fps, one display frame each: every media frame of the loop.
     let mut checked = 0;
     for _ in 0..96 {
@@ -960,13 +945,7 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
         .to_string();
     assert!(e.contains("reference"), "{e}");
     // The player reports the chunk damaged.
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, Throttle::UNLIMITED),
-    )
-    .unwrap();
+    let mut player = unthrottled(&device, &queue, bytes);
     for _ in 0..240 {
         player.advance(DISPLAY);
     }
@@ -1013,13 +992,7 @@ fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_lo
         }
         assert!(longest >= 12, "a chain of {longest} predicted keyframes");
         let mut reference = Decoder::new(r);
-        let mut player = Player::open(
-            &device,
-            &queue,
-            Cursor::new(bytes),
-            inline(Policy::Interpolate, Throttle::UNLIMITED),
-        )
-        .unwrap();
+        let mut player = unthrottled(&device, &queue, bytes);
         let what = format!("{kind:?}, {ch} channel(s), {w}×{h}");
         let mode = if kind == InputKind::Srgb8 {
             Output::Stored
