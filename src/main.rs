@@ -31,6 +31,12 @@ fn main() -> ExitCode {
     }
     #[cfg(unix)]
     quiet_mesa();
+    // Ctrl-C or SIGTERM: remove the files being written (a frame's or a stream's temporary,
+    // the passes of `--exact`), then exit as a shell expects of an interrupted command.
+    let _ = ctrlc::set_handler(|| {
+        vbim_bake::output::remove_temporaries();
+        std::process::exit(130);
+    });
     let args = cli::Cli::parse();
     let res = match args.command {
         cli::Command::Bake(a) => cmd_bake::run(a),

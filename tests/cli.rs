@@ -499,3 +499,72 @@ fn help_states_each_default_once() {
         }
     }
 }
+
+/// Ctrl-C in the middle of `encode --exact` (the command that writes the most temporary
+/// files: a pass file per pass, each written through a temporary of its own) leaves
+/// nothing behind: the handler removes what is being written, and the exit status is 130,
+/// as a shell expects of an interrupted command.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_exact_encode_leaves_no_file_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    bake(&frames, "128", "48", &[]);
+    let out = dir.path().join("day.vbim");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_vbim"))
+        .args([
+            "encode",
+            s(&frames),
+            "-o",
+            s(&out),
+            "--exact",
+            "--tolerance",
+            "52",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait for a finished pass file (each pass is first written through a temporary of
+    // its own), then interrupt.
+    let written = |d: &Path| {
+        std::fs::read_dir(d)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n != "frames")
+            .collect::<Vec<_>>()
+    };
+    loop {
+        if written(dir.path())
+            .iter()
+            .any(|n| n.starts_with(".day.vbim.pass"))
+        {
+            break;
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the encode ended before it wrote anything"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let seen = written(dir.path());
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the encode ended before it could be interrupted (it wrote {seen:?})"
+    );
+    // SAFETY: sending a signal to our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let status = child.wait().unwrap();
+    assert_eq!(
+        status.code(),
+        Some(130),
+        "interrupted while {seen:?} existed"
+    );
+    assert_eq!(
+        written(dir.path()),
+        Vec::<String>::new(),
+        "left behind (had {seen:?})"
+    );
+}

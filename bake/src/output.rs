@@ -2,7 +2,7 @@
 //! file is written under a temporary name and renamed, so an interrupted bake never leaves
 //! a truncated file under a final name.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use half::f16;
 use serde::{Deserialize, Serialize};
@@ -59,6 +59,7 @@ pub fn write_atomic<T, E>(
     }
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("out");
     let tmp = path.with_file_name(format!(".tmp-{}-{name}", std::process::id()));
+    let _registered = Temporary::new(tmp.clone());
     let result = write(&tmp).and_then(|value| {
         std::fs::File::open(&tmp)
             .and_then(|f| f.sync_all())
@@ -70,6 +71,50 @@ pub fn write_atomic<T, E>(
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Temporary files being written, which [`remove_temporaries`] removes when the process
+/// is interrupted (the `vbim` command's Ctrl-C and SIGTERM handler), so that an interrupted
+/// run leaves nothing behind: no `.tmp-` file of [`write_atomic`], no pass file of
+/// `--exact`.
+static TEMPORARIES: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+fn temporaries() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A temporary file registered for removal on interruption while this lives (dropping it
+/// only forgets the registration: the owner removes or renames the file itself).
+pub struct Temporary(PathBuf);
+
+impl Temporary {
+    /// Registers `path`.
+    pub fn new(path: PathBuf) -> Temporary {
+        temporaries().push(path.clone());
+        Temporary(path)
+    }
+
+    /// The registered path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Temporary {
+    fn drop(&mut self) {
+        let mut list = temporaries();
+        if let Some(i) = list.iter().position(|p| *p == self.0) {
+            list.swap_remove(i);
+        }
+    }
+}
+
+/// Removes every registered temporary file. For an interrupt handler, which then exits:
+/// the registrations are forgotten, whatever still holds them.
+pub fn remove_temporaries() {
+    for p in temporaries().drain(..) {
+        let _ = std::fs::remove_file(p);
+    }
 }
 
 /// Refuses an output path that exists and is not a regular file. Renaming over a device,
@@ -309,5 +354,28 @@ mod tests {
         for k in 0..8 {
             assert!(first == write(&format!("b{k}.exr")), "write {k} differs");
         }
+    }
+
+    /// (Removal itself is the interrupt handler's: `an_interrupted_exact_encode_leaves_no_
+    /// file_behind` in tests/cli.rs. Calling it here would remove the files other tests of
+    /// this process are writing.)
+    #[test]
+    fn temporaries_are_registered_while_written_and_forgotten_when_done() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join(".tmp-a"), dir.path().join(".tmp-b"));
+        let writing = Temporary::new(a.clone());
+        drop(Temporary::new(b.clone()));
+        let listed = temporaries().clone();
+        assert!(listed.contains(&a) && !listed.contains(&b), "{listed:?}");
+        drop(writing);
+        assert!(!temporaries().contains(&a));
+        // A file written through `write_atomic` is registered only while it is written.
+        let target = dir.path().join("frame.bin");
+        super::write_file(&target, |tmp| {
+            assert!(temporaries().iter().any(|p| p == tmp));
+            std::fs::write(tmp, b"x").map_err(|e| e.to_string())
+        })
+        .unwrap();
+        assert!(!temporaries().iter().any(|p| p.starts_with(dir.path())));
     }
 }

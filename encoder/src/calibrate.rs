@@ -7,7 +7,9 @@
 //! [T, T + BAND_DB]. Each pass costs one encode and one verification; the smallest file
 //! that meets T is kept.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use vbim_bake::output::Temporary;
 
 use crate::{encode_file, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
 
@@ -38,9 +40,10 @@ pub fn encode_to_tolerance(
     let pass_path =
         |k: usize| out.with_file_name(format!(".{name}.pass{k}-{}", std::process::id()));
     let mut passes: Vec<(f64, f64, u64)> = Vec::new();
-    // (report, file) of the smallest file meeting the target, and of the best one missing it.
-    let mut met: Option<(EncodeReport, PathBuf)> = None;
-    let mut missed: Option<(EncodeReport, PathBuf)> = None;
+    // (report, file) of the smallest file meeting the target, and of the best one missing
+    // it. Pass files are registered as temporaries: an interrupted run removes them.
+    let mut met: Option<(EncodeReport, Temporary)> = None;
+    let mut missed: Option<(EncodeReport, Temporary)> = None;
     let mut internal = target;
     let result = (|| {
         for k in 0..MAX_PASSES {
@@ -48,33 +51,26 @@ pub fn encode_to_tolerance(
                 tolerance_db: internal,
                 ..cfg.clone()
             };
-            let path = pass_path(k);
-            let mut rep = encode_file(src, &c, &path, progress)?;
-            rep.verify_file(src, &path, progress)?;
+            let path = Temporary::new(pass_path(k));
+            let mut rep = encode_file(src, &c, path.path(), progress)?;
+            if let Err(e) = rep.verify_file(src, path.path(), progress) {
+                let _ = std::fs::remove_file(path.path());
+                return Err(e);
+            }
             let p = rep.mean_psnr.unwrap_or(f64::INFINITY);
             passes.push((internal, p, rep.bytes));
-            let keep = |slot: &mut Option<(EncodeReport, PathBuf)>, better: bool| {
-                if better {
-                    if let Some((_, old)) = slot.take() {
-                        let _ = std::fs::remove_file(old);
-                    }
-                    *slot = Some((rep.clone(), path.clone()));
-                    true
-                } else {
-                    false
+            let slot = if p >= target { &mut met } else { &mut missed };
+            let better = slot.as_ref().is_none_or(|(r, _)| match p >= target {
+                true => rep.bytes < r.bytes,
+                false => p > r.mean_psnr.unwrap_or(0.0),
+            });
+            if better {
+                if let Some((_, old)) = slot.take() {
+                    let _ = std::fs::remove_file(old.path());
                 }
-            };
-            let kept = if p >= target {
-                let better = met.as_ref().is_none_or(|(r, _)| rep.bytes < r.bytes);
-                keep(&mut met, better)
+                *slot = Some((rep.clone(), path));
             } else {
-                let better = missed
-                    .as_ref()
-                    .is_none_or(|(r, _)| p > r.mean_psnr.unwrap_or(0.0));
-                keep(&mut missed, better)
-            };
-            if !kept {
-                let _ = std::fs::remove_file(&path);
+                let _ = std::fs::remove_file(path.path());
             }
             if (target..=target + BAND_DB).contains(&p) {
                 break;
@@ -121,16 +117,16 @@ pub fn encode_to_tolerance(
         None => (missed, None),
     };
     if let Some((_, p)) = other {
-        let _ = std::fs::remove_file(p);
+        let _ = std::fs::remove_file(p.path());
     }
     if let Err(e) = result {
         if let Some((_, p)) = chosen {
-            let _ = std::fs::remove_file(p);
+            let _ = std::fs::remove_file(p.path());
         }
         return Err(e);
     }
     let (mut rep, path) = chosen.expect("at least one pass ran");
-    std::fs::rename(&path, out).map_err(|e| EncodeError::Output {
+    std::fs::rename(path.path(), out).map_err(|e| EncodeError::Output {
         path: out.to_path_buf(),
         msg: e.to_string(),
     })?;
