@@ -150,10 +150,10 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
         // the GPU (parsed coefficients; the GPU does the rest).
         let t = Instant::now();
         let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
-        let mut staging = SegmentData::new();
+        let mut packed = SegmentData::new();
         for (i, c) in chunks.iter().enumerate() {
             if let Event::Ready(s) = dec.take(i, Some(c)) {
-                dec.fill(s, 0, 0, &mut staging)?;
+                dec.fill(s, 0, 0, &mut packed)?;
             }
         }
         full_t.push(t.elapsed().as_secs_f64());

@@ -457,10 +457,11 @@ pub fn spans(n: usize, keep: impl Fn(usize) -> bool) -> impl Iterator<Item = (us
     })
 }
 
-/// A coefficient chunk decoded plane by plane, one band of tiles at a time, handing out
-/// finished rows: the player writes them straight into a mapped staging buffer, so a
-/// segment's bubble planes are never zeroed, accumulated and copied as whole planes in
-/// memory (a band of 16 rows stays in cache).
+/// A coefficient chunk read plane by plane: decoded one band of tiles at a time, handing out
+/// finished rows (a band of 16 rows stays in cache, so a segment's bubble planes are never
+/// zeroed, accumulated and copied as whole planes in memory: the reference decoder's path),
+/// or parsed to its quantised blocks only ([`CoeffReader::read_plane_blocks`]: the GPU
+/// player's).
 pub struct CoeffReader<'t> {
     raw: Vec<u8>,
     pos: usize,

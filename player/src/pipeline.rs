@@ -234,11 +234,10 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                 read_seen,
             } => {
                 // At most two passes over the file per frame: a stream in which nothing can
-                // be decoded (a damaged chain that never recovers) never fills a staging
-                // box, and an unthrottled reader would otherwise wrap around it forever
-                // inside this one call. A playable stream never needs as much: what the
-                // decoder takes before both boxes are full, plus a ring no larger than the
-                // file.
+                // be decoded (a damaged chain that never recovers) never fills a box, and an
+                // unthrottled reader would otherwise wrap around it forever inside this one
+                // call. A playable stream never needs as much: what the decoder takes before
+                // every box is full, plus a ring no larger than the file.
                 let mut budget = 2 * reader.chunk_count() + 4;
                 let (mut read_ns, mut decode_ns) = (0, 0);
                 loop {
