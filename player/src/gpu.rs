@@ -86,12 +86,22 @@ const JOB_STRIDE: u64 = 256;
 /// Bytes [`Gpu::decode`] uploads for `seg`: its records and terms, and one job's
 /// parameters per plane decoded (and the bubbles' zero pass).
 pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool) -> u64 {
-    let planes = if bubbles {
+    seg.data.bytes() + job_bytes(seg, bubbles)
+}
+
+/// The planes [`Gpu::decode`] decodes: the keyframe steps', and the bubbles' when wanted.
+fn decoded_planes(seg: &SegmentData, bubbles: bool) -> usize {
+    if bubbles {
         seg.planes.len()
     } else {
         seg.bubbles
-    };
-    seg.data.bytes() + (planes as u64 + 1) * JOB_STRIDE
+    }
+}
+
+/// Bytes of the decode passes' parameters: one job per plane, and one for the bubbles'
+/// zero pass.
+fn job_bytes(seg: &SegmentData, bubbles: bool) -> u64 {
+    (decoded_planes(seg, bubbles) as u64 + 1) * JOB_STRIDE
 }
 
 /// Workgroups per dispatch row: WebGPU's default limit per dimension.
@@ -494,27 +504,20 @@ impl Gpu {
     /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn in
     /// alternating keyframe slots starting with `first_slot`, then (with `bubbles`) its
     /// bubble planes. The records and terms go through `Queue::write_buffer`, which takes
-    /// effect at the queue's next submission: the one that carries `enc`. Returns the
-    /// bytes uploaded.
+    /// effect at the queue's next submission: the one that carries `enc`. It uploads
+    /// [`upload_bytes`].
     pub fn decode(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
         seg: &SegmentData,
         first_slot: usize,
         bubbles: bool,
-    ) -> u64 {
+    ) {
         let ch = self.channels as usize;
         let rec_bytes = seg.data.records.len() as u64 * 4;
-        let term_bytes = seg.data.terms.len().next_multiple_of(2) as u64 * 2;
-        let words = rec_bytes + term_bytes;
-        let planes = if bubbles {
-            seg.planes.len()
-        } else {
-            seg.bubbles
-        };
-        // One job per plane, and one for the bubbles' zero pass.
-        let jobs = (planes as u64 + 1) * JOB_STRIDE;
-        debug_assert_eq!(upload_bytes(seg, bubbles), words + jobs);
+        let words = seg.data.bytes();
+        let planes = decoded_planes(seg, bubbles);
+        let jobs = job_bytes(seg, bubbles);
         if words > self.words.size() || jobs > self.jobs.size() {
             use wgpu::BufferUsages as B;
             if words > self.words.size() {
@@ -646,7 +649,6 @@ impl Gpu {
                 dispatch(&mut pass, span.count);
             }
         }
-        words + self.job_bytes.len() as u64
     }
 
     fn push_job(&mut self, job: Job) {

@@ -439,38 +439,36 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         // went to a dropped segment's), the display keeps the image it has.
         let (mut seg, mut u) = (0, 0.0);
         let mut eval = None;
-        {
-            if let Some(r) = self.resident {
-                let t = if missing {
-                    shown.clamp(r.start, r.end)
-                } else {
-                    pos
-                };
-                u = ((t - r.start) as f64 / (r.end - r.start) as f64).clamp(0.0, 1.0);
-                seg = r.index;
-                let dmax = r.layers - 1;
-                let w = vbim_format::basis::weights(dmax, u);
-                let mut params = Params::zeroed_params();
-                params.w[..w.len()].copy_from_slice(&w);
-                params.size = [self.header.width, self.header.height];
-                params.layers = r.layers as u32;
-                let (tr, v0) = match self.header.transfer {
-                    Transfer::Srgb => (0, 0.0),
-                    Transfer::LogToe { v0 } => (1, v0),
-                };
-                params.transfer = tr;
-                params.v0 = v0;
-                params.channels = self.header.channels as u32;
-                params.key0 = r.keys[0] as u32;
-                params.key1 = r.keys[1] as u32;
-                params.scales = r.scales;
-                params.alpha = alpha;
-                params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
-                if hold_first {
-                    params.alpha = 1e-3;
-                }
-                eval = Some((params, hold_first));
+        if let Some(r) = self.resident {
+            let t = if missing {
+                shown.clamp(r.start, r.end)
+            } else {
+                pos
+            };
+            u = ((t - r.start) as f64 / (r.end - r.start) as f64).clamp(0.0, 1.0);
+            seg = r.index;
+            let dmax = r.layers - 1;
+            let w = vbim_format::basis::weights(dmax, u);
+            let mut params = Params::zeroed_params();
+            params.w[..w.len()].copy_from_slice(&w);
+            params.size = [self.header.width, self.header.height];
+            params.layers = r.layers as u32;
+            let (tr, v0) = match self.header.transfer {
+                Transfer::Srgb => (0, 0.0),
+                Transfer::LogToe { v0 } => (1, v0),
+            };
+            params.transfer = tr;
+            params.v0 = v0;
+            params.channels = self.header.channels as u32;
+            params.key0 = r.keys[0] as u32;
+            params.key1 = r.keys[1] as u32;
+            params.scales = r.scales;
+            params.alpha = alpha;
+            params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
+            if hold_first {
+                params.alpha = 1e-3;
             }
+            eval = Some((params, hold_first));
         }
         let record = self.record(t0, wall, shown, state, alpha, seg, u, uploaded, cpu);
         Frame { record, eval }

@@ -85,19 +85,29 @@ fn inline(policy: Policy, throttle: Throttle) -> PlayerConfig {
     }
 }
 
+/// A player of `bytes`, stepped inline, interpolating, read under `throttle`.
+fn interpolating(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    bytes: Vec<u8>,
+    throttle: Throttle,
+) -> Player<Cursor<Vec<u8>>> {
+    Player::open(
+        device,
+        queue,
+        Cursor::new(bytes),
+        inline(Policy::Interpolate, throttle),
+    )
+    .unwrap()
+}
+
 /// A player of `bytes`, stepped inline, unthrottled, interpolating.
 fn unthrottled(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     bytes: Vec<u8>,
 ) -> Player<Cursor<Vec<u8>>> {
-    Player::open(
-        device,
-        queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, Throttle::UNLIMITED),
-    )
-    .unwrap()
+    interpolating(device, queue, bytes, Throttle::UNLIMITED)
 }
 
 /// 1/60 s in ns; 60 Hz display over 24 fps media.
@@ -198,13 +208,7 @@ fn a_stall_longer_than_the_read_ahead_holds_then_catches_up_without_black_frames
         rate: Some(rate),
         stall: Some(Stall::every(1_500_000_000, 6_000_000_000)),
     };
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, throttle),
-    )
-    .unwrap();
+    let mut player = interpolating(&device, &queue, bytes, throttle);
     let mut states = Vec::new();
     let mut drift_after = Vec::new();
     for k in 0..1500 {
@@ -836,15 +840,7 @@ fn recording_into_the_callers_encoder_shows_what_advance_shows() {
         rate: Some(rate),
         stall: Some(Stall::every(1_500_000_000, 6_000_000_000)),
     };
-    let open = || {
-        Player::open(
-            &device,
-            &queue,
-            Cursor::new(bytes.clone()),
-            inline(Policy::Interpolate, throttle),
-        )
-        .unwrap()
-    };
+    let open = || interpolating(&device, &queue, bytes.clone(), throttle);
     let (mut own, mut embedded) = (open(), open());
     let mut states = Vec::new();
     for k in 0..900 {
@@ -891,13 +887,7 @@ fn a_hostile_buffer_model_is_bounded_by_the_file() {
         rate: Some(rate),
         stall: None,
     };
-    let mut player = Player::open(
-        &device,
-        &queue,
-        Cursor::new(bytes),
-        inline(Policy::Interpolate, throttle),
-    )
-    .unwrap();
+    let mut player = interpolating(&device, &queue, bytes, throttle);
     // The whole file and a 16-byte header per chunk, at most.
     assert!(
         player.ring_bytes() <= file_size + 16 * (h.chunk_count as usize + 4),
