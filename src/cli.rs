@@ -73,8 +73,8 @@ pub struct PlayArgs {
     /// Run without a window and print the summary.
     #[arg(long)]
     pub headless: bool,
-    /// Playback duration (`60s`, `2min`, `500ms`).
-    #[arg(long, default_value = "60s")]
+    /// Playback duration (`60s`, `2min`, `500ms`; at most 3 hours).
+    #[arg(long, default_value = "60s", value_parser = crate::units::parse_play_duration)]
     pub duration: Span,
     /// Display refresh rate in Hz (1 to 1000).
     #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(1..=1000))]
@@ -89,13 +89,13 @@ pub struct PlayArgs {
     #[arg(long, default_value = "interpolate")]
     pub policy: Policy,
     /// Catch-up window of the interpolate policy.
-    #[arg(long, default_value = "500ms")]
+    #[arg(long, default_value = "500ms", value_parser = crate::units::parse_short_span)]
     pub catch_up: Span,
-    /// Ring capacity in bytes [default: the header's read-ahead at the read rate].
-    #[arg(long)]
-    pub ring: Option<usize>,
-    /// Added to the header's pre-roll: a reader stall this long while the ring first fills is survived (`500ms`).
-    #[arg(long, default_value = "0s")]
+    /// Ring capacity in bytes, 1 kB to 100 GB (a ring larger than the file holds the file) [default: the header's read-ahead at the read rate].
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1000..=100_000_000_000))]
+    pub ring: Option<u64>,
+    /// Added to the header's pre-roll, at most an hour: a reader stall this long while the ring first fills is survived (`500ms`).
+    #[arg(long, default_value = "0s", value_parser = crate::units::parse_short_span)]
     pub preroll_margin: Span,
     /// Run in real time with the reader and decoder on their own threads (default: simulated time, stepped deterministically, as fast as the machine goes).
     #[arg(long)]
@@ -115,18 +115,21 @@ pub struct PlayArgs {
     /// With --scene --headless: directory for the rendered PNG frames and the animated preview (preview.gif).
     #[arg(short, long)]
     pub out: Option<PathBuf>,
-    /// With --scene --headless: frames to capture, evenly spread over the duration.
-    #[arg(long, default_value_t = 120)]
-    pub frames: usize,
-    /// Rendered width in pixels.
-    #[arg(long, default_value_t = 960)]
+    /// With --scene --headless: frames to capture, evenly spread over the duration (1 to 100000).
+    #[arg(long, default_value_t = 120, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub frames: u32,
+    /// Rendered width in pixels (16 to 8192).
+    #[arg(long, default_value_t = 960, value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub width: u32,
-    /// Rendered height in pixels.
-    #[arg(long, default_value_t = 540)]
+    /// Rendered height in pixels (16 to 8192).
+    #[arg(long, default_value_t = 540, value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub height: u32,
     /// With a window: close it after this many frames (for scripted runs) [default: never].
     #[arg(long)]
     pub exit_after: Option<u64>,
+    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
+    #[arg(long, default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
+    pub memory_limit: u64,
 }
 
 #[derive(Args)]
@@ -395,6 +398,12 @@ pub struct DecodeArgs {
     /// Frame format: exr (linear half RGB), png8 (8-bit: sRGB files as stored, HDR through the protocol's export curve) or png16 (linear × scale).
     #[arg(long, default_value = "exr")]
     pub format: String,
+    /// Refuse a stream of more frames than this: each frame is a file (a bake makes at most 100000).
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_frames: u32,
+    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
+    #[arg(long, default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
+    pub memory_limit: u64,
 }
 
 #[derive(Args)]
@@ -407,8 +416,11 @@ pub struct CompareArgs {
     #[arg(long)]
     pub csv: Option<String>,
     /// Exposure of the HDR metric [default: from the reference, 1.5 / median of per-frame max green].
-    #[arg(long)]
+    #[arg(long, value_parser = crate::units::parse_exposure)]
     pub exposure: Option<f32>,
+    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
+    #[arg(long, default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
+    pub memory_limit: u64,
 }
 
 #[derive(Args)]

@@ -9,8 +9,11 @@ use crate::progress::Stages;
 use crate::sequence::{to_rgb, Sequence};
 
 pub fn run(a: CompareArgs) -> Result<(), String> {
-    let mut sa = Sequence::open(&a.a)?;
-    let mut sb = Sequence::open(&a.b)?;
+    let limits = vbim_format::Limits {
+        memory: a.memory_limit,
+    };
+    let mut sa = Sequence::open(&a.a, limits)?;
+    let mut sb = Sequence::open(&a.b, limits)?;
     let (wa, ha, ca, srgb_a) = sa.shape();
     let (wb, hb, cb, srgb_b) = sb.shape();
     // An HDR reference against an 8-bit sequence compares the reference's 8-bit export

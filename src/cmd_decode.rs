@@ -11,14 +11,25 @@ use crate::sequence::{to_rgb, Sequence};
 pub fn run(a: DecodeArgs) -> Result<(), String> {
     let format: FrameFormat = a.format.parse()?;
     let name = a.file.display().to_string();
-    let mut seq = Sequence::open(&name)?;
+    let limits = vbim_format::Limits {
+        memory: a.memory_limit,
+    };
+    let mut seq = Sequence::open(&name, limits)?;
     if !name.ends_with(".vbim") {
         return Err(format!("{name}: not a .vbim file"));
     }
     let (w, h, ch, srgb8) = seq.shape();
-    std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
     let stages = Stages::new();
     let n = seq.len();
+    // A file of a few hundred bytes may claim ten million frames: one file each.
+    if n > a.max_frames as usize {
+        return Err(format!(
+            "{name}: {n} frames would be written as {n} files, more than --max-frames {} \
+             (raise it to decode them all)",
+            a.max_frames
+        ));
+    }
+    std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
     // The HDR 8-bit and 16-bit exports need the day's scales (the EXR export and 8-bit
     // streams need none).
     let (exposure, png16_scale) = if !srgb8 && format != FrameFormat::Exr {

@@ -82,7 +82,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         stall: Some(a.stall.clone()),
         preroll_margin: a.preroll_margin.clone(),
         check_every: 15,
-        frames: a.render_frames,
+        frames: a.render_frames as u32,
         ..crate::cli::PlayArgs::headless(&file)
     };
     let s = Session::from_args(&play_args)?;

@@ -14,7 +14,7 @@ use vbim_player::{frames_csv, Summary};
 use vbim_player::{headless_device, FrameRecord, Player};
 
 use crate::cli::PlayArgs;
-use crate::session::{mean_rate, metric_for, open_reference, scene_look, scene_mesh, Session};
+use crate::session::{mean_rate, scene_mesh, Session};
 
 /// What a session measured.
 #[derive(Serialize, Clone, Debug)]
@@ -60,9 +60,9 @@ pub fn play(
     let name = s.file.display().to_string();
     let mut player = s.open_player(device, queue, s.realtime)?;
     let h = player.header().clone();
-    let mut reference = open_reference(&s.file)?;
+    let mut reference = s.reference()?;
     let metric = if s.check_every > 0 {
-        Some(metric_for(&s.file)?)
+        Some(s.metric()?)
     } else {
         None
     };
@@ -236,9 +236,14 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
             .clone()
             .ok_or("--scene --headless needs --out DIR for the frames")?;
         let stages = crate::progress::Stages::new();
-        let c = capture_scene(&s, scene, &out, a.frames, (a.width, a.height), &|d, t| {
-            stages.report("render", d, t)
-        })?;
+        let c = capture_scene(
+            &s,
+            scene,
+            &out,
+            a.frames as usize,
+            (a.width, a.height),
+            &|d, t| stages.report("render", d, t),
+        )?;
         stages.finish();
         print(&c.outcome, &s);
         println!(
@@ -298,7 +303,7 @@ pub fn capture_scene(
             h.width, h.height, hf.w, hf.h
         );
     }
-    let (exposure, sky) = scene_look(&s.file)?;
+    let (exposure, sky) = s.scene_look()?;
     let renderer = SceneRenderer::new(
         &device,
         &queue,

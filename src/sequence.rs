@@ -11,7 +11,7 @@ use vbim_encoder::{FrameSet, InputKind};
 use vbim_format::curve::{exposure_from_max_greens, max_green};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::Metric;
-use vbim_format::{ColorEncoding, Reader};
+use vbim_format::{ColorEncoding, Limits, Reader};
 
 use crate::progress::Stages;
 
@@ -24,13 +24,15 @@ pub enum Sequence {
 }
 
 impl Sequence {
-    pub fn open(spec: &str) -> Result<Sequence, String> {
+    /// A sequence from a `.vbim` file (decoded within `limits`) or image files.
+    pub fn open(spec: &str, limits: Limits) -> Result<Sequence, String> {
         if spec.ends_with(".vbim") {
             let f = open_input(Path::new(spec))?;
             let r = Reader::open(BufReader::new(f)).map_err(|e| format!("{spec}: {e}"))?;
+            let dec = Decoder::with_limits(r, limits).map_err(|e| format!("{spec}: {e}"))?;
             return Ok(Sequence::Vbim {
                 name: spec.to_string(),
-                dec: Box::new(Decoder::new(r)),
+                dec: Box::new(dec),
             });
         }
         FrameSet::open(spec)
@@ -78,8 +80,17 @@ impl Sequence {
     pub fn manifest(&mut self) -> Option<Manifest> {
         match self {
             Sequence::Frames(f) => f.manifest.as_ref().and_then(|m| Manifest::read(m).ok()),
-            Sequence::Vbim { dec, .. } => {
-                let text = dec.reader().metadata().ok().flatten()?;
+            Sequence::Vbim { dec, name } => {
+                // A damaged manifest costs the bake's scales and sky, not the frames: say
+                // so and go on (it used to be dropped without a word).
+                let text = match dec.reader().metadata() {
+                    Ok(text) => text?,
+                    Err(e) => {
+                        eprintln!("vbim: warning: {name}: {e}; going on without its manifest");
+                        return None;
+                    }
+                };
+                // (Metadata that is not a bake manifest is someone else's: not damage.)
                 Manifest::parse(&text).ok()
             }
         }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use vbim_format::decode::Decoder;
 use vbim_format::metrics::Metric;
-use vbim_format::{Header, Reader};
+use vbim_format::{Header, Limits, Reader};
 use vbim_player::{Player, PlayerConfig, Policy, Throttle};
 use vbim_scene::SkyTrack;
 
@@ -29,6 +29,8 @@ pub struct Session {
     pub duration_ns: u64,
     pub display_hz: u32,
     pub check_every: u64,
+    /// The memory the stream may take, in the player and in the reference decoder each.
+    pub limits: Limits,
 }
 
 impl Session {
@@ -41,7 +43,10 @@ impl Session {
     /// The session `vbim play`'s flags ask for: the one place they become settings. A
     /// bandwidth relative to the stream's mean rate needs the file's header.
     pub fn from_args(a: &PlayArgs) -> Result<Session, String> {
-        let h = open_reference(&a.file)?.header().clone();
+        let limits = Limits {
+            memory: a.memory_limit,
+        };
+        let h = open_reference(&a.file, limits)?.header().clone();
         let rate = a
             .bandwidth
             .map(|b| b.bytes_per_second(h.file_size, h.frame_count as f64 / h.fps()));
@@ -53,12 +58,13 @@ impl Session {
                 stall: a.stall.as_ref().map(|s| s.stall),
             },
             catch_up_ns: a.catch_up.ns(),
-            ring: a.ring,
+            ring: a.ring.map(|r| r as usize),
             preroll_margin_ns: a.preroll_margin.ns(),
             realtime: a.realtime,
             duration_ns: a.duration.ns(),
             display_hz: a.display_hz,
             check_every: a.check_every,
+            limits,
         })
     }
 
@@ -79,6 +85,7 @@ impl Session {
             ring_bytes: self.ring,
             preroll_margin_ns: self.preroll_margin_ns,
             threaded,
+            limits: self.limits,
             ..Default::default()
         };
         Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))
@@ -102,26 +109,32 @@ pub fn mean_rate(h: &Header) -> f64 {
     h.file_size as f64 / (h.frame_count as f64 / h.fps())
 }
 
-/// What the scene needs from the bake of `file`: the export curve's exposure (1 for an
-/// 8-bit stream) and the sky over the day.
-pub fn scene_look(file: &Path) -> Result<(f32, SkyTrack), String> {
-    let mut seq = Sequence::open(&file.to_string_lossy())?;
-    let exposure = match seq.metric(&Stages::new())? {
-        Metric::Hdr { exposure } => exposure,
-        Metric::Srgb8 => 1.0,
-    };
-    Ok((exposure, SkyTrack::from_manifest(seq.manifest().as_ref())))
+impl Session {
+    /// What the scene needs from the bake of the session's file: the export curve's
+    /// exposure (1 for an 8-bit stream) and the sky over the day.
+    pub fn scene_look(&self) -> Result<(f32, SkyTrack), String> {
+        let mut seq = Sequence::open(&self.file.to_string_lossy(), self.limits)?;
+        let exposure = match seq.metric(&Stages::new())? {
+            Metric::Hdr { exposure } => exposure,
+            Metric::Srgb8 => 1.0,
+        };
+        Ok((exposure, SkyTrack::from_manifest(seq.manifest().as_ref())))
+    }
+
+    /// The metric for comparing shown frames of the session's file with true ones.
+    pub fn metric(&self) -> Result<Metric, String> {
+        Sequence::open(&self.file.to_string_lossy(), self.limits)?.metric(&Stages::new())
+    }
+
+    /// The reference decoder of the session's file.
+    pub fn reference(&self) -> Result<Decoder<BufReader<File>>, String> {
+        open_reference(&self.file, self.limits)
+    }
 }
 
-/// The metric for comparing shown frames of `file` with true ones.
-pub fn metric_for(file: &Path) -> Result<Metric, String> {
-    Sequence::open(&file.to_string_lossy())?.metric(&Stages::new())
-}
-
-pub fn open_reference(file: &Path) -> Result<Decoder<BufReader<File>>, String> {
+fn open_reference(file: &Path, limits: Limits) -> Result<Decoder<BufReader<File>>, String> {
     let name = file.display();
     let f = open_input(file)?;
-    Ok(Decoder::new(
-        Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?,
-    ))
+    let r = Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?;
+    Decoder::with_limits(r, limits).map_err(|e| format!("{name}: {e}"))
 }

@@ -19,6 +19,49 @@ pub fn parse_duration(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `2GB`, `512MB`, `900kB`, `4096B` or a bare number of bytes (SI units) → bytes, at least 1.
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let bad = || format!("size {s:?} (expected e.g. 2GB, 512MB or 900kB)");
+    let (num, scale) = if let Some(n) = t.strip_suffix("TB") {
+        (n, 1e12)
+    } else if let Some(n) = t.strip_suffix("GB") {
+        (n, 1e9)
+    } else if let Some(n) = t.strip_suffix("MB") {
+        (n, 1e6)
+    } else if let Some(n) = t.strip_suffix("kB") {
+        (n, 1e3)
+    } else if let Some(n) = t.strip_suffix('B') {
+        (n, 1.0)
+    } else {
+        (t, 1.0)
+    };
+    num.trim()
+        .parse::<f64>()
+        .ok()
+        .map(|v| v * scale)
+        .filter(|v| v.is_finite() && *v >= 1.0 && *v <= 1e15)
+        .map(|v| v as u64)
+        .ok_or_else(bad)
+}
+
+/// `--memory-limit`: a size of at least 1 MB (SI units).
+pub fn parse_memory_limit(s: &str) -> Result<u64, String> {
+    parse_size(s)
+        .ok()
+        .filter(|&v| v >= 1_000_000)
+        .ok_or_else(|| format!("memory limit {s:?} (expected a size of at least 1MB, e.g. 4GB)"))
+}
+
+/// `--exposure`: a positive finite number up to 10⁶.
+pub fn parse_exposure(s: &str) -> Result<f32, String> {
+    s.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|v| v.is_finite() && *v > 0.0 && *v <= 1e6)
+        .ok_or_else(|| format!("exposure {s:?} (expected a positive number up to 1e6)"))
+}
+
 /// `24/1`, `1/6` or `24` → (num, den).
 pub fn parse_rate(s: &str) -> Result<(u32, u32), String> {
     vbim_bake::scene::parse_rate(s)
@@ -136,6 +179,29 @@ impl std::str::FromStr for Span {
             text: s.to_string(),
         })
     }
+}
+
+/// A duration flag of at most `max_s` seconds (`what` names the bound in the message).
+fn span_at_most(s: &str, max_s: f64, what: &str) -> Result<Span, String> {
+    let span: Span = s.parse()?;
+    if span.ns as f64 > max_s * 1e9 {
+        return Err(format!("{s:?} is longer than {what}"));
+    }
+    Ok(span)
+}
+
+/// `--duration`: more than nothing, at most 3 hours (records are kept per displayed frame).
+pub fn parse_play_duration(s: &str) -> Result<Span, String> {
+    let span = span_at_most(s, 3.0 * 3600.0, "3 hours")?;
+    if span.ns == 0 {
+        return Err(format!("{s:?}: nothing to play"));
+    }
+    Ok(span)
+}
+
+/// A catch-up window or a pre-roll margin: at most an hour.
+pub fn parse_short_span(s: &str) -> Result<Span, String> {
+    span_at_most(s, 3600.0, "an hour")
 }
 
 impl std::fmt::Display for Span {

@@ -20,7 +20,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::session::{mean_rate, scene_look, scene_mesh, Session};
+use crate::session::{mean_rate, scene_mesh, Session};
 
 struct Gfx {
     window: Arc<Window>,
@@ -260,7 +260,7 @@ pub fn run(
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(
         Box::new(el.owned_display_handle()),
     ));
-    let (exposure, sky) = scene_look(&s.file)?;
+    let (exposure, sky) = s.scene_look()?;
     let mut app = App {
         session: Session { ..s.clone() },
         scene_file: scene.to_path_buf(),

@@ -568,3 +568,153 @@ fn an_interrupted_exact_encode_leaves_no_file_behind() {
         "left behind (had {seen:?})"
     );
 }
+
+/// Runs vbim under an address-space limit of `bytes` (prlimit, util-linux), so that a
+/// command that tried to allocate what a file claims would fail to, instead of passing
+/// unnoticed on a machine with the memory.
+fn vbim_within(bytes: u64, args: &[&str]) -> Output {
+    Command::new("prlimit")
+        .arg(format!("--as={bytes}"))
+        .arg(env!("CARGO_BIN_EXE_vbim"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("prlimit runs (util-linux)")
+}
+
+#[test]
+fn tiny_files_that_claim_huge_work_are_refused_before_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, file) = small_stream(dir.path());
+    let small = std::fs::read(&file).unwrap();
+    // A few hundred bytes that claim an 8192² stream: the decoder would need 3 GB or more
+    // of planes. Refused before allocating, naming the file, the need and the limit, under
+    // a 1 GB address space (the command's own binary and threads take part of it).
+    let mut bytes = small.clone();
+    vbim_format::writer::rewrite(&mut bytes, |h, _| {
+        h.width = 8192;
+        h.height = 8192;
+    })
+    .unwrap();
+    let huge = dir.path().join("huge.vbim");
+    std::fs::write(&huge, &bytes).unwrap();
+    let out = dir.path().join("frames");
+    for cmd in [
+        vec!["decode", s(&huge), "-o", s(&out)],
+        vec!["compare", s(&huge), s(&huge)],
+        vec!["play", s(&huge), "--headless", "--duration", "1s"],
+    ] {
+        let o = vbim_within(1_000_000_000, &cmd);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{cmd:?}: {err}");
+        assert!(
+            err.contains("huge.vbim")
+                && err.contains("8192×8192")
+                && err.contains("limit of 2.00 GB")
+                && err.contains("--memory-limit"),
+            "{cmd:?}: {err}"
+        );
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
+    assert!(!out.exists(), "a refused decode creates nothing");
+    // The override lets it through to the next check (here: the machine's address space
+    // limit makes the allocation fail cleanly, or the chunks do not fit the claim).
+    let o = vbim_within(
+        1_000_000_000,
+        &["decode", s(&huge), "-o", s(&out), "--memory-limit", "1MB"],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("limit of 1.0 MB"));
+    let o = vbim(&["decode", s(&huge), "-o", s(&out), "--memory-limit", "0"]);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "a limit of nothing is a bad argument"
+    );
+
+    // Ten million frames from a few hundred bytes: one segment stretched over them. The
+    // decode would write ten million files; it is refused unless asked for.
+    let mut bytes = small.clone();
+    vbim_format::writer::rewrite(&mut bytes, |h, entries| {
+        // Every frame number stretched by the same factor (the 4-frame stream loops:
+        // its last segment ends at frame 4, keyframe 0 again).
+        let k = 10_000_000 / h.frame_count;
+        h.frame_count *= k;
+        for e in entries.iter_mut() {
+            e.first_frame *= k;
+            e.last_frame *= k;
+        }
+    })
+    .unwrap();
+    let long = dir.path().join("long.vbim");
+    std::fs::write(&long, &bytes).unwrap();
+    let o = vbim(&["decode", s(&long), "-o", s(&out)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("long.vbim") && err.contains("10000000 files") && err.contains("--max-frames"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn play_options_out_of_range_are_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, file) = small_stream(dir.path());
+    for (flag, value) in [
+        // Simulated for ever (it ran until killed).
+        ("--duration", "1e12s"),
+        ("--duration", "0s"),
+        // Waited for ever before the first frame, then exited 0 having shown nothing.
+        ("--preroll-margin", "1e30s"),
+        ("--catch-up", "2h"),
+        ("--ring", "99999999999999"),
+        ("--width", "100000"),
+        ("--frames", "0"),
+        ("--memory-limit", "lots"),
+    ] {
+        let o = vbim(&["play", s(&file), "--headless", flag, value]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+    let o = vbim(&["compare", s(&file), s(&file), "--exposure", "1e39"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--exposure"));
+}
+
+#[test]
+fn a_damaged_manifest_is_reported_not_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, file) = small_stream(dir.path());
+    // The metadata chunk (the bake's manifest) replaced by bytes that are not a zstd frame,
+    // its checksum recomputed: the frames still decode, and the decode says what it lost.
+    let mut bytes = std::fs::read(&file).unwrap();
+    let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
+    let m = r
+        .entries()
+        .iter()
+        .position(|e| e.kind == vbim_format::ChunkKind::Metadata)
+        .unwrap();
+    let (at, len) = (
+        r.entries()[m].offset as usize,
+        r.entries()[m].length as usize,
+    );
+    bytes[at..at + len].fill(0x5a);
+    let sum = vbim_format::checksum::xxh3(&bytes[at..at + len]);
+    vbim_format::writer::rewrite(&mut bytes, |_, entries| entries[m].checksum = sum).unwrap();
+    let bad = dir.path().join("nomanifest.vbim");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = dir.path().join("png");
+    let o = vbim(&["decode", s(&bad), "-o", s(&out), "--format", "png8"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning")
+            && err.contains("nomanifest.vbim")
+            && err.contains(&format!("chunk {m}"))
+            && err.contains("without its manifest"),
+        "{err}"
+    );
+}

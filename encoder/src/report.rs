@@ -224,7 +224,11 @@ fn measure<R: Read + Seek>(
             h.width, h.height, h.frame_count, info.width, info.height, info.frames
         )));
     }
-    let mut dec = Decoder::new(reader);
+    // The file was just written by this encoder: no limit (a large encode's verification
+    // may need more than a player's default).
+    let unlimited = vbim_format::Limits { memory: u64::MAX };
+    let mut dec = Decoder::with_limits(reader, unlimited)
+        .map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
     let mut seq = SequenceError::default();
     let mut out = vec![0f32; h.texel_count() * h.channels as usize];
     for i in 0..info.frames {

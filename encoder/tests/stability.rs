@@ -21,7 +21,7 @@ fn run(src: &MemorySource, cfg: &EncoderConfig) -> (Vec<u8>, Vec<Vec<f32>>) {
     encode(src, cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
     let reader = Reader::open(Cursor::new(bytes.clone())).unwrap();
     let h = reader.header().clone();
-    let mut d = Decoder::new(reader);
+    let mut d = Decoder::new(reader).unwrap();
     let mut frames = Vec::new();
     for i in 0..h.frame_count {
         let mut o = vec![0f32; h.texel_count() * h.channels as usize];

@@ -4,6 +4,7 @@
 
 use crate::dct::N;
 use crate::header::Header;
+use crate::limits::payload_bound;
 use crate::plane::{self, Onto, Plane};
 use crate::{FormatError, Result};
 
@@ -81,7 +82,8 @@ pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
     let capacity = match zstd::zstd_safe::get_frame_content_size(bytes) {
         Ok(Some(n)) if n > limit as u64 => {
             return Err(FormatError::Invalid(format!(
-                "payload claims {n} bytes decompressed (limit {limit})"
+                "payload claims {n} bytes decompressed (limit {limit}: the format's bound, or {}× its stored size)",
+                crate::limits::MAX_EXPANSION
             )));
         }
         // The encoder's frames state their size: allocate that, not the limit.
@@ -99,7 +101,8 @@ pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
                 .map_err(zstd_error)?;
             if out.len() > limit {
                 return Err(FormatError::Invalid(format!(
-                    "payload decompresses to more than {limit} bytes"
+                    "payload decompresses to more than {limit} bytes (the format's bound, or {}× its stored size)",
+                    crate::limits::MAX_EXPANSION
                 )));
             }
             return Ok(out);
@@ -118,11 +121,6 @@ pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
         };
         d.decompress(bytes, capacity).map_err(zstd_error)
     })
-}
-
-/// Upper bound of a decompressed payload holding `blocks` coefficient blocks.
-fn stream_limit(blocks: usize, steps: usize) -> usize {
-    16 + 4 * steps + blocks * N * N * 5
 }
 
 struct Bytes<'a> {
@@ -186,7 +184,7 @@ pub fn read_keyframe_from(
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
-    let raw = decompress(bytes, stream_limit(nblocks * planes, planes))?;
+    let raw = decompress(bytes, payload_bound(nblocks * planes, planes, bytes.len()))?;
     keyframe_from_raw(h, &raw, prev)
 }
 
@@ -255,7 +253,7 @@ pub fn keyframe_blocks(
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
-    let raw = decompress(bytes, stream_limit(nblocks * planes, planes))?;
+    let raw = decompress(bytes, payload_bound(nblocks * planes, planes, bytes.len()))?;
     let mut r = Bytes { b: &raw, pos: 0 };
     let head = r.take(4)?;
     let (mode, np) = (head[0], head[1] as usize);
@@ -494,7 +492,7 @@ impl<'t> CoeffReader<'t> {
         let dmax = tiles.max_degree();
         let raw = decompress(
             bytes,
-            stream_limit(total_blocks, planes * h.max_degree as usize),
+            payload_bound(total_blocks, planes * h.max_degree as usize, bytes.len()),
         )?;
         let mut r = Bytes { b: &raw, pos: 0 };
         let head = r.take(4)?;

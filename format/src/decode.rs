@@ -8,6 +8,7 @@ use crate::basis;
 use crate::chunk::{self, TileMap};
 use crate::color::ycocg_to_rgb;
 use crate::header::Header;
+use crate::memory::Limits;
 use crate::plane::Plane;
 use crate::reader::Reader;
 use crate::{FormatError, Result};
@@ -103,14 +104,28 @@ pub struct Decoder<R> {
 }
 
 impl<R: Read + Seek> Decoder<R> {
-    /// A decoder reading from `reader`.
-    pub fn new(reader: Reader<R>) -> Self {
-        Decoder {
+    /// A decoder reading from `reader`, within the default [`Limits`].
+    pub fn new(reader: Reader<R>) -> Result<Self> {
+        Self::with_limits(reader, Limits::default())
+    }
+
+    /// A decoder reading from `reader`, refused if the stream could need more memory than
+    /// `limits` allow ([`crate::memory::decoder_memory`]).
+    pub fn with_limits(reader: Reader<R>, limits: Limits) -> Result<Self> {
+        let h = reader.header();
+        limits.check(
+            &format!(
+                "decoding a {}×{} stream of {} channel(s), degree ≤ {}",
+                h.width, h.height, h.channels, h.max_degree
+            ),
+            crate::memory::decoder_memory(h, reader.entries()),
+        )?;
+        Ok(Decoder {
             reader,
             last_key: None,
             key0: None,
             segment: None,
-        }
+        })
     }
     /// The stream's header.
     pub fn header(&self) -> &Header {
@@ -190,6 +205,8 @@ impl<R: Read + Seek> Decoder<R> {
     /// Loads segment `s` (keyframes, tile map, coefficients).
     pub fn segment(&mut self, s: usize) -> Result<&Segment> {
         if self.segment.as_ref().is_none_or(|seg| seg.index != s) {
+            // The old segment's planes go first: the memory bound counts one segment's.
+            self.segment = None;
             let layout = self.reader.layout().clone();
             let (ti, ci) = layout.segments[s];
             let (start, end) = (layout.boundaries[s], layout.boundaries[s + 1]);

@@ -58,6 +58,21 @@ pub enum FormatError {
     /// A request or value that makes no sense (for example, writing an invalid header).
     #[error("{0}")]
     Invalid(String),
+    /// The stream needs more memory than the reader's [`crate::Limits`] allow.
+    #[error(
+        "{what} needs up to {} of memory, more than the limit of {} (raise it: \
+         --memory-limit on the command line, Limits::memory in the API)",
+        crate::limits::human_bytes(*need),
+        crate::limits::human_bytes(*limit)
+    )]
+    OverLimit {
+        /// What needs it.
+        what: String,
+        /// Bytes needed, at most.
+        need: u64,
+        /// The limit, bytes.
+        limit: u64,
+    },
 }
 
 /// A result whose error is a [`FormatError`].

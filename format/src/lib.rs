@@ -19,8 +19,11 @@ pub mod curve;
 pub mod dct;
 pub mod decode;
 mod error;
+pub mod fuzz;
 pub mod header;
 pub mod index;
+pub mod limits;
+pub mod memory;
 pub mod metrics;
 pub mod plane;
 pub mod reader;
@@ -30,22 +33,6 @@ pub mod writer;
 pub use error::{FormatError, Result};
 pub use header::{ColorEncoding, Header, ReadAhead, Transfer, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use index::{ChunkKind, IndexEntry};
+pub use memory::Limits;
 pub use reader::Reader;
 pub use writer::Writer;
-
-/// Hard limits checked before anything is allocated. They bound what a hostile or damaged
-/// header can make a reader do; real files are far below them.
-pub mod limits {
-    /// Largest width or height (the largest 2D texture wgpu guarantees on desktop is 16384).
-    pub const MAX_DIMENSION: u32 = 16_384;
-    /// Largest number of frames in one sequence.
-    pub const MAX_FRAMES: u32 = 10_000_000;
-    /// Largest number of chunks (the index is read whole, 40 bytes an entry: 160 MB at most).
-    pub const MAX_CHUNKS: u32 = 4_000_000;
-    /// Largest decompressed payload of one chunk: four f32 planes of the largest texture.
-    pub const MAX_CHUNK_DECODED: u64 = 4 * 4 * (MAX_DIMENSION as u64) * (MAX_DIMENSION as u64);
-    /// Largest polynomial degree in time.
-    pub const MAX_DEGREE: u8 = 8;
-    /// Largest size of the metadata chunk.
-    pub const MAX_METADATA: u64 = 64 << 20;
-}

@@ -171,7 +171,7 @@ fn sample_file() -> Vec<u8> {
 fn decode_all(bytes: &[u8]) -> Result<Vec<Vec<f32>>, FormatError> {
     let reader = Reader::open(Cursor::new(bytes))?;
     let h = reader.header().clone();
-    let mut d = Decoder::new(reader);
+    let mut d = Decoder::new(reader).unwrap();
     let mut frames = Vec::new();
     for f in 0..h.frame_count {
         let mut out = vec![0f32; h.texel_count() * 3];

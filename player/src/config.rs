@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use crate::clock::{Clock, SystemClock};
 use crate::throttle::Throttle;
+use vbim_format::Limits;
 
 /// What the display does when the next segment's data is late.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,6 +71,11 @@ pub struct PlayerConfig {
     /// transition late. A margin as long as the stall to survive buys that back with
     /// start-up time (measured in BENCHMARKS.md).
     pub preroll_margin_ns: u64,
+    /// The memory the stream may take, GPU and CPU together ([`Player::open`] refuses a
+    /// stream that could need more, before creating anything for it).
+    ///
+    /// [`Player::open`]: crate::Player::open
+    pub limits: Limits,
 }
 
 impl Default for PlayerConfig {
@@ -83,6 +89,7 @@ impl Default for PlayerConfig {
             clock: Arc::new(SystemClock::new()),
             preroll_ns: None,
             preroll_margin_ns: 0,
+            limits: Limits::default(),
         }
     }
 }

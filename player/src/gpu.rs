@@ -168,6 +168,26 @@ fn grown(need: u64) -> u64 {
         .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
 }
 
+/// Bytes of the textures [`Gpu::new`] creates for a stream of `width × height` texels
+/// coded on planes of `plane` texels: the two keyframe slots (f32), the bubble planes
+/// (16-bit), the lightmap and its held copy (Rgba16Float). Known before creating them, so
+/// that a stream is refused before anything that size exists.
+pub(crate) fn planned_texture_bytes(
+    (width, height): (u32, u32),
+    plane: [u32; 2],
+    max_degree: u32,
+    channels: u32,
+) -> u64 {
+    let plane_texels = plane[0] as u64 * plane[1] as u64;
+    let keys = plane_texels * 2 * channels as u64 * 4;
+    let bubbles = (plane[0] / 2) as u64
+        * plane[1] as u64
+        * (max_degree.saturating_sub(1) * channels).max(1) as u64
+        * 4;
+    let images = 2 * width as u64 * height as u64 * 8;
+    keys + bubbles + images
+}
+
 impl Gpu {
     /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
     /// planes of `plane` texels (whole tiles), with bubble terms up to `max_degree`.

@@ -77,6 +77,9 @@ pub enum PlayerError {
         /// How long it was given.
         deadline: std::time::Duration,
     },
+    /// The stream needs textures larger than the device allows.
+    #[error("{0}")]
+    Device(String),
     /// A texture given to [`Player::set_output`] does not fit the stream.
     #[error("{0}")]
     Output(String),

@@ -12,7 +12,7 @@ use vbim_format::{Header, IndexEntry, Reader, Transfer};
 use crate::config::{PlayerConfig, Policy};
 use crate::decoder::SegmentData;
 use crate::display::{Display, Step};
-use crate::gpu::{Gpu, Params};
+use crate::gpu::{planned_texture_bytes, Gpu, Params};
 use crate::pipeline::Pipeline;
 use crate::record::{Frame, FrameRecord, FrameState, Totals};
 use crate::slots::{place, KeySlots, Placement, Resident, MAX_BUBBLE_PLANES};
@@ -128,6 +128,32 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             )));
         }
         let (pw, ph) = vbim_format::chunk::padded_size(&header);
+        let max_side = device.limits().max_texture_dimension_2d;
+        if pw.max(ph) > max_side as usize {
+            return Err(PlayerError::Device(format!(
+                "a {}×{} stream (coded on {pw}×{ph}) needs textures larger than this \
+                 device's {max_side} (wgpu::Limits::max_texture_dimension_2d)",
+                header.width, header.height
+            )));
+        }
+        // What the stream can make the player hold, checked before any of it exists: the
+        // textures, exactly; the ring; and the decoder's boxes, parsed keyframes, parse
+        // scratch and the coefficient buffer, each at most a few times the largest payload
+        // (which the file's own chunk sizes bound: limits::MAX_EXPANSION).
+        let textures = planned_texture_bytes(
+            (header.width, header.height),
+            [pw as u32, ph as u32],
+            header.max_degree as u32,
+            header.channels as u32,
+        );
+        let payload = vbim_format::memory::largest_payload(&header, &entries);
+        cfg.limits.check(
+            &format!(
+                "playing a {}×{} stream of {} channel(s), degree ≤ {}",
+                header.width, header.height, header.channels, header.max_degree
+            ),
+            textures + ring_bytes as u64 + 8 * payload,
+        )?;
         let gpu = Gpu::new(
             device,
             queue,

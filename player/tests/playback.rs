@@ -130,7 +130,8 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
             src.info.channels = 1;
         }
         let bytes = encode_bytes(&src, &config(SegmentMode::Auto { max: 12 }));
-        let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+        let mut reference =
+            Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
         let mut player = unthrottled(&device, &queue, bytes);
         // The budget's figure, counted by hand: two keyframe slots of ch R32Float layers
         // and (degree − 1) × ch bubble layers of 16 bits, over the padded planes (48 × 32,
@@ -251,7 +252,7 @@ fn loops_are_seamless_and_100_hours_land_on_the_exact_frame() {
         &sequence(16, 8, 24, InputKind::Hdr),
         &config(SegmentMode::Auto { max: 8 }),
     );
-    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
     let mut player = unthrottled(&device, &queue, bytes);
     // Across three loop seams at 60 Hz, every frame is exact.
     for _ in 0..(3 * 60 + 10) {
@@ -447,7 +448,7 @@ fn the_loop_seam_in_a_sunrise_adds_no_error() {
         frames.clone(),
     );
     let bytes = encode_bytes(&src, &config(SegmentMode::Auto { max: 32 }));
-    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
     let mut player = unthrottled(&device, &queue, bytes);
     let metric = vbim_format::metrics::Metric::Hdr { exposure };
     // Per media frame: MSE of the displayed frame against the source; per display frame,
@@ -644,7 +645,7 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
     let bytes = encode_bytes(&noisy(w, h, n), &config(SegmentMode::Fixed(4)));
     let header = header_of(&bytes);
     let mean_rate = header.file_size as f64 / (n as f64 / 24.0);
-    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
     // (Each keeps up on average: 2 × 2.5/4 and 1.5 × 3/4 of the mean rate.)
     for (policy, factor, stall) in [
         (Policy::Skip, 2.0, 1_500_000_000),
@@ -754,7 +755,7 @@ fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
     let (device, queue) = device();
     let (w, h, n) = (48, 32, 48);
     let bytes = encode_bytes(&noisy(w, h, n), &config(SegmentMode::Fixed(4)));
-    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
     let cfg = PlayerConfig {
         clock: Arc::new(vbim_player::SystemClock::new()),
         ..Default::default()
@@ -808,7 +809,7 @@ fn tiles_that_leave_a_term_are_zero_in_the_next_segment() {
         })
         .sum();
     assert!(left > 0, "no tile left a term between segments");
-    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
     let mut player = unthrottled(&device, &queue, bytes.clone());
     // Media frames at 24 fps, one display frame each: every media frame of the loop.
     let mut checked = 0;
@@ -927,7 +928,7 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
     .unwrap();
     let frame = frame.unwrap();
     // The CPU reference decoder refuses the frame the keyframe stands at.
-    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap());
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
     let mut out = vec![0f32; 32 * 16 * 3];
     let e = reference
         .frame(frame as f64, Output::Linear, &mut out)
@@ -981,7 +982,7 @@ fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_lo
             longest = longest.max(run);
         }
         assert!(longest >= 12, "a chain of {longest} predicted keyframes");
-        let mut reference = Decoder::new(r);
+        let mut reference = Decoder::new(r).unwrap();
         let mut player = unthrottled(&device, &queue, bytes);
         let what = format!("{kind:?}, {ch} channel(s), {w}×{h}");
         let mode = if kind == InputKind::Srgb8 {

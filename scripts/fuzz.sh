@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Runs the fuzz targets of fuzz/ (cargo fuzz, stable Rust, no sanitizer) for SECONDS each
+# (default 60): `container` (header, index, metadata, chunk checksums), `chunks` (every
+# chunk payload parser) and `decode` (the whole reference decode within small limits).
+# Checksums are made right before parsing (vbim_format::fuzz::with_checksums), so the
+# fuzzer reaches the semantic checks. A crash's input is copied into
+# fuzz/regressions/TARGET/, which `cargo test` replays; the script then fails. The last
+# line per target gives executions per second and coverage (libFuzzer's cov / ft).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+secs="${1:-60}"
+command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked --version 0.13.2
+cd fuzz
+cargo fuzz build --sanitizer none -O -a
+failed=0
+for t in container chunks decode; do
+    mkdir -p "corpus/$t" "regressions/$t"
+    log="corpus/$t.log"
+    if cargo fuzz run --sanitizer none -O -a "$t" "corpus/$t" "seeds/$t" "regressions/$t" -- \
+        -max_total_time="$secs" -rss_limit_mb=1024 -max_len=8192 -timeout=10 \
+        -print_final_stats=1 >"$log" 2>&1; then
+        echo "$t: $(grep -E 'DONE' "$log" | tail -1)"
+    else
+        failed=1
+        echo "$t: FAILED — the input is kept in fuzz/regressions/$t/:"
+        grep -E 'panicked|ERROR|SUMMARY|Test unit written' "$log" | head -5 || true
+        for a in artifacts/"$t"/*; do
+            [ -e "$a" ] && cp "$a" "regressions/$t/" && echo "  $(basename "$a")"
+        done
+    fi
+done
+exit "$failed"
