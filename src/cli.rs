@@ -140,12 +140,12 @@ pub struct DemoArgs {
     /// Output directory.
     #[arg(short, long, default_value = "out/demo")]
     pub out: PathBuf,
-    /// Bake resolution, texels per side.
-    #[arg(long, default_value_t = 512)]
-    pub size: usize,
-    /// Frames per day.
-    #[arg(long, default_value_t = 240)]
-    pub frames: usize,
+    /// Bake resolution, texels per side (8 to 8192).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(8..=8192))]
+    pub size: u32,
+    /// Frames per day (2 to 100000).
+    #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    pub frames: u32,
     /// Media frame rate of the demo stream: the day plays in frames / fps seconds.
     #[arg(long, default_value = "24/1")]
     pub fps: String,
@@ -160,9 +160,9 @@ pub struct DemoArgs {
     /// day's first transition late.
     #[arg(long, default_value = "500ms")]
     pub preroll_margin: Span,
-    /// Frames rendered in the terrain scene.
-    #[arg(long, default_value_t = 120)]
-    pub render_frames: usize,
+    /// Frames rendered in the terrain scene (1 to 100000).
+    #[arg(long, default_value_t = 120, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub render_frames: u32,
     /// Moving cloud shadows in the bake [default: the scene's].
     #[arg(long)]
     pub clouds: Option<bool>,
@@ -313,12 +313,12 @@ pub struct BenchBakeArgs {
     /// Scene file.
     #[arg(default_value = "samples/jacksboro.toml")]
     pub scene: PathBuf,
-    /// Bake resolution, texels per side.
-    #[arg(long, default_value_t = 512)]
-    pub size: usize,
-    /// Frames per day.
-    #[arg(long, default_value_t = 240)]
-    pub frames: usize,
+    /// Bake resolution, texels per side (8 to 8192).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(8..=8192))]
+    pub size: u32,
+    /// Frames per day (2 to 100000).
+    #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    pub frames: u32,
     /// Repetitions; the median and the spread are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
@@ -434,12 +434,12 @@ pub struct BakeArgs {
     /// (linear × the manifest's png16_scale).
     #[arg(long, default_value = "exr")]
     pub format: String,
-    /// Frames per day [default: the scene's `frames`].
-    #[arg(long)]
-    pub frames: Option<usize>,
-    /// Bake resolution in texels per side [default: the scene's `size`].
-    #[arg(long)]
-    pub size: Option<usize>,
+    /// Frames per day, 1 to 100000 [default: the scene's `frames`].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub frames: Option<u32>,
+    /// Bake resolution in texels per side, 8 to 8192 [default: the scene's `size`].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(8..=8192))]
+    pub size: Option<u32>,
     /// Moving cloud shadows on or off [default: the scene's `clouds.enabled`].
     #[arg(long)]
     pub clouds: Option<bool>,

@@ -8,10 +8,10 @@ use crate::progress::Stages;
 pub fn run(a: BakeArgs) -> Result<(), String> {
     let mut scene = Scene::load(&a.scene).map_err(|e| e.to_string())?;
     if let Some(f) = a.frames {
-        scene.frames = f;
+        scene.frames = f as usize;
     }
     if let Some(s) = a.size {
-        scene.size = s;
+        scene.size = s as usize;
     }
     if let Some(c) = a.clouds {
         scene.clouds.enabled = c;

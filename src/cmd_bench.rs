@@ -37,12 +37,12 @@ fn stats(v: &mut [f64]) -> (f64, f64, f64) {
 
 fn bench_bake(a: BenchBakeArgs) -> Result<(), String> {
     let mut scene = Scene::load(&a.scene).map_err(|e| e.to_string())?;
-    scene.size = a.size;
-    scene.frames = a.frames;
+    scene.size = a.size as usize;
+    scene.frames = a.frames as usize;
     scene.clouds.enabled = a.clouds;
     scene.validate()?;
     let hf = load_terrain(&scene).map_err(|e| e.to_string())?;
-    let texels = a.size * a.size;
+    let texels = scene.size * scene.size;
     let (mut pre_t, mut light_t, mut write_t) = (Vec::new(), Vec::new(), Vec::new());
     let tmp = std::env::temp_dir().join(format!("vbim-bench-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).map_err(|e| e.to_string())?;
@@ -71,8 +71,8 @@ fn bench_bake(a: BenchBakeArgs) -> Result<(), String> {
         for i in 0..24 {
             output::write_frame(
                 &tmp.join(format!("f{i}.exr")),
-                a.size,
-                a.size,
+                scene.size,
+                scene.size,
                 &buf,
                 FrameFormat::Exr,
                 None,

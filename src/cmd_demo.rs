@@ -27,8 +27,8 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
 
     // 1. Bake a day.
     let mut scene = Scene::load(&a.scene).map_err(|e| e.to_string())?;
-    scene.size = a.size;
-    scene.frames = a.frames;
+    scene.size = a.size as usize;
+    scene.frames = a.frames as usize;
     if let Some(c) = a.clouds {
         scene.clouds.enabled = c;
     }
@@ -82,7 +82,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         stall: Some(a.stall.clone()),
         preroll_margin: a.preroll_margin.clone(),
         check_every: 15,
-        frames: a.render_frames as u32,
+        frames: a.render_frames,
         ..crate::cli::PlayArgs::headless(&file)
     };
     let s = Session::from_args(&play_args)?;
@@ -98,7 +98,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         &s,
         &a.scene,
         &render_dir,
-        a.render_frames,
+        a.render_frames as usize,
         (960, 540),
         &|d, t| stages.report("render", d, t),
     )?;

@@ -132,12 +132,33 @@ fn finish(
     let totals = player.totals().clone();
     let ring = player.ring_bytes();
     let gpu_bytes = player.gpu_bytes();
-    let preroll_ms = player.preroll_ns() as f64 / 1e6;
+    let player_preroll_ns = player.preroll_ns();
+    let preroll_ms = player_preroll_ns as f64 / 1e6;
     let h = player.header().clone();
     player
         .stop(Duration::from_secs(10))
         .map_err(|e| e.to_string())?;
     let sum = Summary::of(&records);
+    // A stream that shows nothing while nothing holds its data back is broken in a way the
+    // checks before did not see (it used to end "played N frames", exit 0, having shown
+    // none). Under a bandwidth cap, showing nothing is a result.
+    let shown = records.iter().any(|r| {
+        matches!(
+            r.state,
+            vbim_player::FrameState::Exact | vbim_player::FrameState::CatchingUp
+        )
+    });
+    if !shown && s.throttle.rate.is_none() && s.duration_ns > player_preroll_ns {
+        let why = totals
+            .last_error
+            .clone()
+            .unwrap_or_else(|| "no segment of it could be decoded".into());
+        return Err(format!(
+            "{}: no frame was shown in {:.1} s of playback: {why}",
+            s.file.display(),
+            s.duration_ns as f64 * 1e-9
+        ));
+    }
     Ok(Outcome {
         adapter: adapter.to_string(),
         policy: s.policy.name().into(),

@@ -338,6 +338,19 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
         err.contains("not finite") && err.contains("inf.vbim"),
         "{err}"
     );
+    // A media frame rate no day has: it played no frame at all and exited 0.
+    let mut bytes = std::fs::read(&file).unwrap();
+    vbim_format::writer::rewrite(&mut bytes, |h, _| (h.rate_num, h.rate_den) = (u32::MAX, 1))
+        .unwrap();
+    let fast = dir.path().join("fast.vbim");
+    std::fs::write(&fast, &bytes).unwrap();
+    let o = vbim(&["play", s(&fast), "--headless", "--duration", "1s"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("fast.vbim") && err.contains("frame rate 4294967295/1"),
+        "{err}"
+    );
     // A display rate no display has is an argument error (it used to abort the process
     // reserving records for duration × rate frames).
     let o = vbim(&["play", s(&file), "--headless", "--display-hz", "4294967295"]);
@@ -659,7 +672,7 @@ fn tiny_files_that_claim_huge_work_are_refused_before_allocating() {
 }
 
 #[test]
-fn play_options_out_of_range_are_bad_arguments() {
+fn options_out_of_range_are_bad_arguments() {
     let dir = tempfile::tempdir().unwrap();
     let (_, file) = small_stream(dir.path());
     for (flag, value) in [
@@ -678,6 +691,12 @@ fn play_options_out_of_range_are_bad_arguments() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
         assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+    // The bake's overrides of its scene (they were refused as the scene file's values).
+    for (flag, value) in [("--size", "100000"), ("--frames", "0")] {
+        let o = vbim(&["bake", "samples/jacksboro.toml", "-o", "never", flag, value]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains(flag));
     }
     let o = vbim(&["compare", s(&file), s(&file), "--exposure", "1e39"]);
     assert_eq!(o.status.code(), Some(2));
@@ -715,6 +734,52 @@ fn a_damaged_manifest_is_reported_not_dropped() {
             && err.contains("nomanifest.vbim")
             && err.contains(&format!("chunk {m}"))
             && err.contains("without its manifest"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_stream_that_shows_nothing_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, file) = small_stream(dir.path());
+    // Every keyframe's payload zeroed, its checksum recomputed: each chunk is damaged in a
+    // way only decoding finds, so no segment can ever be shown. It used to end with
+    // "played N frames" and exit 0.
+    let mut bytes = std::fs::read(&file).unwrap();
+    let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
+    let keys: Vec<_> = r
+        .entries()
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.kind == vbim_format::ChunkKind::Keyframe)
+        .map(|(i, e)| (i, e.offset as usize, e.length as usize))
+        .collect();
+    let mut sums = Vec::new();
+    for &(i, at, len) in &keys {
+        bytes[at..at + len].fill(0);
+        sums.push((i, vbim_format::checksum::xxh3(&bytes[at..at + len])));
+    }
+    vbim_format::writer::rewrite(&mut bytes, |_, entries| {
+        for &(i, sum) in &sums {
+            entries[i].checksum = sum;
+        }
+    })
+    .unwrap();
+    let bad = dir.path().join("blank.vbim");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = vbim(&[
+        "play",
+        s(&bad),
+        "--headless",
+        "--duration",
+        "3s",
+        "--check-every",
+        "0",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("blank.vbim") && err.contains("no frame was shown") && err.contains("chunk"),
         "{err}"
     );
 }

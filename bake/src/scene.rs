@@ -241,9 +241,13 @@ pub fn parse_rate(s: &str) -> Result<(u32, u32), String> {
         None => (s.trim(), "1"),
     };
     match (n.parse::<u32>(), d.parse::<u32>()) {
-        (Ok(n), Ok(d)) if n > 0 && d > 0 => Ok((n, d)),
+        (Ok(n), Ok(d))
+            if n > 0 && d > 0 && (1.0 / 86_400.0..=1000.0).contains(&(n as f64 / d as f64)) =>
+        {
+            Ok((n, d))
+        }
         _ => Err(format!(
-            "frame rate {s:?} (expected a positive rational such as 24/1 or 1/6)"
+            "frame rate {s:?} (expected a rational such as 24/1 or 1/6, from 1/86400 to 1000)"
         )),
     }
 }

@@ -117,7 +117,9 @@ impl EncoderConfig {
         if !(8..=256).contains(&self.tile_size) || !self.tile_size.is_multiple_of(8) {
             return Err(ConfigError::TileSize(self.tile_size));
         }
-        if self.rate.0 == 0 || self.rate.1 == 0 {
+        let fps = self.rate.0 as f64 / self.rate.1.max(1) as f64;
+        let fps_range = vbim_format::limits::MIN_FPS..=vbim_format::limits::MAX_FPS;
+        if self.rate.0 == 0 || self.rate.1 == 0 || !fps_range.contains(&fps) {
             return Err(ConfigError::Rate(self.rate.0, self.rate.1));
         }
         if self.search_stride == 0 {
@@ -172,8 +174,8 @@ pub enum ConfigError {
     /// `tile_size` not a multiple of 8 from 8 to 256.
     #[error("tile size {0} is not a multiple of 8 from 8 to 256")]
     TileSize(usize),
-    /// A frame rate with a zero numerator or denominator.
-    #[error("frame rate {0}/{1} is not positive")]
+    /// A frame rate of nothing, or outside 1/86400 to 1000 frames per second.
+    #[error("frame rate {0}/{1} (must be 1/86400 to 1000 frames per second)")]
     Rate(u32, u32),
     /// `search_stride` of 0.
     #[error("search stride 0 (1 searches every texel)")]
@@ -212,6 +214,10 @@ mod tests {
         );
         assert_eq!(bad(&|c| c.tile_size = 12), ConfigError::TileSize(12));
         assert_eq!(bad(&|c| c.rate = (24, 0)), ConfigError::Rate(24, 0));
+        assert_eq!(
+            bad(&|c| c.rate = (u32::MAX, 1)),
+            ConfigError::Rate(u32::MAX, 1)
+        );
         assert!(matches!(
             bad(&|c| c.threads = 100_000),
             ConfigError::Threads {

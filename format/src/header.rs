@@ -1,7 +1,7 @@
 //! The fixed-size file header (`docs/FORMAT.md`, section "Header").
 
 use crate::checksum::xxh3;
-use crate::limits::{MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FRAMES};
+use crate::limits::{MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FPS, MAX_FRAMES, MIN_FPS};
 use crate::{FormatError, Result};
 
 /// Bytes of one index entry (the index, which follows the header, is `chunk_count` of them).
@@ -309,8 +309,11 @@ impl Header {
                 self.frame_count
             ));
         }
-        if self.rate_num == 0 || self.rate_den == 0 {
-            return bad(format!("frame rate {}/{}", self.rate_num, self.rate_den));
+        if self.rate_num == 0 || self.rate_den == 0 || !(MIN_FPS..=MAX_FPS).contains(&self.fps()) {
+            return bad(format!(
+                "frame rate {}/{} (must be 1/86400 to 1000 frames per second)",
+                self.rate_num, self.rate_den
+            ));
         }
         if !(8..=256).contains(&self.tile_size) || !self.tile_size.is_multiple_of(8) {
             return bad(format!(

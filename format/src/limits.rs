@@ -12,6 +12,11 @@ pub const MAX_CHUNKS: u32 = 4_000_000;
 pub const MAX_CHUNK_DECODED: u64 = 4 * 4 * (MAX_DIMENSION as u64) * (MAX_DIMENSION as u64);
 /// Largest polynomial degree in time.
 pub const MAX_DEGREE: u8 = 8;
+/// Fastest media frame rate, frames per second (a lightmap day plays at a few to a few
+/// dozen: a file claiming 4294967295/1 played no frame at all).
+pub const MAX_FPS: f64 = 1000.0;
+/// Slowest media frame rate: a frame a day.
+pub const MIN_FPS: f64 = 1.0 / 86_400.0;
 /// Largest size of the metadata chunk.
 pub const MAX_METADATA: u64 = 64 << 20;
 /// A coefficient payload may decompress to at most this many times its stored size (or
