@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Runs the fuzz targets of fuzz/ (cargo fuzz, stable Rust, no sanitizer) for SECONDS each
 # (default 60): `container` (header, index, metadata, chunk checksums), `chunks` (every
-# chunk payload parser) and `decode` (the whole reference decode within small limits).
+# chunk payload parser), `decode` (the whole reference decode within small limits) and
+# `player_decoder` (the player's decoder thread: parsing and packing for the GPU; it
+# starts from decode's seeds).
 # Checksums are made right before parsing (vbim_format::fuzz::with_checksums), so the
 # fuzzer reaches the semantic checks. A crash's input is copied into
 # fuzz/regressions/TARGET/, which `cargo test` replays; the script then fails. The last
@@ -13,10 +15,13 @@ command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked --version 
 cd fuzz
 cargo fuzz build --sanitizer none -O -a
 failed=0
-for t in container chunks decode; do
+for t in container chunks decode player_decoder; do
     mkdir -p "corpus/$t" "regressions/$t"
     log="corpus/$t.log"
-    if cargo fuzz run --sanitizer none -O -a "$t" "corpus/$t" "seeds/$t" "regressions/$t" -- \
+    seeds="seeds/$t"
+    [ "$t" = player_decoder ] && seeds="seeds/decode regressions/decode"
+    # shellcheck disable=SC2086 # $seeds is one or two directories
+    if cargo fuzz run --sanitizer none -O -a "$t" "corpus/$t" $seeds "regressions/$t" -- \
         -max_total_time="$secs" -rss_limit_mb=1024 -max_len=8192 -timeout=10 \
         -print_final_stats=1 >"$log" 2>&1; then
         echo "$t: $(grep -E 'DONE' "$log" | tail -1)"

@@ -30,6 +30,8 @@ mod config;
 mod cpu_time;
 mod decoder;
 mod display;
+#[cfg(feature = "bench")]
+mod fuzz;
 mod gpu;
 mod pipeline;
 mod player;
@@ -49,11 +51,12 @@ pub use record::{Frame, FrameRecord, FrameState, Totals};
 pub use stats::{frames_csv, Summary};
 pub use throttle::{Stall, Throttle};
 
-/// The decoder alone, without threads or a GPU, for `vbim bench decode` and the tests
-/// that check what it stages. Not a stable API.
+/// The decoder alone, without threads or a GPU, for `vbim bench decode`, the tests that
+/// check what it stages and the fuzz target. Not a stable API.
 #[cfg(feature = "bench")]
 pub mod bench {
     pub use crate::decoder::{DecoderCore, Event, KeyStep, SegmentData};
+    pub use crate::fuzz::decoder as fuzz_decoder;
 }
 
 /// Why a player could not be opened or stopped.

@@ -100,6 +100,22 @@ fn preroll_ns(h: &Header, cfg: &PlayerConfig) -> u64 {
     model.saturating_add(cfg.preroll_margin_ns)
 }
 
+/// What a stream can make the player hold, checked before any of it exists: the textures,
+/// exactly; the ring; and the decoder's boxes, parsed keyframes, parse scratch and the
+/// coefficient buffer, each at most a few times the largest payload (which the file's own
+/// chunk sizes bound: `limits::MAX_EXPANSION`).
+pub(crate) fn memory_needed(header: &Header, entries: &[IndexEntry], ring_bytes: usize) -> u64 {
+    let (pw, ph) = vbim_format::chunk::padded_size(header);
+    let textures = planned_texture_bytes(
+        (header.width, header.height),
+        [pw as u32, ph as u32],
+        header.max_degree as u32,
+        header.channels as u32,
+    );
+    let payload = vbim_format::memory::largest_payload(header, entries);
+    textures + ring_bytes as u64 + 8 * payload
+}
+
 impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Opens a stream on `device`. Reads and validates the header and index first.
     pub fn open(
@@ -136,23 +152,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 header.width, header.height
             )));
         }
-        // What the stream can make the player hold, checked before any of it exists: the
-        // textures, exactly; the ring; and the decoder's boxes, parsed keyframes, parse
-        // scratch and the coefficient buffer, each at most a few times the largest payload
-        // (which the file's own chunk sizes bound: limits::MAX_EXPANSION).
-        let textures = planned_texture_bytes(
-            (header.width, header.height),
-            [pw as u32, ph as u32],
-            header.max_degree as u32,
-            header.channels as u32,
-        );
-        let payload = vbim_format::memory::largest_payload(&header, &entries);
         cfg.limits.check(
             &format!(
                 "playing a {}×{} stream of {} channel(s), degree ≤ {}",
                 header.width, header.height, header.channels, header.max_degree
             ),
-            textures + ring_bytes as u64 + 8 * payload,
+            memory_needed(&header, &entries, ring_bytes),
         )?;
         let gpu = Gpu::new(
             device,
