@@ -55,7 +55,7 @@ fn keyframe_plane(
         let mut out = Plane {
             w,
             h: ht,
-            data: Vec::with_capacity(w * ht),
+            data: plane::try_storage(w, ht)?,
         };
         for by in 0..ht / N {
             let rows = by * N * w..(by + 1) * N * w;
@@ -385,7 +385,7 @@ pub fn read_coeffs(h: &Header, bytes: &[u8], tiles: &TileMap) -> Result<Vec<Vec<
     for k in 2..=reader.max_degree() {
         let mut planes_k = Vec::with_capacity(h.channels as usize);
         for p in 0..h.channels as usize {
-            let mut plane = Plane::zeros(w, ht);
+            let mut plane = Plane::try_zeros(w, ht)?;
             reader.read_plane(k, p, &mut band, |r| {
                 for (y, x0, values) in r.member_rows() {
                     plane.data[y * w + x0..][..values.len()].copy_from_slice(values);

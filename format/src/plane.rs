@@ -21,6 +21,20 @@ pub struct Plane {
     pub data: Vec<f32>,
 }
 
+/// Room for a `w × h` plane's values, or an error naming its size if it cannot be had.
+pub(crate) fn try_storage(w: usize, h: usize) -> crate::Result<Vec<f32>> {
+    let mut data = Vec::new();
+    w.checked_mul(h)
+        .and_then(|n| data.try_reserve_exact(n).ok())
+        .ok_or_else(|| {
+            crate::FormatError::Invalid(format!(
+                "cannot allocate a {w}×{h} plane ({} bytes)",
+                w as u128 * h as u128 * 4
+            ))
+        })?;
+    Ok(data)
+}
+
 impl Plane {
     /// A `w × h` plane of zeros.
     pub fn zeros(w: usize, h: usize) -> Plane {
@@ -29,6 +43,14 @@ impl Plane {
             h,
             data: vec![0.0; w * h],
         }
+    }
+
+    /// A `w × h` plane of zeros, or an error if the memory cannot be had: a decoder's
+    /// planes are sized by a header, and a failed allocation must not abort the process.
+    pub fn try_zeros(w: usize, h: usize) -> crate::Result<Plane> {
+        let mut data = try_storage(w, h)?;
+        data.resize(w * h, 0.0);
+        Ok(Plane { w, h, data })
     }
 
     /// The 8×8 block at block column `bx`, block row `by`.

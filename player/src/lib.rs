@@ -50,6 +50,8 @@ pub use player::Player;
 pub use record::{Frame, FrameRecord, FrameState, Totals};
 pub use stats::{frames_csv, Summary};
 pub use throttle::{Stall, Throttle};
+/// The memory a stream may take ([`PlayerConfig::limits`]).
+pub use vbim_format::Limits;
 
 /// The decoder alone, without threads or a GPU, for `vbim bench decode`, the tests that
 /// check what it stages and the fuzz target. Not a stable API.
