@@ -322,8 +322,8 @@ fn small_stream(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
 fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (frames, file) = small_stream(dir.path());
-    // A log toe of 3e38 is positive and finite, so the header passes, but every texel
-    // decodes to +inf: compare must not call that a match (it printed 99 dB).
+    // A log toe of 3e38 is positive and finite, but every texel would decode to +inf
+    // (compare printed 99 dB): the header's validation refuses it now.
     let mut bytes = std::fs::read(&file).unwrap();
     vbim_format::writer::rewrite(&mut bytes, |h, _| {
         h.transfer = vbim_format::Transfer::LogToe { v0: 3e38 }
@@ -335,7 +335,7 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("not finite") && err.contains("inf.vbim"),
+        err.contains("log curve parameter") && err.contains("inf.vbim"),
         "{err}"
     );
     // A media frame rate no day has: it played no frame at all and exited 0.

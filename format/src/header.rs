@@ -1,7 +1,9 @@
 //! The fixed-size file header (`docs/FORMAT.md`, section "Header").
 
 use crate::checksum::xxh3;
-use crate::limits::{MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FPS, MAX_FRAMES, MIN_FPS};
+use crate::limits::{
+    MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FPS, MAX_FRAMES, MAX_LOG_TOE, MIN_FPS,
+};
 use crate::{FormatError, Result};
 
 /// Bytes of one index entry (the index, which follows the header, is `chunk_count` of them).
@@ -328,9 +330,12 @@ impl Header {
             ));
         }
         if let Transfer::LogToe { v0 } = self.transfer {
-            if !(v0.is_finite() && v0 > 0.0) {
+            // Decoding is v0 · (2^c − 1) with c clamped to 120 (curve.rs, reconstruct.wgsl):
+            // a toe above 200 could come near overflowing f32 (every texel +inf); no real one is
+            // near it (texels are irradiance / π, about 1 at noon; toes are ~1e-4).
+            if !(v0.is_finite() && v0 > 0.0 && v0 <= MAX_LOG_TOE) {
                 return bad(format!(
-                    "log curve parameter {v0} (must be positive and finite)"
+                    "log curve parameter {v0} (must be positive, at most {MAX_LOG_TOE})"
                 ));
             }
         }

@@ -17,6 +17,10 @@ pub const MAX_DEGREE: u8 = 8;
 pub const MAX_FPS: f64 = 1000.0;
 /// Slowest media frame rate: a frame a day.
 pub const MIN_FPS: f64 = 1.0 / 86_400.0;
+/// Largest toe `v0` of the HDR log curve: decoding is `v0 · (2^c − 1)` with `c` clamped
+/// to 120, which stays a finite f32 for any toe up to about 255. (The encoder picks
+/// 2⁻¹⁰ / exposure: at most 43 for half-float input, whose values end at 65504.)
+pub const MAX_LOG_TOE: f32 = 200.0;
 /// Largest size of the metadata chunk.
 pub const MAX_METADATA: u64 = 64 << 20;
 /// A coefficient payload may decompress to at most this many times its stored size (or
