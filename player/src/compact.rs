@@ -58,6 +58,8 @@ pub(crate) struct Compact {
     pub terms: Vec<u16>,
     /// Scratch: what each block of a row is (absent, empty, with terms).
     row: Vec<u8>,
+    /// Records and terms the last released segment held.
+    hint: (usize, usize),
 }
 
 const ABSENT: u8 = 0;
@@ -65,9 +67,22 @@ const EMPTY: u8 = 1;
 const FULL: u8 = 2;
 
 impl Compact {
+    /// Empties it for the next segment, with room for as many records and terms as the
+    /// last one released held (the next segment is usually of a similar size).
     pub fn clear(&mut self) {
         self.records.clear();
         self.terms.clear();
+        let (r, t) = std::mem::take(&mut self.hint);
+        self.records.reserve(r);
+        self.terms.reserve(t);
+    }
+
+    /// Gives back the storage once the coefficients are in a GPU staging buffer, so that
+    /// a box in flight holds them once, remembering their size for [`Compact::clear`].
+    pub fn release(&mut self) {
+        self.hint = (self.records.len(), self.terms.len());
+        self.records = Vec::new();
+        self.terms = Vec::new();
     }
 
     /// Bytes this holds as uploaded (the term stream padded to whole words).

@@ -63,6 +63,10 @@ pub struct SegmentData {
     /// Where the bubble planes start in `planes`.
     pub bubbles: usize,
     pub(crate) data: Compact,
+    /// The coefficients in a buffer of the GPU's (`data`'s layout), written by the thread
+    /// that packed them, so that the render thread only records a copy; `None` where the
+    /// decoder has no device (then the render thread uploads `data` itself).
+    pub(crate) staged: Option<Staged>,
     /// CPU nanoseconds (the decoding thread's own clock) spent on this segment and the
     /// keyframes it carries.
     pub decode_ns: u64,
@@ -90,14 +94,50 @@ impl SegmentData {
             planes: Vec::new(),
             bubbles: 0,
             data: Compact::default(),
+            staged: None,
             decode_ns: 0,
         }
     }
 
     /// Bytes the GPU upload of this box moves (records and terms).
-    #[cfg_attr(not(feature = "bench"), allow(dead_code))]
     pub fn bytes(&self) -> u64 {
-        self.data.bytes()
+        self.staged.as_ref().map_or(self.data.bytes(), |s| s.bytes)
+    }
+
+    /// Bytes of the records, which the terms follow.
+    pub(crate) fn record_bytes(&self) -> u64 {
+        self.staged
+            .as_ref()
+            .map_or(self.data.records.len() as u64 * 4, |s| s.record_bytes)
+    }
+
+    /// Moves the packed coefficients into a staging buffer of `device`'s, and frees their
+    /// CPU copy.
+    fn stage(&mut self, device: &wgpu::Device) {
+        let bytes = self.data.bytes();
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim segment coefficients"),
+            size: bytes.max(wgpu::COPY_BUFFER_ALIGNMENT),
+            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: true,
+        });
+        {
+            // Records, then terms padded to a whole word: the layout the decode pass reads.
+            let mut view = buffer.slice(..bytes).get_mapped_range_mut();
+            let records: &[u8] = bytemuck::cast_slice(&self.data.records);
+            let terms: &[u8] = bytemuck::cast_slice(&self.data.terms);
+            let (r, t) = (records.len(), records.len() + terms.len());
+            view.slice(..r).copy_from_slice(records);
+            view.slice(r..t).copy_from_slice(terms);
+            view.slice(t..).fill(0);
+        }
+        buffer.unmap();
+        self.staged = Some(Staged {
+            buffer,
+            record_bytes: self.data.records.len() as u64 * 4,
+            bytes,
+        });
+        self.data.release();
     }
 
     /// Number of planes (keyframe and bubble) the box holds.
@@ -105,6 +145,16 @@ impl SegmentData {
     pub fn plane_count(&self) -> usize {
         self.planes.len()
     }
+}
+
+/// A box's coefficients in a GPU buffer (`MAP_WRITE | COPY_SRC`), ready to be copied into
+/// the decode pass's storage buffer.
+pub(crate) struct Staged {
+    pub buffer: wgpu::Buffer,
+    /// Bytes of records; the terms follow.
+    pub record_bytes: u64,
+    /// Bytes in all (a whole number of words).
+    pub bytes: u64,
 }
 
 /// What the decoder made of one chunk.
@@ -142,6 +192,9 @@ pub struct DecoderCore {
     key_ns: u64,
     /// Scratch: each tile's rank among a bubble plane's member tiles.
     ranks: Vec<u32>,
+    /// The device whose staging buffers the packed boxes go into (`None`: they stay on
+    /// the CPU, for benchmarks and tests of the packing alone).
+    device: Option<wgpu::Device>,
     /// After a seek, the segment it is for: the ones before it get no box (the first box
     /// carries their keyframes in its chain), so that the GPU is not sent them one frame
     /// at a time only to drop them.
@@ -166,9 +219,16 @@ impl DecoderCore {
             lost: vec![false; s],
             key_ns: 0,
             ranks: Vec::new(),
+            device: None,
             first_segment: 0,
             last_closing: None,
         }
+    }
+
+    /// Packs each box into a staging buffer of `device` (the pipeline's decoders do; the
+    /// render thread then only records a copy).
+    pub fn stage_on(&mut self, device: wgpu::Device) {
+        self.device = Some(device);
     }
 
     /// Forgets everything (after a seek).
@@ -347,6 +407,7 @@ impl DecoderCore {
         out.steps.clear();
         out.planes.clear();
         out.data.clear();
+        out.staged = None;
         // The keyframes: K_{s+1} alone when the GPU built K_s last, else the chain.
         let first = if self.last_closing == Some((generation, s)) {
             None
@@ -449,6 +510,9 @@ impl DecoderCore {
         out.layers = layers;
         out.keys = [s, k1n];
         self.last_closing = Some((generation, k1n));
+        if let Some(device) = self.device.as_ref().filter(|_| out.data.bytes() > 0) {
+            out.stage(device);
+        }
         out.decode_ns = thread_cpu_ns() - t0 + std::mem::take(&mut self.key_ns);
         // The GPU holds the chain up to K_{s+1} now: only keyframe 0 (a loop's end) and
         // the ones ahead are needed here.

@@ -86,7 +86,7 @@ const JOB_STRIDE: u64 = 256;
 /// Bytes [`Gpu::decode`] uploads for `seg`: its records and terms, and one job's
 /// parameters per plane decoded (and the bubbles' zero pass).
 pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool) -> u64 {
-    seg.data.bytes() + job_bytes(seg, bubbles)
+    seg.bytes() + job_bytes(seg, bubbles)
 }
 
 /// The planes [`Gpu::decode`] decodes: the keyframe steps', and the bubbles' when wanted.
@@ -511,7 +511,7 @@ impl Gpu {
     /// Whether a segment's coefficients fit one storage binding of this device.
     pub fn fits(&self, seg: &SegmentData) -> Result<(), String> {
         let limit = self.device.limits().max_storage_buffer_binding_size;
-        let need = seg.data.bytes();
+        let need = seg.bytes();
         if need > limit {
             return Err(format!(
                 "segment {}: {need} bytes of coefficients, more than one storage binding holds ({limit})",
@@ -534,8 +534,8 @@ impl Gpu {
         bubbles: bool,
     ) {
         let ch = self.channels as usize;
-        let rec_bytes = seg.data.records.len() as u64 * 4;
-        let words = seg.data.bytes();
+        let rec_bytes = seg.record_bytes();
+        let words = seg.bytes();
         let planes = decoded_planes(seg, bubbles);
         let jobs = job_bytes(seg, bubbles);
         if words > self.words.size() || jobs > self.jobs.size() {
@@ -558,11 +558,17 @@ impl Gpu {
             }
             self.bind_decode();
         }
-        if rec_bytes > 0 {
+        if let Some(staged) = &seg.staged {
+            // Packed into a staging buffer by the decoder thread: a copy on the GPU, no
+            // bytes through this thread.
+            if staged.bytes > 0 {
+                enc.copy_buffer_to_buffer(&staged.buffer, 0, &self.words, 0, staged.bytes);
+            }
+        } else if rec_bytes > 0 {
             self.queue
                 .write_buffer(&self.words, 0, bytemuck::cast_slice(&seg.data.records));
         }
-        if !seg.data.terms.is_empty() {
+        if seg.staged.is_none() && !seg.data.terms.is_empty() {
             let t: &[u8] = bytemuck::cast_slice(&seg.data.terms);
             if t.len().is_multiple_of(4) {
                 self.queue.write_buffer(&self.words, rec_bytes, t);

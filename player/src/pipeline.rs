@@ -80,6 +80,7 @@ enum Mode<R> {
 impl<R: Read + Seek + Send + 'static> Pipeline<R> {
     /// Starts reading `src` into a ring of `ring_bytes`, with two boxes for the decoder.
     pub fn start(
+        device: &wgpu::Device,
         src: R,
         header: &Header,
         layout: &Layout,
@@ -89,7 +90,8 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
     ) -> Result<Self, PlayerError> {
         let (prod, cons) = HeapRb::<u8>::new(ring_bytes).split();
         let mut reader_core = ReaderCore::new(src, entries.to_vec(), header.looping, cfg.throttle);
-        let decoder = DecoderCore::new(header.clone(), layout.clone(), entries.to_vec());
+        let mut decoder = DecoderCore::new(header.clone(), layout.clone(), entries.to_vec());
+        decoder.stage_on(device.clone());
         let (recycle_tx, recycle_rx) = bounded::<Box<SegmentData>>(BOXES);
         for _ in 0..BOXES {
             recycle_tx

@@ -167,7 +167,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             header.max_degree as u32,
             header.channels as u32,
         );
-        let pipeline = Pipeline::start(src, &header, &layout, &entries, &cfg, ring_bytes)?;
+        let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         Ok(Player {
             header,
