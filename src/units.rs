@@ -19,30 +19,33 @@ pub fn parse_duration(s: &str) -> Result<f64, String> {
     }
 }
 
-/// `2GB`, `512MB`, `900kB`, `4096B` or a bare number of bytes (SI units) → bytes, at least 1.
-pub fn parse_size(s: &str) -> Result<u64, String> {
-    let t = s.trim();
-    let bad = || format!("size {s:?} (expected e.g. 2GB, 512MB or 900kB)");
-    let (num, scale) = if let Some(n) = t.strip_suffix("TB") {
-        (n, 1e12)
-    } else if let Some(n) = t.strip_suffix("GB") {
-        (n, 1e9)
-    } else if let Some(n) = t.strip_suffix("MB") {
-        (n, 1e6)
-    } else if let Some(n) = t.strip_suffix("kB") {
-        (n, 1e3)
-    } else if let Some(n) = t.strip_suffix('B') {
-        (n, 1.0)
-    } else {
-        (t, 1.0)
-    };
+/// `2GB`, `512MB`, `900kB`, `4096B` (SI) → bytes; `None` without a unit or a number.
+fn si_bytes(t: &str) -> Option<f64> {
+    let (num, scale) = [
+        ("TB", 1e12),
+        ("GB", 1e9),
+        ("MB", 1e6),
+        ("kB", 1e3),
+        ("B", 1.0),
+    ]
+    .iter()
+    .find_map(|&(unit, scale)| t.strip_suffix(unit).map(|n| (n, scale)))?;
     num.trim()
         .parse::<f64>()
         .ok()
         .map(|v| v * scale)
+        .filter(|v| v.is_finite() && *v > 0.0)
+}
+
+/// `2GB`, `512MB`, `900kB`, `4096B` or a bare number of bytes (SI units) → bytes, at least 1.
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    t.parse::<f64>()
+        .ok()
+        .or_else(|| si_bytes(t))
         .filter(|v| v.is_finite() && *v >= 1.0 && *v <= 1e15)
         .map(|v| v as u64)
-        .ok_or_else(bad)
+        .ok_or_else(|| format!("size {s:?} (expected e.g. 2GB, 512MB or 900kB)"))
 }
 
 /// `--memory-limit`: a size of at least 1 MB (SI units).
@@ -99,22 +102,8 @@ pub fn parse_bandwidth(s: &str) -> Result<Bandwidth, String> {
             .ok_or_else(bad);
     }
     let body = t.strip_suffix("/s").ok_or_else(bad)?;
-    let (num, scale) = if let Some(n) = body.strip_suffix("GB") {
-        (n, 1e9)
-    } else if let Some(n) = body.strip_suffix("MB") {
-        (n, 1e6)
-    } else if let Some(n) = body.strip_suffix("kB") {
-        (n, 1e3)
-    } else if let Some(n) = body.strip_suffix('B') {
-        (n, 1.0)
-    } else {
-        return Err(bad());
-    };
-    num.trim()
-        .parse::<f64>()
-        .ok()
-        .filter(|v| *v > 0.0 && v.is_finite())
-        .map(|v| Bandwidth::BytesPerSecond(v * scale))
+    si_bytes(body)
+        .map(Bandwidth::BytesPerSecond)
         .ok_or_else(bad)
 }
 
@@ -297,6 +286,21 @@ mod tests {
         assert!(parse_stall("5s@1s").is_err());
         assert!(parse_stall("300ms@5s+6s").is_err());
         assert!(parse_stall("300ms@5s+soon").is_err());
+    }
+
+    #[test]
+    fn sizes_and_limits() {
+        assert_eq!(parse_size("2GB").unwrap(), 2_000_000_000);
+        assert_eq!(parse_size("900kB").unwrap(), 900_000);
+        assert_eq!(parse_size("4096").unwrap(), 4096);
+        for bad in ["", "GB", "-1GB", "0", "1e30GB", "NaNMB", "2 GiB"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+        assert!(parse_memory_limit("999kB").is_err());
+        assert_eq!(parse_memory_limit("8GB").unwrap(), 8_000_000_000);
+        assert!(parse_exposure("1e39").is_err() && parse_exposure("0").is_err());
+        assert!(parse_play_duration("0s").is_err() && parse_play_duration("4h").is_err());
+        assert_eq!(parse_play_duration("3min").unwrap().ns(), 180_000_000_000);
     }
 
     #[test]

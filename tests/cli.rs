@@ -318,6 +318,34 @@ fn small_stream(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     (frames, file)
 }
 
+/// Fills the chunks of `kind` in a stream's `bytes` (the first only, or all) with `byte`
+/// and gives each the checksum of its new bytes, the index's and the header's recomputed
+/// too: damage that every checksum passes and only decoding finds. Returns their positions
+/// in the index.
+fn fill_chunks(bytes: &mut [u8], kind: vbim_format::ChunkKind, all: bool, byte: u8) -> Vec<usize> {
+    let r = vbim_format::Reader::open(std::io::Cursor::new(&*bytes)).unwrap();
+    let mut hit: Vec<(usize, usize, usize)> = r
+        .entries()
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.kind == kind)
+        .map(|(i, e)| (i, e.offset as usize, e.length as usize))
+        .collect();
+    hit.truncate(if all { hit.len() } else { 1 });
+    let mut sums = Vec::new();
+    for &(i, at, len) in &hit {
+        bytes[at..at + len].fill(byte);
+        sums.push((i, vbim_format::checksum::xxh3(&bytes[at..at + len])));
+    }
+    vbim_format::writer::rewrite(bytes, |_, entries| {
+        for &(i, sum) in &sums {
+            entries[i].checksum = sum;
+        }
+    })
+    .unwrap();
+    hit.iter().map(|h| h.0).collect()
+}
+
 #[test]
 fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -365,19 +393,7 @@ fn inspect_checks_that_a_chunk_with_a_valid_checksum_holds_a_payload() {
     // Zero a coefficient chunk and give it the checksum of its new bytes (the index's and
     // the header's recomputed): every checksum holds, and inspect used to say "ok".
     let mut bytes = std::fs::read(&file).unwrap();
-    let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
-    let c = r
-        .entries()
-        .iter()
-        .position(|e| e.kind == vbim_format::ChunkKind::Coefficients)
-        .unwrap();
-    let (at, len) = (
-        r.entries()[c].offset as usize,
-        r.entries()[c].length as usize,
-    );
-    bytes[at..at + len].fill(0);
-    let zeros = vbim_format::checksum::xxh3(&bytes[at..at + len]);
-    vbim_format::writer::rewrite(&mut bytes, |_, entries| entries[c].checksum = zeros).unwrap();
+    let c = fill_chunks(&mut bytes, vbim_format::ChunkKind::Coefficients, false, 0)[0];
     let bad = dir.path().join("zeroed.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let o = vbim(&["inspect", s(&bad)]);
@@ -710,19 +726,7 @@ fn a_damaged_manifest_is_reported_not_dropped() {
     // The metadata chunk (the bake's manifest) replaced by bytes that are not a zstd frame,
     // its checksum recomputed: the frames still decode, and the decode says what it lost.
     let mut bytes = std::fs::read(&file).unwrap();
-    let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
-    let m = r
-        .entries()
-        .iter()
-        .position(|e| e.kind == vbim_format::ChunkKind::Metadata)
-        .unwrap();
-    let (at, len) = (
-        r.entries()[m].offset as usize,
-        r.entries()[m].length as usize,
-    );
-    bytes[at..at + len].fill(0x5a);
-    let sum = vbim_format::checksum::xxh3(&bytes[at..at + len]);
-    vbim_format::writer::rewrite(&mut bytes, |_, entries| entries[m].checksum = sum).unwrap();
+    let m = fill_chunks(&mut bytes, vbim_format::ChunkKind::Metadata, false, 0x5a)[0];
     let bad = dir.path().join("nomanifest.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let out = dir.path().join("png");
@@ -746,25 +750,7 @@ fn a_stream_that_shows_nothing_is_an_error() {
     // way only decoding finds, so no segment can ever be shown. It used to end with
     // "played N frames" and exit 0.
     let mut bytes = std::fs::read(&file).unwrap();
-    let r = vbim_format::Reader::open(std::io::Cursor::new(&bytes)).unwrap();
-    let keys: Vec<_> = r
-        .entries()
-        .iter()
-        .enumerate()
-        .filter(|(_, e)| e.kind == vbim_format::ChunkKind::Keyframe)
-        .map(|(i, e)| (i, e.offset as usize, e.length as usize))
-        .collect();
-    let mut sums = Vec::new();
-    for &(i, at, len) in &keys {
-        bytes[at..at + len].fill(0);
-        sums.push((i, vbim_format::checksum::xxh3(&bytes[at..at + len])));
-    }
-    vbim_format::writer::rewrite(&mut bytes, |_, entries| {
-        for &(i, sum) in &sums {
-            entries[i].checksum = sum;
-        }
-    })
-    .unwrap();
+    fill_chunks(&mut bytes, vbim_format::ChunkKind::Keyframe, true, 0);
     let bad = dir.path().join("blank.vbim");
     std::fs::write(&bad, &bytes).unwrap();
     let o = vbim(&[
