@@ -49,6 +49,14 @@ struct PlayCommand {
     args: PlayArgs,
 }
 
+/// `--memory-limit`, for every command that decodes or plays a stream.
+#[derive(Args, Clone)]
+pub struct MemoryArgs {
+    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
+    #[arg(long = "memory-limit", default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
+    pub limits: vbim_format::Limits,
+}
+
 impl PlayArgs {
     /// `vbim play FILE --headless` with the command line's defaults: commands that play a
     /// file (`bench drift`, `demo`) start from this and set what they change, so that a
@@ -127,9 +135,8 @@ pub struct PlayArgs {
     /// With a window: close it after this many frames (for scripted runs) [default: never].
     #[arg(long)]
     pub exit_after: Option<u64>,
-    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
-    #[arg(long, default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
-    pub memory_limit: u64,
+    #[command(flatten)]
+    pub memory: MemoryArgs,
 }
 
 #[derive(Args)]
@@ -401,9 +408,8 @@ pub struct DecodeArgs {
     /// Refuse a stream of more frames than this: each frame is a file (a bake makes at most 100000).
     #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u32).range(1..))]
     pub max_frames: u32,
-    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
-    #[arg(long, default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
-    pub memory_limit: u64,
+    #[command(flatten)]
+    pub memory: MemoryArgs,
 }
 
 #[derive(Args)]
@@ -418,9 +424,8 @@ pub struct CompareArgs {
     /// Exposure of the HDR metric [default: from the reference, 1.5 / median of per-frame max green].
     #[arg(long, value_parser = crate::units::parse_exposure)]
     pub exposure: Option<f32>,
-    /// Memory one stream may take while it is decoded or played (SI: `4GB`); a stream that could need more is refused before anything is allocated for it.
-    #[arg(long, default_value = "2GB", value_parser = crate::units::parse_memory_limit)]
-    pub memory_limit: u64,
+    #[command(flatten)]
+    pub memory: MemoryArgs,
 }
 
 #[derive(Args)]

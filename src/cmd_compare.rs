@@ -9,9 +9,7 @@ use crate::progress::Stages;
 use crate::sequence::{to_rgb, Sequence};
 
 pub fn run(a: CompareArgs) -> Result<(), String> {
-    let limits = vbim_format::Limits {
-        memory: a.memory_limit,
-    };
+    let limits = a.memory.limits;
     let mut sa = Sequence::open(&a.a, limits)?;
     let mut sb = Sequence::open(&a.b, limits)?;
     let (wa, ha, ca, srgb_a) = sa.shape();

@@ -11,10 +11,7 @@ use crate::sequence::{to_rgb, Sequence};
 pub fn run(a: DecodeArgs) -> Result<(), String> {
     let format: FrameFormat = a.format.parse()?;
     let name = a.file.display().to_string();
-    let limits = vbim_format::Limits {
-        memory: a.memory_limit,
-    };
-    let mut seq = Sequence::open(&name, limits)?;
+    let mut seq = Sequence::open(&name, a.memory.limits)?;
     if !name.ends_with(".vbim") {
         return Err(format!("{name}: not a .vbim file"));
     }

@@ -43,9 +43,7 @@ impl Session {
     /// The session `vbim play`'s flags ask for: the one place they become settings. A
     /// bandwidth relative to the stream's mean rate needs the file's header.
     pub fn from_args(a: &PlayArgs) -> Result<Session, String> {
-        let limits = Limits {
-            memory: a.memory_limit,
-        };
+        let limits = a.memory.limits;
         let h = open_reference(&a.file, limits)?.header().clone();
         let rate = a
             .bandwidth
@@ -90,26 +88,7 @@ impl Session {
         };
         Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))
     }
-}
 
-/// The terrain mesh of a scene file, and its height field.
-pub fn scene_mesh(scene_file: &Path) -> Result<(vbim_scene::Mesh, vbim_bake::HeightField), String> {
-    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
-    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
-    let mesh = vbim_scene::Mesh::new(
-        &hf,
-        256,
-        scene.view.vertical_exaggeration as f32,
-        scene.view.snow_line as f32,
-    );
-    Ok((mesh, hf))
-}
-
-pub fn mean_rate(h: &Header) -> f64 {
-    h.file_size as f64 / (h.frame_count as f64 / h.fps())
-}
-
-impl Session {
     /// What the scene needs from the bake of the session's file: the export curve's
     /// exposure (1 for an 8-bit stream) and the sky over the day.
     pub fn scene_look(&self) -> Result<(f32, SkyTrack), String> {
@@ -130,6 +109,23 @@ impl Session {
     pub fn reference(&self) -> Result<Decoder<BufReader<File>>, String> {
         open_reference(&self.file, self.limits)
     }
+}
+
+/// The terrain mesh of a scene file, and its height field.
+pub fn scene_mesh(scene_file: &Path) -> Result<(vbim_scene::Mesh, vbim_bake::HeightField), String> {
+    let scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
+    let hf = vbim_bake::load_terrain(&scene).map_err(|e| e.to_string())?;
+    let mesh = vbim_scene::Mesh::new(
+        &hf,
+        256,
+        scene.view.vertical_exaggeration as f32,
+        scene.view.snow_line as f32,
+    );
+    Ok((mesh, hf))
+}
+
+pub fn mean_rate(h: &Header) -> f64 {
+    h.file_size as f64 / (h.frame_count as f64 / h.fps())
 }
 
 fn open_reference(file: &Path, limits: Limits) -> Result<Decoder<BufReader<File>>, String> {

@@ -49,10 +49,11 @@ pub fn parse_size(s: &str) -> Result<u64, String> {
 }
 
 /// `--memory-limit`: a size of at least 1 MB (SI units).
-pub fn parse_memory_limit(s: &str) -> Result<u64, String> {
+pub fn parse_memory_limit(s: &str) -> Result<vbim_format::Limits, String> {
     parse_size(s)
         .ok()
         .filter(|&v| v >= 1_000_000)
+        .map(|memory| vbim_format::Limits { memory })
         .ok_or_else(|| format!("memory limit {s:?} (expected a size of at least 1MB, e.g. 4GB)"))
 }
 
@@ -297,7 +298,7 @@ mod tests {
             assert!(parse_size(bad).is_err(), "{bad}");
         }
         assert!(parse_memory_limit("999kB").is_err());
-        assert_eq!(parse_memory_limit("8GB").unwrap(), 8_000_000_000);
+        assert_eq!(parse_memory_limit("8GB").unwrap().memory, 8_000_000_000);
         assert!(parse_exposure("1e39").is_err() && parse_exposure("0").is_err());
         assert!(parse_play_duration("0s").is_err() && parse_play_duration("4h").is_err());
         assert_eq!(parse_play_duration("3min").unwrap().ns(), 180_000_000_000);

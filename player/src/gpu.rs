@@ -12,6 +12,7 @@
 
 use wgpu::util::DeviceExt;
 
+use crate::compact::Compact;
 use crate::decoder::SegmentData;
 use crate::slots::MAX_BUBBLE_PLANES;
 
@@ -168,24 +169,73 @@ fn grown(need: u64) -> u64 {
         .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
 }
 
-/// Bytes of the textures [`Gpu::new`] creates for a stream of `width × height` texels
-/// coded on planes of `plane` texels: the two keyframe slots (f32), the bubble planes
-/// (16-bit), the lightmap and its held copy (Rgba16Float). Known before creating them, so
-/// that a stream is refused before anything that size exists.
-pub(crate) fn planned_texture_bytes(
+/// The textures [`Gpu::new`] creates for a stream of `width × height` texels coded on
+/// planes of `plane` texels with bubble terms up to `max_degree`: the two keyframe slots
+/// (f32), the bubble planes (16-bit pairs), the lightmap and its held copy (Rgba16Float).
+fn texture_plans(
     (width, height): (u32, u32),
     plane: [u32; 2],
     max_degree: u32,
     channels: u32,
+) -> [wgpu::TextureDescriptor<'static>; 4] {
+    use wgpu::TextureUsages as U;
+    let texture =
+        |label, (width, height, depth_or_array_layers), format, usage| wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        };
+    let bubble_layers = (max_degree.saturating_sub(1) * channels).max(1);
+    [
+        texture(
+            "vbim keyframes",
+            (plane[0], plane[1], 2 * channels),
+            wgpu::TextureFormat::R32Float,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC | U::COPY_DST,
+        ),
+        texture(
+            "vbim bubbles",
+            (plane[0] / 2, plane[1], bubble_layers),
+            wgpu::TextureFormat::R32Uint,
+            // (COPY_SRC: tests read it back.)
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
+        ),
+        texture(
+            "vbim lightmap",
+            (width, height, 1),
+            wgpu::TextureFormat::Rgba16Float,
+            U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
+        ),
+        texture(
+            "vbim held",
+            (width, height, 1),
+            wgpu::TextureFormat::Rgba16Float,
+            U::TEXTURE_BINDING | U::COPY_DST,
+        ),
+    ]
+}
+
+/// Bytes of the textures [`Gpu::new`] creates for a stream ([`texture_plans`]'s), known
+/// before creating them, so that a stream is refused before anything that size exists.
+pub(crate) fn planned_texture_bytes(
+    size: (u32, u32),
+    plane: [u32; 2],
+    max_degree: u32,
+    channels: u32,
 ) -> u64 {
-    let plane_texels = plane[0] as u64 * plane[1] as u64;
-    let keys = plane_texels * 2 * channels as u64 * 4;
-    let bubbles = (plane[0] / 2) as u64
-        * plane[1] as u64
-        * (max_degree.saturating_sub(1) * channels).max(1) as u64
-        * 4;
-    let images = 2 * width as u64 * height as u64 * 8;
-    keys + bubbles + images
+    texture_plans(size, plane, max_degree, channels)
+        .iter()
+        .map(|d| extent_bytes(d.size, d.format))
+        .sum()
 }
 
 impl Gpu {
@@ -199,50 +249,9 @@ impl Gpu {
         max_degree: u32,
         channels: u32,
     ) -> Gpu {
-        use wgpu::TextureUsages as U;
-        let texture = |label: &str, size: wgpu::Extent3d, format, usage| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let extent = |width, height, depth_or_array_layers| wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers,
-        };
-        let keys = texture(
-            "vbim keyframes",
-            extent(plane[0], plane[1], 2 * channels),
-            wgpu::TextureFormat::R32Float,
-            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC | U::COPY_DST,
-        );
-        let bubble_layers = (max_degree.saturating_sub(1) * channels).max(1);
-        let bubbles = texture(
-            "vbim bubbles",
-            extent(plane[0] / 2, plane[1], bubble_layers),
-            wgpu::TextureFormat::R32Uint,
-            // (COPY_SRC: tests read it back.)
-            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
-        );
-        let display = texture(
-            "vbim lightmap",
-            extent(width, height, 1),
-            wgpu::TextureFormat::Rgba16Float,
-            U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
-        );
-        let held = texture(
-            "vbim held",
-            extent(width, height, 1),
-            wgpu::TextureFormat::Rgba16Float,
-            U::TEXTURE_BINDING | U::COPY_DST,
-        );
+        let [keys, bubbles, display, held] =
+            texture_plans((width, height), plane, max_degree, channels)
+                .map(|d| device.create_texture(&d));
         let display_view = display.create_view(&Default::default());
         let held_view = held.create_view(&Default::default());
         let array_view = |t: &wgpu::Texture| {
@@ -558,30 +567,13 @@ impl Gpu {
             }
             self.bind_decode();
         }
-        if let Some(staged) = &seg.staged {
+        match &seg.staged {
             // Packed into a staging buffer by the decoder thread: a copy on the GPU, no
             // bytes through this thread.
-            if staged.bytes > 0 {
-                enc.copy_buffer_to_buffer(&staged.buffer, 0, &self.words, 0, staged.bytes);
+            Some(staged) => {
+                enc.copy_buffer_to_buffer(&staged.buffer, 0, &self.words, 0, staged.bytes)
             }
-        } else if rec_bytes > 0 {
-            self.queue
-                .write_buffer(&self.words, 0, bytemuck::cast_slice(&seg.data.records));
-        }
-        if seg.staged.is_none() && !seg.data.terms.is_empty() {
-            let t: &[u8] = bytemuck::cast_slice(&seg.data.terms);
-            if t.len().is_multiple_of(4) {
-                self.queue.write_buffer(&self.words, rec_bytes, t);
-            } else {
-                // Whole words only: the last entry goes with a zero beside it.
-                let (body, last) = t.split_at(t.len() - 2);
-                if !body.is_empty() {
-                    self.queue.write_buffer(&self.words, rec_bytes, body);
-                }
-                let tail = [last[0], last[1], 0, 0];
-                self.queue
-                    .write_buffer(&self.words, rec_bytes + body.len() as u64, &tail);
-            }
+            None => self.write_words(&seg.data),
         }
         // Terms are addressed in u16 entries from the start of `words`.
         let term0 = (rec_bytes / 2) as u32;
@@ -740,6 +732,32 @@ impl Gpu {
         );
     }
 
+    /// Uploads `data` into the coefficient buffer from the CPU (a box packed by a decoder
+    /// without a device): records, then terms padded to a whole word.
+    fn write_words(&self, data: &Compact) {
+        let rec_bytes = data.records.len() as u64 * 4;
+        if rec_bytes > 0 {
+            self.queue
+                .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.records));
+        }
+        if data.terms.is_empty() {
+            return;
+        }
+        let t: &[u8] = bytemuck::cast_slice(&data.terms);
+        if t.len().is_multiple_of(4) {
+            self.queue.write_buffer(&self.words, rec_bytes, t);
+        } else {
+            // Whole words only: the last entry goes with a zero beside it.
+            let (body, last) = t.split_at(t.len() - 2);
+            if !body.is_empty() {
+                self.queue.write_buffer(&self.words, rec_bytes, body);
+            }
+            let tail = [last[0], last[1], 0, 0];
+            self.queue
+                .write_buffer(&self.words, rec_bytes + body.len() as u64, &tail);
+        }
+    }
+
     /// Records the reconstruction of one frame into `enc`. The parameters go through
     /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
     /// that carries `enc`.
@@ -808,8 +826,13 @@ fn reconstruct_group(
 
 /// Bytes a texture holds (one mip level, every layer).
 fn texture_bytes(t: &wgpu::Texture) -> u64 {
-    let texel = t.format().block_copy_size(None).unwrap_or(0) as u64;
-    t.width() as u64 * t.height() as u64 * t.depth_or_array_layers() as u64 * texel
+    extent_bytes(t.size(), t.format())
+}
+
+/// Bytes of a texture of `size` texels of `format`.
+fn extent_bytes(size: wgpu::Extent3d, format: wgpu::TextureFormat) -> u64 {
+    let texel = format.block_copy_size(None).unwrap_or(0) as u64;
+    size.width as u64 * size.height as u64 * size.depth_or_array_layers as u64 * texel
 }
 
 /// Copies a 2D texture to the CPU, rows tightly packed (`bytes_per_texel` per texel):
@@ -882,7 +905,7 @@ fn read_texture_layer(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::compact::Compact;
+
     use crate::decoder::KeyStep;
     use vbim_format::plane::{self, Blocks, Onto, Plane};
 
