@@ -43,10 +43,14 @@ struct Tables {
 @group(0) @binding(0) var<uniform> job: Job;
 @group(0) @binding(1) var<uniform> tables: Tables;
 @group(0) @binding(2) var<storage, read> words: array<u32>;
-// A keyframe plane (one layer of the keyframe slots).
+// A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
-// The bubble planes: two 16-bit texels per R32Uint texel, one layer per (term, plane).
-@group(0) @binding(4) var bubble_planes: texture_storage_2d_array<r32uint, write>;
+// 16-bit planes, two texels per R32Uint texel: the bubble planes (one layer per term and
+// plane) in the bubble passes, the previous keyframe's planes in `key_pack`.
+@group(0) @binding(4) var planes16: texture_storage_2d_array<r32uint, write>;
+// The previous keyframe's range per region of REGION² texels and plane: (lowest value,
+// step), region (x, y) of plane p at (p · regions.y + y) · regions.x + x.
+@group(0) @binding(5) var<storage, read_write> ranges: array<vec2<f32>>;
 
 fn basis(k: u32, n: u32) -> f32 {
     let i = k * 8u + n;
@@ -166,7 +170,7 @@ fn bubble_write(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
         let s = block_sum(i, x, l.y, 0.0, true);
         let at = vec2<u32>(run.x0 / 2u + j * 4u + l.x, run.y0 + l.y);
         let packed = quantize(s.a) | (quantize(s.b) << 16u);
-        textureStore(bubble_planes, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
+        textureStore(planes16, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
         i = s.next;
     }
 }
@@ -177,5 +181,68 @@ fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= job.size.x || id.y >= job.size.y || id.z >= job.layer) {
         return;
     }
-    textureStore(bubble_planes, id.xy, id.z, vec4<u32>(0u));
+    textureStore(planes16, id.xy, id.z, vec4<u32>(0u));
+}
+
+// The side of a region of the previous keyframe with its own range. Small enough that a
+// region's range stays near the local contrast (the rounding is range / 131070), large
+// enough that the ranges cost nothing (8 bytes per 1024 texels and plane).
+const REGION: u32 = 32u;
+
+var<workgroup> lows: array<f32, 64>;
+var<workgroup> highs: array<f32, 64>;
+
+// Packs plane `job.layer` of the head keyframe into the previous keyframe's 16-bit plane:
+// one workgroup per region finds the region's range (a reduction in workgroup memory),
+// then each invocation rounds its 4 × 4 texels to 16-bit steps of that range. The head is
+// only read: the next keyframe is added onto it afterwards.
+@compute @workgroup_size(8, 8)
+fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>,
+            @builtin(local_invocation_index) li: u32) {
+    let origin = wg.xy * REGION + l.xy * 4u;
+    var v: array<f32, 16>;
+    var lo = 3.4e38;
+    var hi = -3.4e38;
+    for (var j = 0u; j < 16u; j = j + 1u) {
+        let xy = origin + vec2<u32>(j % 4u, j / 4u);
+        var x = 0.0;
+        if (xy.x < job.size.x && xy.y < job.size.y) {
+            x = textureLoad(key_plane, xy).x;
+            lo = min(lo, x);
+            hi = max(hi, x);
+        }
+        v[j] = x;
+    }
+    lows[li] = lo;
+    highs[li] = hi;
+    for (var n = 32u; n > 0u; n = n / 2u) {
+        workgroupBarrier();
+        if (li < n) {
+            lows[li] = min(lows[li], lows[li + n]);
+            highs[li] = max(highs[li], highs[li + n]);
+        }
+    }
+    workgroupBarrier();
+    lo = lows[0];
+    hi = highs[0];
+    let step = (hi - lo) / 65535.0;
+    var inv = 0.0;
+    if (step > 0.0) {
+        inv = 1.0 / step;
+    }
+    let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
+    if (li == 0u) {
+        ranges[(job.layer * regions.y + wg.y) * regions.x + wg.x] = vec2<f32>(lo, step);
+    }
+    if (origin.x >= job.size.x) {
+        return;
+    }
+    for (var j = 0u; j < 16u; j = j + 2u) {
+        let xy = origin + vec2<u32>(j % 4u, j / 4u);
+        if (xy.y < job.size.y) {
+            let a = u32(clamp(round((v[j] - lo) * inv), 0.0, 65535.0));
+            let b = u32(clamp(round((v[j + 1u] - lo) * inv), 0.0, 65535.0));
+            textureStore(planes16, vec2<u32>(xy.x / 2u, xy.y), job.layer, vec4<u32>(a | (b << 16u), 0u, 0u, 0u));
+        }
+    }
 }

@@ -1,7 +1,7 @@
 //! The decoder: takes chunks from the ring, verifies them, parses keyframes and
 //! coefficients down to their quantised terms, and when a segment's keyframes, tile map
 //! and coefficients are all there packs what the GPU needs for it into a box
-//! ([`SegmentData`]): the keyframe steps that bring the GPU's keyframe slots to the
+//! ([`SegmentData`]): the keyframe steps that bring the GPU's resident keyframes to the
 //! segment's K_s and K_{s+1}, and the segment's bubble planes, all in the compact form of
 //! `compact.rs`. Dequantisation, the inverse DCT and predicted keyframes are the GPU's.
 //!
@@ -19,8 +19,8 @@ use vbim_format::index::Layout;
 use vbim_format::reader::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
-/// One keyframe for the GPU to build in a keyframe slot: from zeros (intra) or from the
-/// keyframe before it, which the slot built last holds (predicted).
+/// One keyframe for the GPU to build on its head keyframe: from zeros (intra) or onto the
+/// keyframe before it, which the head holds (predicted).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct KeyStep {
     /// The keyframe's number.

@@ -1,14 +1,16 @@
-//! The GPU side: what stays resident — two keyframe slots (R32Float, one layer per
-//! plane), one set of bubble planes (16-bit signed integers with a scale per plane, two
-//! to an R32Uint texel), the display texture the renderer samples and a held copy for
-//! catch-up blending — and the passes that fill them: the segment decode of
+//! The GPU side: what stays resident — the chain's head keyframe (R32Float, one layer
+//! per plane), the keyframe before it (16-bit steps of a range per 32² region, two to an
+//! R32Uint texel), one set of bubble planes (16-bit signed integers with a scale per
+//! plane, two to an R32Uint texel), the display texture the renderer samples and a held
+//! copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill them: the segment decode of
 //! `decode.wgsl` (dequantisation, inverse DCT, predicted keyframes) and the per-frame
 //! reconstruction of `reconstruct.wgsl`.
 //!
-//! Keyframes stay f32: a predicted keyframe is built from the one before it, and a 16-bit
-//! keyframe would add its rounding at every step of the chain (docs/FORMAT.md, "What the
-//! GPU decoder guarantees"). Bubble planes are rebuilt for every segment from their
-//! coefficients, so they carry one rounding, well inside the protocol's bound.
+//! The head stays f32: the next predicted keyframe is built on it, and a 16-bit head
+//! would add its rounding at every step of the chain (docs/FORMAT.md, "What the GPU
+//! decoder guarantees"). The previous keyframe is only displayed, and is packed afresh
+//! from the f32 head at every step, so it carries one rounding, like the bubble planes,
+//! which are rebuilt for every segment from their coefficients.
 
 use wgpu::util::DeviceExt;
 
@@ -58,9 +60,8 @@ pub(crate) struct Params {
     pub alpha: f32,
     pub channels: u32,
     pub blend: u32,
-    /// Keyframe slots of K_s and K_{s+1}.
-    pub key0: u32,
-    pub key1: u32,
+    /// Regions of the previous keyframe's ranges, across and down.
+    pub regions: [u32; 2],
     pub _pad: [u32; 2],
     /// Scale of each bubble plane.
     pub scales: [f32; MAX_BUBBLE_PLANES],
@@ -120,8 +121,13 @@ pub(crate) struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
+    /// Packs what is on screen into `held` (from the display, or the caller's output).
+    hold: wgpu::ComputePipeline,
+    hold_layout: wgpu::BindGroupLayout,
+    hold_group: wgpu::BindGroup,
     key_add: wgpu::ComputePipeline,
     key_zero: wgpu::ComputePipeline,
+    key_pack: wgpu::ComputePipeline,
     bubble_write: wgpu::ComputePipeline,
     bubble_zero: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,
@@ -132,9 +138,15 @@ pub(crate) struct Gpu {
     jobs: wgpu::Buffer,
     /// A segment's records and terms; grows with the largest segment.
     words: wgpu::Buffer,
+    /// The chain's head keyframe K_{s+1}, f32.
     keys: wgpu::Texture,
-    /// One view per keyframe layer (slot · channels + plane), for the decode passes.
+    /// One view per plane of the head, for the decode passes.
     key_views: Vec<wgpu::TextureView>,
+    /// The previous keyframe K_s, 16-bit, and the range of each of its regions.
+    previous: wgpu::Texture,
+    previous_view: wgpu::TextureView,
+    ranges: wgpu::Buffer,
+    regions: [u32; 2],
     bubbles: wgpu::Texture,
     bubble_view: wgpu::TextureView,
     display: wgpu::Texture,
@@ -145,8 +157,9 @@ pub(crate) struct Gpu {
     reconstruct_layout: wgpu::BindGroupLayout,
     keys_view: wgpu::TextureView,
     held_view: wgpu::TextureView,
-    /// A texture of the caller's that the reconstruction writes instead of `display`.
-    output: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    /// A texture of the caller's that the reconstruction writes instead of `display`, with
+    /// the reconstruction's and the hold pass's bind groups over it.
+    output: Option<(wgpu::Texture, wgpu::BindGroup, wgpu::BindGroup)>,
     /// Decode bind groups (per keyframe layer, and the bubbles'): remade when `words` or
     /// `jobs` grow.
     key_groups: Vec<wgpu::BindGroup>,
@@ -169,15 +182,32 @@ fn grown(need: u64) -> u64 {
         .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
 }
 
+/// The side of a region of the previous keyframe with its own range (`REGION` in
+/// decode.wgsl and reconstruct.wgsl).
+const REGION: u32 = 32;
+
+/// Regions of [`REGION`]² texels across and down a plane of `plane` texels.
+fn regions(plane: [u32; 2]) -> [u32; 2] {
+    plane.map(|n| n.div_ceil(REGION))
+}
+
+/// Bytes of the previous keyframe's ranges: a (lowest value, step) pair of f32 per region
+/// and plane.
+fn range_bytes(plane: [u32; 2], channels: u32) -> u64 {
+    let [rx, ry] = regions(plane);
+    rx as u64 * ry as u64 * channels as u64 * 8
+}
+
 /// The textures [`Gpu::new`] creates for a stream of `width × height` texels coded on
-/// planes of `plane` texels with bubble terms up to `max_degree`: the two keyframe slots
-/// (f32), the bubble planes (16-bit pairs), the lightmap and its held copy (Rgba16Float).
+/// planes of `plane` texels with bubble terms up to `max_degree`: the head keyframe
+/// (f32), the previous keyframe and the bubble planes (16-bit pairs), the lightmap
+/// (Rgba16Float) and its held copy (RGB9E5 packed into R32Uint).
 fn texture_plans(
     (width, height): (u32, u32),
     plane: [u32; 2],
     max_degree: u32,
     channels: u32,
-) -> [wgpu::TextureDescriptor<'static>; 4] {
+) -> [wgpu::TextureDescriptor<'static>; 5] {
     use wgpu::TextureUsages as U;
     let texture =
         |label, (width, height, depth_or_array_layers), format, usage| wgpu::TextureDescriptor {
@@ -197,10 +227,17 @@ fn texture_plans(
     let bubble_layers = (max_degree.saturating_sub(1) * channels).max(1);
     [
         texture(
-            "vbim keyframes",
-            (plane[0], plane[1], 2 * channels),
+            "vbim head keyframe",
+            (plane[0], plane[1], channels),
             wgpu::TextureFormat::R32Float,
-            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC | U::COPY_DST,
+            // (COPY_SRC: tests read it back.)
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
+        ),
+        texture(
+            "vbim previous keyframe",
+            (plane[0] / 2, plane[1], channels),
+            wgpu::TextureFormat::R32Uint,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
         ),
         texture(
             "vbim bubbles",
@@ -218,14 +255,15 @@ fn texture_plans(
         texture(
             "vbim held",
             (width, height, 1),
-            wgpu::TextureFormat::Rgba16Float,
-            U::TEXTURE_BINDING | U::COPY_DST,
+            wgpu::TextureFormat::R32Uint,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING,
         ),
     ]
 }
 
-/// Bytes of the textures [`Gpu::new`] creates for a stream ([`texture_plans`]'s), known
-/// before creating them, so that a stream is refused before anything that size exists.
+/// Bytes of the textures and range buffer [`Gpu::new`] creates for a stream
+/// ([`texture_plans`]'s), known before creating them, so that a stream is refused before
+/// anything that size exists.
 pub(crate) fn planned_texture_bytes(
     size: (u32, u32),
     plane: [u32; 2],
@@ -235,7 +273,8 @@ pub(crate) fn planned_texture_bytes(
     texture_plans(size, plane, max_degree, channels)
         .iter()
         .map(|d| extent_bytes(d.size, d.format))
-        .sum()
+        .sum::<u64>()
+        + range_bytes(plane, channels)
 }
 
 impl Gpu {
@@ -249,7 +288,7 @@ impl Gpu {
         max_degree: u32,
         channels: u32,
     ) -> Gpu {
-        let [keys, bubbles, display, held] =
+        let [keys, previous, bubbles, display, held] =
             texture_plans((width, height), plane, max_degree, channels)
                 .map(|d| device.create_texture(&d));
         let display_view = display.create_view(&Default::default());
@@ -262,7 +301,14 @@ impl Gpu {
         };
         let keys_view = array_view(&keys);
         let bubble_view = array_view(&bubbles);
-        let key_views = (0..2 * channels)
+        let previous_view = array_view(&previous);
+        let ranges = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim previous keyframe ranges"),
+            size: range_bytes(plane, channels).max(8),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let key_views = (0..channels)
             .map(|l| {
                 keys.create_view(&wgpu::TextureViewDescriptor {
                     dimension: Some(wgpu::TextureViewDimension::D2),
@@ -303,6 +349,16 @@ impl Gpu {
             has_dynamic_offset: dynamic,
             min_binding_size: None,
         };
+        let storage = |read_only| wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let sampled_2d = |sample_type| wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        };
         let sampled = |sample_type| wgpu::BindingType::Texture {
             sample_type,
             view_dimension: wgpu::TextureViewDimension::D2Array,
@@ -317,14 +373,7 @@ impl Gpu {
                     sampled(wgpu::TextureSampleType::Float { filterable: false }),
                 ),
                 entry(2, sampled(wgpu::TextureSampleType::Uint)),
-                entry(
-                    3,
-                    wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                ),
+                entry(3, sampled_2d(wgpu::TextureSampleType::Uint)),
                 entry(
                     4,
                     wgpu::BindingType::StorageTexture {
@@ -333,14 +382,34 @@ impl Gpu {
                         view_dimension: wgpu::TextureViewDimension::D2,
                     },
                 ),
+                entry(5, sampled(wgpu::TextureSampleType::Uint)),
+                entry(6, storage(true)),
             ],
         });
-        let words_entry = entry(
-            2,
-            wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
+        let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim hold"),
+            entries: &[
+                entry(
+                    7,
+                    sampled_2d(wgpu::TextureSampleType::Float { filterable: false }),
+                ),
+                entry(
+                    8,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::R32Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                ),
+            ],
+        });
+        let words_entry = entry(2, storage(true));
+        let planes16 = entry(
+            4,
+            wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::R32Uint,
+                view_dimension: wgpu::TextureViewDimension::D2Array,
             },
         );
         let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -357,6 +426,8 @@ impl Gpu {
                         view_dimension: wgpu::TextureViewDimension::D2,
                     },
                 ),
+                planes16,
+                entry(5, storage(false)),
             ],
         });
         let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -365,14 +436,7 @@ impl Gpu {
                 entry(0, uniform(true)),
                 entry(1, uniform(false)),
                 words_entry,
-                entry(
-                    4,
-                    wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::R32Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                    },
-                ),
+                planes16,
             ],
         });
         let pipeline_for =
@@ -402,15 +466,30 @@ impl Gpu {
             &bgl,
             "main",
         );
+        let hold = pipeline_for(
+            "vbim hold",
+            include_str!("reconstruct.wgsl"),
+            &hold_layout,
+            "hold",
+        );
+        let hold_group = hold_group(device, &hold_layout, &display_view, &held_view);
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
+        let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
         let bubble_write =
             pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
         let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
         let bind_group = reconstruct_group(
             device,
             &bgl,
-            [&keys_view, &bubble_view, &held_view, &display_view],
+            [
+                &keys_view,
+                &bubble_view,
+                &held_view,
+                &display_view,
+                &previous_view,
+            ],
+            &ranges,
             &params,
         );
         let buffer = |label: &str, size: u64, usage| {
@@ -432,8 +511,12 @@ impl Gpu {
             device: device.clone(),
             queue: queue.clone(),
             pipeline,
+            hold,
+            hold_layout,
+            hold_group,
             key_add,
             key_zero,
+            key_pack,
             bubble_write,
             bubble_zero,
             key_layout,
@@ -444,6 +527,10 @@ impl Gpu {
             words,
             keys,
             key_views,
+            previous,
+            previous_view,
+            ranges,
+            regions: regions(plane),
             bubbles,
             bubble_view,
             display,
@@ -473,44 +560,62 @@ impl Gpu {
             offset: 0,
             size: wgpu::BufferSize::new(std::mem::size_of::<Job>() as u64),
         };
-        let group = |layout: &wgpu::BindGroupLayout, binding: u32, view: &wgpu::TextureView| {
+        let group = |layout: &wgpu::BindGroupLayout, more: &[wgpu::BindGroupEntry]| {
+            let mut entries = vec![
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(job.clone()),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.tables.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.words.as_entire_binding(),
+                },
+            ];
+            entries.extend_from_slice(more);
             self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vbim decode"),
                 layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::Buffer(job.clone()),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: self.tables.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: self.words.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding,
-                        resource: wgpu::BindingResource::TextureView(view),
-                    },
-                ],
+                entries: &entries,
             })
+        };
+        let view = |binding, v| wgpu::BindGroupEntry {
+            binding,
+            resource: wgpu::BindingResource::TextureView(v),
         };
         self.key_groups = self
             .key_views
             .iter()
-            .map(|v| group(&self.key_layout, 3, v))
+            .map(|v| {
+                let ranges = wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: self.ranges.as_entire_binding(),
+                };
+                group(
+                    &self.key_layout,
+                    &[view(3, v), view(4, &self.previous_view), ranges],
+                )
+            })
             .collect();
-        self.bubble_group = Some(group(&self.bubble_layout, 4, &self.bubble_view));
+        self.bubble_group = Some(group(&self.bubble_layout, &[view(4, &self.bubble_view)]));
     }
 
     /// Bytes of the textures and buffers the player holds on the GPU (the budget's figure).
     pub fn bytes(&self) -> u64 {
-        [&self.keys, &self.bubbles, &self.display, &self.held]
-            .iter()
-            .map(|t| texture_bytes(t))
-            .sum::<u64>()
+        [
+            &self.keys,
+            &self.previous,
+            &self.bubbles,
+            &self.display,
+            &self.held,
+        ]
+        .iter()
+        .map(|t| texture_bytes(t))
+        .sum::<u64>()
+            + self.ranges.size()
             + self.params.size()
             + self.tables.size()
             + self.jobs.size()
@@ -530,18 +635,12 @@ impl Gpu {
         Ok(())
     }
 
-    /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn in
-    /// alternating keyframe slots starting with `first_slot`, then (with `bubbles`) its
-    /// bubble planes. The records and terms go through `Queue::write_buffer`, which takes
+    /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn on the
+    /// head (the head packed into the previous keyframe before the last step), then
+    /// (with `bubbles`) its bubble planes. The records and terms go through `Queue::write_buffer`, which takes
     /// effect at the queue's next submission: the one that carries `enc`. It uploads
     /// [`upload_bytes`].
-    pub fn decode(
-        &mut self,
-        enc: &mut wgpu::CommandEncoder,
-        seg: &SegmentData,
-        first_slot: usize,
-        bubbles: bool,
-    ) {
+    pub fn decode(&mut self, enc: &mut wgpu::CommandEncoder, seg: &SegmentData, bubbles: bool) {
         let ch = self.channels as usize;
         let rec_bytes = seg.record_bytes();
         let words = seg.bytes();
@@ -591,8 +690,14 @@ impl Gpu {
                 count: span.count,
                 terms: term0 + span.terms,
                 terms_end: term0 + span.terms_end,
-                // A bubble plane's layer (a keyframe pass writes the layer it is bound to).
-                layer: i.saturating_sub(seg.bubbles) as u32,
+                // A bubble plane's layer; a keyframe plane's channel, the layer of the
+                // previous keyframe `key_pack` writes (the head's passes write the layer
+                // their binding views).
+                layer: if i < seg.bubbles {
+                    i % ch
+                } else {
+                    i - seg.bubbles
+                } as u32,
                 groups_x: GROUPS_X,
                 size: [pw, ph],
                 _pad: [0; 2],
@@ -611,45 +716,28 @@ impl Gpu {
                 pass.dispatch_workgroups(count.min(GROUPS_X), count.div_ceil(GROUPS_X), 1);
             }
         };
-        let mut slot = first_slot;
-        for st in &seg.steps {
+        let last = seg.steps.len().saturating_sub(1);
+        for (n, st) in seg.steps.iter().enumerate() {
             for p in 0..ch {
-                let layer = slot * ch + p;
                 let plane = st.plane + p;
                 let offset = (plane as u64 * JOB_STRIDE) as u32;
-                if !st.intra {
-                    // Start from the reference keyframe: the other slot's plane.
-                    let from = (1 - slot) * ch + p;
-                    let at = |z: usize| wgpu::TexelCopyTextureInfo {
-                        texture: &self.keys,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d {
-                            x: 0,
-                            y: 0,
-                            z: z as u32,
-                        },
-                        aspect: wgpu::TextureAspect::All,
-                    };
-                    enc.copy_texture_to_texture(
-                        at(from),
-                        at(layer),
-                        wgpu::Extent3d {
-                            width: pw,
-                            height: ph,
-                            depth_or_array_layers: 1,
-                        },
-                    );
-                }
                 let mut pass = enc.begin_compute_pass(&Default::default());
-                pass.set_bind_group(0, &self.key_groups[layer], &[offset]);
+                pass.set_bind_group(0, &self.key_groups[p], &[offset]);
+                if n == last {
+                    // The head becomes the previous keyframe (the earlier steps' heads are
+                    // never shown).
+                    pass.set_pipeline(&self.key_pack);
+                    let [rx, ry] = self.regions;
+                    pass.dispatch_workgroups(rx, ry, 1);
+                }
                 if st.intra {
                     pass.set_pipeline(&self.key_zero);
                     pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
                 }
+                // A predicted keyframe is added onto the head: the keyframe it follows.
                 pass.set_pipeline(&self.key_add);
                 dispatch(&mut pass, seg.planes[plane].count);
             }
-            slot = 1 - slot;
         }
         if bubbles {
             let mut pass = enc.begin_compute_pass(&Default::default());
@@ -683,7 +771,7 @@ impl Gpu {
             return Ok(());
         };
         use wgpu::TextureUsages as U;
-        let need = U::STORAGE_BINDING | U::COPY_SRC;
+        let need = U::STORAGE_BINDING | U::TEXTURE_BINDING;
         if t.format() != wgpu::TextureFormat::Rgba16Float
             || (t.width(), t.height()) != (self.width, self.height)
             || t.depth_or_array_layers() != 1
@@ -692,8 +780,8 @@ impl Gpu {
         {
             return Err(format!(
                 "the output must be a {}×{} 2D Rgba16Float texture with STORAGE_BINDING | \
-                 COPY_SRC usage (COPY_SRC keeps the image on screen for catch-up blending); \
-                 got {}×{}×{} {:?} with {:?}",
+                 TEXTURE_BINDING usage (the player reads it to keep the image on screen for \
+                 catch-up blending); got {}×{}×{} {:?} with {:?}",
                 self.width,
                 self.height,
                 t.width(),
@@ -707,29 +795,33 @@ impl Gpu {
         let group = reconstruct_group(
             &self.device,
             &self.reconstruct_layout,
-            [&self.keys_view, &self.bubble_view, &self.held_view, &view],
+            [
+                &self.keys_view,
+                &self.bubble_view,
+                &self.held_view,
+                &view,
+                &self.previous_view,
+            ],
+            &self.ranges,
             &self.params,
         );
-        self.output = Some((t.clone(), group));
+        let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
+        self.output = Some((t.clone(), group, hold));
         Ok(())
     }
 
     /// The texture the reconstruction writes: the caller's, or the player's own.
     fn target(&self) -> &wgpu::Texture {
-        self.output.as_ref().map_or(&self.display, |(t, _)| t)
+        self.output.as_ref().map_or(&self.display, |(t, ..)| t)
     }
 
     /// Keeps what is on screen for blending (at the start of a catch-up).
     pub fn hold(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.copy_texture_to_texture(
-            self.target().as_image_copy(),
-            self.held.as_image_copy(),
-            wgpu::Extent3d {
-                width: self.width,
-                height: self.height,
-                depth_or_array_layers: 1,
-            },
-        );
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&self.hold);
+        let group = self.output.as_ref().map_or(&self.hold_group, |(.., g)| g);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
     }
 
     /// Uploads `data` into the coefficient buffer from the CPU (a box packed by a decoder
@@ -762,8 +854,12 @@ impl Gpu {
     /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
     /// that carries `enc`.
     pub fn reconstruct(&self, enc: &mut wgpu::CommandEncoder, params: &Params, hold_first: bool) {
+        let params = Params {
+            regions: self.regions,
+            ..*params
+        };
         self.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         if hold_first {
             self.hold(enc);
         }
@@ -772,7 +868,7 @@ impl Gpu {
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.pipeline);
-        let group = self.output.as_ref().map_or(&self.bind_group, |(_, g)| g);
+        let group = self.output.as_ref().map_or(&self.bind_group, |(_, g, _)| g);
         pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
     }
@@ -799,12 +895,14 @@ impl Params {
     }
 }
 
-/// The reconstruction's bind group: its parameters, then the keyframes, bubble planes,
-/// held image and output views.
+/// The reconstruction's bind group: its parameters, then the head keyframe, bubble
+/// planes, held image, output and previous keyframe views, and the previous keyframe's
+/// ranges.
 fn reconstruct_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
-    views: [&wgpu::TextureView; 4],
+    views: [&wgpu::TextureView; 5],
+    ranges: &wgpu::Buffer,
     params: &wgpu::Buffer,
 ) -> wgpu::BindGroup {
     let mut entries = vec![wgpu::BindGroupEntry {
@@ -817,10 +915,37 @@ fn reconstruct_group(
             resource: wgpu::BindingResource::TextureView(v),
         });
     }
+    entries.push(wgpu::BindGroupEntry {
+        binding: 6,
+        resource: ranges.as_entire_binding(),
+    });
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("vbim reconstruct"),
         layout,
         entries: &entries,
+    })
+}
+
+/// The hold pass's bind group: what is on screen, and the held texture it packs it into.
+fn hold_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    shown: &wgpu::TextureView,
+    held: &wgpu::TextureView,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("vbim hold"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 7,
+                resource: wgpu::BindingResource::TextureView(shown),
+            },
+            wgpu::BindGroupEntry {
+                binding: 8,
+                resource: wgpu::BindingResource::TextureView(held),
+            },
+        ],
     })
 }
 
@@ -928,7 +1053,8 @@ mod tests {
     }
 
     /// The keyframe passes on a real adapter: an intra keyframe, then a predicted one
-    /// built on it in the other slot, against the reference decoder's block kernel.
+    /// built on it, against the reference decoder's block kernel; the first, packed into
+    /// the previous keyframe, within half a 16-bit step of its region's range.
     #[test]
     fn keyframe_passes_match_the_reference_kernel() {
         let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
@@ -937,8 +1063,12 @@ mod tests {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1);
         let mut seed = 3;
         let mut want = Plane::zeros(pw as usize, ph as usize);
+        let mut first = None;
         let mut seg = SegmentData::new();
         for (n, step) in [(0usize, 0.01f32), (1, 0.002)] {
+            if n == 1 {
+                first = Some(want.clone());
+            }
             let blocks = random_blocks(bw * bh, &mut seed);
             let mut raw = Vec::new();
             plane::write_coefficients(&blocks, &mut raw);
@@ -958,11 +1088,10 @@ mod tests {
             seg.data = c;
             seg.layers = 2;
             let mut enc = device.create_command_encoder(&Default::default());
-            gpu.decode(&mut enc, &seg, n % 2, false);
+            gpu.decode(&mut enc, &seg, false);
             queue.submit([enc.finish()]);
         }
-        // The predicted keyframe went into slot 1.
-        let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 1);
+        let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 0);
         let got: &[f32] = bytemuck::cast_slice(&raw);
         let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
         for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
@@ -970,6 +1099,30 @@ mod tests {
                 (g - w).abs() <= 1e-5 * peak,
                 "texel {i}: GPU {g} against {w}"
             );
+        }
+        // The previous keyframe: 16-bit steps of each 32² region's range.
+        let first = first.expect("two steps");
+        let raw = read_texture_layer(&device, &queue, &gpu.previous, 4, 0);
+        let q: &[u16] = bytemuck::cast_slice(&raw);
+        let (w, rs) = (pw as usize, REGION as usize);
+        for ry in 0..(ph as usize).div_ceil(rs) {
+            for rx in 0..w.div_ceil(rs) {
+                let at = |i: usize| (ry * rs + i / rs, rx * rs + i % rs);
+                let inside = (0..rs * rs)
+                    .map(at)
+                    .filter(|&(y, x)| y < ph as usize && x < w);
+                let vals: Vec<f32> = inside.clone().map(|(y, x)| first.data[y * w + x]).collect();
+                let lo = vals.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+                let hi = vals.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+                let step = (hi - lo) / 65535.0;
+                for ((y, x), v) in inside.zip(vals) {
+                    let g = lo + q[y * w + x] as f32 * step;
+                    assert!(
+                        (g - v).abs() <= 0.5001 * step + 1e-6 * hi.abs().max(lo.abs()),
+                        "previous keyframe at ({x}, {y}): {g} against {v} (step {step})"
+                    );
+                }
+            }
         }
     }
 
@@ -1005,7 +1158,7 @@ mod tests {
         seg.data = c;
         seg.layers = 3;
         let mut enc = device.create_command_encoder(&Default::default());
-        gpu.decode(&mut enc, &seg, 0, true);
+        gpu.decode(&mut enc, &seg, true);
         queue.submit([enc.finish()]);
         let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
         let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
@@ -1018,6 +1171,80 @@ mod tests {
                 "texel {i}: GPU {g} against {w} (scale {})",
                 span.scale
             );
+        }
+    }
+
+    /// The held image: what is on screen, packed by the hold pass and read back through
+    /// a blend at its start (alpha 0), is within a 9-bit step of the texel's largest
+    /// channel (and the output's half-float rounding), from zero to beyond RGB9E5's range.
+    #[test]
+    fn the_held_image_keeps_nine_bits_of_each_texels_largest_channel() {
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let (w, h) = (16u32, 8u32);
+        let mut gpu = Gpu::new(&device, &queue, (w, h), [w, h], 2, 3);
+        use wgpu::TextureUsages as U;
+        let screen = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("on screen"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC | U::COPY_DST,
+            view_formats: &[],
+        });
+        let texels = (w * h) as usize;
+        let want: Vec<[f32; 3]> = (0..texels)
+            .map(|i| {
+                let big = 2f32.powf(i as f32 * 0.37 - 20.0);
+                [
+                    big,
+                    big * ((i % 5) as f32 / 7.0),
+                    big * 1e-3 * (i % 3) as f32,
+                ]
+            })
+            .collect();
+        let raw: Vec<half::f16> = want
+            .iter()
+            .flat_map(|c| [c[0], c[1], c[2], 1.0].map(half::f16::from_f32))
+            .collect();
+        queue.write_texture(
+            screen.as_image_copy(),
+            bytemuck::cast_slice(&raw),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(w * 8),
+                rows_per_image: Some(h),
+            },
+            screen.size(),
+        );
+        let on_screen: Vec<f32> = raw.iter().map(|v| v.to_f32()).collect();
+        gpu.set_output(Some(&screen)).unwrap();
+        let mut params = Params::zeroed_params();
+        params.size = [w, h];
+        params.channels = 3;
+        params.blend = 1;
+        params.alpha = 0.0;
+        let mut enc = device.create_command_encoder(&Default::default());
+        gpu.reconstruct(&mut enc, &params, true);
+        queue.submit([enc.finish()]);
+        let got = gpu.read_display();
+        for i in 0..texels {
+            let (g, s) = (&got[i * 4..i * 4 + 3], &on_screen[i * 4..i * 4 + 3]);
+            let peak = s.iter().fold(0f32, |m, v| m.max(*v)).min(65408.0);
+            for c in 0..3 {
+                let tol = peak / 512.0 + s[c].min(65408.0) / 1024.0 + 1e-7;
+                assert!(
+                    (g[c] - s[c].min(65408.0)).abs() <= tol,
+                    "texel {i} channel {c}: held {} against {} on screen",
+                    g[c],
+                    s[c]
+                );
+            }
         }
     }
 }

@@ -32,10 +32,10 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     pipeline: Pipeline<R>,
     /// The box received but not yet decoded on the GPU.
     incoming: Option<Box<SegmentData>>,
-    /// A box to decode on the GPU this frame: from which keyframe slot its keyframe
-    /// steps start, and whether its bubbles are wanted (not for a dropped segment).
-    to_decode: Option<(Box<SegmentData>, usize, bool)>,
-    /// What the keyframe slots hold.
+    /// A box to decode on the GPU this frame, and whether its bubbles are wanted (not for
+    /// a dropped segment).
+    to_decode: Option<(Box<SegmentData>, bool)>,
+    /// Which keyframes the GPU holds.
     keys: KeySlots,
     /// The segment the GPU can evaluate (its bubbles and keyframes are resident).
     resident: Option<Resident>,
@@ -205,8 +205,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// instead of the player's own lightmap ([`Player::view`] then stops changing); `None`
     /// goes back to the player's own. For an engine whose materials keep the texture they
     /// were built with. The texture must be `width × height`, 2D, `Rgba16Float`, with
-    /// `STORAGE_BINDING | COPY_SRC` usage (the copy keeps the image on screen for the
-    /// catch-up blend); the player keeps a clone of the handle while it writes it.
+    /// `STORAGE_BINDING | TEXTURE_BINDING` usage (the player reads it to keep the image on
+    /// screen for the catch-up blend; [`Player::read_display`] also needs `COPY_SRC`); the
+    /// player keeps a clone of the handle while it writes it.
     pub fn set_output(&mut self, texture: Option<&wgpu::Texture>) -> Result<(), PlayerError> {
         self.last_eval = None;
         self.gpu.set_output(texture).map_err(PlayerError::Output)
@@ -218,8 +219,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.gpu.read_display()
     }
 
-    /// Bytes of GPU memory the player holds: its textures (the two keyframe slots, the
-    /// bubble planes, the lightmap and its held copy) and its buffers (the coefficients of
+    /// Bytes of GPU memory the player holds: its textures (the head keyframe and the one
+    /// before it, the bubble planes, the lightmap and its held copy) and its buffers (the coefficients of
     /// the segment being decoded, the passes' parameters). The runtime's budget is stated
     /// in these bytes per texel of the lightmap.
     pub fn gpu_bytes(&self) -> u64 {
@@ -292,7 +293,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             self.pipeline.give_back(b);
             return 0;
         }
-        let first_slot = self.keys.next_slot();
         if let Err(k) = self.keys.build(&b.steps) {
             // The GPU's keyframes are not the ones this segment's chain continues (it
             // follows one that never reached the GPU): read again from an intra keyframe.
@@ -303,12 +303,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             self.seek(pos);
             return 0;
         }
-        // The keyframe slots changed: the segment on screen is gone.
+        // The resident keyframes changed: the segment on screen is gone.
         self.resident = None;
         self.known_end = range.1;
         let show = placement == Placement::Show;
         if show {
-            if let Some(keys) = self.keys.slots_of(b.keys) {
+            if self.keys.holds(b.keys) {
                 let mut scales = [0f32; MAX_BUBBLE_PLANES];
                 for (s, p) in scales.iter_mut().zip(&b.planes[b.bubbles..]) {
                     *s = p.scale;
@@ -318,7 +318,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                     start: range.0,
                     end: range.1,
                     layers: b.layers,
-                    keys,
                     scales,
                 });
                 self.totals.segments_uploaded += 1;
@@ -328,7 +327,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         }
         let show = show && self.resident.is_some();
         let bytes = crate::gpu::upload_bytes(&b, show);
-        self.to_decode = Some((b, first_slot, show));
+        self.to_decode = Some((b, show));
         bytes
     }
 
@@ -377,8 +376,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 
     /// Records the GPU work of a planned frame into `encoder` (see [`Player::advance_into`]).
     pub fn render_into(&mut self, frame: &Frame, encoder: &mut wgpu::CommandEncoder) {
-        if let Some((b, first_slot, bubbles)) = self.to_decode.take() {
-            self.gpu.decode(encoder, &b, first_slot, bubbles);
+        if let Some((b, bubbles)) = self.to_decode.take() {
+            self.gpu.decode(encoder, &b, bubbles);
             // Its bytes are with wgpu now (`write_buffer` copies them): the box goes back.
             self.pipeline.give_back(b);
             self.last_eval = None;
@@ -491,8 +490,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             params.transfer = tr;
             params.v0 = v0;
             params.channels = self.header.channels as u32;
-            params.key0 = r.keys[0] as u32;
-            params.key1 = r.keys[1] as u32;
             params.scales = r.scales;
             params.alpha = alpha;
             params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
@@ -569,7 +566,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         if let Some(b) = self.incoming.take() {
             self.pipeline.give_back(b);
         }
-        if let Some((b, _, _)) = self.to_decode.take() {
+        if let Some((b, _)) = self.to_decode.take() {
             self.pipeline.give_back(b);
         }
         self.resident = None;

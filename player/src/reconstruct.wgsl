@@ -1,7 +1,8 @@
 // Reconstructs the lightmap at one moment: per texel, the segment's terms weighted by the
 // basis at the current normalised time (computed once per frame on the CPU, in f32, the
 // same weights the reference decoder uses), then YCoCg → RGB, clamp, inverse transfer.
-// While catching up after a stall, the result is blended with the image held on screen.
+// While catching up after a stall, the result is blended with the image held on screen,
+// which `hold` keeps in 4 bytes a texel (RGB9E5, as the texture format of that name).
 
 struct Params {
     // Basis weights w0..w8 (hats, then bubbles), packed four to a vector.
@@ -14,9 +15,8 @@ struct Params {
     alpha: f32,
     channels: u32,
     blend: u32,
-    // Keyframe slots of K_s and K_{s+1}.
-    key0: u32,
-    key1: u32,
+    // Regions of the previous keyframe's ranges, across and down (decode.wgsl, key_pack).
+    regions: vec2<u32>,
     pad0: u32,
     pad1: u32,
     // Scale of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
@@ -24,13 +24,19 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-// Keyframes (two slots, `channels` R32Float layers each) and the segment's bubble terms
+// The head keyframe K_{s+1} (`channels` R32Float layers) and the segment's bubble terms
 // (term k ≥ 2 at layers (k − 2)·channels …), 16-bit signed integers times the layer's
 // scale, two to an R32Uint texel.
-@group(0) @binding(1) var keys: texture_2d_array<f32>;
+@group(0) @binding(1) var head: texture_2d_array<f32>;
 @group(0) @binding(2) var bubbles: texture_2d_array<u32>;
-@group(0) @binding(3) var held: texture_2d<f32>;
+@group(0) @binding(3) var held: texture_2d<u32>;
 @group(0) @binding(4) var out_tex: texture_storage_2d<rgba16float, write>;
+// The previous keyframe K_s: 16-bit steps of its region's range (lowest value, step), two
+// to an R32Uint texel, one layer per plane.
+@group(0) @binding(5) var previous: texture_2d_array<u32>;
+@group(0) @binding(6) var<storage, read> ranges: array<vec2<f32>>;
+
+const REGION: i32 = 32;
 
 fn weight(k: u32) -> f32 {
     return p.w[k / 4u][k % 4u];
@@ -50,16 +56,30 @@ fn decode(c: f32) -> f32 {
     return p.v0 * (exp2(clamp(c, 0.0, 120.0)) - 1.0);
 }
 
-fn key(xy: vec2<i32>, slot: u32) -> vec3<f32> {
-    let b = i32(slot * p.channels);
+fn head_key(xy: vec2<i32>) -> vec3<f32> {
     if (p.channels == 3u) {
         return vec3<f32>(
-            textureLoad(keys, xy, b, 0).x,
-            textureLoad(keys, xy, b + 1, 0).x,
-            textureLoad(keys, xy, b + 2, 0).x,
+            textureLoad(head, xy, 0, 0).x,
+            textureLoad(head, xy, 1, 0).x,
+            textureLoad(head, xy, 2, 0).x,
         );
     }
-    return vec3<f32>(textureLoad(keys, xy, b, 0).x, 0.0, 0.0);
+    return vec3<f32>(textureLoad(head, xy, 0, 0).x, 0.0, 0.0);
+}
+
+fn previous_plane(xy: vec2<i32>, plane: u32) -> f32 {
+    let w = textureLoad(previous, vec2<i32>(xy.x >> 1u, xy.y), i32(plane), 0).x;
+    let q = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
+    let region = vec2<u32>(xy / REGION);
+    let r = ranges[(plane * p.regions.y + region.y) * p.regions.x + region.x];
+    return r.x + f32(q) * r.y;
+}
+
+fn previous_key(xy: vec2<i32>) -> vec3<f32> {
+    if (p.channels == 3u) {
+        return vec3<f32>(previous_plane(xy, 0u), previous_plane(xy, 1u), previous_plane(xy, 2u));
+    }
+    return vec3<f32>(previous_plane(xy, 0u), 0.0, 0.0);
 }
 
 fn bubble_layer(xy: vec2<i32>, layer: u32) -> f32 {
@@ -96,7 +116,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let xy = vec2<i32>(id.xy);
     // Same order as the reference decoder: w0·K0 + w1·K1, then each bubble.
-    var c = weight(0u) * key(xy, p.key0) + weight(1u) * key(xy, p.key1);
+    var c = weight(0u) * previous_key(xy) + weight(1u) * head_key(xy);
     for (var k = 2u; k < p.layers; k = k + 1u) {
         c = c + weight(k) * bubble(xy, k);
     }
@@ -109,8 +129,44 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         rgb = vec3<f32>(v, v, v);
     }
     if (p.blend == 1u) {
-        rgb = mix(textureLoad(held, xy, 0).xyz, rgb, p.alpha);
+        rgb = mix(unpack_rgb9e5(textureLoad(held, xy, 0).x), rgb, p.alpha);
     }
     let out = vec3<f32>(nearest_half(rgb.x), nearest_half(rgb.y), nearest_half(rgb.z));
     textureStore(out_tex, xy, vec4<f32>(out, 1.0));
+}
+
+// The held image: RGB with 9-bit mantissas and a shared 5-bit exponent (bias 15), the
+// layout of the RGB9E5 texture format, which cannot be a storage texture. The largest
+// channel keeps 9 significant bits (a 2^-9 step at worst); a blend's start is within that
+// of what was on screen, where a catch-up blends towards the exact image anyway.
+fn unpack_rgb9e5(w: u32) -> vec3<f32> {
+    let scale = exp2(f32(w >> 27u) - 24.0);
+    return vec3<f32>(f32(w & 0x1FFu), f32((w >> 9u) & 0x1FFu), f32((w >> 18u) & 0x1FFu)) * scale;
+}
+
+fn pack_rgb9e5(c: vec3<f32>) -> u32 {
+    // The largest value the layout holds: (511 / 512) · 2^16.
+    let v = clamp(c, vec3<f32>(0.0), vec3<f32>(65408.0));
+    let m = max(v.x, max(v.y, v.z));
+    // The shared exponent e: steps of 2^(e − 24) hold the largest channel in 9 bits.
+    var e = max(-16.0, floor(log2(max(m, 1e-30)))) + 16.0;
+    if (floor(m * exp2(24.0 - e) + 0.5) >= 512.0) {
+        e = e + 1.0;
+    }
+    let q = vec3<u32>(floor(v * exp2(24.0 - e) + 0.5));
+    return min(q.x, 511u) | (min(q.y, 511u) << 9u) | (min(q.z, 511u) << 18u) | (u32(e) << 27u);
+}
+
+@group(0) @binding(7) var shown: texture_2d<f32>;
+@group(0) @binding(8) var held_out: texture_storage_2d<r32uint, write>;
+
+// Keeps what is on screen for blending (at the start of a catch-up).
+@compute @workgroup_size(8, 8)
+fn hold(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(shown);
+    if (id.x >= size.x || id.y >= size.y) {
+        return;
+    }
+    let xy = vec2<i32>(id.xy);
+    textureStore(held_out, xy, vec4<u32>(pack_rgb9e5(textureLoad(shown, xy, 0).xyz), 0u, 0u, 0u));
 }

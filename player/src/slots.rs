@@ -1,14 +1,16 @@
-//! What the GPU holds, as bookkeeping tested without a GPU: which keyframe each of the
-//! two keyframe slots holds, which segment the bubble planes hold, and what to do with
+//! What the GPU holds, as bookkeeping tested without a GPU: which keyframes are the
+//! chain's head and the one before it, which segment the bubble planes hold, and what to do with
 //! an arriving segment. `gpu.rs` records the passes a decision asks for.
 //!
 //! The GPU builds a segment's keyframes and decodes its bubble planes in the frame that
 //! first shows it, in the same submission as the reconstruction, so one bubble set and
-//! two keyframe slots are enough: K_{s+2} is built from K_{s+1} in the slot K_s held,
-//! once segment s is over. A segment that arrives too late to show still has its
-//! keyframes built (the next one starts from its K_{s+1}); the segment on screen then
-//! loses its keyframes, and the display keeps the last image it showed until the next
-//! segment arrives.
+//! two keyframes are enough: the head of the chain, K_{s+1}, in f32 (the next predicted
+//! keyframe is built on it in place), and the one before it, K_s, in 16 bits with a range
+//! per region (only the display reads it). Building K_{s+2} first packs K_{s+1} into the
+//! 16-bit slot, then adds the residual onto the head. A segment that arrives too late to
+//! show still has its keyframes built (the next one starts from its K_{s+1}); the segment
+//! on screen then loses its keyframes, and the display keeps the last image it showed
+//! until the next segment arrives.
 
 use crate::decoder::KeyStep;
 use crate::time::{MediaTime, ONE_FRAME};
@@ -17,11 +19,11 @@ use crate::time::{MediaTime, ONE_FRAME};
 /// `reconstruct.wgsl` hold their scales in 6 vec4s).
 pub(crate) const MAX_BUBBLE_PLANES: usize = 24;
 
-/// The two keyframe slots: the keyframe each holds, and which was built last.
+/// The two resident keyframes: the chain's head (f32) and the one before it (16-bit).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct KeySlots {
-    held: [Option<usize>; 2],
-    latest: usize,
+    head: Option<usize>,
+    previous: Option<usize>,
 }
 
 impl KeySlots {
@@ -30,46 +32,37 @@ impl KeySlots {
         *self = KeySlots::default();
     }
 
-    /// The slot the next keyframe is built in: never the one built last, which a
-    /// predicted keyframe starts from.
-    pub fn next_slot(&self) -> usize {
-        1 - self.latest
-    }
-
-    /// Builds `steps` in turn, alternating slots. `Err(k)`: predicted keyframe `k` does
-    /// not follow the keyframe built last (the GPU's chain is not the decoder's); nothing
-    /// changes then.
+    /// Builds `steps` in turn, each on the head, the head before it becoming the previous
+    /// keyframe. `Err(k)`: predicted keyframe `k` does not follow the head (the GPU's
+    /// chain is not the decoder's); nothing changes then.
     pub fn build(&mut self, steps: &[KeyStep]) -> Result<(), usize> {
         let mut t = *self;
         for st in steps {
-            let follows = st.number > 0 && t.held[t.latest] == Some(st.number - 1);
+            let follows = st.number > 0 && t.head == Some(st.number - 1);
             if !st.intra && !follows {
                 return Err(st.number);
             }
-            t.latest = 1 - t.latest;
-            t.held[t.latest] = Some(st.number);
+            t.previous = t.head;
+            t.head = Some(st.number);
         }
         *self = t;
         Ok(())
     }
 
-    /// The slots holding keyframes `k0` and `k1`, if both are resident and `k1` was
-    /// built last.
-    pub fn slots_of(&self, [k0, k1]: [usize; 2]) -> Option<[usize; 2]> {
-        let (last, other) = (self.latest, 1 - self.latest);
-        (self.held[last] == Some(k1) && self.held[other] == Some(k0)).then_some([other, last])
+    /// Whether keyframes `k0` (the previous one) and `k1` (the head) are resident.
+    pub fn holds(&self, [k0, k1]: [usize; 2]) -> bool {
+        self.previous == Some(k0) && self.head == Some(k1)
     }
 }
 
 /// The segment whose bubble planes the GPU holds, with its absolute media range
-/// (pass · N + frames) and the keyframe slots of its K_s and K_{s+1}.
+/// (pass · N + frames). Its K_s and K_{s+1} are the resident keyframes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Resident {
     pub index: usize,
     pub start: MediaTime,
     pub end: MediaTime,
     pub layers: usize,
-    pub keys: [usize; 2],
     /// Scale of each bubble plane.
     pub scales: [f32; MAX_BUBBLE_PLANES],
 }
@@ -126,13 +119,12 @@ mod tests {
             start: s * 10 * F,
             end: (s + 1) * 10 * F,
             layers: 4,
-            keys: [0, 1],
             scales: [0.0; MAX_BUBBLE_PLANES],
         }
     }
 
     #[test]
-    fn a_chain_alternates_slots_and_ends_with_the_segments_keyframes() {
+    fn a_chain_ends_with_the_segments_keyframes() {
         let mut k = KeySlots::default();
         // After a seek into segment 3: intra keyframe 1, then 2, 3 and the closing 4.
         let steps = [
@@ -142,17 +134,15 @@ mod tests {
             step(4, false),
         ];
         k.build(&steps).unwrap();
-        let [a, b] = k.slots_of([3, 4]).expect("K_3 and K_4 resident");
-        assert_ne!(a, b);
-        // The next segment carries only its closing keyframe, built where K_3 was.
-        assert_eq!(k.next_slot(), a);
+        assert!(k.holds([3, 4]));
+        // The next segment carries only its closing keyframe, built on the head.
         k.build(&[step(5, false)]).unwrap();
-        assert_eq!(k.slots_of([4, 5]), Some([b, a]));
-        assert_eq!(k.slots_of([3, 4]), None);
+        assert!(k.holds([4, 5]));
+        assert!(!k.holds([3, 4]));
     }
 
     #[test]
-    fn a_predicted_keyframe_that_does_not_follow_the_last_one_changes_nothing() {
+    fn a_predicted_keyframe_that_does_not_follow_the_head_changes_nothing() {
         let mut k = KeySlots::default();
         k.build(&[step(0, true), step(1, false)]).unwrap();
         let before = k;
@@ -161,8 +151,13 @@ mod tests {
         assert_eq!(KeySlots::default().build(&[step(0, false)]), Err(0));
         // A loop: the last segment closes on keyframe 0 (intra), segment 0 follows.
         k.build(&[step(0, true)]).unwrap();
+        assert!(k.holds([1, 0]));
         k.build(&[step(1, false)]).unwrap();
-        assert_eq!(k.slots_of([0, 1]).map(|s| s[0] != s[1]), Some(true));
+        assert!(k.holds([0, 1]));
+        // After a seek nothing is held: the first intra keyframe alone shows nothing.
+        k.clear();
+        k.build(&[step(4, true)]).unwrap();
+        assert!(!k.holds([3, 4]));
     }
 
     #[test]

@@ -133,14 +133,17 @@ fn gpu_reconstruction_matches_the_reference_decoder() {
         let mut reference =
             Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
         let mut player = unthrottled(&device, &queue, bytes);
-        // The budget's figure, counted by hand: two keyframe slots of ch R32Float layers
-        // and (degree − 1) × ch bubble layers of 16 bits, over the padded planes (48 × 32,
-        // whole 16-texel tiles), the lightmap and its held copy (Rgba16Float); then the
-        // buffers: the 192-byte uniform of the reconstruction, the 512-byte DCT tables,
-        // and the decode jobs and coefficients, at least 16 and 64 KiB.
+        // The budget's figure, counted by hand: the head keyframe's ch R32Float layers,
+        // the previous keyframe's ch 16-bit layers and (degree − 1) × ch bubble layers of
+        // 16 bits, over the padded planes (48 × 32, whole 16-texel tiles), the lightmap
+        // (Rgba16Float) and its held copy (RGB9E5, 4 bytes); then the buffers: the previous keyframe's ranges
+        // (2 × 1 regions of 32² per plane, 8 bytes each), the 192-byte uniform of the
+        // reconstruction, the 512-byte DCT tables, and the decode jobs and coefficients,
+        // at least 16 and 64 KiB.
         let (planes, d) = (48 * 32u64, player.header().max_degree as u64);
-        let textures = planes * ch as u64 * (2 * 4 + (d - 1) * 2) + 2 * 40 * 24 * 8;
-        let buffers = player.gpu_bytes() - textures - 192 - 512;
+        let textures = planes * ch as u64 * (4 + 2 + (d - 1) * 2) + 40 * 24 * (8 + 4);
+        let ranges = 2 * ch as u64 * 8;
+        let buffers = player.gpu_bytes() - textures - ranges - 192 - 512;
         assert!(
             ((16 << 10) + (64 << 10)..1 << 20).contains(&buffers),
             "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",
@@ -1086,13 +1089,17 @@ fn a_callers_texture_gets_what_the_players_own_would_show() {
     use wgpu::TextureUsages as U;
     let (mut own, mut theirs) = (open(), open());
     let e = theirs
-        .set_output(Some(&texture(w, h - 1, U::STORAGE_BINDING | U::COPY_SRC)))
+        .set_output(Some(&texture(
+            w,
+            h - 1,
+            U::STORAGE_BINDING | U::TEXTURE_BINDING,
+        )))
         .unwrap_err();
     assert!(e.to_string().contains("48×32"), "{e}");
     let e = theirs
         .set_output(Some(&texture(w, h, U::STORAGE_BINDING)))
         .unwrap_err();
-    assert!(e.to_string().contains("COPY_SRC"), "{e}");
+    assert!(e.to_string().contains("TEXTURE_BINDING"), "{e}");
     let engine = texture(w, h, U::STORAGE_BINDING | U::COPY_SRC | U::TEXTURE_BINDING);
     theirs.set_output(Some(&engine)).unwrap();
     let mut states = std::collections::HashSet::new();
