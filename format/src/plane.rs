@@ -130,8 +130,10 @@ pub struct Blocks {
     /// AC terms of block b: `ac[start[b]..start[b + 1]]`.
     ac: Vec<(u8, i32)>,
     start: Vec<u32>,
-    /// Scratch: (block, zig-zag index, value) in stream order, and bucket cursors.
-    parsed: Vec<(u32, u8, i32)>,
+    /// Scratch: (block | zig-zag index << [`BLOCK_BITS`], value) in stream order, and
+    /// bucket cursors. (8 bytes a term, not 12: the scratch is the largest thing the
+    /// player's decoder holds on the CPU.)
+    parsed: Vec<(u32, i32)>,
     cursor: Vec<u32>,
 }
 
@@ -221,22 +223,28 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
     out.ac.resize(out.parsed.len(), (0, 0));
     // (As slices, whose pointers stay in registers.)
     let (cursor, ac) = (&mut out.cursor[..], &mut out.ac[..]);
-    for &(b, f, v) in &out.parsed {
-        let c = &mut cursor[b as usize];
-        ac[*c as usize] = (f, v);
+    for &(bf, v) in &out.parsed {
+        let c = &mut cursor[(bf & BLOCK_MASK) as usize];
+        ac[*c as usize] = ((bf >> BLOCK_BITS) as u8, v);
         *c += 1;
     }
     Ok(())
 }
 
+/// Bits of a block's index in [`Blocks`]' scratch; the zig-zag index (6 bits) goes above.
+const BLOCK_BITS: u32 = 26;
+const BLOCK_MASK: u32 = (1 << BLOCK_BITS) - 1;
+// `read_blocks` refuses streams of more blocks than one chunk can decode to.
+const _: () = assert!(crate::limits::MAX_CHUNK_DECODED / (N * N) as u64 <= 1 << BLOCK_BITS);
+
 /// The (zero run, value) pairs of a stream of `dc.len()` blocks: DC differences into `dc`,
-/// non-zero AC terms as (block, zig-zag index, value) in stream order into `parsed`, and
-/// each block's count of them into `counts`.
+/// non-zero AC terms as (block | zig-zag index << [`BLOCK_BITS`], value) in stream order
+/// into `parsed`, and each block's count of them into `counts`.
 fn parse_pairs(
     buf: &[u8],
     pos: &mut usize,
     dc: &mut [i32],
-    parsed: &mut Vec<(u32, u8, i32)>,
+    parsed: &mut Vec<(u32, i32)>,
     counts: &mut [u32],
 ) -> Result<()> {
     let n = dc.len();
@@ -268,7 +276,7 @@ fn parse_pairs(
         if f == 0 {
             dc[b] = v;
         } else if v != 0 {
-            parsed.push((b as u32, f as u8, v));
+            parsed.push((b as u32 | (f as u32) << BLOCK_BITS, v));
             counts[b] += 1;
         }
         b += 1;
