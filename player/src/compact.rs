@@ -156,10 +156,14 @@ impl Compact {
         let z = dct::zigzag();
         let amax = row_max();
         let mut col = [[0f32; dct::N]; dct::N];
+        // The columns with a term: the rows' sums below skip the others (a DC-only block,
+        // the commonest, has one), adding in the same order, so the bound is the same.
+        let mut touched = 0u32;
         let mut head = self.terms.len();
         for (i, v) in blocks.terms(b) {
             if bound {
                 let (ky, kx) = (z[i] / dct::N, z[i] % dct::N);
+                touched |= 1 << kx;
                 for (c, &ty) in col[kx].iter_mut().zip(&t[ky]) {
                     *c += v as f32 * ty;
                 }
@@ -178,14 +182,16 @@ impl Compact {
         if !bound {
             return 0.0;
         }
-        (0..dct::N)
-            .map(|y| {
-                col.iter()
-                    .zip(amax)
-                    .map(|(c, a)| c[y].abs() * a)
-                    .sum::<f32>()
-            })
-            .fold(0f32, f32::max)
+        // Column after column, eight rows at a time (vectorised).
+        let mut rows = [0f32; dct::N];
+        while touched != 0 {
+            let kx = touched.trailing_zeros() as usize;
+            touched &= touched - 1;
+            for (r, c) in rows.iter_mut().zip(&col[kx]) {
+                *r += c.abs() * amax[kx];
+            }
+        }
+        rows.iter().fold(0f32, |m, &r| m.max(r))
     }
 
     /// Appends a copy of `src`'s planes (as [`Compact::push_plane`] left them there),

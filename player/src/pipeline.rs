@@ -400,8 +400,10 @@ fn wake(w: &Waker) {
 }
 
 /// Longest park while waiting on the ring: bounds a missed wake-up (there should be none:
-/// an unpark before the park makes it return at once).
-const PARK: Duration = Duration::from_millis(20);
+/// an unpark before the park makes it return at once: a stop unparks both threads, a seek
+/// or a throttle change the reader, and the reader wakes the decoder with every chunk). At
+/// 20 ms the reader, parked on a full ring, woke 50 times a second, most of its CPU time.
+const PARK: Duration = Duration::from_millis(200);
 /// How often a thread blocked on a channel looks at the stop flag.
 const STOP_CHECK: Duration = Duration::from_millis(50);
 
@@ -427,8 +429,8 @@ fn reader_loop<R: Read + Seek>(
         }
         core.prepare();
         let Some(arrival) = core.next_arrival() else {
-            // Finished a file that does not loop.
-            std::thread::sleep(Duration::from_millis(5));
+            // Finished a file that does not loop: until a seek or a stop unparks it.
+            std::thread::park_timeout(PARK);
             continue;
         };
         if !clock.sleep_until(arrival, &give_up) {
