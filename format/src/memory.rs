@@ -17,7 +17,7 @@ use crate::{FormatError, Result};
 /// bounds: what the texel count makes a decoder hold, exactly, plus what the largest
 /// payload may (a bound set by the file's own chunk sizes). The default lets every size
 /// the project targets through — the 4096² benchmark day (degree ≤ 4) counts 1.84 GB to
-/// decode on the CPU and about 1.75 GB to play on the GPU (1.2 GB measured) — and refuses
+/// decode on the CPU and about 1.58 GB to play on the GPU (1.06 GB measured) — and refuses
 /// a few-hundred-byte file that claims an 8192² stream (3.2 GB or more for its planes)
 /// until the limit is raised; an 8192² day needs about 4–5 GB to play.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
