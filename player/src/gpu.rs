@@ -2,9 +2,9 @@
 //! per plane), the keyframe before it (16-bit steps of a range per 32² region, two to an
 //! R32Uint texel), one set of bubble planes (16-bit signed integers with a scale per
 //! plane, two to an R32Uint texel), the display texture the renderer samples and a held
-//! copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill them: the segment decode of
-//! `decode.wgsl` (dequantisation, inverse DCT, predicted keyframes) and the per-frame
-//! reconstruction of `reconstruct.wgsl`.
+//! copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill
+//! them: the segment decode of `decode.wgsl` (dequantisation, inverse DCT, predicted
+//! keyframes) and the per-frame reconstruction of `reconstruct.wgsl`.
 //!
 //! The head stays f32: the next predicted keyframe is built on it, and a 16-bit head
 //! would add its rounding at every step of the chain (docs/FORMAT.md, "What the GPU
@@ -354,14 +354,10 @@ impl Gpu {
             has_dynamic_offset: false,
             min_binding_size: None,
         };
-        let sampled_2d = |sample_type| wgpu::BindingType::Texture {
+        use wgpu::TextureViewDimension::{D2Array, D2};
+        let sampled = |sample_type, view_dimension| wgpu::BindingType::Texture {
             sample_type,
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        };
-        let sampled = |sample_type| wgpu::BindingType::Texture {
-            sample_type,
-            view_dimension: wgpu::TextureViewDimension::D2Array,
+            view_dimension,
             multisampled: false,
         };
         let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -370,10 +366,13 @@ impl Gpu {
                 entry(0, uniform(false)),
                 entry(
                     1,
-                    sampled(wgpu::TextureSampleType::Float { filterable: false }),
+                    sampled(
+                        wgpu::TextureSampleType::Float { filterable: false },
+                        D2Array,
+                    ),
                 ),
-                entry(2, sampled(wgpu::TextureSampleType::Uint)),
-                entry(3, sampled_2d(wgpu::TextureSampleType::Uint)),
+                entry(2, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+                entry(3, sampled(wgpu::TextureSampleType::Uint, D2)),
                 entry(
                     4,
                     wgpu::BindingType::StorageTexture {
@@ -382,7 +381,7 @@ impl Gpu {
                         view_dimension: wgpu::TextureViewDimension::D2,
                     },
                 ),
-                entry(5, sampled(wgpu::TextureSampleType::Uint)),
+                entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
                 entry(6, storage(true)),
             ],
         });
@@ -391,7 +390,7 @@ impl Gpu {
             entries: &[
                 entry(
                     7,
-                    sampled_2d(wgpu::TextureSampleType::Float { filterable: false }),
+                    sampled(wgpu::TextureSampleType::Float { filterable: false }, D2),
                 ),
                 entry(
                     8,
@@ -637,9 +636,9 @@ impl Gpu {
 
     /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn on the
     /// head (the head packed into the previous keyframe before the last step), then
-    /// (with `bubbles`) its bubble planes. The records and terms go through `Queue::write_buffer`, which takes
-    /// effect at the queue's next submission: the one that carries `enc`. It uploads
-    /// [`upload_bytes`].
+    /// (with `bubbles`) its bubble planes. The records and terms go through
+    /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
+    /// that carries `enc`. It uploads [`upload_bytes`].
     pub fn decode(&mut self, enc: &mut wgpu::CommandEncoder, seg: &SegmentData, bubbles: bool) {
         let ch = self.channels as usize;
         let rec_bytes = seg.record_bytes();
