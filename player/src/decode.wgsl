@@ -189,60 +189,44 @@ fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
 // enough that the ranges cost nothing (8 bytes per 1024 texels and plane).
 const REGION: u32 = 32u;
 
-var<workgroup> lows: array<f32, 64>;
-var<workgroup> highs: array<f32, 64>;
-
 // Packs plane `job.layer` of the head keyframe into the previous keyframe's 16-bit plane:
-// one workgroup per region finds the region's range (a reduction in workgroup memory),
-// then each invocation rounds its 4 × 4 texels to 16-bit steps of that range. The head is
-// only read: the next keyframe is added onto it afterwards.
-@compute @workgroup_size(8, 8)
-fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>,
-            @builtin(local_invocation_index) li: u32) {
-    let origin = wg.xy * REGION + l.xy * 4u;
-    var v: array<f32, 16>;
+// one invocation per region reads the region twice, first for its range, then to round
+// each pair of texels to 16-bit steps of it. (No workgroup memory or barriers: a reduction
+// in workgroup memory cost lavapipe, which runs a workgroup's invocations in turns
+// between barriers, more than the reads it saved.) The head is only read: the next
+// keyframe is added onto it afterwards.
+@compute @workgroup_size(64)
+fn key_pack(@builtin(global_invocation_id) id: vec3<u32>) {
+    let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
+    if (id.x >= regions.x * regions.y) {
+        return;
+    }
+    let region = vec2<u32>(id.x % regions.x, id.x / regions.x);
+    let origin = region * REGION;
+    let end = min(origin + vec2<u32>(REGION), job.size);
     var lo = 3.4e38;
     var hi = -3.4e38;
-    for (var j = 0u; j < 16u; j = j + 1u) {
-        let xy = origin + vec2<u32>(j % 4u, j / 4u);
-        var x = 0.0;
-        if (xy.x < job.size.x && xy.y < job.size.y) {
-            x = textureLoad(key_plane, xy).x;
-            lo = min(lo, x);
-            hi = max(hi, x);
-        }
-        v[j] = x;
-    }
-    lows[li] = lo;
-    highs[li] = hi;
-    for (var n = 32u; n > 0u; n = n / 2u) {
-        workgroupBarrier();
-        if (li < n) {
-            lows[li] = min(lows[li], lows[li + n]);
-            highs[li] = max(highs[li], highs[li + n]);
+    for (var y = origin.y; y < end.y; y = y + 1u) {
+        for (var x = origin.x; x < end.x; x = x + 1u) {
+            let v = textureLoad(key_plane, vec2<u32>(x, y)).x;
+            lo = min(lo, v);
+            hi = max(hi, v);
         }
     }
-    workgroupBarrier();
-    lo = lows[0];
-    hi = highs[0];
     let step = (hi - lo) / 65535.0;
     var inv = 0.0;
     if (step > 0.0) {
         inv = 1.0 / step;
     }
-    let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
-    if (li == 0u) {
-        ranges[(job.layer * regions.y + wg.y) * regions.x + wg.x] = vec2<f32>(lo, step);
-    }
-    if (origin.x >= job.size.x) {
-        return;
-    }
-    for (var j = 0u; j < 16u; j = j + 2u) {
-        let xy = origin + vec2<u32>(j % 4u, j / 4u);
-        if (xy.y < job.size.y) {
-            let a = u32(clamp(round((v[j] - lo) * inv), 0.0, 65535.0));
-            let b = u32(clamp(round((v[j + 1u] - lo) * inv), 0.0, 65535.0));
-            textureStore(planes16, vec2<u32>(xy.x / 2u, xy.y), job.layer, vec4<u32>(a | (b << 16u), 0u, 0u, 0u));
+    ranges[(job.layer * regions.y + region.y) * regions.x + region.x] = vec2<f32>(lo, step);
+    // Planes are whole tiles, so a region's width is even: texels go in pairs.
+    for (var y = origin.y; y < end.y; y = y + 1u) {
+        for (var x = origin.x; x < end.x; x = x + 2u) {
+            let a = textureLoad(key_plane, vec2<u32>(x, y)).x;
+            let b = textureLoad(key_plane, vec2<u32>(x + 1u, y)).x;
+            let qa = u32(clamp(round((a - lo) * inv), 0.0, 65535.0));
+            let qb = u32(clamp(round((b - lo) * inv), 0.0, 65535.0));
+            textureStore(planes16, vec2<u32>(x / 2u, y), job.layer, vec4<u32>(qa | (qb << 16u), 0u, 0u, 0u));
         }
     }
 }

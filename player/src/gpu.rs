@@ -183,7 +183,7 @@ fn grown(need: u64) -> u64 {
 }
 
 /// The side of a region of the previous keyframe with its own range (`REGION` in
-/// decode.wgsl and reconstruct.wgsl).
+/// decode.wgsl; `REGION_GROUPS` workgroups of 8 × 8 in reconstruct.wgsl).
 const REGION: u32 = 32;
 
 /// Regions of [`REGION`]² texels across and down a plane of `plane` texels.
@@ -725,9 +725,10 @@ impl Gpu {
                 if n == last {
                     // The head becomes the previous keyframe (the earlier steps' heads are
                     // never shown).
+                    // (One invocation per region, 64 to a workgroup.)
                     pass.set_pipeline(&self.key_pack);
                     let [rx, ry] = self.regions;
-                    pass.dispatch_workgroups(rx, ry, 1);
+                    pass.dispatch_workgroups((rx * ry).div_ceil(64), 1, 1);
                 }
                 if st.intra {
                     pass.set_pipeline(&self.key_zero);

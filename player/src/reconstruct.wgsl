@@ -36,7 +36,10 @@ struct Params {
 @group(0) @binding(5) var previous: texture_2d_array<u32>;
 @group(0) @binding(6) var<storage, read> ranges: array<vec2<f32>>;
 
-const REGION: i32 = 32;
+// The side of a region with its own range, in workgroups of 8 × 8 texels: a workgroup
+// lies in one region, so its ranges are read at addresses uniform across it (scalar
+// loads where the compiler sees that, as lavapipe's does).
+const REGION_GROUPS: u32 = 4u;
 
 fn weight(k: u32) -> f32 {
     return p.w[k / 4u][k % 4u];
@@ -67,19 +70,22 @@ fn head_key(xy: vec2<i32>) -> vec3<f32> {
     return vec3<f32>(textureLoad(head, xy, 0, 0).x, 0.0, 0.0);
 }
 
-fn previous_plane(xy: vec2<i32>, plane: u32) -> f32 {
+fn previous_plane(xy: vec2<i32>, region: vec2<u32>, plane: u32) -> f32 {
     let w = textureLoad(previous, vec2<i32>(xy.x >> 1u, xy.y), i32(plane), 0).x;
     let q = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
-    let region = vec2<u32>(xy / REGION);
     let r = ranges[(plane * p.regions.y + region.y) * p.regions.x + region.x];
     return r.x + f32(q) * r.y;
 }
 
-fn previous_key(xy: vec2<i32>) -> vec3<f32> {
+fn previous_key(xy: vec2<i32>, region: vec2<u32>) -> vec3<f32> {
     if (p.channels == 3u) {
-        return vec3<f32>(previous_plane(xy, 0u), previous_plane(xy, 1u), previous_plane(xy, 2u));
+        return vec3<f32>(
+            previous_plane(xy, region, 0u),
+            previous_plane(xy, region, 1u),
+            previous_plane(xy, region, 2u),
+        );
     }
-    return vec3<f32>(previous_plane(xy, 0u), 0.0, 0.0);
+    return vec3<f32>(previous_plane(xy, region, 0u), 0.0, 0.0);
 }
 
 fn bubble_layer(xy: vec2<i32>, layer: u32) -> f32 {
@@ -110,13 +116,13 @@ fn nearest_half(x: f32) -> f32 {
 }
 
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>) {
     if (id.x >= p.size.x || id.y >= p.size.y) {
         return;
     }
     let xy = vec2<i32>(id.xy);
     // Same order as the reference decoder: w0·K0 + w1·K1, then each bubble.
-    var c = weight(0u) * previous_key(xy) + weight(1u) * head_key(xy);
+    var c = weight(0u) * previous_key(xy, wg.xy / REGION_GROUPS) + weight(1u) * head_key(xy);
     for (var k = 2u; k < p.layers; k = k + 1u) {
         c = c + weight(k) * bubble(xy, k);
     }
