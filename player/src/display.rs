@@ -51,6 +51,8 @@ pub(crate) struct Display {
     catch_start: Option<(u64, MediaTime)>,
     last_shown: MediaTime,
     was_missing: bool,
+    /// The time the clock jumped to (`set_time`), until its data has been shown.
+    jump: Option<MediaTime>,
     /// Frames stepped so far, pre-roll included.
     steps: u64,
 }
@@ -68,6 +70,7 @@ impl Display {
             catch_start: None,
             last_shown: 0,
             was_missing: false,
+            jump: None,
             steps: 0,
         }
     }
@@ -83,9 +86,15 @@ impl Display {
     }
 
     /// Restarts the clock at zero (a jump to a new time: no pre-roll offset, no pause).
-    pub fn restart_clock(&mut self) {
+    /// Until the new time's data is resident, the screen holds the old image; `wait` pauses
+    /// the clock at the new time (not at the old image's), and when the data arrives every
+    /// policy cuts to it without a blend: a blend would need the clock to run, and a game
+    /// that seeks while paused must still see the new time.
+    pub fn restart_clock(&mut self, at: MediaTime) {
         self.paused = 0;
         self.startup = 0;
+        self.jump = Some(at);
+        self.catch_start = None;
     }
 
     /// The media time shown last.
@@ -118,8 +127,10 @@ impl Display {
         self.steps += 1;
         if !self.started && (held.is_some() || ticks < self.preroll_ns) {
             // Start-up: the buffer model's pre-roll, and at least the first segment,
-            // before the clock starts, whatever the policy.
-            self.startup = ticks;
+            // before the clock starts, whatever the policy. The clock then starts at the
+            // start, or at the time jumped to before the first frame.
+            let at = self.jump.map_or(0, |j| media_to_ticks(j, num, den));
+            self.startup = ticks.saturating_sub(at);
             self.was_missing = false;
             return Step::Preroll;
         }
@@ -131,9 +142,11 @@ impl Display {
                 new_stall = !self.was_missing;
                 shown = held.min(pos);
                 if self.policy == Policy::Wait {
-                    // Pause the clock at the held time.
+                    // Pause the clock at the held time (after a jump: at the time jumped
+                    // to, whose data is awaited).
+                    let at = self.jump.unwrap_or(shown);
                     let run = ticks - self.startup;
-                    self.paused = run - media_to_ticks(shown, num, den).min(run);
+                    self.paused = run - media_to_ticks(at, num, den).min(run);
                     state = FrameState::Waiting;
                 } else {
                     state = FrameState::Held;
@@ -141,7 +154,11 @@ impl Display {
                 self.catch_start = None;
             }
             None => {
-                if self.was_missing && self.policy == Policy::Interpolate && !first {
+                if self.was_missing
+                    && self.policy == Policy::Interpolate
+                    && !first
+                    && self.jump.is_none()
+                {
                     // The data arrived: blend from the held image over the catch-up window.
                     self.catch_start = Some((ticks, pos.saturating_sub(self.last_shown)));
                     hold_first = true;
@@ -159,6 +176,9 @@ impl Display {
                     }
                 }
             }
+        }
+        if held.is_none() {
+            self.jump = None;
         }
         self.was_missing = held.is_some();
         self.last_shown = shown;
@@ -312,8 +332,100 @@ mod tests {
         let (_, t) = run(&mut d, 0, 30, |i| (5..25).contains(&i));
         let (wall, pos) = d.clock(t, RATE);
         assert!(wall > pos);
-        d.restart_clock();
+        d.restart_clock(ticks_to_media(t, RATE.0, RATE.1));
         let (wall, pos) = d.clock(t, RATE);
         assert_eq!(wall, pos);
+    }
+
+    /// A jump (`set_time`) to a time whose data is not resident, stepped with the clock
+    /// stopped (a paused game seeking): every policy holds the old image, then shows the
+    /// new time exactly once its data is there, without waiting for a blend that a stopped
+    /// clock would never finish.
+    #[test]
+    fn a_jump_with_the_clock_stopped_shows_the_new_time_under_every_policy() {
+        for policy in Policy::ALL {
+            let mut d = Display::new(policy, 500_000_000, 0);
+            let (_, t) = run(&mut d, 0, 30, |_| false);
+            let before = d.last_shown();
+            let jump = 80 * FRAME_NS;
+            let target = ticks_to_media(jump, RATE.0, RATE.1);
+            d.restart_clock(target);
+            for i in 0..10 {
+                let (_, pos) = d.clock(jump, RATE);
+                assert!(near(pos, target), "{policy:?}: the position is the jump's");
+                let late = i < 6;
+                let step = d.step(jump, pos, late.then(|| d.last_shown()), RATE);
+                if late {
+                    assert_eq!(shown(&step), before, "{policy:?}: the old image is held");
+                } else {
+                    let Step::Show {
+                        state,
+                        shown,
+                        alpha,
+                        ..
+                    } = step
+                    else {
+                        panic!("a frame")
+                    };
+                    assert_eq!((state, alpha), (FrameState::Exact, 1.0), "{policy:?}");
+                    assert!(near(shown, target), "{policy:?}");
+                }
+            }
+            assert!(t < jump);
+        }
+    }
+
+    /// A jump before the first frame (a game that opens a day at noon): the pre-roll waits
+    /// for the new time's data, and the clock starts there.
+    #[test]
+    fn a_jump_before_the_first_frame_starts_the_clock_there() {
+        for policy in Policy::ALL {
+            let mut d = Display::new(policy, 500_000_000, 0);
+            let jump = 80 * FRAME_NS;
+            let target = ticks_to_media(jump, RATE.0, RATE.1);
+            d.restart_clock(target);
+            for i in 0..6 {
+                let (_, pos) = d.clock(jump, RATE);
+                assert!(near(pos, target), "{policy:?} step {i}");
+                let late = i < 4;
+                let step = d.step(jump, pos, late.then_some(0), RATE);
+                if late {
+                    assert_eq!(step, Step::Preroll);
+                } else {
+                    assert_eq!(state(&step), Some(FrameState::Exact), "{policy:?}");
+                    assert!(near(shown(&step), target), "{policy:?}");
+                }
+            }
+        }
+    }
+
+    /// With the clock running, `wait` pauses at the time jumped to while its data is late
+    /// (not at the old image's time, which would send playback back there).
+    #[test]
+    fn wait_after_a_jump_pauses_at_the_new_time() {
+        let mut d = Display::new(Policy::Wait, 500_000_000, 0);
+        run(&mut d, 0, 30, |_| false);
+        let mut t = 80 * FRAME_NS;
+        let target = ticks_to_media(t, RATE.0, RATE.1);
+        d.restart_clock(target);
+        for i in 0..8 {
+            t += FRAME_NS;
+            let (_, pos) = d.clock(t, RATE);
+            let step = d.step(t, pos, Some(d.last_shown()), RATE);
+            assert_eq!(state(&step), Some(FrameState::Waiting));
+            let (_, after) = d.clock(t, RATE);
+            assert!(near(after, target), "frame {i}: paused at the jump");
+        }
+        t += FRAME_NS;
+        let (_, pos) = d.clock(t, RATE);
+        let step = d.step(t, pos, None, RATE);
+        // The data arrived: shown from the jump on (one display frame of clock later).
+        assert_eq!(state(&step), Some(FrameState::Exact));
+        assert!(shown(&step) >= target && shown(&step) - target <= ONE_FRAME);
+    }
+
+    /// Media times equal up to the clock's nanosecond rounding.
+    fn near(a: MediaTime, b: MediaTime) -> bool {
+        a.abs_diff(b) < ONE_FRAME / 1_000_000
     }
 }

@@ -580,8 +580,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Jumps playback to `ticks` ns (of the playback clock).
     pub fn set_time(&mut self, ticks: u64) {
         self.ticks = ticks;
-        self.display.restart_clock();
         let pos = ticks_to_media(ticks, self.header.rate_num, self.header.rate_den);
+        self.display.restart_clock(pos);
         self.seek(pos);
     }
 
@@ -590,6 +590,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.pipeline.stop(deadline)
     }
 }
+
+// An engine keeps its player in a resource its render thread uses (Bevy's render world
+// needs `Send`): a change that made the player `!Send` must fail to compile here.
+const _: () = {
+    const fn assert_send<T: Send>() {}
+    assert_send::<Player<std::fs::File>>();
+    assert_send::<Player<std::io::Cursor<Vec<u8>>>>();
+};
 
 impl<R: Read + Seek + Send + 'static> Drop for Player<R> {
     fn drop(&mut self) {
