@@ -21,7 +21,7 @@ SHARED = "../" + "shared"
 CLIMB = re.compile(r"(?:\.\./)+[A-Za-z0-9_.\-/]*")
 LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")
 TICKED = re.compile(r"`([A-Za-z0-9_.\-/]+)`")
-TOP = ("bake/", "encoder/", "format/", "player/", "scene/", "src/", "samples/", "docs/",
+TOP = ("bake/", "bevy/", "encoder/", "format/", "player/", "scene/", "src/", "samples/", "docs/",
        "scripts/", "tests/", "assets/", ".ci/")
 
 

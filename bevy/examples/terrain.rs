@@ -1,0 +1,424 @@
+//! A day of lighting on the shipped sample's terrain, streamed into Bevy's own lightmap slot.
+//!
+//! ```sh
+//! cargo run --release -p bevy_vbim --example terrain            # bakes a small day first
+//! cargo run --release -p bevy_vbim --example terrain -- --stream out/demo/jacksboro.vbim
+//! ```
+//!
+//! The terrain is a Bevy mesh with the bake's lightmap coordinates in `UV_1`, a
+//! `StandardMaterial` with vertex colours as its albedo, and Bevy's `Lightmap` component
+//! pointing at the image the player writes. A directional light and the ambient light
+//! follow the sun and sky of the bake's manifest (carried in the stream's metadata) and
+//! light a white sphere beside the terrain; they do not light the terrain's diffuse, which
+//! the lightmap already holds. The window's title shows the time of day and the player's
+//! statistics. Keys: Space pause, ↑/↓ speed ×2 / ÷2, ←/→ one hour back /
+//! on, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::Exposure;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::light::GlobalAmbientLight;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::pbr::Lightmap;
+use bevy::prelude::*;
+use bevy::window::PrimaryWindow;
+use bevy_vbim::{
+    bake_sky, lux_per_unit, sky_light, sun_light, VbimEvent, VbimEventKind, VbimPlayback,
+    VbimPlugin, VbimStats, VbimStream,
+};
+use vbim_bake::{FrameInfo, Manifest};
+
+/// The lux the bake's noon sun (a texel of 1.0) stands for.
+const SUN_LUX: f32 = 100_000.0;
+/// The camera's exposure: Bevy's "sunlight" value, for a day lit at `SUN_LUX`.
+const EV100: f32 = 14.0;
+
+struct Args {
+    stream: Option<PathBuf>,
+    scene: PathBuf,
+    frames: Option<u64>,
+}
+
+fn args() -> Result<Args, String> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut a = Args {
+        stream: None,
+        scene: root.join("samples/jacksboro.toml"),
+        frames: None,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        let mut value = || it.next().ok_or(format!("{flag} needs a value"));
+        match flag.as_str() {
+            "--stream" => a.stream = Some(value()?.into()),
+            "--scene" => a.scene = value()?.into(),
+            "--frames" => a.frames = Some(value()?.parse().map_err(|e| format!("--frames: {e}"))?),
+            _ => {
+                return Err(format!(
+                    "unknown argument {flag} (--stream F.vbim, --scene S.toml, --frames N)"
+                ))
+            }
+        }
+    }
+    Ok(a)
+}
+
+/// A small day of the scene (128², 48 frames, 24 fps), baked and encoded once into
+/// `target/bevy_vbim_example/`, for when no stream is given.
+fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bevy_vbim_example");
+    let mut scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
+    scene.size = 128;
+    scene.frames = 48;
+    let file = dir.join(format!(
+        "{}_{}x{}.vbim",
+        scene.name, scene.size, scene.frames
+    ));
+    if file.exists() {
+        return Ok(file);
+    }
+    eprintln!(
+        "baking and encoding a small day into {} (once)",
+        dir.display()
+    );
+    let frames = dir.join("frames");
+    let quiet = |_: &str, _: u64, _: u64| {};
+    let baked = vbim_bake::bake(
+        &scene,
+        &vbim_bake::BakeOptions {
+            out: frames.clone(),
+            format: vbim_bake::FrameFormat::Exr,
+            use_cache: true,
+        },
+        &quiet,
+    )
+    .map_err(|e| e.to_string())?;
+    let fs = vbim_encoder::FrameSet::open(frames.to_str().ok_or("path is not UTF-8")?)
+        .map_err(|e| e.to_string())?;
+    let mut cfg = vbim_encoder::EncoderConfig::preset(vbim_encoder::Preset::Fast);
+    cfg.rate = (24, 1);
+    cfg.metadata = std::fs::read_to_string(&baked.manifest).ok();
+    // Written under another name first: an interrupted run leaves no half file behind.
+    let part = file.with_extension("vbim.part");
+    vbim_encoder::encode_file(&fs, &cfg, &part, &quiet).map_err(|e| e.to_string())?;
+    std::fs::rename(&part, &file).map_err(|e| e.to_string())?;
+    Ok(file)
+}
+
+#[derive(Resource)]
+struct Day {
+    playback: Entity,
+    manifest: Option<Manifest>,
+    /// The stream's frame rate, frames per second.
+    fps: f64,
+    exit_after: Option<u64>,
+    frames: u64,
+}
+
+#[derive(Component)]
+struct Sun;
+
+fn main() {
+    let a = match args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("terrain: {e}");
+            std::process::exit(2);
+        }
+    };
+    let stream = match a.stream.clone().map_or_else(|| small_day(&a.scene), Ok) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("terrain: {e}");
+            std::process::exit(1);
+        }
+    };
+    let stream = std::fs::canonicalize(&stream).unwrap_or(stream);
+    let folder = stream.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let name = stream.file_name().unwrap().to_string_lossy().into_owned();
+    App::new()
+        .add_plugins(DefaultPlugins.set(AssetPlugin {
+            file_path: folder.to_string_lossy().into_owned(),
+            ..default()
+        }))
+        .add_plugins(VbimPlugin)
+        .insert_resource(ClearColor(Color::BLACK))
+        .insert_resource(GlobalAmbientLight::NONE)
+        .add_systems(
+            Startup,
+            move |commands: Commands,
+                  assets: Res<AssetServer>,
+                  images: ResMut<Assets<Image>>,
+                  meshes: ResMut<Assets<Mesh>>,
+                  materials: ResMut<Assets<StandardMaterial>>| {
+                setup(
+                    commands, assets, images, meshes, materials, &a, &name, &stream,
+                )
+            },
+        )
+        .add_systems(
+            Update,
+            (keys, follow_sun, readout, report_events, exit_after),
+        )
+        .run();
+}
+
+#[allow(clippy::too_many_arguments)]
+fn setup(
+    mut commands: Commands,
+    assets: Res<AssetServer>,
+    mut images: ResMut<Assets<Image>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    a: &Args,
+    name: &str,
+    path: &Path,
+) {
+    // The header and manifest now, for the mesh's size and the sun; the asset server
+    // loads the same file for the player.
+    let opened = VbimStream::open(path).unwrap_or_else(|e| panic!("{e}"));
+    let (w, h) = (opened.header().width, opened.header().height);
+    let manifest = opened.metadata().and_then(|m| Manifest::parse(m).ok());
+    let lightmap = images.add(bevy_vbim::lightmap_image(w, h));
+    let stream: Handle<VbimStream> = assets.load(name.to_string());
+    let playback = commands
+        .spawn(VbimPlayback::new(stream, lightmap.clone()))
+        .id();
+
+    let scene = vbim_bake::Scene::load(&a.scene).unwrap_or_else(|e| panic!("{e}"));
+    let hf = vbim_bake::load_terrain(&scene).unwrap_or_else(|e| panic!("{e}"));
+    let grid = vbim_scene::Mesh::new(
+        &hf,
+        256,
+        scene.view.vertical_exaggeration as f32,
+        scene.view.snow_line as f32,
+    );
+    let terrain = terrain_mesh(&grid);
+    let material = materials.add(StandardMaterial {
+        base_color: Color::WHITE,
+        perceptual_roughness: 0.95,
+        reflectance: 0.2,
+        lightmap_exposure: lux_per_unit(SUN_LUX),
+        ..default()
+    });
+    commands.spawn((
+        Mesh3d(meshes.add(terrain)),
+        MeshMaterial3d(material),
+        Lightmap {
+            image: lightmap,
+            ..default()
+        },
+    ));
+    // A white sphere at the map's centre, resting on the ground: lit by the sun and sky
+    // lights only, to compare with the terrain's lightmap.
+    let ground = hf.sample((hf.w / 2) as f32, (hf.h / 2) as f32);
+    let lo = hf.z.iter().copied().fold(f32::MAX, f32::min);
+    let half =
+        0.5 * ((hf.w - 1) as f32 * hf.cell_x as f32).max((hf.h - 1) as f32 * hf.cell_y as f32);
+    let y = (ground - lo) * scene.view.vertical_exaggeration as f32 / half;
+    commands.spawn((
+        Mesh3d(meshes.add(Sphere::new(0.04).mesh().uv(48, 24))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: Color::WHITE,
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        })),
+        Transform::from_xyz(0.0, y + 0.06, 0.0),
+    ));
+    commands.spawn((
+        Sun,
+        DirectionalLight {
+            shadow_maps_enabled: true,
+            affects_lightmapped_mesh_diffuse: false,
+            ..default()
+        },
+        Transform::default(),
+    ));
+    commands.spawn((
+        Camera3d::default(),
+        Exposure { ev100: EV100 },
+        // ACES needs no lookup table (the example builds Bevy without them).
+        Tonemapping::AcesFitted,
+        Transform::from_xyz(1.3, 0.9, 1.3).looking_at(Vec3::new(0.0, 0.05, 0.0), Vec3::Y),
+    ));
+    commands.insert_resource(Day {
+        playback,
+        manifest,
+        fps: opened.header().rate_num as f64 / opened.header().rate_den.max(1) as f64,
+        exit_after: a.frames,
+        frames: 0,
+    });
+}
+
+/// The grid as a Bevy mesh: positions, normals, vertex colours (the albedo) and the
+/// lightmap's coordinates in `UV_1`, where Bevy's `Lightmap` reads them.
+fn terrain_mesh(grid: &vbim_scene::Mesh) -> Mesh {
+    let pos: Vec<[f32; 3]> = grid.vertices.iter().map(|v| v.pos).collect();
+    let uv: Vec<[f32; 2]> = grid.vertices.iter().map(|v| v.uv).collect();
+    let colour: Vec<[f32; 4]> = grid
+        .vertices
+        .iter()
+        .map(|v| [v.base[0], v.base[1], v.base[2], 1.0])
+        .collect();
+    let mut mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD,
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, pos)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv.clone())
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_1, uv)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, colour)
+    .with_inserted_indices(Indices::U32(grid.indices.clone()));
+    mesh.compute_smooth_normals();
+    mesh
+}
+
+/// The manifest's frame at a fractional frame, linearly between its two neighbours.
+fn frame_at(m: &Manifest, t: f64) -> Option<FrameInfo> {
+    let n = m.per_frame.len();
+    if n == 0 {
+        return None;
+    }
+    let t = t.rem_euclid(n as f64);
+    let (i, f) = (t.floor() as usize % n, t - t.floor());
+    let (a, b) = (&m.per_frame[i], &m.per_frame[(i + 1) % n]);
+    let mix3 = |x: [f64; 3], y: [f64; 3]| [0, 1, 2].map(|c| x[c] + (y[c] - x[c]) * f);
+    let mut out = a.clone();
+    out.sun_dir = mix3(a.sun_dir, b.sun_dir);
+    out.sun_color = mix3(a.sun_color, b.sun_color);
+    out.sky_color = mix3(a.sky_color, b.sky_color);
+    out.sky_horizon_sun_side = mix3(a.sky_horizon_sun_side, b.sky_horizon_sun_side);
+    Some(out)
+}
+
+/// The sun, sky light and background follow the time the lightmap shows.
+fn follow_sun(
+    day: Res<Day>,
+    stats: Query<&VbimStats>,
+    mut sun: Single<(&mut DirectionalLight, &mut Transform), With<Sun>>,
+    mut ambient: ResMut<GlobalAmbientLight>,
+    mut clear: ResMut<ClearColor>,
+) {
+    let (Some(m), Ok(s)) = (&day.manifest, stats.get(day.playback)) else {
+        return;
+    };
+    let Some(f) = frame_at(m, s.frame) else {
+        return;
+    };
+    let f32s = |c: [f64; 3]| c.map(|x| x as f32);
+    // Map frame: x east, y south, z up; Bevy's: x east, y up, z south.
+    let towards = Vec3::new(
+        f.sun_dir[0] as f32,
+        f.sun_dir[2] as f32,
+        f.sun_dir[1] as f32,
+    );
+    let (light, transform) = &mut *sun;
+    (light.color, light.illuminance) = sun_light(SUN_LUX, f32s(f.sun_color));
+    if towards.y > 0.0 {
+        **transform = Transform::from_translation(towards).looking_at(Vec3::ZERO, Vec3::Y);
+    } else {
+        light.illuminance = 0.0;
+    }
+    let sky = bake_sky(f32s(f.sky_color), f32s(f.sky_horizon_sun_side));
+    (ambient.color, ambient.brightness) = sky_light(SUN_LUX, sky);
+    ambient.affects_lightmapped_meshes = false;
+    let exposure = 1.0 / (1.2 * 2f32.powf(EV100));
+    let k = lux_per_unit(SUN_LUX) * exposure;
+    let bg = f32s(f.sky_color).map(|c| (c * k).min(1.0));
+    clear.0 = Color::linear_rgb(bg[0], bg[1], bg[2]);
+}
+
+fn keys(
+    input: Res<ButtonInput<KeyCode>>,
+    day: Res<Day>,
+    mut playbacks: Query<(&mut VbimPlayback, &VbimStats)>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    let Ok((mut p, s)) = playbacks.get_mut(day.playback) else {
+        return;
+    };
+    if input.just_pressed(KeyCode::Space) {
+        p.paused = !p.paused;
+    }
+    if input.just_pressed(KeyCode::ArrowUp) {
+        p.speed = (p.speed * 2.0).min(64.0);
+    }
+    if input.just_pressed(KeyCode::ArrowDown) {
+        p.speed = (p.speed / 2.0).max(1.0 / 64.0);
+    }
+    let hour = day
+        .manifest
+        .as_ref()
+        .map_or(0.0, |m| m.per_frame.len() as f64 / 24.0);
+    let fps = day.fps;
+    let step = |d: f64| Duration::from_secs_f64(((s.frame + d * hour).max(0.0)) / fps);
+    if input.just_pressed(KeyCode::ArrowRight) {
+        p.set_time(step(1.0));
+    }
+    if input.just_pressed(KeyCode::ArrowLeft) {
+        p.set_time(step(-1.0));
+    }
+    if input.just_pressed(KeyCode::Escape) {
+        exit.write(AppExit::Success);
+    }
+}
+
+/// The statistics, in the window's title.
+fn readout(
+    day: Res<Day>,
+    stats: Query<(&VbimStats, &VbimPlayback)>,
+    mut window: Single<&mut Window, With<PrimaryWindow>>,
+) {
+    let Ok((s, p)) = stats.get(day.playback) else {
+        return;
+    };
+    let frames = day
+        .manifest
+        .as_ref()
+        .map_or(1, |m| m.per_frame.len().max(1)) as f64;
+    let hours = 24.0 * s.frame / frames;
+    window.title = format!(
+        "vbim {:02}:{:02} {}{} ×{} · drift {:.2} · loops {} · read {:.2} MB · GPU {:.1} MB · Space ↑↓ ←→ Esc",
+        hours.floor() as u32,
+        (hours.fract() * 60.0).floor() as u32,
+        if p.paused { "paused " } else { "" },
+        s.state.map_or("loading", |st| st.name()),
+        p.speed,
+        s.drift,
+        s.loops,
+        s.totals.bytes_read as f64 / 1e6,
+        s.gpu_bytes as f64 / 1e6,
+    );
+}
+
+fn report_events(mut events: MessageReader<VbimEvent>) {
+    for e in events.read() {
+        match &e.kind {
+            VbimEventKind::Failed(m) | VbimEventKind::Damaged(m) => eprintln!("vbim: {m}"),
+            k => info!("vbim: {k:?}"),
+        }
+    }
+}
+
+fn exit_after(mut day: ResMut<Day>, stats: Query<&VbimStats>, mut exit: MessageWriter<AppExit>) {
+    let Some(n) = day.exit_after else { return };
+    if stats.get(day.playback).is_ok_and(|s| s.playing) {
+        day.frames += 1;
+    }
+    if day.frames >= n {
+        if let Ok(s) = stats.get(day.playback) {
+            println!(
+                "terrain: {} frames shown, frame {:.2} of the day, {} stalls, {:.1} MB on the GPU",
+                s.totals.frames,
+                s.frame,
+                s.totals.stalls,
+                s.gpu_bytes as f64 / 1e6
+            );
+        }
+        exit.write(AppExit::Success);
+    }
+}

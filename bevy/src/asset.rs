@@ -1,0 +1,173 @@
+//! `.vbim` files as Bevy assets. The asset is the stream's header and where its file is:
+//! the chunks stay on disk and the player reads them through its ring while it plays, so
+//! loading a day of lighting costs a few hundred bytes of main-world memory, not the file.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use bevy::asset::io::file::FileAssetReader;
+use bevy::asset::io::{AssetSourceId, Reader};
+use bevy::asset::{Asset, AssetLoader, LoadContext, RenderAssetUsages};
+use bevy::image::{Image, ImageSampler};
+use bevy::reflect::TypePath;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+use vbim_format::{Header, Reader as StreamReader};
+
+/// A `.vbim` stream: its header, checked with its index when it was loaded, and the file the
+/// player streams it from.
+#[derive(Asset, TypePath, Clone, Debug)]
+pub struct VbimStream {
+    path: Arc<PathBuf>,
+    header: Header,
+    metadata: Option<Arc<str>>,
+}
+
+/// Why a stream could not be loaded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StreamError {
+    /// The file could not be opened.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// The header or index is invalid (the error names what).
+    #[error("{path}: {source}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: vbim_format::FormatError,
+    },
+    /// The asset does not come from the file system (the player streams from a file).
+    #[error("{0}: vbim streams play from files; this asset source is not the file system")]
+    NotAFile(String),
+}
+
+impl VbimStream {
+    /// Opens the stream at `path` and validates its header and index (what
+    /// [`AssetServer::load`](bevy::asset::AssetServer::load) does for a `.vbim` asset), for
+    /// streams outside the asset folder: add the result to `Assets<VbimStream>`.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, StreamError> {
+        let path = path.as_ref().to_path_buf();
+        let file = File::open(&path).map_err(|source| StreamError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let format = |source| StreamError::Format {
+            path: path.clone(),
+            source,
+        };
+        let mut reader = StreamReader::open(BufReader::new(file)).map_err(format)?;
+        // The metadata chunk is small (the format bounds it) and read once, here.
+        let metadata = reader.metadata().map_err(format)?.map(Arc::from);
+        Ok(VbimStream {
+            header: reader.header().clone(),
+            path: Arc::new(path),
+            metadata,
+        })
+    }
+
+    /// The stream's header: size, channels, frame rate, frame count, looping.
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The stream's metadata: for a stream of `vbim bake` frames, the bake's manifest
+    /// (JSON: the sun's direction and colour and the sky's colours for every frame).
+    pub fn metadata(&self) -> Option<&str> {
+        self.metadata.as_deref()
+    }
+
+    /// The file the player streams from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub(crate) fn shared_path(&self) -> Arc<PathBuf> {
+        self.path.clone()
+    }
+
+    /// An image the player can write this stream into: see [`lightmap_image`].
+    pub fn lightmap_image(&self) -> Image {
+        lightmap_image(self.header.width, self.header.height)
+    }
+
+    /// The length of one pass through the day at the stream's own rate.
+    pub fn duration(&self) -> std::time::Duration {
+        let ns = self.header.frame_count as u128 * 1_000_000_000 * self.header.rate_den as u128
+            / self.header.rate_num.max(1) as u128;
+        std::time::Duration::from_nanos(ns.min(u64::MAX as u128) as u64)
+    }
+}
+
+/// A `width × height` image for a stream to play into: `Rgba16Float`, linear, sampled with
+/// linear filtering, with the usages the player needs (`STORAGE_BINDING` to write it,
+/// `TEXTURE_BINDING` to sample it and to keep the image on screen while it catches up) and
+/// `COPY_SRC` for captures. Its texels live only on the GPU: nothing is uploaded from the
+/// CPU, ever.
+pub fn lightmap_image(width: u32, height: u32) -> Image {
+    let mut image = Image::new_uninit(
+        Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        TextureFormat::Rgba16Float,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.texture_descriptor.usage = TextureUsages::STORAGE_BINDING
+        | TextureUsages::TEXTURE_BINDING
+        | TextureUsages::COPY_SRC
+        | TextureUsages::COPY_DST;
+    image.sampler = ImageSampler::linear();
+    image
+}
+
+/// Loads `.vbim` files from the asset folder: reads the header and index (checking the
+/// index's checksum and every entry), never the chunks.
+#[derive(TypePath)]
+pub(crate) struct VbimLoader {
+    /// The asset folder on disk (`AssetPlugin::file_path` under Bevy's base path).
+    pub(crate) root: PathBuf,
+}
+
+impl VbimLoader {
+    pub(crate) fn new(asset_folder: &str) -> Self {
+        VbimLoader {
+            root: FileAssetReader::get_base_path().join(asset_folder),
+        }
+    }
+}
+
+impl AssetLoader for VbimLoader {
+    type Asset = VbimStream;
+    type Settings = ();
+    type Error = StreamError;
+
+    async fn load(
+        &self,
+        _reader: &mut dyn Reader,
+        _settings: &(),
+        ctx: &mut LoadContext<'_>,
+    ) -> Result<VbimStream, StreamError> {
+        let asset = ctx.path();
+        if !matches!(asset.source(), AssetSourceId::Default) {
+            return Err(StreamError::NotAFile(asset.to_string()));
+        }
+        // The player reads the file on a thread of its own while it plays, so the asset
+        // keeps the path, not Bevy's reader. Header and index are small: read them here,
+        // blocking this IO task briefly, with the same validation the player applies.
+        VbimStream::open(self.root.join(asset.path()))
+    }
+
+    fn extensions(&self) -> &[&str] {
+        &["vbim"]
+    }
+}

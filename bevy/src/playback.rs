@@ -1,0 +1,228 @@
+//! The main world's side: the component that asks for a stream to play into an image, the
+//! statistics the player reports back, and the events those reports raise.
+
+use std::sync::mpsc::Receiver;
+use std::sync::Mutex;
+use std::time::Duration;
+
+use bevy::asset::Handle;
+use bevy::ecs::prelude::*;
+use bevy::image::Image;
+use bevy::time::{Time, Virtual};
+use vbim_player::{FrameRecord, FrameState, Policy, Throttle, Totals};
+
+use crate::asset::VbimStream;
+
+/// Plays a [`VbimStream`] into an [`Image`], written on the GPU every frame.
+///
+/// The image must be the stream's size, `Rgba16Float`, with `STORAGE_BINDING` and
+/// `TEXTURE_BINDING` usage: make it with [`VbimStream::lightmap_image`] or
+/// [`lightmap_image`](crate::lightmap_image). Give the same handle to the material or
+/// `Lightmap` that shows it: the player writes into that texture and never replaces it.
+///
+/// Playback follows `Time<Virtual>` (its pause and relative speed) times [`speed`], and
+/// starts when the stream is loaded and the image exists. [`VbimStats`] (added with this
+/// component) says what is shown; [`VbimEvent`]s say when it loaded, looped, stalled,
+/// caught up, met damaged data or failed.
+///
+/// [`speed`]: VbimPlayback::speed
+#[derive(Component, Clone, Debug)]
+#[require(VbimStats)]
+pub struct VbimPlayback {
+    /// The stream to play.
+    pub stream: Handle<VbimStream>,
+    /// The image it plays into.
+    pub target: Handle<Image>,
+    /// Holds the day where it is (the lightmap stays on the GPU; nothing is re-evaluated).
+    pub paused: bool,
+    /// Media time per unit of virtual time (1.0: the stream's own rate; 0 or less stops).
+    pub speed: f64,
+    /// What is shown when data is late (applied while playing).
+    pub policy: Policy,
+    /// The reader's bandwidth cap (and, for tests, a stall pattern), applied while playing.
+    pub throttle: Throttle,
+    /// The catch-up window of [`Policy::Interpolate`], used when the player opens.
+    pub catch_up: Duration,
+    /// The playback clock: integer nanoseconds of media time driven so far.
+    pub(crate) clock_ns: u64,
+    /// The last seek asked for: (generation, media time in ns).
+    pub(crate) seek: (u32, u64),
+}
+
+impl VbimPlayback {
+    /// Plays `stream` into `target` at the stream's own rate, with the `interpolate` policy
+    /// and no bandwidth cap.
+    pub fn new(stream: Handle<VbimStream>, target: Handle<Image>) -> Self {
+        VbimPlayback {
+            stream,
+            target,
+            paused: false,
+            speed: 1.0,
+            policy: Policy::Interpolate,
+            throttle: Throttle::UNLIMITED,
+            catch_up: Duration::from_millis(500),
+            clock_ns: 0,
+            seek: (0, 0),
+        }
+    }
+
+    /// Jumps to `time` into the day (wrapped at the day's end for a looping stream), from
+    /// the next rendered frame on.
+    pub fn set_time(&mut self, time: Duration) {
+        self.seek = (
+            self.seek.0.wrapping_add(1),
+            time.as_nanos().min(u64::MAX as u128) as u64,
+        );
+    }
+}
+
+/// What a playback showed in the last frame the render world reported (one frame behind
+/// the main world's, as everything the render world says), and its running totals.
+#[derive(Component, Clone, Debug, Default)]
+pub struct VbimStats {
+    /// The player is open and has shown at least one frame.
+    pub playing: bool,
+    /// The media time shown, from the start of the day (wrapped at loops).
+    pub time: Duration,
+    /// The media time shown, in frames from the start of the day (wrapped at loops).
+    pub frame: f64,
+    /// How far the display is behind the clock, media frames.
+    pub drift: f64,
+    /// What the last frame showed (`None` before the first).
+    pub state: Option<FrameState>,
+    /// Times the day wrapped at its end.
+    pub loops: u64,
+    /// Bytes the player holds on the GPU.
+    pub gpu_bytes: u64,
+    /// The player's running totals: frames, stalls, bytes read and uploaded, CPU time,
+    /// damage.
+    pub totals: Totals,
+}
+
+/// Something that happened to a playback.
+#[derive(Message, Clone, Debug, PartialEq)]
+pub struct VbimEvent {
+    /// The entity with the [`VbimPlayback`].
+    pub entity: Entity,
+    /// What happened.
+    pub kind: VbimEventKind,
+}
+
+/// What happened to a playback.
+#[derive(Clone, Debug, PartialEq)]
+pub enum VbimEventKind {
+    /// The player opened and showed its first frame.
+    Loaded,
+    /// The day wrapped at its end (a looping stream).
+    Looped,
+    /// Data came late: the display holds (or, with `wait`, the clock waits).
+    Stalled,
+    /// The display shows the true state again after a stall.
+    CaughtUp,
+    /// A chunk was damaged or could not be read; playback goes on (the message names the
+    /// chunk).
+    Damaged(String),
+    /// The stream could not be played (the image does not fit it, the file vanished, the
+    /// device cannot hold it); the playback stays stopped.
+    Failed(String),
+}
+
+/// What the render world tells the main world about one playback.
+pub(crate) enum Report {
+    /// The player opened: the bytes it holds on the GPU.
+    Opened { gpu_bytes: u64 },
+    /// One rendered frame.
+    Frame {
+        record: FrameRecord,
+        totals: Box<Totals>,
+        frame_count: u32,
+        rate: (u32, u32),
+        looped: bool,
+    },
+    /// The player could not open or write the image.
+    Failed(String),
+}
+
+/// The render world's reports, received by the main world.
+#[derive(Resource)]
+pub(crate) struct Reports(pub(crate) Mutex<Receiver<(Entity, Report)>>);
+
+/// Advances every playback's clock by the frame's virtual time (which Bevy has already
+/// scaled and paused) times the playback's own speed. The clock counts integer
+/// nanoseconds; a frame's product is rounded once, so no float error accumulates.
+pub(crate) fn advance_clocks(time: Res<Time<Virtual>>, mut playbacks: Query<&mut VbimPlayback>) {
+    let delta = time.delta().as_nanos() as f64;
+    for mut p in &mut playbacks {
+        if p.paused || p.speed.is_nan() || p.speed <= 0.0 || delta == 0.0 {
+            continue;
+        }
+        let step = (delta * p.speed).round().min(u64::MAX as f64) as u64;
+        p.clock_ns = p.clock_ns.saturating_add(step);
+    }
+}
+
+/// Turns the render world's reports into [`VbimStats`] and [`VbimEvent`]s.
+pub(crate) fn receive_reports(
+    reports: Res<Reports>,
+    mut stats: Query<&mut VbimStats>,
+    mut events: MessageWriter<VbimEvent>,
+) {
+    let Ok(rx) = reports.0.lock() else { return };
+    for (entity, report) in rx.try_iter() {
+        let Ok(mut s) = stats.get_mut(entity) else {
+            continue;
+        };
+        let mut send = |kind| {
+            events.write(VbimEvent { entity, kind });
+        };
+        match report {
+            Report::Opened { gpu_bytes } => s.gpu_bytes = gpu_bytes,
+            Report::Failed(e) => {
+                s.playing = false;
+                send(VbimEventKind::Failed(e));
+            }
+            Report::Frame {
+                record,
+                totals,
+                frame_count,
+                rate,
+                looped,
+            } => {
+                if !s.playing {
+                    send(VbimEventKind::Loaded);
+                }
+                let late = |st: Option<FrameState>| {
+                    matches!(st, Some(FrameState::Held | FrameState::Waiting))
+                };
+                if late(Some(record.state)) && !late(s.state) {
+                    send(VbimEventKind::Stalled);
+                }
+                // Back to the true state after a stall (through a catch-up blend, or not).
+                if record.state == FrameState::Exact
+                    && matches!(s.state, Some(st) if st != FrameState::Exact)
+                {
+                    send(VbimEventKind::CaughtUp);
+                }
+                if looped {
+                    s.loops += 1;
+                    send(VbimEventKind::Looped);
+                }
+                if totals.damaged > s.totals.damaged {
+                    send(VbimEventKind::Damaged(
+                        totals.last_error.clone().unwrap_or_default(),
+                    ));
+                }
+                let frames = frame_count.max(1) as f64;
+                let frame = record.shown.rem_euclid(frames);
+                s.playing = true;
+                s.frame = frame;
+                s.time = Duration::from_secs_f64(
+                    (frame * rate.1 as f64 / rate.0.max(1) as f64).max(0.0),
+                );
+                s.drift = record.drift;
+                s.state = Some(record.state);
+                s.totals = *totals;
+            }
+        }
+    }
+}

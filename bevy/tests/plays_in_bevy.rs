@@ -1,0 +1,294 @@
+//! A headless Bevy app on a real adapter (lavapipe on machines without a GPU) plays two
+//! streams into Bevy-owned images; the images, read back from Bevy's own textures, match the
+//! CPU reference decoder at several times of day, after a `set_time`, across the loop point
+//! and while paused.
+
+mod common;
+
+use std::io::Cursor;
+use std::path::Path;
+use std::time::Duration;
+
+use bevy::prelude::*;
+use bevy_vbim::{
+    lightmap_image, FrameState, Policy, VbimEventKind, VbimPlayback, VbimStats, VbimStream,
+};
+use common::{app, read_image, Seen};
+use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
+use vbim_format::curve::linear_to_srgb;
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::Reader;
+
+/// A small day: a soft shadow edge sweeping over a gradient, bright by day, dim by night.
+fn day(w: usize, h: usize, n: usize, kind: InputKind, channels: usize) -> MemorySource {
+    let frames = (0..n)
+        .map(|t| {
+            let sun = (std::f32::consts::PI * t as f32 / n as f32).sin().max(0.0);
+            (0..w * h)
+                .flat_map(|i| {
+                    let (x, y) = ((i % w) as f32, (i / w) as f32);
+                    let edge = 1.0 / (1.0 + (-(x - w as f32 * t as f32 / n as f32) * 0.5).exp());
+                    let v = 0.02 + sun * (0.3 + 0.6 * edge) * (0.8 + 0.2 * (y * 0.2).sin());
+                    let v = if kind == InputKind::Srgb8 {
+                        (linear_to_srgb(v.min(1.0)) * 255.0).round() / 255.0
+                    } else {
+                        v
+                    };
+                    [v, v * 0.9, v * 0.75].into_iter().take(channels)
+                })
+                .collect()
+        })
+        .collect();
+    MemorySource::new("day", w, h, channels, kind, frames)
+}
+
+fn write_stream(dir: &Path, name: &str, src: &MemorySource) -> Vec<u8> {
+    let cfg = EncoderConfig {
+        segment: SegmentMode::Auto { max: 8 },
+        rate: (24, 1),
+        tolerance_db: 45.0,
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    let mut bytes = Vec::new();
+    encode(src, &cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
+    std::fs::write(dir.join(name), &bytes).unwrap();
+    bytes
+}
+
+struct Stream {
+    entity: Entity,
+    image: Handle<Image>,
+    reference: Decoder<Cursor<Vec<u8>>>,
+    kind: InputKind,
+    channels: usize,
+    texels: usize,
+}
+
+/// The protocol's GPU bound for HDR: within 2^-10 relative, or 1e-6 absolute below 1e-3.
+fn within_hdr_bound(g: f32, want: f32) -> bool {
+    (g - want).abs() <= want * 2f32.powi(-10) + if want < 1e-3 { 1e-6 } else { 0.0 }
+}
+
+fn stats(app: &App, e: Entity) -> VbimStats {
+    app.world().get::<VbimStats>(e).unwrap().clone()
+}
+
+/// Runs frames until every stream shows the true state of a paused time for two frames in
+/// a row, then checks each image against the reference decoder at the time shown.
+fn check_paused(app: &mut App, streams: &mut [Stream], what: &str) {
+    let mut last: Vec<Option<f64>> = vec![None; streams.len()];
+    for _ in 0..600 {
+        app.update();
+        let now: Vec<VbimStats> = streams.iter().map(|s| stats(app, s.entity)).collect();
+        let settled = now
+            .iter()
+            .zip(&last)
+            .all(|(s, l)| s.playing && s.state == Some(FrameState::Exact) && *l == Some(s.frame));
+        if settled {
+            break;
+        }
+        last = now.iter().map(|s| Some(s.frame)).collect();
+    }
+    for s in streams.iter_mut() {
+        let st = stats(app, s.entity);
+        assert_eq!(st.state, Some(FrameState::Exact), "{what}: {st:?}");
+        let gpu = read_image(app, &s.image);
+        let mut cpu = vec![0f32; s.texels * s.channels];
+        let mode = match s.kind {
+            InputKind::Srgb8 => Output::Stored,
+            _ => Output::Linear,
+        };
+        s.reference.frame(st.frame, mode, &mut cpu).unwrap();
+        for i in 0..s.texels {
+            for c in 0..3 {
+                // One channel is shown as grey.
+                let (g, want) = (gpu[i * 4 + c], cpu[i * s.channels + c.min(s.channels - 1)]);
+                match s.kind {
+                    InputKind::Srgb8 => {
+                        let d = (linear_to_srgb(g) - want).abs() * 255.0;
+                        assert!(
+                            d <= 0.5,
+                            "{what}, frame {:.3}, texel {i} channel {c}: {g} vs code {want}",
+                            st.frame
+                        );
+                    }
+                    _ => assert!(
+                        within_hdr_bound(g, want),
+                        "{what}, frame {:.3}, texel {i} channel {c}: GPU {g} vs CPU {want}",
+                        st.frame
+                    ),
+                }
+            }
+        }
+    }
+}
+
+fn set_paused(app: &mut App, streams: &[Stream], paused: bool) {
+    for s in streams {
+        app.world_mut()
+            .get_mut::<VbimPlayback>(s.entity)
+            .unwrap()
+            .paused = paused;
+    }
+}
+
+#[test]
+fn two_streams_play_into_bevy_images_and_match_the_reference_decoder() {
+    let dir = tempfile::tempdir().unwrap();
+    // An HDR RGB day at an odd size, and an 8-bit grey one of another size; 30 frames at
+    // 24 fps (a 1.25 s day) and one intra keyframe, so the chain of predicted keyframes
+    // runs the whole day.
+    let (w0, h0, w1, h1) = (37, 21, 24, 40);
+    let hdr = write_stream(dir.path(), "hdr.vbim", &day(w0, h0, 30, InputKind::Hdr, 3));
+    let grey = write_stream(
+        dir.path(),
+        "grey.vbim",
+        &day(w1, h1, 30, InputKind::Srgb8, 1),
+    );
+    let mut app = app(dir.path());
+
+    let spawn = |app: &mut App, name: &str, w: u32, h: u32| {
+        let world = app.world_mut();
+        let stream: Handle<VbimStream> = world.resource::<AssetServer>().load(name.to_string());
+        let image = world
+            .resource_mut::<Assets<Image>>()
+            .add(lightmap_image(w, h));
+        let mut p = VbimPlayback::new(stream, image.clone());
+        p.policy = Policy::Wait;
+        (world.spawn(p).id(), image)
+    };
+    let (e0, i0) = spawn(&mut app, "hdr.vbim", w0 as u32, h0 as u32);
+    let (e1, i1) = spawn(&mut app, "grey.vbim", w1 as u32, h1 as u32);
+    let decoder =
+        |b: &Vec<u8>| Decoder::new(Reader::open(Cursor::new(b.clone())).unwrap()).unwrap();
+    let mut streams = vec![
+        Stream {
+            entity: e0,
+            image: i0,
+            reference: decoder(&hdr),
+            kind: InputKind::Hdr,
+            channels: 3,
+            texels: w0 * h0,
+        },
+        Stream {
+            entity: e1,
+            image: i1,
+            reference: decoder(&grey),
+            kind: InputKind::Srgb8,
+            channels: 1,
+            texels: w1 * h1,
+        },
+    ];
+
+    // Playing: a few frames in, then paused mid-morning.
+    for _ in 0..600 {
+        app.update();
+        if streams.iter().all(|s| stats(&app, s.entity).frame > 8.0) {
+            break;
+        }
+    }
+    set_paused(&mut app, &streams, true);
+    check_paused(&mut app, &mut streams, "paused while playing");
+    let held = stats(&app, e0).frame;
+    for _ in 0..10 {
+        app.update();
+    }
+    assert_eq!(
+        stats(&app, e0).frame,
+        held,
+        "a paused playback holds its time"
+    );
+
+    // `set_time` deep into the chain of predicted keyframes, while paused.
+    for s in &streams {
+        app.world_mut()
+            .get_mut::<VbimPlayback>(s.entity)
+            .unwrap()
+            .set_time(Duration::from_millis(1150));
+    }
+    check_paused(&mut app, &mut streams, "after set_time(1.15 s)");
+    assert!(
+        (stats(&app, e0).frame - 27.6).abs() < 1e-6,
+        "{:?}",
+        stats(&app, e0)
+    );
+
+    // Across the loop point: play on until both have wrapped, then pause.
+    set_paused(&mut app, &streams, false);
+    for _ in 0..600 {
+        app.update();
+        if streams.iter().all(|s| stats(&app, s.entity).loops >= 1) {
+            break;
+        }
+    }
+    for _ in 0..6 {
+        app.update();
+    }
+    set_paused(&mut app, &streams, true);
+    check_paused(&mut app, &mut streams, "after the loop point");
+    assert!(stats(&app, e0).frame < 15.0, "{:?}", stats(&app, e0));
+
+    // Virtual time paused: the playback holds even though it is not paused itself.
+    set_paused(&mut app, &streams, false);
+    app.world_mut().resource_mut::<Time<Virtual>>().pause();
+    let before = stats(&app, e1).frame;
+    for _ in 0..10 {
+        app.update();
+    }
+    assert_eq!(stats(&app, e1).frame, before, "virtual time paused");
+
+    let seen = &app.world().resource::<Seen>().0;
+    for e in [e0, e1] {
+        let kinds: Vec<&VbimEventKind> = seen
+            .iter()
+            .filter(|v| v.entity == e)
+            .map(|v| &v.kind)
+            .collect();
+        assert_eq!(
+            kinds
+                .iter()
+                .filter(|k| ***k == VbimEventKind::Loaded)
+                .count(),
+            1
+        );
+        assert!(kinds.contains(&&VbimEventKind::Looped), "{kinds:?}");
+        assert!(
+            !kinds.iter().any(|k| matches!(k, VbimEventKind::Failed(_))),
+            "{kinds:?}"
+        );
+    }
+    let st = stats(&app, e0);
+    assert!(st.gpu_bytes > 0 && st.totals.frames > 20, "{st:?}");
+}
+
+#[test]
+fn an_image_of_the_wrong_size_is_reported_not_written() {
+    let dir = tempfile::tempdir().unwrap();
+    write_stream(dir.path(), "day.vbim", &day(20, 12, 6, InputKind::Hdr, 3));
+    let mut app = app(dir.path());
+    let world = app.world_mut();
+    let stream: Handle<VbimStream> = world.resource::<AssetServer>().load("day.vbim");
+    let image = world
+        .resource_mut::<Assets<Image>>()
+        .add(lightmap_image(21, 12));
+    let e = world.spawn(VbimPlayback::new(stream, image)).id();
+    let mut failed = None;
+    for _ in 0..300 {
+        app.update();
+        failed = app
+            .world()
+            .resource::<Seen>()
+            .0
+            .iter()
+            .find_map(|v| match &v.kind {
+                VbimEventKind::Failed(m) if v.entity == e => Some(m.clone()),
+                _ => None,
+            });
+        if failed.is_some() {
+            break;
+        }
+    }
+    let msg = failed.expect("a Failed event");
+    assert!(msg.contains("21") && msg.contains("20"), "{msg}");
+    assert!(!stats(&app, e).playing);
+}
