@@ -9,8 +9,11 @@
 //! `StandardMaterial` with vertex colours as its albedo, and Bevy's `Lightmap` component
 //! pointing at the image the player writes. A directional light and the ambient light
 //! follow the sun and sky of the bake's manifest (carried in the stream's metadata) and
-//! light a white sphere beside the terrain; they do not light the terrain's diffuse, which
-//! the lightmap already holds. The window's title shows the time of day and the player's
+//! light a white sphere beside the terrain, under a sky of the manifest's zenith colour
+//! (`--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
+//! crashes lavapipe); they do not light the terrain's diffuse, which
+//! the lightmap already holds. `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
+//! the window before `--frames N` quits. The window's title shows the time of day and the player's
 //! statistics. Keys: Space pause, ↑/↓ speed ×2 / ÷2, ←/→ one hour back /
 //! on, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
 
@@ -20,10 +23,13 @@ use std::time::Duration;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::Tonemapping;
-use bevy::light::GlobalAmbientLight;
+use bevy::light::atmosphere::ScatteringMedium;
+use bevy::light::{Atmosphere, GlobalAmbientLight};
 use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::pbr::AtmosphereSettings;
 use bevy::pbr::Lightmap;
 use bevy::prelude::*;
+use bevy::render::view::screenshot::{save_to_disk, Screenshot};
 use bevy::window::PrimaryWindow;
 use bevy_vbim::{
     bake_sky, lux_per_unit, sky_light, sun_light, VbimEvent, VbimEventKind, VbimPlayback,
@@ -40,6 +46,16 @@ struct Args {
     stream: Option<PathBuf>,
     scene: PathBuf,
     frames: Option<u64>,
+    /// Start at this hour of the day.
+    hour: f64,
+    /// Start paused.
+    paused: bool,
+    /// Bevy's atmosphere as the sky (off: a plain sky colour from the manifest). Off by
+    /// default: it crashes lavapipe (Mesa 22.3, a segmentation fault in its first frames),
+    /// the adapter of machines without a GPU.
+    atmosphere: bool,
+    /// Save the window to this PNG before quitting (with `--frames`).
+    screenshot: Option<PathBuf>,
 }
 
 fn args() -> Result<Args, String> {
@@ -48,6 +64,10 @@ fn args() -> Result<Args, String> {
         stream: None,
         scene: root.join("samples/jacksboro.toml"),
         frames: None,
+        hour: 0.0,
+        paused: false,
+        atmosphere: false,
+        screenshot: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -56,9 +76,13 @@ fn args() -> Result<Args, String> {
             "--stream" => a.stream = Some(value()?.into()),
             "--scene" => a.scene = value()?.into(),
             "--frames" => a.frames = Some(value()?.parse().map_err(|e| format!("--frames: {e}"))?),
+            "--hour" => a.hour = value()?.parse().map_err(|e| format!("--hour: {e}"))?,
+            "--paused" => a.paused = true,
+            "--atmosphere" => a.atmosphere = true,
+            "--screenshot" => a.screenshot = Some(value()?.into()),
             _ => {
                 return Err(format!(
-                    "unknown argument {flag} (--stream F.vbim, --scene S.toml, --frames N)"
+                    "unknown argument {flag} (--stream F.vbim, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png)"
                 ))
             }
         }
@@ -115,6 +139,7 @@ struct Day {
     /// The stream's frame rate, frames per second.
     fps: f64,
     exit_after: Option<u64>,
+    screenshot: Option<PathBuf>,
     frames: u64,
 }
 
@@ -153,9 +178,10 @@ fn main() {
                   assets: Res<AssetServer>,
                   images: ResMut<Assets<Image>>,
                   meshes: ResMut<Assets<Mesh>>,
-                  materials: ResMut<Assets<StandardMaterial>>| {
+                  materials: ResMut<Assets<StandardMaterial>>,
+                  media: ResMut<Assets<ScatteringMedium>>| {
                 setup(
-                    commands, assets, images, meshes, materials, &a, &name, &stream,
+                    commands, assets, images, meshes, materials, media, &a, &name, &stream,
                 )
             },
         )
@@ -173,6 +199,7 @@ fn setup(
     mut images: ResMut<Assets<Image>>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
+    mut media: ResMut<Assets<ScatteringMedium>>,
     a: &Args,
     name: &str,
     path: &Path,
@@ -184,9 +211,12 @@ fn setup(
     let manifest = opened.metadata().and_then(|m| Manifest::parse(m).ok());
     let lightmap = images.add(bevy_vbim::lightmap_image(w, h));
     let stream: Handle<VbimStream> = assets.load(name.to_string());
-    let playback = commands
-        .spawn(VbimPlayback::new(stream, lightmap.clone()))
-        .id();
+    let mut p = VbimPlayback::new(stream, lightmap.clone());
+    p.paused = a.paused;
+    if a.hour > 0.0 {
+        p.set_time(opened.duration().mul_f64((a.hour / 24.0).clamp(0.0, 1.0)));
+    }
+    let playback = commands.spawn(p).id();
 
     let scene = vbim_bake::Scene::load(&a.scene).unwrap_or_else(|e| panic!("{e}"));
     let hf = vbim_bake::load_terrain(&scene).unwrap_or_else(|e| panic!("{e}"));
@@ -238,18 +268,29 @@ fn setup(
         },
         Transform::default(),
     ));
-    commands.spawn((
+    if a.atmosphere {
+        // Bevy's own sky: its atmosphere scatters the directional light, which follows the
+        // bake's sun (one scene unit as one metre above the ground, as Bevy assumes).
+        commands.spawn(Atmosphere::earth(
+            media.add(ScatteringMedium::earth(256, 256)),
+        ));
+    }
+    let mut camera = commands.spawn((
         Camera3d::default(),
         Exposure { ev100: EV100 },
         // ACES needs no lookup table (the example builds Bevy without them).
         Tonemapping::AcesFitted,
         Transform::from_xyz(1.3, 0.9, 1.3).looking_at(Vec3::new(0.0, 0.05, 0.0), Vec3::Y),
     ));
+    if a.atmosphere {
+        camera.insert(AtmosphereSettings::default());
+    }
     commands.insert_resource(Day {
         playback,
         manifest,
         fps: opened.header().rate_num as f64 / opened.header().rate_den.max(1) as f64,
         exit_after: a.frames,
+        screenshot: a.screenshot.clone(),
         frames: 0,
     });
 }
@@ -404,12 +445,22 @@ fn report_events(mut events: MessageReader<VbimEvent>) {
     }
 }
 
-fn exit_after(mut day: ResMut<Day>, stats: Query<&VbimStats>, mut exit: MessageWriter<AppExit>) {
+fn exit_after(
+    mut commands: Commands,
+    mut day: ResMut<Day>,
+    stats: Query<&VbimStats>,
+    mut exit: MessageWriter<AppExit>,
+) {
     let Some(n) = day.exit_after else { return };
     if stats.get(day.playback).is_ok_and(|s| s.playing) {
         day.frames += 1;
     }
-    if day.frames >= n {
+    if day.frames == n {
+        if let Some(path) = day.screenshot.clone() {
+            commands
+                .spawn(Screenshot::primary_window())
+                .observe(save_to_disk(path));
+        }
         if let Ok(s) = stats.get(day.playback) {
             println!(
                 "terrain: {} frames shown, frame {:.2} of the day, {} stalls, {:.1} MB on the GPU",
@@ -419,6 +470,9 @@ fn exit_after(mut day: ResMut<Day>, stats: Query<&VbimStats>, mut exit: MessageW
                 s.gpu_bytes as f64 / 1e6
             );
         }
+    }
+    // A few frames more for the screenshot to be captured and written.
+    if day.frames >= n + 5 {
         exit.write(AppExit::Success);
     }
 }

@@ -11,7 +11,8 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 use bevy_vbim::{
-    lightmap_image, FrameState, Policy, VbimEventKind, VbimPlayback, VbimStats, VbimStream,
+    lightmap_image, FrameState, Policy, Throttle, VbimEvent, VbimEventKind, VbimPlayback,
+    VbimStats, VbimStream,
 };
 use common::{app, read_image, Seen};
 use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
@@ -291,4 +292,91 @@ fn an_image_of_the_wrong_size_is_reported_not_written() {
     let msg = failed.expect("a Failed event");
     assert!(msg.contains("21") && msg.contains("20"), "{msg}");
     assert!(!stats(&app, e).playing);
+}
+
+/// Runs frames until `pred` holds for the events seen so far (at most `frames`).
+fn until(app: &mut App, frames: usize, pred: impl Fn(&[VbimEvent]) -> bool) -> Vec<VbimEvent> {
+    for _ in 0..frames {
+        app.update();
+        if pred(&app.world().resource::<Seen>().0) {
+            break;
+        }
+    }
+    app.world().resource::<Seen>().0.clone()
+}
+
+#[test]
+fn a_starved_reader_raises_stalled_then_caught_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = write_stream(dir.path(), "day.vbim", &day(32, 32, 30, InputKind::Hdr, 3));
+    let mut app = app(dir.path());
+    let world = app.world_mut();
+    let stream: Handle<VbimStream> = world.resource::<AssetServer>().load("day.vbim");
+    let image = world
+        .resource_mut::<Assets<Image>>()
+        .add(lightmap_image(32, 32));
+    let mut p = VbimPlayback::new(stream, image);
+    // Read at a fifth of the stream's own rate (its bytes over its 1.25 s day): the display
+    // must wait for data, then show it.
+    p.policy = Policy::Wait;
+    p.throttle = Throttle {
+        rate: Some((bytes.len() as f64 / 1.25 / 5.0) as u64),
+        stall: None,
+    };
+    let e = world.spawn(p).id();
+    let kinds = |v: &[VbimEvent]| -> Vec<VbimEventKind> {
+        v.iter()
+            .filter(|x| x.entity == e)
+            .map(|x| x.kind.clone())
+            .collect()
+    };
+    let seen = until(&mut app, 3000, |v| {
+        let k = kinds(v);
+        let stalled = k.iter().position(|x| *x == VbimEventKind::Stalled);
+        stalled.is_some_and(|i| k[i..].contains(&VbimEventKind::CaughtUp))
+    });
+    let k = kinds(&seen);
+    let stalled = k.iter().position(|x| *x == VbimEventKind::Stalled);
+    assert!(
+        stalled.is_some_and(|i| k[i..].contains(&VbimEventKind::CaughtUp)),
+        "{k:?} {:?}",
+        app.world().get::<VbimStats>(e)
+    );
+    assert!(app.world().get::<VbimStats>(e).unwrap().totals.stalls >= 1);
+}
+
+#[test]
+fn a_damaged_chunk_raises_damaged_naming_it_and_playback_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = write_stream(dir.path(), "day.vbim", &day(32, 32, 30, InputKind::Hdr, 3));
+    // Flip a byte in the last chunk's payload (the index and its checksum stay valid).
+    let reader = Reader::open(Cursor::new(bytes.clone())).unwrap();
+    let last = *reader.entries().last().unwrap();
+    bytes[(last.offset + last.length / 2) as usize] ^= 0x5a;
+    std::fs::write(dir.path().join("day.vbim"), &bytes).unwrap();
+    let mut app = app(dir.path());
+    let world = app.world_mut();
+    let stream: Handle<VbimStream> = world.resource::<AssetServer>().load("day.vbim");
+    let image = world
+        .resource_mut::<Assets<Image>>()
+        .add(lightmap_image(32, 32));
+    let e = world.spawn(VbimPlayback::new(stream, image)).id();
+    let seen = until(&mut app, 600, |v| {
+        v.iter()
+            .any(|x| matches!(x.kind, VbimEventKind::Damaged(_)))
+    });
+    let msg = seen
+        .iter()
+        .find_map(|x| match &x.kind {
+            VbimEventKind::Damaged(m) if x.entity == e => Some(m.clone()),
+            _ => None,
+        })
+        .expect("a Damaged event");
+    assert!(msg.contains("chunk"), "{msg}");
+    // Playback goes on.
+    let before = app.world().get::<VbimStats>(e).unwrap().totals.frames;
+    for _ in 0..10 {
+        app.update();
+    }
+    assert!(app.world().get::<VbimStats>(e).unwrap().totals.frames >= before + 10);
 }
