@@ -97,6 +97,8 @@ pub struct VbimStats {
     /// The player's running totals: frames, stalls, bytes read and uploaded, CPU time,
     /// damage.
     pub totals: Totals,
+    /// A stall began and the true state has not been shown since.
+    in_stall: bool,
 }
 
 /// Something that happened to a playback.
@@ -111,11 +113,13 @@ pub struct VbimEvent {
 /// What happened to a playback.
 #[derive(Clone, Debug, PartialEq)]
 pub enum VbimEventKind {
-    /// The player opened and showed its first frame.
+    /// The player opened and its frames began (it may still be buffering: `VbimStats::state`
+    /// says `Waiting` until the first data is shown).
     Loaded,
     /// The day wrapped at its end (a looping stream).
     Looped,
-    /// Data came late: the display holds (or, with `wait`, the clock waits).
+    /// Data came late: the display holds (or, with `wait`, the clock waits). The buffering
+    /// before the first frame is not a stall.
     Stalled,
     /// The display shows the true state again after a stall.
     CaughtUp,
@@ -191,16 +195,14 @@ pub(crate) fn receive_reports(
                 if !s.playing {
                     send(VbimEventKind::Loaded);
                 }
-                let late = |st: Option<FrameState>| {
-                    matches!(st, Some(FrameState::Held | FrameState::Waiting))
-                };
-                if late(Some(record.state)) && !late(s.state) {
+                // A stall is the player's own count (a run of late frames counts once; the
+                // buffering before the first frame is not one).
+                if totals.stalls > s.totals.stalls {
+                    s.in_stall = true;
                     send(VbimEventKind::Stalled);
                 }
-                // Back to the true state after a stall (through a catch-up blend, or not).
-                if record.state == FrameState::Exact
-                    && matches!(s.state, Some(st) if st != FrameState::Exact)
-                {
+                if record.state == FrameState::Exact && s.in_stall {
+                    s.in_stall = false;
                     send(VbimEventKind::CaughtUp);
                 }
                 if looped {
