@@ -44,16 +44,15 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
     for i in 0..n {
         let mut x = to_rgb(&sa.read(i)?, ca);
         let y = to_rgb(&sb.read(i)?, cb);
-        let f = match (export_b, metric) {
+        match (export_b, metric) {
             (true, Metric::Hdr { exposure }) => {
                 for v in x.iter_mut() {
                     *v = vbim_format::curve::export_curve(*v, exposure);
                 }
-                Metric::Srgb8.compare(&x, &y)
+                seq.add(Metric::Srgb8, &x, &y)
             }
-            _ => metric.compare(&x, &y),
-        };
-        seq.push(f);
+            _ => seq.add(metric, &x, &y),
+        }
         stages.report("compare", i as u64 + 1, n as u64);
     }
     stages.finish();
@@ -88,7 +87,15 @@ pub fn run(a: CompareArgs) -> Result<(), String> {
     );
     println!("mean PSNR   {:.3} dB", seq.mean_psnr());
     println!("worst frame {wp:.3} dB (frame {wf})");
-    println!("max error   {:.5} (on the 0–1 scale)", seq.max_abs());
+    println!(
+        "max error   {:.5} (on the 0–1 scale), {:.2} levels of 255",
+        seq.max_abs(),
+        seq.max_abs() * 255.0
+    );
+    println!(
+        "p99.9 error {:.4} levels of 255 (every value of every frame)",
+        seq.p999_levels()
+    );
     if let Metric::Hdr { .. } = metric {
         println!(
             "max rel.    {:.3}% (texels brighter than 1% of white)",

@@ -75,6 +75,21 @@ impl Metric {
 
     /// Compares a source frame with a decoded one, value by value.
     pub fn compare(self, src: &[f32], dec: &[f32]) -> FrameError {
+        self.compare_with(src, dec, |_| {})
+    }
+
+    /// [`Metric::compare`], also counting every value's error in `levels` (for the
+    /// percentiles of a whole sequence, [`SequenceError::add`]).
+    pub fn compare_counted(
+        self,
+        src: &[f32],
+        dec: &[f32],
+        levels: &mut ErrorHistogram,
+    ) -> FrameError {
+        self.compare_with(src, dec, |d| levels.record(d))
+    }
+
+    fn compare_with(self, src: &[f32], dec: &[f32], mut each: impl FnMut(f64)) -> FrameError {
         assert_eq!(src.len(), dec.len());
         let mut e = FrameError {
             count: src.len() as u64,
@@ -93,6 +108,7 @@ impl Metric {
             };
             e.sse += diff * diff;
             e.max_abs = nan_max(e.max_abs, diff.abs());
+            each(diff);
             if s > bright {
                 e.max_rel = nan_max(e.max_rel, ((d - s) / s).abs() as f64);
             }
@@ -110,17 +126,86 @@ fn nan_max(a: f64, b: f64) -> f64 {
     }
 }
 
+/// How many values erred by how much, in bins of 1/16 of an 8-bit level (errors on the
+/// 0–1 scale never exceed 255 levels): the pooled error's percentiles without keeping
+/// every value. 32 KiB however long the sequence.
+#[derive(Clone, Debug, Default)]
+pub struct ErrorHistogram {
+    bins: Vec<u64>,
+}
+
+impl ErrorHistogram {
+    /// Bins per 8-bit level.
+    pub const PER_LEVEL: usize = 16;
+
+    /// Counts one error on the 0–1 scale (a NaN is not counted: the frame's PSNR already
+    /// says it is not a number).
+    pub fn record(&mut self, diff: f64) {
+        if diff.is_nan() {
+            return;
+        }
+        if self.bins.is_empty() {
+            self.bins = vec![0; 256 * Self::PER_LEVEL];
+        }
+        let b = (diff.abs() * 255.0 * Self::PER_LEVEL as f64) as usize;
+        let last = self.bins.len() - 1;
+        self.bins[b.min(last)] += 1;
+    }
+
+    /// Adds another histogram's counts.
+    pub fn merge(&mut self, other: &ErrorHistogram) {
+        if self.bins.is_empty() {
+            self.bins = other.bins.clone();
+        } else {
+            for (a, b) in self.bins.iter_mut().zip(&other.bins) {
+                *a += b;
+            }
+        }
+    }
+
+    /// The error, in 8-bit levels, that a share `q` (0 to 1) of the values do not exceed,
+    /// to the bin's upper edge (at most 1/16 of a level above the true quantile); 0 when
+    /// nothing was counted.
+    pub fn quantile_levels(&self, q: f64) -> f64 {
+        let total: u64 = self.bins.iter().sum();
+        if total == 0 {
+            return 0.0;
+        }
+        let need = (q.clamp(0.0, 1.0) * total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (i, n) in self.bins.iter().enumerate() {
+            seen += n;
+            if seen >= need {
+                return (i + 1) as f64 / Self::PER_LEVEL as f64;
+            }
+        }
+        256.0
+    }
+}
+
 /// Pooled statistics over a sequence.
 #[derive(Clone, Debug, Default)]
 pub struct SequenceError {
     /// Each frame, in order.
     pub frames: Vec<FrameError>,
+    /// Every value's error, when frames were added with [`SequenceError::add`].
+    pub levels: ErrorHistogram,
 }
 
 impl SequenceError {
     /// Adds a frame.
     pub fn push(&mut self, f: FrameError) {
         self.frames.push(f);
+    }
+    /// Compares a frame with `metric`, adds it and counts its values' errors.
+    pub fn add(&mut self, metric: Metric, src: &[f32], dec: &[f32]) {
+        let f = metric.compare_counted(src, dec, &mut self.levels);
+        self.frames.push(f);
+    }
+    /// The 99.9th percentile of every value's error, in 8-bit levels (frames added with
+    /// [`SequenceError::add`]).
+    pub fn p999_levels(&self) -> f64 {
+        self.levels.quantile_levels(0.999)
     }
     /// PSNR of the error pooled over all frames and values (the mean PSNR).
     pub fn mean_psnr(&self) -> f64 {
@@ -183,6 +268,31 @@ mod tests {
         assert_eq!(seq.first_not_a_number(), Some(1));
         let (frame, worst) = seq.worst();
         assert!(frame == 1 && worst.is_nan());
+    }
+
+    #[test]
+    fn the_percentile_counts_every_value_to_a_sixteenth_of_a_level() {
+        // 1000 values: 997 exact, one off by 1 level, one by 3, one by 40.
+        let src = vec![128.0f32 / 255.0; 1000];
+        let mut dec = src.clone();
+        dec[5] += 1.0 / 255.0;
+        dec[10] += 3.0 / 255.0;
+        dec[20] -= 40.0 / 255.0;
+        let mut seq = SequenceError::default();
+        seq.add(Metric::Srgb8, &src, &dec);
+        let near = |q: f64, levels: f64| {
+            let p = seq.levels.quantile_levels(q);
+            assert!(
+                (p - levels).abs() <= 1.0 / 16.0 + 1e-9,
+                "q {q}: {p}, not {levels}"
+            );
+        };
+        near(0.997, 0.0);
+        near(0.998, 1.0);
+        near(0.999, 3.0);
+        near(1.0, 40.0);
+        assert_eq!(seq.p999_levels(), seq.levels.quantile_levels(0.999));
+        assert_eq!(ErrorHistogram::default().quantile_levels(0.999), 0.0);
     }
 
     #[test]
