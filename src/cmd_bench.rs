@@ -16,6 +16,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::Decode(a) => bench_decode(a),
         BenchCommand::Lossless(a) => bench_lossless(a),
         BenchCommand::PlotRd(a) => plot_rd(a),
+        BenchCommand::PlotTolerance(a) => plot_tolerance(a),
         BenchCommand::Drift(a) => bench_drift(a),
         BenchCommand::Render(a) => bench_render(a),
         BenchCommand::Scale(a) => crate::bench_scale::run(a),
@@ -223,6 +224,54 @@ fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
         "mean PSNR, dB (protocol metric)",
         &series,
         true,
+    )?;
+    println!("wrote {}", a.out.display());
+    Ok(())
+}
+
+fn plot_tolerance(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
+    let text = std::fs::read_to_string(&a.csv).map_err(|e| format!("{}: {e}", a.csv.display()))?;
+    let mut series: Vec<crate::plot::Series> = Vec::new();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() < 4 {
+            continue;
+        }
+        let (asked, got): (f64, f64) = (
+            f[2].parse()
+                .map_err(|_| format!("bad tolerance in {line}"))?,
+            f[3].parse().map_err(|_| format!("bad PSNR in {line}"))?,
+        );
+        (lo, hi) = (lo.min(asked), hi.max(asked));
+        let name = format!("{} ({})", f[0], f[1]);
+        match series.iter_mut().find(|s| s.name == name) {
+            Some(s) => s.points.push((asked, got)),
+            None => series.push(crate::plot::Series {
+                name,
+                points: vec![(asked, got)],
+            }),
+        }
+    }
+    if series.is_empty() {
+        return Err(format!("{}: no rows", a.csv.display()));
+    }
+    for s in &mut series {
+        s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    for (name, d) in [("asked − 0.5 dB", -0.5), ("asked + 0.5 dB", 0.5)] {
+        series.push(crate::plot::Series {
+            name: name.into(),
+            points: vec![(lo, lo + d), (hi, hi + d)],
+        });
+    }
+    crate::plot::lines(
+        &a.out,
+        &a.title,
+        "tolerance asked, dB",
+        "mean PSNR delivered, dB (protocol metric)",
+        &series,
+        false,
     )?;
     println!("wrote {}", a.out.display());
     Ok(())

@@ -48,6 +48,10 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Some(t) = a.tolerance {
         cfg.tolerance_db = t;
     }
+    cfg.aim = !a.no_aim;
+    if let Some(m) = a.worst_margin {
+        cfg.worst_margin_db = m;
+    }
     if let Some(d) = a.max_degree {
         cfg.max_degree = d;
     }
@@ -131,6 +135,7 @@ fn parse_segment(s: &str, current: SegmentMode) -> Result<SegmentMode, String> {
 fn flag_of(e: &ConfigError) -> &'static str {
     match e {
         ConfigError::Tolerance(_) => "--tolerance",
+        ConfigError::WorstMargin(_) => "--worst-margin",
         ConfigError::MaxDegree(_) => "--max-degree",
         ConfigError::EmptySegments => "--segment",
         ConfigError::ZstdLevel(_) => "--zstd-level",

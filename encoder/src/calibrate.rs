@@ -5,12 +5,14 @@
 //! budget (secant steps on internal tolerance → delivered PSNR, which rises with it but in
 //! steps, then bisection once T is bracketed) until the delivered mean PSNR lands in
 //! [T, T + BAND_DB]. Each pass costs one encode and one verification; the smallest file
-//! that meets T is kept.
+//! that meets T is kept. The first pass starts from the budget that `aim` finds on a
+//! sample for the band's middle, which usually lands in the band at once.
 
 use std::path::Path;
 
 use vbim_bake::output::Temporary;
 
+use crate::secant::next_tolerance;
 use crate::{encode_file, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
 
 /// Width of the accepted band above the tolerance, dB.
@@ -29,7 +31,6 @@ pub fn encode_to_tolerance(
 ) -> Result<EncodeReport, EncodeError> {
     let t_start = std::time::Instant::now();
     let target = cfg.tolerance_db;
-    let aim = target + BAND_DB / 2.0;
     let name = out
         .file_name()
         .and_then(|n| n.to_str())
@@ -47,9 +48,18 @@ pub fn encode_to_tolerance(
     let mut internal = target;
     let result = (|| {
         for k in 0..MAX_PASSES {
-            let c = EncoderConfig {
-                tolerance_db: internal,
-                ..cfg.clone()
+            // The first pass aims at the band's middle from a sample (when `cfg.aim`), the
+            // others use the internal tolerance the search gives.
+            let c = match k {
+                0 if cfg.aim => EncoderConfig {
+                    tolerance_db: target + BAND_DB / 2.0,
+                    ..cfg.clone()
+                },
+                _ => EncoderConfig {
+                    tolerance_db: internal,
+                    aim: false,
+                    ..cfg.clone()
+                },
             };
             let path = Temporary::new(pass_path(k));
             let mut rep = encode_file(src, &c, path.path(), progress)?;
@@ -58,7 +68,7 @@ pub fn encode_to_tolerance(
                 return Err(e);
             }
             let p = rep.mean_psnr.unwrap_or(f64::INFINITY);
-            passes.push((internal, p, rep.bytes));
+            passes.push((rep.internal_tolerance_db, p, rep.bytes));
             let slot = if p >= target { &mut met } else { &mut missed };
             let better = slot.as_ref().is_none_or(|(r, _)| match p >= target {
                 true => rep.bytes < r.bytes,
@@ -75,38 +85,7 @@ pub fn encode_to_tolerance(
             if (target..=target + BAND_DB).contains(&p) {
                 break;
             }
-            // The delivered PSNR rises with the internal tolerance, but in steps (segment
-            // lengths change discretely): secant steps until the target is bracketed,
-            // then regula falsi kept away from the bracket's ends (bisection when the
-            // secant would hug one).
-            let below = passes
-                .iter()
-                .filter(|q| q.1 < target)
-                .max_by(|a, b| a.0.total_cmp(&b.0));
-            let above = passes
-                .iter()
-                .filter(|q| q.1 > target + BAND_DB)
-                .min_by(|a, b| a.0.total_cmp(&b.0));
-            let next = match (below, above) {
-                (Some(&(t0, p0, _)), Some(&(t1, p1, _))) => {
-                    let x = t0 + (aim - p0) * (t1 - t0) / (p1 - p0);
-                    let margin = 0.15 * (t1 - t0);
-                    if x < t0 + margin || x > t1 - margin {
-                        0.5 * (t0 + t1)
-                    } else {
-                        x
-                    }
-                }
-                _ => {
-                    let n = passes.len();
-                    if n >= 2 && (passes[n - 1].1 - passes[n - 2].1).abs() > 1e-3 {
-                        let ((t0, p0, _), (t1, p1, _)) = (passes[n - 2], passes[n - 1]);
-                        t1 + (aim - p1) * (t1 - t0) / (p1 - p0)
-                    } else {
-                        internal + (aim - p)
-                    }
-                }
-            };
+            let next = next_tolerance(&passes, target, target + BAND_DB);
             internal = next;
         }
         Ok::<(), EncodeError>(())

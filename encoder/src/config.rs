@@ -30,6 +30,15 @@ pub enum Preset {
 pub struct EncoderConfig {
     /// Error budget: the target mean PSNR in dB of the protocol's metric.
     pub tolerance_db: f64,
+    /// Find, on a sample of the sequence, the internal budget that delivers
+    /// `tolerance_db` (within about ±0.5 dB; BENCHMARKS.md) before coding. Off, the budget
+    /// is the tolerance itself and a day with dark nights pools 3 to 6.5 dB above it.
+    pub aim: bool,
+    /// With `aim`: no frame's PSNR more than this below `tolerance_db` (the protocol pairs
+    /// a 45 dB mean with a 38 dB worst frame); where the mean alone would allow it, the
+    /// budget is raised, up to a mean 0.2 dB above the tolerance on the aim's sample.
+    /// Infinite: no floor.
+    pub worst_margin_db: f64,
     /// Highest polynomial degree in time (1 = keyframe interpolation only).
     pub max_degree: usize,
     /// How segment boundaries are chosen.
@@ -61,6 +70,8 @@ impl EncoderConfig {
     pub fn preset(p: Preset) -> EncoderConfig {
         let base = EncoderConfig {
             tolerance_db: 45.0,
+            aim: true,
+            worst_margin_db: 7.0,
             max_degree: 4,
             // Longer segments fit the budget but cost more than they save (measured).
             segment: SegmentMode::Auto { max: 32 },
@@ -98,6 +109,9 @@ impl EncoderConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         if !(10.0..=99.0).contains(&self.tolerance_db) {
             return Err(ConfigError::Tolerance(self.tolerance_db));
+        }
+        if self.worst_margin_db.is_nan() || self.worst_margin_db < 0.0 {
+            return Err(ConfigError::WorstMargin(self.worst_margin_db));
         }
         if !(1..=MAX_DEGREE as usize).contains(&self.max_degree) {
             return Err(ConfigError::MaxDegree(self.max_degree));
@@ -159,6 +173,9 @@ pub enum ConfigError {
     /// `tolerance_db` outside 10 to 99.
     #[error("tolerance {0} dB is outside 10 to 99")]
     Tolerance(f64),
+    /// `worst_margin_db` negative or not a number.
+    #[error("worst-frame margin {0} dB is not 0 or more")]
+    WorstMargin(f64),
     /// `max_degree` outside 1 to the format's largest.
     #[error("max degree {0} is outside 1 to {MAX_DEGREE}")]
     MaxDegree(usize),

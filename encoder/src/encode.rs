@@ -47,54 +47,48 @@ pub(crate) struct Coded {
     pub started: Instant,
 }
 
-/// Codes `src` with `cfg` (inside the worker pool).
+/// Codes `src` with `cfg` (inside the worker pool). `validated`: every frame was already
+/// read and checked, and this is the sequence's exposure (used for HDR); `None` reads and
+/// checks them first.
 pub(crate) fn code_sequence(
     src: &dyn FrameSource,
     cfg: &EncoderConfig,
+    validated: Option<f32>,
     progress: Progress,
 ) -> Result<Coded, EncodeError> {
     let info = src.info();
     let n = info.frames;
-    if n > vbim_format::limits::MAX_FRAMES as usize {
-        return Err(EncodeError::Input(format!(
-            "{n} frames (at most {})",
-            vbim_format::limits::MAX_FRAMES
-        )));
-    }
-    if info.width > vbim_format::limits::MAX_DIMENSION as usize
-        || info.height > vbim_format::limits::MAX_DIMENSION as usize
-    {
-        return Err(EncodeError::Input(format!(
-            "{}: {}×{} is larger than 16384²",
-            info.name, info.width, info.height
-        )));
-    }
-    // Pass 1: validate every frame before any work, and learn the exposure.
-    let done = AtomicU64::new(0);
-    let greens: Vec<f32> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let f = src.read(i)?;
-            progress(
-                "validate",
-                done.fetch_add(1, Ordering::Relaxed) + 1,
-                n as u64,
-            );
-            Ok(vbim_format::curve::max_green(&f.data, f.channels))
-        })
-        .collect::<Result<_, EncodeError>>()?;
+    check_shape(&info)?;
+    // Pass 1: validate every frame before any work, and learn the exposure (unless a
+    // sample's reading did both).
+    let e = match validated {
+        Some(e) => e,
+        None => {
+            let done = AtomicU64::new(0);
+            let greens: Vec<f32> = (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let f = src.read(i)?;
+                    progress(
+                        "validate",
+                        done.fetch_add(1, Ordering::Relaxed) + 1,
+                        n as u64,
+                    );
+                    Ok(vbim_format::curve::max_green(&f.data, f.channels))
+                })
+                .collect::<Result<_, EncodeError>>()?;
+            exposure_from_max_greens(&greens)
+        }
+    };
     let (color, transfer, metric) = match info.kind {
         InputKind::Srgb8 => (ColorEncoding::Srgb8, Transfer::Srgb, Metric::Srgb8),
-        InputKind::Hdr => {
-            let e = exposure_from_max_greens(&greens);
-            (
-                ColorEncoding::LinearHdr,
-                Transfer::LogToe {
-                    v0: (2.0f32).powi(-10) / e,
-                },
-                Metric::Hdr { exposure: e },
-            )
-        }
+        InputKind::Hdr => (
+            ColorEncoding::LinearHdr,
+            Transfer::LogToe {
+                v0: (2.0f32).powi(-10) / e,
+            },
+            Metric::Hdr { exposure: e },
+        ),
     };
     let dom = Domain::new(
         transfer,
@@ -236,6 +230,26 @@ pub(crate) fn code_sequence(
         metric,
         started,
     })
+}
+
+/// Refuses a sequence longer or larger than the format allows (before reading a frame).
+pub(crate) fn check_shape(info: &crate::SourceInfo) -> Result<(), EncodeError> {
+    let n = info.frames;
+    if n > vbim_format::limits::MAX_FRAMES as usize {
+        return Err(EncodeError::Input(format!(
+            "{n} frames (at most {})",
+            vbim_format::limits::MAX_FRAMES
+        )));
+    }
+    if info.width > vbim_format::limits::MAX_DIMENSION as usize
+        || info.height > vbim_format::limits::MAX_DIMENSION as usize
+    {
+        return Err(EncodeError::Input(format!(
+            "{}: {}×{} is larger than 16384²",
+            info.name, info.width, info.height
+        )));
+    }
+    Ok(())
 }
 
 /// Keyframe `number`'s chunk, at frame `frame`.

@@ -10,8 +10,11 @@
 //! Inside, in the order a frame meets them: `input` (reading and validating frames),
 //! `domain` (the coded domain), `encode` (the pass over the sequence), `segment` (segment
 //! lengths), `keyframe` (keyframe coding), `model` (a segment's per-tile model), `output`
-//! (the header and writing), `report` (what an encode did), `calibrate` (`--exact`).
+//! (the header and writing), `report` (what an encode did), `aim` (the internal budget
+//! that delivers the tolerance, found on a sample before coding), `calibrate` (`--exact`)
+//! and `secant` (the search both of those share).
 
+mod aim;
 mod calibrate;
 mod config;
 mod domain;
@@ -21,11 +24,13 @@ mod keyframe;
 mod model;
 mod output;
 mod report;
+mod secant;
 mod segment;
 
 use std::io::{Seek, Write};
 use std::path::{Path, PathBuf};
 
+pub use aim::{Aim, SamplePass, SAMPLE_TEXELS};
 pub use calibrate::{encode_to_tolerance, BAND_DB};
 pub use config::{ConfigError, EncoderConfig, Preset, SegmentMode};
 pub use input::{Frame, FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
@@ -55,8 +60,10 @@ pub enum EncodeError {
     Format(#[from] vbim_format::FormatError),
 }
 
-/// Encodes `src` with `cfg` into `out`. The report's error fields stay empty until
-/// [`EncodeReport::verify`] measures the stream.
+/// Encodes `src` with `cfg` into `out`. With `cfg.aim` (the default) it first finds, on a
+/// sample of the sequence, the internal budget that delivers `cfg.tolerance_db` (module
+/// `aim`). The report's error fields stay empty until [`EncodeReport::verify`] measures
+/// the stream.
 pub fn encode<W: Write + Seek>(
     src: &dyn FrameSource,
     cfg: &EncoderConfig,
@@ -72,7 +79,52 @@ pub fn encode<W: Write + Seek>(
             threads: cfg.threads,
             reason: e.to_string(),
         })?;
-    let coded = pool.install(|| encode::code_sequence(src, cfg, progress))?;
+    // The sample passes and the coding run in the pool; the writing, which needs `out`,
+    // outside it (`out` need not be `Send`).
+    let (c, aimed, coded) = pool.install(|| {
+        let (c, aimed, validated) = if cfg.aim {
+            let (a, validated) = aim::aim(src, cfg, progress)?;
+            let c = EncoderConfig {
+                tolerance_db: a.internal_db,
+                aim: false,
+                ..cfg.clone()
+            };
+            (c, Some(a), validated)
+        } else {
+            (cfg.clone(), None, None)
+        };
+        let coded = encode::code_sequence(src, &c, validated, progress)?;
+        Ok::<_, EncodeError>((c, aimed, coded))
+    })?;
+    let mut rep = write_coded(src, &c, coded, out, t_start)?;
+    rep.tolerance_db = cfg.tolerance_db;
+    rep.aim = aimed;
+    Ok(rep)
+}
+
+/// One encode at `cfg`'s budget as it is (inside the worker pool). `validated`: the
+/// frames were checked already and this is the exposure to code them at (a sample must
+/// be measured as the whole sequence is).
+pub(crate) fn encode_in_pool<W: Write + Seek>(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    validated: Option<f32>,
+    out: W,
+    progress: Progress,
+) -> Result<EncodeReport, EncodeError> {
+    let t_start = std::time::Instant::now();
+    let coded = encode::code_sequence(src, cfg, validated, progress)?;
+    write_coded(src, cfg, coded, out, t_start)
+}
+
+/// Writes a coded sequence and reports on it.
+fn write_coded<W: Write + Seek>(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    coded: encode::Coded,
+    out: W,
+    t_start: std::time::Instant,
+) -> Result<EncodeReport, EncodeError> {
     let header = output::write_chunks(out, coded.header, &coded.chunks)?;
     let mut rep = EncodeReport::new(
         src,

@@ -26,6 +26,10 @@ pub struct EncodeReport {
     /// Texel-frames encoded per second of encode time.
     pub texel_frames_per_s: f64,
     pub tolerance_db: f64,
+    /// The budget the kept encode used, dB (the tolerance itself without `aim`).
+    pub internal_tolerance_db: f64,
+    /// What the analysis on a sample found (with `aim`).
+    pub aim: Option<crate::Aim>,
     /// With `--exact`: every pass as (internal tolerance, delivered mean PSNR, bytes).
     pub calibration: Vec<(f64, f64, u64)>,
     pub max_degree: usize,
@@ -45,6 +49,8 @@ pub struct EncodeReport {
     pub max_abs_error: Option<f64>,
     /// HDR: largest relative error over texels brighter than 1% of white.
     pub max_rel_error: Option<f64>,
+    /// The 99.9th percentile of every value's error, in 8-bit levels of the metric.
+    pub p999_levels: Option<f64>,
     /// Per-frame PSNR.
     pub frame_psnr: Vec<f64>,
     /// Luma degree of every tile in every segment: `tile_degrees[segment][tile]`, tiles in
@@ -103,6 +109,8 @@ impl EncodeReport {
             total_s,
             texel_frames_per_s: texel_frames / encode_s.max(1e-9),
             tolerance_db: cfg.tolerance_db,
+            internal_tolerance_db: cfg.tolerance_db,
+            aim: None,
             calibration: Vec::new(),
             max_degree: cfg.max_degree,
             degree_histogram: hist,
@@ -119,6 +127,7 @@ impl EncodeReport {
             worst_psnr: None,
             worst_frame: None,
             max_abs_error: None,
+            p999_levels: None,
             max_rel_error: None,
             frame_psnr: Vec::new(),
             tile_degrees: tilemaps.iter().map(|t| t.luma.clone()).collect(),
@@ -139,18 +148,20 @@ impl EncodeReport {
         name: &str,
         progress: Progress,
     ) -> Result<(), EncodeError> {
-        let seq = measure(src, encoded, name, self.metric, progress)?;
-        let (wf, wp) = seq.worst();
-        self.mean_psnr = Some(seq.mean_psnr());
-        self.worst_psnr = Some(wp);
-        self.worst_frame = Some(wf);
-        self.max_abs_error = Some(seq.max_abs());
-        self.max_rel_error = matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel());
-        self.frame_psnr = seq.frames.iter().map(|f| f.psnr()).collect();
+        let seq = measure(
+            src,
+            encoded,
+            0..src.info().frames,
+            name,
+            self.metric,
+            progress,
+        )?;
+        self.take(seq);
         Ok(())
     }
 
-    /// [`EncodeReport::verify`] on the file at `path`.
+    /// [`EncodeReport::verify`] on the file at `path`, in parallel: each worker opens the
+    /// file and decodes a run of frames.
     pub fn verify_file(
         &mut self,
         src: &dyn FrameSource,
@@ -158,9 +169,39 @@ impl EncodeReport {
         progress: Progress,
     ) -> Result<(), EncodeError> {
         let name = path.display().to_string();
-        let f =
-            std::fs::File::open(path).map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
-        self.verify(src, std::io::BufReader::new(f), &name, progress)
+        let open = || {
+            std::fs::File::open(path)
+                .map(std::io::BufReader::new)
+                .map_err(|e| EncodeError::Input(format!("{name}: {e}")))
+        };
+        let seq = measure_parallel(src, &open, &name, self.metric, progress)?;
+        self.take(seq);
+        Ok(())
+    }
+
+    /// [`EncodeReport::verify`] on a stream in memory, in parallel.
+    pub fn verify_bytes(
+        &mut self,
+        src: &dyn FrameSource,
+        bytes: &[u8],
+        name: &str,
+        progress: Progress,
+    ) -> Result<(), EncodeError> {
+        let open = || Ok(std::io::Cursor::new(bytes));
+        let seq = measure_parallel(src, &open, name, self.metric, progress)?;
+        self.take(seq);
+        Ok(())
+    }
+
+    fn take(&mut self, seq: SequenceError) {
+        let (wf, wp) = seq.worst();
+        self.mean_psnr = Some(seq.mean_psnr());
+        self.worst_psnr = Some(wp);
+        self.worst_frame = Some(wf);
+        self.max_abs_error = Some(seq.max_abs());
+        self.p999_levels = Some(seq.p999_levels());
+        self.max_rel_error = matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel());
+        self.frame_psnr = seq.frames.iter().map(|f| f.psnr()).collect();
     }
 }
 
@@ -204,10 +245,55 @@ impl EncodeReport {
     }
 }
 
-/// Decodes every frame of `encoded` and compares it with the source frames.
+/// Texel-frames of decoder state per worker, at most, when measuring in parallel: each
+/// worker holds a decoder (its keyframes and terms), so large frames take fewer workers.
+const PARALLEL_TEXELS: usize = 1 << 26;
+
+/// [`measure`] split into runs of frames, one decoder per run, on the worker pool (a run
+/// starting mid-chain decodes its keyframes from the last intra one, as a seek does).
+fn measure_parallel<R: Read + Seek>(
+    src: &dyn FrameSource,
+    open: &(dyn Fn() -> Result<R, EncodeError> + Sync),
+    name: &str,
+    metric: Metric,
+    progress: Progress,
+) -> Result<SequenceError, EncodeError> {
+    use rayon::prelude::*;
+    let info = src.info();
+    let n = info.frames;
+    let by_memory = (PARALLEL_TEXELS / (info.width * info.height).max(1)).max(1);
+    let runs = rayon::current_num_threads().min(by_memory).min(n).max(1);
+    let done = std::sync::atomic::AtomicU64::new(0);
+    let counted = |_: &str, _: u64, _: u64| {
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress("verify", d, n as u64);
+    };
+    let parts: Vec<SequenceError> = (0..runs)
+        .into_par_iter()
+        .map(|k| {
+            measure(
+                src,
+                open()?,
+                k * n / runs..(k + 1) * n / runs,
+                name,
+                metric,
+                &counted,
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    let mut seq = SequenceError::default();
+    for p in parts {
+        seq.frames.extend(p.frames);
+        seq.levels.merge(&p.levels);
+    }
+    Ok(seq)
+}
+
+/// Decodes frames `frames` of `encoded` and compares them with the source frames.
 fn measure<R: Read + Seek>(
     src: &dyn FrameSource,
     encoded: R,
+    frames: std::ops::Range<usize>,
     name: &str,
     metric: Metric,
     progress: Progress,
@@ -231,11 +317,11 @@ fn measure<R: Read + Seek>(
         .map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
     let mut seq = SequenceError::default();
     let mut out = vec![0f32; h.texel_count() * h.channels as usize];
-    for i in 0..info.frames {
+    for i in frames {
         dec.frame(i as f64, Output::Stored, &mut out)
             .map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
         let src = src.read(i)?;
-        seq.push(metric.compare(&src.data, &out));
+        seq.add(metric, &src.data, &out);
         progress("verify", i as u64 + 1, info.frames as u64);
     }
     Ok(seq)
@@ -249,7 +335,9 @@ impl std::fmt::Display for EncodeReport {
             self.bytes, self.bpp, self.ratio_to_raw
         )?;
         if let (Some(m), Some(w), Some(wf)) = (self.mean_psnr, self.worst_psnr, self.worst_frame) {
-            write!(f, "error       mean PSNR {m:.2} dB, worst frame {w:.2} dB (frame {wf}), largest error {:.4}", self.max_abs_error.unwrap_or(0.0))?;
+            let max = self.max_abs_error.unwrap_or(0.0) * 255.0;
+            let p999 = self.p999_levels.unwrap_or(0.0);
+            write!(f, "error       mean PSNR {m:.2} dB, worst frame {w:.2} dB (frame {wf}), largest error {max:.2} levels of 255 (p99.9 {p999:.3})")?;
             if let Some(r) = self.max_rel_error {
                 write!(
                     f,
@@ -305,6 +393,23 @@ impl std::fmt::Display for EncodeReport {
             "keyframes   {} ({} intra)",
             self.keyframes, self.intra_keyframes
         )?;
+        if let Some(why) = self.aim.as_ref().and_then(|a| a.skipped.as_ref()) {
+            write!(
+                f,
+                "\naim         skipped ({why}): the tolerance is the budget as it is"
+            )?;
+        } else if let Some(a) = &self.aim {
+            write!(
+                f,
+                "\naim         tolerance {:.2} dB: internal budget {:.2} dB, {:.2} dB on a sample of {} texels a frame after {} pass(es){}",
+                self.tolerance_db,
+                a.internal_db,
+                a.predicted_db,
+                a.sample_texels,
+                a.passes.len(),
+                if a.held_by_worst_frame { ", raised for the worst frame" } else { "" }
+            )?;
+        }
         if !self.calibration.is_empty() {
             let p: Vec<String> = self
                 .calibration

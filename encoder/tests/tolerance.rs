@@ -37,7 +37,12 @@ fn exact_tolerance_holds_the_budget_with_fewer_bytes() {
     };
     let dir = tempfile::tempdir().unwrap();
     let mut stream = Cursor::new(Vec::new());
-    let mut plain = encode(&src, &cfg, &mut stream, &|_, _, _| {}).unwrap();
+    // The budget as it is (no aim): what `--exact` improves on.
+    let as_is = EncoderConfig {
+        aim: false,
+        ..cfg.clone()
+    };
+    let mut plain = encode(&src, &as_is, &mut stream, &|_, _, _| {}).unwrap();
     stream.set_position(0);
     plain.verify(&src, stream, "plain", &|_, _, _| {}).unwrap();
     let out = dir.path().join("exact.vbim");
@@ -70,4 +75,77 @@ fn exact_tolerance_holds_the_budget_with_fewer_bytes() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names, ["exact.vbim"], "only the kept file is left");
+}
+
+/// A real day: Aletsch baked at 256² with 72 frames (one per 20 minutes) by the bake's
+/// own lighting, in memory. With tiles of 8² it has 1024 of them, so the aim draws a
+/// sample rather than using the whole frame.
+fn aletsch_day() -> MemorySource {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples/aletsch.toml");
+    let mut scene = vbim_bake::Scene::load(&path).unwrap();
+    let (size, n) = (256, 72);
+    scene.frames = n;
+    scene.size = size;
+    let pre = vbim_bake::Precomputed::compute(vbim_bake::load_terrain(&scene).unwrap(), &scene);
+    let frames = (0..n)
+        .map(|i| {
+            let mut frame = vec![0f32; size * size * 3];
+            vbim_bake::light::light_frame(&pre, &scene, i, &mut frame);
+            frame
+        })
+        .collect();
+    MemorySource::new("aletsch", size, size, 3, InputKind::Hdr, frames)
+}
+
+#[test]
+fn one_pass_delivers_the_tolerance_asked() {
+    let src = aletsch_day();
+    let measured = |cfg: &EncoderConfig| {
+        let mut stream = Cursor::new(Vec::new());
+        let mut rep = encode(&src, cfg, &mut stream, &|_, _, _| {}).unwrap();
+        rep.verify_bytes(&src, stream.get_ref(), "aletsch", &|_, _, _| {})
+            .unwrap();
+        rep
+    };
+    for t in [40.0, 46.0] {
+        let cfg = EncoderConfig {
+            tolerance_db: t,
+            tile_size: 8,
+            worst_margin_db: f64::INFINITY,
+            ..EncoderConfig::preset(Preset::Default)
+        };
+        let plain = measured(&EncoderConfig {
+            aim: false,
+            ..cfg.clone()
+        });
+        let aimed = measured(&cfg);
+        let (p0, p1) = (plain.mean_psnr.unwrap(), aimed.mean_psnr.unwrap());
+        let a = aimed.aim.as_ref().expect("the aim ran");
+        eprintln!(
+            "T {t}: budget as it is {p0:.2} dB, one pass {p1:.2} dB ({} sample passes)",
+            a.passes.len()
+        );
+        assert!(
+            (p1 - t).abs() <= 0.5,
+            "T {t}: delivered {p1:.2} dB (the budget as it is: {p0:.2} dB); aim {a:?}"
+        );
+        assert!(a.sample_texels < 256 * 256, "a sample, not the whole frame");
+        assert_eq!(aimed.tolerance_db, t);
+        assert_eq!(aimed.internal_tolerance_db, a.internal_db);
+    }
+    // With the worst-frame floor (the default), no frame more than 7 dB below T (to the
+    // sample's accuracy), and the mean at least T.
+    let cfg = EncoderConfig {
+        tolerance_db: 44.0,
+        tile_size: 8,
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    let r = measured(&cfg);
+    let (mean, worst) = (r.mean_psnr.unwrap(), r.worst_psnr.unwrap());
+    eprintln!("T 44 with the floor: mean {mean:.2} dB, worst frame {worst:.2} dB");
+    assert!(
+        worst >= 44.0 - 7.0 - 0.5 && mean >= 44.0 - 0.5,
+        "mean {mean:.2} dB, worst frame {worst:.2} dB; aim {:?}",
+        r.aim
+    );
 }

@@ -1,0 +1,371 @@
+//! `--tolerance T` in one pass: the internal budget that delivers T, found on a sample.
+//!
+//! The encoder's budgets are per segment (`encode.rs`), and a day's frames do not spend
+//! them alike: nights fall far below, sunrise and sunset go above, so the pooled mean
+//! PSNR of a budget lands anywhere from 1 dB below to 13 dB above it (BENCHMARKS.md),
+//! depending on the share of frames that are dark and how much detail the light has. So before coding, the encoder codes a *sample* of the sequence — whole
+//! tiles drawn one from each stratum of the frame, every frame, laid out side by side as
+//! a smaller sequence — at a few internal budgets, measures each with the reference
+//! decoder, and keeps the budget whose sample lands on T. Whole tiles keep everything the
+//! encoder decides locally (a tile's degrees, its 8×8 blocks' quantisation) as it is in
+//! the full frame, and every frame keeps the day's shape (its nights, its sunsets), so
+//! the sample's PSNR follows the full encode's. What the sample cannot see exactly — the
+//! frame-wide statistics the segment search and the quantiser steps use — it estimates
+//! from its tiles; BENCHMARKS.md gives the measured difference between the sample's PSNR
+//! and the full encode's. The budget is then raised, if need be, until the sample's worst
+//! frame is within `worst_margin_db` of T — but never past a mean of T + 0.2 dB.
+
+use std::io::Cursor;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+
+use crate::secant::next_tolerance;
+use crate::{EncodeError, EncoderConfig, FrameSource, MemorySource, Progress};
+
+/// Texels in a sample frame at most: an eighth of a 512² frame. (A quarter was measured
+/// to predict no better on the benchmark days, at a third more time; BENCHMARKS.md.)
+pub const SAMPLE_TEXELS: usize = 32_768;
+/// The sample takes one whole tile in this many, at most.
+const SAMPLE_SHARE: usize = 8;
+/// Memory the sample's frames may take, bytes (f32 values).
+const SAMPLE_BYTES: usize = 256 << 20;
+/// Fewer whole tiles than this and the sample is the sequence itself; a sample has at
+/// least this over `SAMPLE_SHARE`.
+const MIN_TILES: usize = 64;
+/// Sample passes at most for the mean, and in all.
+const MEAN_PASSES: usize = 6;
+const MAX_PASSES: usize = 8;
+/// The sample's PSNR is close enough to T within this, dB.
+const CLOSE_DB: f64 = 0.1;
+/// How far above T the worst-frame floor may raise the mean, dB (inside the ±0.5 dB the
+/// tolerance promises, with room for the sample's error).
+const WORST_RAISE_DB: f64 = 0.2;
+/// Two passes this close around T are interpolated between, dB.
+const BRACKET_DB: f64 = 2.0;
+
+/// What the analysis found.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Aim {
+    /// The internal tolerance the full encode uses, dB.
+    pub internal_db: f64,
+    /// The sample's mean PSNR at that tolerance (interpolated between the passes around
+    /// it): the prediction of what the full encode delivers, dB.
+    pub predicted_db: f64,
+    /// Whether the worst frame, not the mean, set the budget (the mean then comes out
+    /// above the tolerance, by at most 0.2 dB on the sample).
+    pub held_by_worst_frame: bool,
+    /// Every sample pass.
+    pub passes: Vec<SamplePass>,
+    /// Texels of each sample frame (all of them when the sequence is small).
+    pub sample_texels: usize,
+    /// Why there was no aim (the tolerance was used as the budget as it is), if so.
+    pub skipped: Option<String>,
+}
+
+/// One encode and measurement of the sample.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SamplePass {
+    /// The internal tolerance it was coded at, dB.
+    pub internal_db: f64,
+    /// The sample's mean PSNR, dB.
+    pub mean_db: f64,
+    /// The sample's worst frame, dB.
+    pub worst_db: f64,
+    /// The sample's bytes.
+    pub bytes: u64,
+}
+
+/// Finds the internal tolerance at which `src` coded with `cfg` delivers
+/// `cfg.tolerance_db`, with no frame below `cfg.tolerance_db − cfg.worst_margin_db`
+/// (run inside the encoder's worker pool). Also returns the sequence's exposure when
+/// drawing the sample read and checked every frame (the full encode then need not).
+pub(crate) fn aim(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    progress: Progress,
+) -> Result<(Aim, Option<f32>), EncodeError> {
+    let target = cfg.tolerance_db;
+    let sample = Sample::draw(src, cfg, progress)?;
+    let (source, validated): (&dyn FrameSource, Option<f32>) = match &sample {
+        Draw::Tiles(s) => (&s.frames, Some(s.exposure)),
+        Draw::Whole => (src, None),
+        Draw::Skip(why) => {
+            let aim = Aim {
+                internal_db: target,
+                predicted_db: f64::NAN,
+                held_by_worst_frame: false,
+                passes: Vec::new(),
+                sample_texels: 0,
+                skipped: Some(why.clone()),
+            };
+            return Ok((aim, None));
+        }
+    };
+    let sample_texels = {
+        let i = source.info();
+        i.width * i.height
+    };
+    let quiet: Progress = &|_, _, _| {};
+    let mut run = |internal: f64, k: usize| {
+        let c = EncoderConfig {
+            tolerance_db: internal,
+            aim: false,
+            metadata: None,
+            ..cfg.clone()
+        };
+        let mut out = Cursor::new(Vec::new());
+        let mut rep = crate::encode_in_pool(source, &c, validated, &mut out, quiet)?;
+        rep.verify_bytes(source, out.get_ref(), "the tolerance's sample", quiet)?;
+        progress("aim", k as u64 + 1, MAX_PASSES as u64);
+        Ok::<_, EncodeError>(SamplePass {
+            internal_db: internal,
+            mean_db: rep.mean_psnr.unwrap_or(f64::INFINITY),
+            worst_db: rep.worst_psnr.unwrap_or(f64::INFINITY),
+            bytes: rep.bytes,
+        })
+    };
+    let mut passes = Vec::new();
+    let mean = |p: &SamplePass| p.mean_db;
+    let worst = |p: &SamplePass| p.worst_db;
+    let mut internal_db = solve(&mut passes, target, mean, MEAN_PASSES, &mut run)?;
+    // Where the curve is a staircase (content coded almost exactly at any budget), a pass
+    // that met T with no more bytes than the chosen budget's beats it: the most accurate.
+    let bytes_there = along(&passes, internal_db, |p| p.bytes as f64);
+    if let Some(p) = passes
+        .iter()
+        .filter(|p| p.mean_db >= target - CLOSE_DB && p.bytes as f64 <= bytes_there)
+        .max_by(|a, b| a.mean_db.total_cmp(&b.mean_db))
+    {
+        internal_db = p.internal_db;
+    }
+    // The worst frame: a day pooled far above its budget by dark nights puts its errors in
+    // the daylight frames; the protocol pairs a 45 dB mean with a 38 dB worst frame.
+    let floor = target - cfg.worst_margin_db;
+    let held_by_worst_frame = floor.is_finite() && along(&passes, internal_db, worst) < floor;
+    if held_by_worst_frame {
+        let w = solve(&mut passes, floor, worst, MAX_PASSES, &mut run)?;
+        // Raised no further than a mean of T + WORST_RAISE_DB: the tolerance stays the
+        // promise, the floor is kept as far as the band allows.
+        let cap = match along(&passes, w, mean) > target + WORST_RAISE_DB {
+            true => solve(
+                &mut passes,
+                target + WORST_RAISE_DB,
+                mean,
+                MAX_PASSES,
+                &mut run,
+            )?,
+            false => w,
+        };
+        internal_db = internal_db.max(w.min(cap));
+    }
+    progress("aim", MAX_PASSES as u64, MAX_PASSES as u64);
+    let aim = Aim {
+        internal_db,
+        predicted_db: along(&passes, internal_db, mean),
+        held_by_worst_frame,
+        passes,
+        sample_texels,
+        skipped: None,
+    };
+    Ok((aim, validated))
+}
+
+/// The internal tolerance at which `of` (the mean or the worst frame) reaches `goal`:
+/// a pass within `CLOSE_DB` of it, or the crossing of the line between the two passes
+/// around it once they are within `BRACKET_DB` (the curve is close to straight over a dB
+/// or two), found with secant steps (`next_tolerance`) while fewer than `most` passes
+/// ran. Without either, the pass closest to the goal.
+fn solve(
+    passes: &mut Vec<SamplePass>,
+    goal: f64,
+    of: impl Fn(&SamplePass) -> f64,
+    most: usize,
+    run: &mut impl FnMut(f64, usize) -> Result<SamplePass, EncodeError>,
+) -> Result<f64, EncodeError> {
+    loop {
+        let pts: Vec<(f64, f64, u64)> = passes
+            .iter()
+            .map(|p| (p.internal_db, of(p), p.bytes))
+            .collect();
+        let closest = pts
+            .iter()
+            .min_by(|a, b| (a.1 - goal).abs().total_cmp(&(b.1 - goal).abs()));
+        if let Some(c) = closest.filter(|c| (c.1 - goal).abs() <= CLOSE_DB || !c.1.is_finite()) {
+            return Ok(c.0);
+        }
+        if let Some(x) = interpolate(&pts, goal) {
+            return Ok(x);
+        }
+        let next = match pts.is_empty() {
+            true => goal,
+            false => next_tolerance(&pts, goal - CLOSE_DB, goal + CLOSE_DB),
+        }
+        // A budget outside what the encoder takes would fail the encode.
+        .clamp(10.0, 99.0);
+        if passes.len() >= most || pts.iter().any(|q| q.0 == next) {
+            return Ok(closest.expect("one pass at least").0);
+        }
+        let k = passes.len();
+        passes.push(run(next, k)?);
+    }
+}
+
+/// `of` at internal tolerance `t`, linear between the passes nearest it on either side
+/// (the nearest pass's value outside them).
+fn along(passes: &[SamplePass], t: f64, of: impl Fn(&SamplePass) -> f64) -> f64 {
+    let below = passes
+        .iter()
+        .filter(|p| p.internal_db <= t)
+        .max_by(|a, b| a.internal_db.total_cmp(&b.internal_db));
+    let above = passes
+        .iter()
+        .filter(|p| p.internal_db >= t)
+        .min_by(|a, b| a.internal_db.total_cmp(&b.internal_db));
+    match (below, above) {
+        (Some(a), Some(b)) if b.internal_db > a.internal_db => {
+            let u = (t - a.internal_db) / (b.internal_db - a.internal_db);
+            of(a) + u * (of(b) - of(a))
+        }
+        (Some(a), _) | (None, Some(a)) => of(a),
+        (None, None) => f64::NAN,
+    }
+}
+
+/// The internal tolerance at which the line between the passes nearest `target` on
+/// either side crosses it, when they are within `BRACKET_DB` of each other.
+fn interpolate(passes: &[(f64, f64, u64)], target: f64) -> Option<f64> {
+    let below = passes
+        .iter()
+        .filter(|q| q.1 < target)
+        .max_by(|a, b| a.0.total_cmp(&b.0))?;
+    let above = passes
+        .iter()
+        .filter(|q| q.1 > target)
+        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    let ((t0, p0, _), (t1, p1, _)) = (*below, *above);
+    (p1 - p0 <= BRACKET_DB).then(|| t0 + (target - p0) * (t1 - t0) / (p1 - p0))
+}
+
+/// What the aim codes its passes on.
+enum Draw {
+    /// The sequence itself: too few whole tiles to sample.
+    Whole,
+    /// A sample of its tiles.
+    Tiles(Sample),
+    /// No aim: the sample would not fit in memory (why).
+    Skip(String),
+}
+
+/// A sample of the sequence: whole tiles of every frame, side by side.
+struct Sample {
+    frames: MemorySource,
+    /// The full sequence's exposure (used for HDR): the metric must be the full encode's.
+    exposure: f32,
+}
+
+impl Sample {
+    /// Draws the sample, reading every frame once.
+    fn draw(
+        src: &dyn FrameSource,
+        cfg: &EncoderConfig,
+        progress: Progress,
+    ) -> Result<Draw, EncodeError> {
+        let info = src.info();
+        crate::encode::check_shape(&info)?;
+        let ts = cfg.tile_size;
+        let (tx, ty) = (info.width / ts, info.height / ts);
+        let whole = tx * ty;
+        if whole < MIN_TILES {
+            return Ok(Draw::Whole);
+        }
+        let tile_bytes = ts * ts * info.channels * 4 * info.frames.max(1);
+        let want = (whole / SAMPLE_SHARE)
+            .min(SAMPLE_TEXELS / (ts * ts))
+            .max(MIN_TILES / SAMPLE_SHARE)
+            .min(SAMPLE_BYTES / tile_bytes);
+        if want < MIN_TILES / SAMPLE_SHARE {
+            return Ok(Draw::Skip(format!(
+                "{} frames: a sample of {} tiles would hold more than {} MB",
+                info.frames,
+                MIN_TILES / SAMPLE_SHARE,
+                SAMPLE_BYTES >> 20
+            )));
+        }
+        // A rectangle of tiles, about square.
+        let cols = (want as f64).sqrt().floor() as usize;
+        let rows = want / cols;
+        let chosen = stratified(whole, cols * rows);
+        let (w, h, ch) = (cols * ts, rows * ts, info.channels);
+        let done = AtomicU64::new(0);
+        let read: Vec<(Vec<f32>, f32)> = (0..info.frames)
+            .into_par_iter()
+            .map(|i| {
+                let f = src.read(i)?;
+                let mut out = vec![0f32; w * h * ch];
+                for (k, &t) in chosen.iter().enumerate() {
+                    let (sx, sy) = ((t % tx) * ts, (t / tx) * ts);
+                    let (dx, dy) = ((k % cols) * ts, (k / cols) * ts);
+                    for y in 0..ts {
+                        let s = ((sy + y) * info.width + sx) * ch;
+                        let d = ((dy + y) * w + dx) * ch;
+                        out[d..d + ts * ch].copy_from_slice(&f.data[s..s + ts * ch]);
+                    }
+                }
+                progress(
+                    "sample",
+                    done.fetch_add(1, Ordering::Relaxed) + 1,
+                    info.frames as u64,
+                );
+                Ok((out, vbim_format::curve::max_green(&f.data, ch)))
+            })
+            .collect::<Result<_, EncodeError>>()?;
+        let greens: Vec<f32> = read.iter().map(|r| r.1).collect();
+        let exposure = vbim_format::curve::exposure_from_max_greens(&greens);
+        let frames = read.into_iter().map(|r| r.0).collect();
+        let name = format!("{} (sample)", info.name);
+        Ok(Draw::Tiles(Sample {
+            frames: MemorySource::new(&name, w, h, ch, info.kind, frames),
+            exposure,
+        }))
+    }
+}
+
+/// `k` of the tiles `0..n` (raster order), one from each of `k` equal runs, at an offset
+/// within its run that a fixed hash picks: the sample covers the whole frame, and is the
+/// same on every run.
+fn stratified(n: usize, k: usize) -> Vec<usize> {
+    (0..k)
+        .map(|i| {
+            let (a, b) = (i * n / k, (i + 1) * n / k);
+            a + (splitmix(i as u64) % (b - a).max(1) as u64) as usize
+        })
+        .collect()
+}
+
+/// SplitMix64: a well-mixed 64-bit hash of `x`.
+fn splitmix(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_strata_cover_the_frame_once_each() {
+        for (n, k) in [(1024, 256), (1000, 250), (4096, 256), (64, 64)] {
+            let s = stratified(n, k);
+            assert_eq!(s.len(), k);
+            for (i, &t) in s.iter().enumerate() {
+                assert!(
+                    (i * n / k..(i + 1) * n / k).contains(&t),
+                    "{n} {k}: {i} → {t}"
+                );
+            }
+        }
+    }
+}
