@@ -187,7 +187,7 @@ pub enum BenchCommand {
     /// Draw a rate–distortion CSV (method,setting,bytes,bpp,mean_psnr,…) as a PNG plot.
     PlotRd(BenchPlotArgs),
     /// Draw a tolerance CSV (sequence,mode,asked,delivered,…; scripts/tolerance_bench.sh):
-    /// the mean PSNR delivered against the tolerance asked, with the ±0.5 dB band.
+    /// the mean PSNR delivered minus the tolerance asked, against it, with the ±0.5 dB band.
     PlotTolerance(BenchPlotArgs),
     /// Sweep bandwidth caps from 0.25× to 2× the stream's mean rate under a stall pattern,
     /// for each policy; drift and shown error against bandwidth (CSV + PNG).

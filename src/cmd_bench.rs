@@ -245,11 +245,12 @@ fn plot_tolerance(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
         );
         (lo, hi) = (lo.min(asked), hi.max(asked));
         let name = format!("{} ({})", f[0], f[1]);
+        let miss = got - asked;
         match series.iter_mut().find(|s| s.name == name) {
-            Some(s) => s.points.push((asked, got)),
+            Some(s) => s.points.push((asked, miss)),
             None => series.push(crate::plot::Series {
                 name,
-                points: vec![(asked, got)],
+                points: vec![(asked, miss)],
             }),
         }
     }
@@ -259,17 +260,17 @@ fn plot_tolerance(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
     for s in &mut series {
         s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
-    for (name, d) in [("asked − 0.5 dB", -0.5), ("asked + 0.5 dB", 0.5)] {
+    for (name, d) in [("−0.5 dB", -0.5), ("+0.5 dB", 0.5)] {
         series.push(crate::plot::Series {
             name: name.into(),
-            points: vec![(lo, lo + d), (hi, hi + d)],
+            points: vec![(lo, d), (hi, d)],
         });
     }
     crate::plot::lines(
         &a.out,
         &a.title,
         "tolerance asked, dB",
-        "mean PSNR delivered, dB (protocol metric)",
+        "mean PSNR delivered − asked, dB (protocol metric)",
         &series,
         false,
     )?;
