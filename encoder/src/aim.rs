@@ -142,8 +142,8 @@ pub(crate) fn aim(
     // The worst frame: a day pooled far above its budget by dark nights puts its errors in
     // the daylight frames; the protocol pairs a 45 dB mean with a 38 dB worst frame.
     let floor = target - cfg.worst_margin_db;
-    let held_by_worst_frame = floor.is_finite() && along(&passes, internal_db, worst) < floor;
-    if held_by_worst_frame {
+    let for_the_mean = internal_db;
+    if floor.is_finite() && along(&passes, internal_db, worst) < floor {
         let w = solve(&mut passes, floor, worst, MAX_PASSES, &mut run)?;
         // Raised no further than a mean of T + WORST_RAISE_DB: the tolerance stays the
         // promise, the floor is kept as far as the band allows.
@@ -160,6 +160,7 @@ pub(crate) fn aim(
         internal_db = internal_db.max(w.min(cap));
     }
     progress("aim", MAX_PASSES as u64, MAX_PASSES as u64);
+    let held_by_worst_frame = internal_db > for_the_mean;
     let aim = Aim {
         internal_db,
         predicted_db: along(&passes, internal_db, mean),
