@@ -251,7 +251,7 @@ const PARALLEL_TEXELS: usize = 1 << 26;
 
 /// [`measure`] split into runs of frames, one decoder per run, on the worker pool (a run
 /// starting mid-chain decodes its keyframes from the last intra one, as a seek does).
-fn measure_parallel<R: Read + Seek>(
+fn measure_parallel<R: Read + Seek + Send>(
     src: &dyn FrameSource,
     open: &(dyn Fn() -> Result<R, EncodeError> + Sync),
     name: &str,
@@ -268,12 +268,16 @@ fn measure_parallel<R: Read + Seek>(
         let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         progress("verify", d, n as u64);
     };
-    let parts: Vec<SequenceError> = (0..runs)
+    // Every run's reader is opened before any work: a file removed while it is being
+    // measured (an interrupt removes an `--exact` pass) stays readable through them.
+    let readers: Vec<R> = (0..runs).map(|_| open()).collect::<Result<_, _>>()?;
+    let parts: Vec<SequenceError> = readers
         .into_par_iter()
-        .map(|k| {
+        .enumerate()
+        .map(|(k, reader)| {
             measure(
                 src,
-                open()?,
+                reader,
                 k * n / runs..(k + 1) * n / runs,
                 name,
                 metric,
