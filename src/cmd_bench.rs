@@ -185,29 +185,42 @@ fn bench_lossless(a: crate::cli::BenchLosslessArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
-    let text = std::fs::read_to_string(&a.csv).map_err(|e| format!("{}: {e}", a.csv.display()))?;
+/// The rows of a benchmark CSV (header skipped, rows with fewer than `fields` values
+/// ignored) as series: `point` names each row's series and gives its point. Points are
+/// sorted by x.
+fn csv_series(
+    path: &std::path::Path,
+    fields: usize,
+    point: impl Fn(&[&str], &str) -> Result<(String, (f64, f64)), String>,
+) -> Result<Vec<crate::plot::Series>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let mut series: Vec<crate::plot::Series> = Vec::new();
     for line in text.lines().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
-        if f.len() < 5 {
+        if f.len() < fields {
             continue;
         }
-        let (bpp, psnr): (f64, f64) = (
-            f[3].parse().map_err(|_| format!("bad bpp in {line}"))?,
-            f[4].parse().map_err(|_| format!("bad PSNR in {line}"))?,
-        );
-        match series.iter_mut().find(|s| s.name == f[0]) {
-            Some(s) => s.points.push((bpp, psnr)),
+        let (name, p) = point(&f, line)?;
+        match series.iter_mut().find(|s| s.name == name) {
+            Some(s) => s.points.push(p),
             None => series.push(crate::plot::Series {
-                name: f[0].to_string(),
-                points: vec![(bpp, psnr)],
+                name,
+                points: vec![p],
             }),
         }
     }
     for s in &mut series {
         s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
+    Ok(series)
+}
+
+fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
+    let mut series = csv_series(&a.csv, 5, |f, line| {
+        let bpp = f[3].parse().map_err(|_| format!("bad bpp in {line}"))?;
+        let psnr = f[4].parse().map_err(|_| format!("bad PSNR in {line}"))?;
+        Ok((f[0].to_string(), (bpp, psnr)))
+    })?;
     // Lossless points (99 dB) would squash the axis: named in the title instead.
     let mut title = a.title.clone();
     for s in series
@@ -230,36 +243,20 @@ fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
 }
 
 fn plot_tolerance(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
-    let text = std::fs::read_to_string(&a.csv).map_err(|e| format!("{}: {e}", a.csv.display()))?;
-    let mut series: Vec<crate::plot::Series> = Vec::new();
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for line in text.lines().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() < 4 {
-            continue;
-        }
-        let (asked, got): (f64, f64) = (
-            f[2].parse()
-                .map_err(|_| format!("bad tolerance in {line}"))?,
-            f[3].parse().map_err(|_| format!("bad PSNR in {line}"))?,
-        );
-        (lo, hi) = (lo.min(asked), hi.max(asked));
-        let name = format!("{} ({})", f[0], f[1]);
-        let miss = got - asked;
-        match series.iter_mut().find(|s| s.name == name) {
-            Some(s) => s.points.push((asked, miss)),
-            None => series.push(crate::plot::Series {
-                name,
-                points: vec![(asked, miss)],
-            }),
-        }
-    }
+    let mut series = csv_series(&a.csv, 4, |f, line| {
+        let asked: f64 = f[2]
+            .parse()
+            .map_err(|_| format!("bad tolerance in {line}"))?;
+        let got: f64 = f[3].parse().map_err(|_| format!("bad PSNR in {line}"))?;
+        Ok((format!("{} ({})", f[0], f[1]), (asked, got - asked)))
+    })?;
     if series.is_empty() {
         return Err(format!("{}: no rows", a.csv.display()));
     }
-    for s in &mut series {
-        s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
+    let asked = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+    let (lo, hi) = asked.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+        (l.min(x), h.max(x))
+    });
     for (name, d) in [("−0.5 dB", -0.5), ("+0.5 dB", 0.5)] {
         series.push(crate::plot::Series {
             name: name.into(),

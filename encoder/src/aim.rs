@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
-use crate::secant::next_tolerance;
+use crate::secant::{bracket, next_tolerance, Pass};
 use crate::{EncodeError, EncoderConfig, FrameSource, MemorySource, Progress};
 
 /// Texels in a sample frame at most: an eighth of a 512² frame. (A quarter was measured
@@ -185,7 +185,7 @@ fn solve(
     run: &mut impl FnMut(f64, usize) -> Result<SamplePass, EncodeError>,
 ) -> Result<f64, EncodeError> {
     loop {
-        let pts: Vec<(f64, f64, u64)> = passes
+        let pts: Vec<Pass> = passes
             .iter()
             .map(|p| (p.internal_db, of(p), p.bytes))
             .collect();
@@ -235,16 +235,10 @@ fn along(passes: &[SamplePass], t: f64, of: impl Fn(&SamplePass) -> f64) -> f64 
 
 /// The internal tolerance at which the line between the passes nearest `target` on
 /// either side crosses it, when they are within `BRACKET_DB` of each other.
-fn interpolate(passes: &[(f64, f64, u64)], target: f64) -> Option<f64> {
-    let below = passes
-        .iter()
-        .filter(|q| q.1 < target)
-        .max_by(|a, b| a.0.total_cmp(&b.0))?;
-    let above = passes
-        .iter()
-        .filter(|q| q.1 > target)
-        .min_by(|a, b| a.0.total_cmp(&b.0))?;
-    let ((t0, p0, _), (t1, p1, _)) = (*below, *above);
+fn interpolate(passes: &[Pass], target: f64) -> Option<f64> {
+    let (Some(&(t0, p0, _)), Some(&(t1, p1, _))) = bracket(passes, target, target) else {
+        return None;
+    };
     (p1 - p0 <= BRACKET_DB).then(|| t0 + (target - p0) * (t1 - t0) / (p1 - p0))
 }
 

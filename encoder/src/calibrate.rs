@@ -12,7 +12,7 @@ use std::path::Path;
 
 use vbim_bake::output::Temporary;
 
-use crate::secant::next_tolerance;
+use crate::secant::{next_tolerance, Pass};
 use crate::{encode_file, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
 
 /// Width of the accepted band above the tolerance, dB.
@@ -40,7 +40,7 @@ pub fn encode_to_tolerance(
         })?;
     let pass_path =
         |k: usize| out.with_file_name(format!(".{name}.pass{k}-{}", std::process::id()));
-    let mut passes: Vec<(f64, f64, u64)> = Vec::new();
+    let mut passes: Vec<Pass> = Vec::new();
     // (report, file) of the smallest file meeting the target, and of the best one missing
     // it. Pass files are registered as temporaries: an interrupted run removes them.
     let mut met: Option<(EncodeReport, Temporary)> = None;

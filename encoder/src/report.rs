@@ -160,8 +160,8 @@ impl EncodeReport {
         Ok(())
     }
 
-    /// [`EncodeReport::verify`] on the file at `path`, in parallel: each worker opens the
-    /// file and decodes a run of frames.
+    /// [`EncodeReport::verify`] on the file at `path`, in parallel: the file is opened once
+    /// per worker, and each worker decodes a run of frames.
     pub fn verify_file(
         &mut self,
         src: &dyn FrameSource,
