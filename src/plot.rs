@@ -88,6 +88,9 @@ pub fn lines(
         ($c:expr) => {{
             let mut c = $c.map_err(|e| e.to_string())?;
             c.configure_mesh()
+                // Shortest form of a rounded value: a log axis ticks at 0.3, 0.4, … whose
+                // default labels printed every binary digit of 0.30000000000000004.
+                .x_label_formatter(&|x| format!("{}", (x * 1000.0).round() / 1000.0))
                 .x_desc(x_label)
                 .y_desc(y_label)
                 .label_style(("sans-serif", 14))
