@@ -383,6 +383,12 @@ pub struct EncodeArgs {
     /// Tile size in texels (multiple of 8) [default: 16].
     #[arg(long)]
     pub tile: Option<usize>,
+    /// What the encode may hold (SI units: `4GB`, `800MB`). Frames too large to hold a segment's worth whole are coded in bands of tile rows read a band at a time; the output is the same.
+    #[arg(long = "memory-limit", default_value = "4GB", value_parser = crate::units::parse_memory_limit)]
+    pub memory_limit: vbim_format::Limits,
+    /// Tile rows per band, instead of what the memory limit allows (the output is the same; for measuring).
+    #[arg(long)]
+    pub band: Option<usize>,
     /// Preset: smaller search, degree ≤ 3, zstd 3.
     #[arg(long, conflicts_with = "best")]
     pub fast: bool,

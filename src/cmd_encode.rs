@@ -71,6 +71,8 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
         cfg.tile_size = t;
     }
     cfg.threads = a.threads;
+    cfg.memory_limit = a.memory_limit.memory;
+    cfg.band_tiles = a.band;
     let stages = Stages::new();
     let progress = |s: &str, d: u64, t: u64| stages.report(s, d, t);
     if let Err(e) = cfg.validate() {
@@ -143,6 +145,7 @@ fn flag_of(e: &ConfigError) -> &'static str {
         ConfigError::TileSize(_) => "--tile",
         ConfigError::Rate(..) => "--fps",
         ConfigError::Threads { .. } => "--threads",
+        ConfigError::EmptyBands => "--band",
         _ => "settings",
     }
 }

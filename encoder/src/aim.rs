@@ -112,6 +112,9 @@ pub(crate) fn aim(
             tolerance_db: internal,
             aim: false,
             metadata: None,
+            // The sample is in memory and small: code its frames whole.
+            band_tiles: None,
+            memory_limit: u64::MAX,
             ..cfg.clone()
         };
         let mut out = Cursor::new(Vec::new());

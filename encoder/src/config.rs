@@ -59,6 +59,13 @@ pub struct EncoderConfig {
     pub metadata: Option<String>,
     /// Sub-sampling stride of the segment-length search (1 = every texel).
     pub search_stride: usize,
+    /// What the encode may hold, in bytes (an estimate counted before it starts; the
+    /// output does not depend on it). A sequence whose frames do not fit whole is coded
+    /// in bands of tile rows, read from the input a band at a time (docs/MODEL.md).
+    pub memory_limit: u64,
+    /// Tile rows per band, overriding what `memory_limit` would choose (the output does
+    /// not depend on it either; tests and benchmarks compare the two).
+    pub band_tiles: Option<usize>,
     /// Dead zone of the quantiser, in steps beyond the half step.
     pub deadzone: f32,
     /// Chroma steps relative to luma.
@@ -83,6 +90,8 @@ impl EncoderConfig {
             looping: true,
             metadata: None,
             search_stride: 4,
+            memory_limit: DEFAULT_MEMORY_LIMIT,
+            band_tiles: None,
             deadzone: 0.2,
             chroma_step_factor: 1.5,
         };
@@ -139,6 +148,9 @@ impl EncoderConfig {
         if self.search_stride == 0 {
             return Err(ConfigError::SearchStride);
         }
+        if self.band_tiles == Some(0) {
+            return Err(ConfigError::EmptyBands);
+        }
         if self.threads > max_threads() {
             return Err(ConfigError::Threads {
                 threads: self.threads,
@@ -156,6 +168,10 @@ impl EncoderConfig {
         ((self.intra_interval_s * self.rate.0 as f64 / self.rate.1 as f64).floor() as u32).max(1)
     }
 }
+
+/// The encoder's memory limit unless told otherwise: 4 GB, which holds a 2048² day's
+/// frames whole and codes 4096² and 8192² in bands.
+pub const DEFAULT_MEMORY_LIMIT: u64 = 4_000_000_000;
 
 /// The most worker threads an encode may ask for: 4 per core, at least 16. (3,000
 /// threads took 10 s just to start; the work is CPU-bound, so more than the cores buys
@@ -197,6 +213,9 @@ pub enum ConfigError {
     /// `search_stride` of 0.
     #[error("search stride 0 (1 searches every texel)")]
     SearchStride,
+    /// `band_tiles` of 0.
+    #[error("bands must be at least 1 tile row high")]
+    EmptyBands,
     /// The worker pool could not be started.
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads {

@@ -67,15 +67,28 @@ impl Domain {
     /// A frame (interleaved, linear or code / 255) → coded planes (Y, Co, Cg or Y alone)
     /// padded by repeating edge texels, and the per-texel sensitivity plane.
     pub fn code(&self, data: &[f32]) -> (Vec<Plane>, Vec<f32>) {
+        self.code_rows(data, 0, 0..self.ph)
+    }
+
+    /// Padded rows `rows` of a frame, from the source rows starting at `first_row`
+    /// (`data` holds source rows `first_row..`, and every source row `rows` needs:
+    /// [`Domain::source_rows`]). Each texel is coded as [`Domain::code`] codes it.
+    pub fn code_rows(
+        &self,
+        data: &[f32],
+        first_row: usize,
+        rows: std::ops::Range<usize>,
+    ) -> (Vec<Plane>, Vec<f32>) {
         let ch = self.channels;
-        let mut planes = vec![Plane::zeros(self.pw, self.ph); ch];
-        let mut sens = vec![0f32; self.pw * self.ph];
-        for y in 0..self.ph {
-            let sy = y.min(self.height - 1);
+        let h = rows.len();
+        let mut planes = vec![Plane::zeros(self.pw, h); ch];
+        let mut sens = vec![0f32; self.pw * h];
+        for (r, y) in rows.enumerate() {
+            let sy = y.min(self.height - 1) - first_row;
             for x in 0..self.pw {
                 let sx = x.min(self.width - 1);
                 let s = (sy * self.width + sx) * ch;
-                let i = y * self.pw + x;
+                let i = r * self.pw + x;
                 if ch == 3 {
                     let c = [0, 1, 2].map(|k| self.transfer.encode(data[s + k]));
                     let v = rgb_to_ycocg(c);
@@ -93,5 +106,62 @@ impl Domain {
             }
         }
         (planes, sens)
+    }
+
+    /// The source rows that padded rows `rows` are coded from (the padding repeats the
+    /// last row).
+    pub fn source_rows(&self, rows: &std::ops::Range<usize>) -> std::ops::Range<usize> {
+        let last = self.height - 1;
+        rows.start.min(last)..rows.end.min(self.height).max(rows.start.min(last) + 1)
+    }
+
+    /// The domain of a frame subsampled as the segment search reads it: every
+    /// `stride`-th texel of each tile, in both directions, packed into tiles of
+    /// [`Domain::sub_tile`] texels.
+    pub fn subsampled(&self, tile: usize, stride: usize) -> Domain {
+        let st = Self::sub_tile(tile, stride);
+        Domain {
+            transfer: self.transfer,
+            channels: self.channels,
+            width: self.pw / tile * st,
+            height: self.ph / tile * st,
+            pw: self.pw / tile * st,
+            ph: self.ph / tile * st,
+            lut: self.lut.clone(),
+            lut_max: self.lut_max,
+        }
+    }
+
+    /// Texels a side of a subsampled tile.
+    pub fn sub_tile(tile: usize, stride: usize) -> usize {
+        tile.div_ceil(stride)
+    }
+
+    /// Keeps the texels of a coded frame (`planes`, `sens` over the padded frame) that
+    /// the search reads, laid out in the domain of [`Domain::subsampled`].
+    pub fn subsample(
+        &self,
+        planes: &[Plane],
+        sens: &[f32],
+        tile: usize,
+        stride: usize,
+    ) -> (Vec<Plane>, Vec<f32>) {
+        let st = Self::sub_tile(tile, stride);
+        let (tx, ty) = (self.pw / tile, self.ph / tile);
+        let sw = tx * st;
+        let mut out = vec![Plane::zeros(sw, ty * st); planes.len()];
+        let mut out_sens = vec![0f32; sw * ty * st];
+        for y in 0..ty * st {
+            let sy = (y / st) * tile + (y % st) * stride;
+            for x in 0..sw {
+                let sx = (x / st) * tile + (x % st) * stride;
+                let (i, o) = (sy * self.pw + sx, y * sw + x);
+                for (p, q) in planes.iter().zip(out.iter_mut()) {
+                    q.data[o] = p.data[i];
+                }
+                out_sens[o] = sens[i];
+            }
+        }
+        (out, out_sens)
     }
 }

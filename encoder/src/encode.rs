@@ -1,6 +1,7 @@
 //! The encode itself: validate every frame, choose the coded domain, then walk the
 //! sequence front to back — segment length, closing keyframe, the segment's model — over
-//! a window of frames that holds one segment's worth at a time.
+//! a window of frames that holds one segment's worth at a time: subsampled for the
+//! search, and whole or a band of tile rows at a time for the model (module `plan`).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -16,8 +17,9 @@ use vbim_format::{ChunkKind, ColorEncoding, Header, Transfer};
 
 use crate::domain::Domain;
 use crate::keyframe::{self, KeyParams};
-use crate::model::{self, CodedFrame, Projectors, SegmentParams};
+use crate::model::{self, CodedFrame, Projectors, Rows, SegmentInput, SegmentParams};
 use crate::output::{header_for, pack_metadata, PendingChunk};
+use crate::plan::Plan;
 use crate::segment::Search;
 use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress, SegmentMode};
 
@@ -43,6 +45,8 @@ pub(crate) struct Coded {
     pub tilemaps: Vec<TileMap>,
     pub intra_keyframes: usize,
     pub metric: Metric,
+    /// How the frames were held.
+    pub plan: Plan,
     /// When coding started (after validation).
     pub started: Instant,
 }
@@ -119,7 +123,9 @@ pub(crate) fn code_sequence(
     let looping = cfg.looping;
     let end = if looping { n } else { n - 1 } as u32;
     let intra_every = cfg.intra_interval_frames();
-    let mut window = Window::new(src, &dom, end);
+    let plan = crate::plan::plan(&info, cfg, rayon::current_num_threads())?;
+    let sub_dom = dom.subsampled(cfg.tile_size, cfg.search_stride);
+    let mut window = Window::new(src, &dom, cfg, plan, end);
     let mut chunks: Vec<PendingChunk> = Vec::new();
     if let Some(m) = &cfg.metadata {
         chunks.push(PendingChunk {
@@ -133,7 +139,7 @@ pub(crate) fn code_sequence(
     // The header keyframes are decoded against (their shape and curve only).
     let key_header = header_for(&info, cfg, (color, transfer), 0, 0, 1);
     window.load(0)?;
-    let first = keyframe::code(&window.frames[&0], None, &key_header, kp)?;
+    let first = keyframe::code(&*window.full(0)?, None, &key_header, kp)?;
     let k0 = first.decoded.clone();
     chunks.push(keyframe_chunk(first, 0, 0));
     let mut boundaries = vec![0u32];
@@ -154,8 +160,9 @@ pub(crate) fn code_sequence(
             SegmentMode::Fixed(_) => max_len,
             SegmentMode::Auto { .. } => {
                 let search = Search {
-                    dom: &dom,
-                    window: &window.frames,
+                    dom: &sub_dom,
+                    tile: Domain::sub_tile(cfg.tile_size, cfg.search_stride),
+                    window: &window.subs,
                     cfg,
                     params: &sp,
                 };
@@ -170,7 +177,7 @@ pub(crate) fn code_sequence(
             k0.clone()
         } else {
             let prev = (e - last_intra <= intra_every).then(|| prev_key.as_slice());
-            let k = keyframe::code(&window.frames[&e], prev, &key_header, kp)?;
+            let k = keyframe::code(&*window.full(e)?, prev, &key_header, kp)?;
             if k.intra {
                 last_intra = e;
                 intra_keyframes += 1;
@@ -179,16 +186,15 @@ pub(crate) fn code_sequence(
             chunks.push(keyframe_chunk(k, s + 1, e));
             decoded
         };
-        let inner: Vec<&CodedFrame> = (b + 1..e).map(|i| window.frames[&i].as_ref()).collect();
-        let code = model::code_segment(
-            &dom,
-            cfg.tile_size,
-            &prev_key,
-            &k1,
-            &inner,
-            &mut projectors,
-            &sp,
-        );
+        let input = SegmentInput {
+            k0: &prev_key,
+            k1: &k1,
+            inner: (e - b).saturating_sub(1) as usize,
+            sens_sq: (b + 1..e).map(|i| window.sens_sq[&i]).sum(),
+            band_tiles: plan.band_tiles,
+            rows: |rows| window.rows(b + 1..e, rows),
+        };
+        let code = model::code_segment(&dom, cfg.tile_size, input, &mut projectors, &sp)?;
         // Playback order: a segment's tile map and coefficients follow its closing keyframe.
         let parts = [
             (ChunkKind::TileMap, code.tilemap_bytes),
@@ -228,6 +234,7 @@ pub(crate) fn code_sequence(
         tilemaps,
         intra_keyframes,
         metric,
+        plan,
         started,
     })
 }
@@ -263,12 +270,21 @@ fn keyframe_chunk(k: keyframe::CodedKeyframe, number: u32, frame: u32) -> Pendin
     }
 }
 
-/// The frames the encoder holds: read once, in order, and dropped once behind the current
-/// boundary, so that memory stays at one segment's worth of frames.
+/// The frames the encoder holds: read in order, and dropped once behind the current
+/// boundary, so that memory stays at one segment's worth of frames — subsampled for the
+/// search always, whole only when the plan allows it.
 struct Window<'a> {
     src: &'a dyn FrameSource,
     dom: &'a Domain,
-    frames: BTreeMap<u32, Arc<CodedFrame>>,
+    tile: usize,
+    stride: usize,
+    plan: Plan,
+    /// Each frame as the search reads it.
+    subs: BTreeMap<u32, Arc<CodedFrame>>,
+    /// Each frame whole (when the plan holds them).
+    full: BTreeMap<u32, Arc<CodedFrame>>,
+    /// Each frame's sum of squared sensitivities over the whole frame.
+    sens_sq: BTreeMap<u32, f64>,
     /// Frames in the sequence (the window's frame numbers run past it at a loop's end).
     frames_in_source: usize,
     /// The first frame never loaded.
@@ -278,42 +294,112 @@ struct Window<'a> {
 }
 
 impl<'a> Window<'a> {
-    fn new(src: &'a dyn FrameSource, dom: &'a Domain, end: u32) -> Self {
+    fn new(
+        src: &'a dyn FrameSource,
+        dom: &'a Domain,
+        cfg: &EncoderConfig,
+        plan: Plan,
+        end: u32,
+    ) -> Self {
         Window {
             src,
             dom,
-            frames: BTreeMap::new(),
+            tile: cfg.tile_size,
+            stride: cfg.search_stride,
+            plan,
+            subs: BTreeMap::new(),
+            full: BTreeMap::new(),
+            sens_sq: BTreeMap::new(),
             frames_in_source: src.info().frames,
             next: 0,
             end,
         }
     }
 
-    /// Reads and codes every frame up to `upto` not read yet (in parallel).
+    /// Frame `i` of the window, read whole and coded.
+    fn read_full(&self, i: u32) -> Result<CodedFrame, EncodeError> {
+        let f = self.src.read(i as usize % self.frames_in_source)?;
+        let (planes, sens) = self.dom.code(&f.data);
+        Ok(CodedFrame { planes, sens })
+    }
+
+    /// Reads and codes every frame up to `upto` not read yet (in parallel, as many at
+    /// once as the plan allows).
     fn load(&mut self, upto: u32) -> Result<(), EncodeError> {
         let upto = upto.min(self.end);
         if upto < self.next {
             return Ok(());
         }
-        let n = self.frames_in_source;
         let missing: Vec<u32> = (self.next..=upto).collect();
         self.next = upto + 1;
-        let fresh: Vec<(u32, CodedFrame)> = missing
-            .par_iter()
-            .map(|&i| {
-                let f = self.src.read(i as usize % n)?;
-                let (planes, sens) = self.dom.code(&f.data);
-                Ok((i, CodedFrame { planes, sens }))
-            })
-            .collect::<Result<_, EncodeError>>()?;
-        for (i, f) in fresh {
-            self.frames.insert(i, Arc::new(f));
+        for group in missing.chunks(self.plan.readers.max(1)) {
+            let fresh: Vec<(u32, f64, CodedFrame, Option<CodedFrame>)> = group
+                .par_iter()
+                .map(|&i| {
+                    let f = self.read_full(i)?;
+                    let sens_sq = f.sens.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
+                    let (planes, sens) =
+                        self.dom
+                            .subsample(&f.planes, &f.sens, self.tile, self.stride);
+                    let full = self.plan.whole.then_some(f);
+                    Ok((i, sens_sq, CodedFrame { planes, sens }, full))
+                })
+                .collect::<Result<_, EncodeError>>()?;
+            for (i, sens_sq, sub, full) in fresh {
+                self.subs.insert(i, Arc::new(sub));
+                self.sens_sq.insert(i, sens_sq);
+                if let Some(f) = full {
+                    self.full.insert(i, Arc::new(f));
+                }
+            }
         }
         Ok(())
     }
 
-    /// Drops the frames before `b`, except frame 0 (a loop's end needs it).
+    /// Frame `i` whole: held, or read again.
+    fn full(&self, i: u32) -> Result<Arc<CodedFrame>, EncodeError> {
+        match self.full.get(&i) {
+            Some(f) => Ok(f.clone()),
+            None => Ok(Arc::new(self.read_full(i)?)),
+        }
+    }
+
+    /// Frames `frames`, cut to padded rows `rows`: the held frames when whole, else read
+    /// from the input.
+    fn rows(
+        &self,
+        frames: std::ops::Range<u32>,
+        rows: std::ops::Range<usize>,
+    ) -> Result<Rows, EncodeError> {
+        if self.plan.whole {
+            debug_assert_eq!(rows, 0..self.dom.ph);
+            return Ok(Rows {
+                first: 0,
+                frames: frames.map(|i| self.full[&i].clone()).collect(),
+            });
+        }
+        let src_rows = self.dom.source_rows(&rows);
+        let idx: Vec<u32> = frames.collect();
+        let frames = idx
+            .par_iter()
+            .map(|&i| {
+                let f = self
+                    .src
+                    .read_rows(i as usize % self.frames_in_source, src_rows.clone())?;
+                let (planes, sens) = self.dom.code_rows(&f.data, src_rows.start, rows.clone());
+                Ok(Arc::new(CodedFrame { planes, sens }))
+            })
+            .collect::<Result<_, EncodeError>>()?;
+        Ok(Rows {
+            first: rows.start,
+            frames,
+        })
+    }
+
+    /// Drops the frames before `b`, except frame 0's subsample (a loop's end needs it).
     fn forget_before(&mut self, b: u32) {
-        self.frames.retain(|&i, _| i >= b || i == 0);
+        self.subs.retain(|&i, _| i >= b || i == 0);
+        self.full.retain(|&i, _| i >= b);
+        self.sens_sq.retain(|&i, _| i >= b);
     }
 }

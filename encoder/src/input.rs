@@ -2,6 +2,8 @@
 //! or float; RGB, RGBA or Y) or PNG (8- or 16-bit) files. Every frame is validated — same
 //! size and channels, finite, non-negative — with errors naming the file and texel.
 
+mod band_read;
+
 use std::path::{Path, PathBuf};
 use vbim_bake::Manifest;
 
@@ -186,6 +188,17 @@ pub struct Frame {
     pub data: Vec<f32>,
 }
 
+impl Frame {
+    /// Rows `rows` of this frame, as a frame of their own.
+    pub fn rows(mut self, rows: std::ops::Range<usize>) -> Frame {
+        let row = self.width * self.channels;
+        self.data.truncate(rows.end * row);
+        self.data.drain(..rows.start * row);
+        self.height = rows.len();
+        self
+    }
+}
+
 /// Reads one frame file, whatever its format.
 pub fn read_file(path: &Path, png16_scale: f32) -> Result<Frame, EncodeError> {
     let err = |m: String| EncodeError::Input(format!("{}: {m}", path.display()));
@@ -241,50 +254,7 @@ pub fn read_file(path: &Path, png16_scale: f32) -> Result<Frame, EncodeError> {
             data,
         });
     }
-    let img = image::open(path).map_err(|e| err(e.to_string()))?;
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    use image::DynamicImage as D;
-    let (kind, channels, data) = match img {
-        D::ImageLuma8(b) => (
-            InputKind::Srgb8,
-            1,
-            b.into_raw().iter().map(|&v| v as f32 / 255.0).collect(),
-        ),
-        D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => (
-            InputKind::Srgb8,
-            3,
-            img.to_rgb8()
-                .into_raw()
-                .iter()
-                .map(|&v| v as f32 / 255.0)
-                .collect(),
-        ),
-        D::ImageLuma16(b) => (
-            InputKind::Hdr,
-            1,
-            b.into_raw()
-                .iter()
-                .map(|&v| v as f32 / png16_scale)
-                .collect(),
-        ),
-        D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => (
-            InputKind::Hdr,
-            3,
-            img.to_rgb16()
-                .into_raw()
-                .iter()
-                .map(|&v| v as f32 / png16_scale)
-                .collect(),
-        ),
-        _ => return Err(err("unsupported PNG pixel format".into())),
-    };
-    Ok(Frame {
-        width: w,
-        height: h,
-        channels,
-        kind,
-        data,
-    })
+    band_read::png_rows(path, None, png16_scale).map_err(err)
 }
 
 impl FrameSet {
@@ -343,6 +313,13 @@ pub trait FrameSource: Sync {
     fn info(&self) -> SourceInfo;
     /// Frame `i`, interleaved; implementations check it with [`check`].
     fn read(&self, i: usize) -> Result<Frame, EncodeError>;
+    /// Rows `rows` of frame `i` (a frame `rows.len()` high), checked as [`Self::read`]
+    /// checks a frame. Large frames are coded a band of rows at a time, so a source that
+    /// can read part of a frame for less than the whole should.
+    fn read_rows(&self, i: usize, rows: std::ops::Range<usize>) -> Result<Frame, EncodeError> {
+        let f = self.read(i)?;
+        Ok(f.rows(rows))
+    }
     /// The files the frames are read from (none for frames in memory): an output must
     /// not be one of them.
     fn files(&self) -> &[PathBuf] {
@@ -367,6 +344,27 @@ impl FrameSource for FrameSet {
     }
     fn read(&self, i: usize) -> Result<Frame, EncodeError> {
         FrameSet::read(self, i)
+    }
+    fn read_rows(&self, i: usize, rows: std::ops::Range<usize>) -> Result<Frame, EncodeError> {
+        let path = &self.paths[i];
+        let err = |m: String| EncodeError::Input(format!("{}: {m}", path.display()));
+        let exr = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        let f = if exr {
+            match band_read::exr_rows(path, rows.clone()).map_err(err)? {
+                Some(f) => f,
+                None => read_file(path, self.png16_scale)?.rows(rows.clone()),
+            }
+        } else {
+            band_read::png_rows(path, Some(rows.clone()), self.png16_scale).map_err(err)?
+        };
+        let info = SourceInfo {
+            height: rows.len(),
+            ..self.info()
+        };
+        check(&info, &path.display().to_string(), i, &f)?;
+        Ok(f)
     }
     fn files(&self) -> &[PathBuf] {
         &self.paths

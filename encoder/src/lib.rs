@@ -23,16 +23,18 @@ mod input;
 mod keyframe;
 mod model;
 mod output;
+mod plan;
 mod report;
 mod secant;
 mod segment;
+mod sparse;
 
 use std::io::{Seek, Write};
 use std::path::{Path, PathBuf};
 
 pub use aim::{Aim, SamplePass, SAMPLE_TEXELS};
 pub use calibrate::{encode_to_tolerance, BAND_DB};
-pub use config::{ConfigError, EncoderConfig, Preset, SegmentMode};
+pub use config::{ConfigError, EncoderConfig, Preset, SegmentMode, DEFAULT_MEMORY_LIMIT};
 pub use input::{Frame, FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
 pub use report::{lossless_baseline, EncodeReport};
 /// Progress callback: (stage, done, total) — the bake's, so one bar serves both.
@@ -82,6 +84,9 @@ pub fn encode<W: Write + Seek>(
     // The sample passes and the coding run in the pool; the writing, which needs `out`,
     // outside it (`out` need not be `Send`).
     let (c, aimed, coded) = pool.install(|| {
+        // A memory limit that cannot hold one band is refused before any work.
+        encode::check_shape(&src.info())?;
+        plan::plan(&src.info(), cfg, rayon::current_num_threads())?;
         let (c, aimed, validated) = if cfg.aim {
             let (a, validated) = aim::aim(src, cfg, progress)?;
             let c = EncoderConfig {
@@ -137,6 +142,8 @@ fn write_coded<W: Write + Seek>(
         coded.metric,
     );
     rep.intra_keyframes = coded.intra_keyframes;
+    rep.band_tiles = (!coded.plan.whole).then_some(coded.plan.band_tiles);
+    rep.memory_estimate = coded.plan.estimate;
     Ok(rep)
 }
 

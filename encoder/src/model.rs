@@ -12,6 +12,8 @@ use vbim_format::dct::N;
 use vbim_format::plane::{self, Plane};
 
 use crate::domain::Domain;
+use crate::sparse::SparseBlocks;
+use crate::EncodeError;
 
 /// A source frame in the coded domain with its per-texel sensitivity.
 pub struct CodedFrame {
@@ -41,6 +43,8 @@ impl Projectors {
 /// Weighted squared fit error of one tile for each number of bubbles 0..=nb and each
 /// interior frame (`[slot · frames + frame]`), summed over its texels, per plane group
 /// (luma, chroma). Optionally keeps z = Qᵀr per texel and plane (for the coefficients).
+/// The keyframes cover the frame; the inner frames may be a band of it, starting at
+/// texel `inner_at` of the frame.
 #[allow(clippy::too_many_arguments)]
 fn tile_errors(
     dom: &Domain,
@@ -50,6 +54,7 @@ fn tile_errors(
     k0: &[Plane],
     k1: &[Plane],
     inner: &[&CodedFrame],
+    inner_at: usize,
     p: &Projector,
     mut keep_z: Option<&mut Vec<f64>>,
 ) -> ([Vec<f64>; 2], usize) {
@@ -65,12 +70,13 @@ fn tile_errors(
     for ty in (0..ts).step_by(stride) {
         for tx in (0..ts).step_by(stride) {
             let i = (tile.1 * ts + ty) * pw + tile.0 * ts + tx;
+            let bi = i - inner_at;
             count += 1;
             for pl in 0..dom.channels {
                 let (a, b) = (k0[pl].data[i] as f64, k1[pl].data[i] as f64);
                 for (j, f) in inner.iter().enumerate() {
                     let u = (j + 1) as f64 / len;
-                    r[j] = f.planes[pl].data[i] as f64 - (a * (1.0 - u) + b * u);
+                    r[j] = f.planes[pl].data[bi] as f64 - (a * (1.0 - u) + b * u);
                 }
                 for (k, zk) in z.iter_mut().enumerate() {
                     *zk = (0..m).map(|j| p.q[j * nb + k] * r[j]).sum();
@@ -84,10 +90,10 @@ fn tile_errors(
                         // saturated range (dawn under a night-set exposure) lands where
                         // the metric is steep. Take the larger of the two ends.
                         let sens = if pl == 0 {
-                            let fitted = f.planes[0].data[i] - *v as f32;
-                            f.sens[i].max(dom.sensitivity(fitted))
+                            let fitted = f.planes[0].data[bi] - *v as f32;
+                            f.sens[bi].max(dom.sensitivity(fitted))
                         } else {
-                            f.sens[i]
+                            f.sens[bi]
                         };
                         err[g][slot * m + j] += w * (v * sens as f64).powi(2);
                     }
@@ -127,7 +133,7 @@ pub fn fit_error(
         .into_par_iter()
         .map(|t| {
             let (err, count) =
-                tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, p, None);
+                tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, 0, p, None);
             let all = p.bubbles * m..(p.bubbles + 1) * m;
             let pf: Vec<f64> = err[0][all.clone()]
                 .iter()
@@ -179,142 +185,190 @@ pub struct SegmentParams {
     pub zstd_level: i32,
 }
 
+/// The inner frames of a segment over a band of padded rows (all of them, or a band).
+pub struct Rows {
+    /// The band's first padded row.
+    pub first: usize,
+    /// The inner frames, cut to the band.
+    pub frames: Vec<Arc<CodedFrame>>,
+}
+
+/// What a segment is coded from: its decoded keyframes (whole), its inner frames (read a
+/// band at a time through `rows`), and the sum of their squared sensitivities over the
+/// whole frame (which sets the quantiser steps, so it must be known before any band).
+pub struct SegmentInput<'a, R> {
+    pub k0: &'a [Plane],
+    pub k1: &'a [Plane],
+    pub inner: usize,
+    pub sens_sq: f64,
+    /// Tile rows per band (all of them: the whole frame at once).
+    pub band_tiles: usize,
+    pub rows: R,
+}
+
 /// Chooses degrees and codes the bubble planes of the segment between decoded keyframes
-/// `k0` and `k1` with source frames `inner` strictly between them.
-pub fn code_segment(
+/// `k0` and `k1`, one band of tile rows at a time. A tile's degree and coefficients are
+/// its own; the quantiser steps depend on the segment's highest degree, which only the
+/// last band settles, so until then each band is quantised at every highest degree still
+/// possible and the streams kept sparse ([`SparseBlocks`]). With one band, there is one.
+pub fn code_segment<R>(
     dom: &Domain,
     ts: usize,
-    k0: &[Plane],
-    k1: &[Plane],
-    inner: &[&CodedFrame],
+    input: SegmentInput<'_, R>,
     projectors: &mut Projectors,
     sp: &SegmentParams,
-) -> SegmentCode {
+) -> Result<SegmentCode, EncodeError>
+where
+    R: FnMut(std::ops::Range<usize>) -> Result<Rows, EncodeError>,
+{
+    let SegmentInput {
+        k0,
+        k1,
+        inner: m,
+        sens_sq,
+        band_tiles,
+        mut rows,
+    } = input;
     let (tx, ty) = (dom.pw / ts, dom.ph / ts);
-    let ntiles = tx * ty;
     let planes = dom.channels;
-    let len = inner.len() as u32 + 1;
+    let len = m as u32 + 1;
     let p = projectors.get(len, sp.max_degree);
     let nb = p.bubbles;
-    // Per tile: degrees and z = Qᵀr for every texel and plane.
-    let per_tile: Vec<(u8, u8, Vec<f64>)> = (0..ntiles)
-        .into_par_iter()
-        .map(|t| {
-            let mut zs = Vec::with_capacity(ts * ts * planes * nb);
-            let (err, count) = tile_errors(
-                dom,
-                (t % tx, t / tx),
-                ts,
-                1,
-                k0,
-                k1,
-                inner,
-                &p,
-                Some(&mut zs),
-            );
-            let m = inner.len();
-            let budget = sp.fit_budget * sp.fit_budget * count as f64;
-            // The cheapest (luma, chroma) pair within budget — on average over the
-            // segment's frames, and in every frame within WORST_FRAME_SHARE of it, so that
-            // a tile's error cannot gather in the one frame where the light turns — each
-            // bubble costs one plane for luma and two for chroma.
-            let frame_err = |dl: usize, dc: usize, j: usize| {
-                err[0][dl * m + j] + if planes == 3 { err[1][dc * m + j] } else { 0.0 }
-            };
-            let mut best = (nb + 1, nb + 1, usize::MAX);
-            for dl in 0..=nb {
-                for dc in 0..=dl {
-                    let cost = dl + 2 * dc;
-                    if cost >= best.2 {
-                        continue;
-                    }
-                    let (mut sum, mut worst) = (0.0, 0.0f64);
-                    for j in 0..m {
-                        let e = frame_err(dl, dc, j);
-                        sum += e;
-                        worst = worst.max(e);
-                    }
-                    if sum <= budget * m.max(1) as f64 && worst <= WORST_FRAME_SHARE * budget {
-                        best = (dl, dc, cost);
-                    }
-                }
-            }
-            if best.2 == usize::MAX {
-                best = (nb, if planes == 3 { nb } else { 0 }, 0);
-            }
-            let dc = if planes == 3 { best.1 } else { 0 };
-            ((best.0 + 1) as u8, (dc + 1) as u8, zs)
-        })
-        .collect();
-    let tiles = TileMap {
-        luma: per_tile.iter().map(|t| t.0).collect(),
-        chroma: per_tile.iter().map(|t| t.1).collect(),
-    };
-    let dmax = tiles.max_degree() as usize;
-    // Bubble planes: coefficients of the chosen fit for each texel.
-    let mut bubbles: Vec<Vec<Plane>> = (2..=dmax)
-        .map(|_| vec![Plane::zeros(dom.pw, dom.ph); planes])
-        .collect();
-    for (t, (dl, dc, zs)) in per_tile.iter().enumerate() {
-        let (ox, oy) = ((t % tx) * ts, (t / tx) * ts);
-        let mut c = vec![0.0f64; nb];
-        let mut idx = 0;
-        for ty_ in 0..ts {
-            for tx_ in 0..ts {
-                let i = (oy + ty_) * dom.pw + ox + tx_;
-                for (pl, _) in (0..planes).enumerate() {
-                    let d = if pl == 0 { *dl } else { *dc } as usize - 1;
-                    let z = &zs[idx * nb..idx * nb + nb];
-                    idx += 1;
-                    p.coeffs_from_qt(z, d, &mut c);
-                    for k in 0..d {
-                        bubbles[k][pl].data[i] = c[k] as f32;
-                    }
-                }
-            }
-        }
-    }
     // Quantiser steps: a coefficient error δ costs about rms(B_k)·δ in value, and the
-    // segment's RMS sensitivity turns that into metric units.
-    let sens_rms = {
-        let s: f64 = inner
-            .iter()
-            .map(|f| f.sens.iter().map(|v| (*v as f64).powi(2)).sum::<f64>())
-            .sum();
-        (s / (inner.len().max(1) * dom.pw * dom.ph) as f64)
-            .sqrt()
-            .max(1e-9)
+    // segment's RMS sensitivity turns that into metric units; the budget is shared by
+    // the dmax − 1 bubble terms of the segment's highest degree.
+    let sens_rms = (sens_sq / (m.max(1) * dom.pw * dom.ph) as f64)
+        .sqrt()
+        .max(1e-9);
+    let steps_for = |dmax: usize| -> Vec<f32> {
+        let mut steps = Vec::new();
+        for k in 2..=dmax {
+            let brms = (1..len)
+                .map(|j| vbim_format::basis::bubble(k, j as f64 / len as f64).powi(2))
+                .sum::<f64>()
+                .max(1e-12)
+                / (len as f64 - 1.0).max(1.0);
+            let base = ((12.0f64).sqrt() * sp.quant_budget
+                / (sens_rms * brms.sqrt() * (dmax as f64 - 1.0).sqrt()))
+                as f32;
+            for pl in 0..planes {
+                steps.push(if pl == 0 {
+                    base
+                } else {
+                    base * sp.chroma_step_factor
+                });
+            }
+        }
+        steps
     };
-    let mut steps = Vec::new();
-    let mut blocks = Vec::new();
-    for k in 2..=dmax {
-        let brms = (1..len)
-            .map(|j| vbim_format::basis::bubble(k, j as f64 / len as f64).powi(2))
-            .sum::<f64>()
-            .max(1e-12)
-            / (len as f64 - 1.0).max(1.0);
-        let base = ((12.0f64).sqrt() * sp.quant_budget
-            / (sens_rms * brms.sqrt() * (dmax as f64 - 1.0).sqrt())) as f32;
-        for (pl, src) in bubbles[k - 2].iter().enumerate() {
-            let step = if pl == 0 {
-                base
-            } else {
-                base * sp.chroma_step_factor
-            };
-            steps.push(step);
-            let members: Vec<usize> = (0..ntiles)
-                .filter(|&t| tiles.degree(pl, t) as usize >= k)
-                .collect();
-            let q: Vec<[i32; N * N]> = members
-                .par_iter()
-                .flat_map_iter(|&t| plane::tile_blocks(t, tx, ts).collect::<Vec<_>>())
-                .map(|(bx, by)| plane::quantize_block(&src.read_block(bx, by), step, sp.deadzone))
-                .collect();
-            blocks.push(q);
+    let top = nb + 1;
+    let mut tiles = TileMap {
+        luma: Vec::with_capacity(tx * ty),
+        chroma: Vec::with_capacity(tx * ty),
+    };
+    // Streams (k, plane) for each highest degree still possible: `variants[dmax]`.
+    let mut variants: Vec<Option<Vec<SparseBlocks>>> = (0..=top)
+        .map(|d| (d >= 2).then(|| vec![SparseBlocks::default(); (d - 1) * planes]))
+        .collect();
+    let mut dmax = 1usize;
+    for band in (0..ty).step_by(band_tiles.max(1)) {
+        let band_end = (band + band_tiles.max(1)).min(ty);
+        let r = rows(band * ts..band_end * ts)?;
+        debug_assert_eq!(r.first, band * ts);
+        let inner: Vec<&CodedFrame> = r.frames.iter().map(|f| f.as_ref()).collect();
+        let at = band * ts * dom.pw;
+        // Per tile: degrees and z = Qᵀr for every texel and plane.
+        let per_tile: Vec<(u8, u8, Vec<f64>)> = (band * tx..band_end * tx)
+            .into_par_iter()
+            .map(|t| {
+                let mut zs = Vec::with_capacity(ts * ts * planes * nb);
+                let (err, count) = tile_errors(
+                    dom,
+                    (t % tx, t / tx),
+                    ts,
+                    1,
+                    k0,
+                    k1,
+                    &inner,
+                    at,
+                    &p,
+                    Some(&mut zs),
+                );
+                let (dl, dc) = choose_degrees(&err, count, m, nb, planes, sp.fit_budget);
+                (dl, dc, zs)
+            })
+            .collect();
+        tiles.luma.extend(per_tile.iter().map(|t| t.0));
+        tiles.chroma.extend(per_tile.iter().map(|t| t.1));
+        let band_dmax = per_tile
+            .iter()
+            .map(|t| t.0.max(t.1) as usize)
+            .max()
+            .unwrap_or(1);
+        dmax = dmax.max(band_dmax);
+        // Bubble planes of the band: coefficients of the chosen fit for each texel.
+        let bh = (band_end - band) * ts;
+        let mut bubbles: Vec<Vec<Plane>> = (2..=band_dmax)
+            .map(|_| vec![Plane::zeros(dom.pw, bh); planes])
+            .collect();
+        for (t, (dl, dc, zs)) in per_tile.iter().enumerate() {
+            let (ox, oy) = ((t % tx) * ts, (t / tx) * ts);
+            let mut c = vec![0.0f64; nb];
+            let mut idx = 0;
+            for ty_ in 0..ts {
+                for tx_ in 0..ts {
+                    let i = (oy + ty_) * dom.pw + ox + tx_;
+                    for pl in 0..planes {
+                        let d = if pl == 0 { *dl } else { *dc } as usize - 1;
+                        let z = &zs[idx * nb..idx * nb + nb];
+                        idx += 1;
+                        p.coeffs_from_qt(z, d, &mut c);
+                        for (b, ck) in bubbles.iter_mut().zip(&c).take(d) {
+                            b[pl].data[i] = *ck as f32;
+                        }
+                    }
+                }
+            }
+        }
+        drop(per_tile);
+        // The highest degrees still possible: from here up, or (last band) the one.
+        let last = band_end == ty;
+        for (d, streams) in variants.iter_mut().enumerate() {
+            if d < dmax || (last && d > dmax) {
+                *streams = None;
+            }
+            let Some(streams) = streams else { continue };
+            let steps = steps_for(d);
+            for k in 2..=band_dmax.min(d) {
+                for (pl, src) in bubbles[k - 2].iter().enumerate() {
+                    let step = steps[(k - 2) * planes + pl];
+                    let members: Vec<usize> = (band * tx..band_end * tx)
+                        .filter(|&t| tiles.degree(pl, t) as usize >= k)
+                        .collect();
+                    let q: Vec<[i32; N * N]> = members
+                        .par_iter()
+                        .flat_map_iter(|&t| plane::tile_blocks(t, tx, ts).collect::<Vec<_>>())
+                        .map(|(bx, by)| {
+                            let b = src.read_block(bx, by - band * ts / N);
+                            plane::quantize_block(&b, step, sp.deadzone)
+                        })
+                        .collect();
+                    let s = &mut streams[(k - 2) * planes + pl];
+                    q.iter().for_each(|b| s.push(b));
+                }
+            }
         }
     }
-    let raw = chunk::write_coeffs(dmax as u8, &steps, &blocks);
-    SegmentCode {
+    debug_assert_eq!(dmax, tiles.max_degree() as usize);
+    let steps = steps_for(dmax);
+    let mut raw = vec![dmax as u8, if dmax > 1 { planes as u8 } else { 0 }, 0, 0];
+    for s in &steps {
+        raw.extend_from_slice(&s.to_le_bytes());
+    }
+    for s in variants[dmax].iter().flatten() {
+        s.write(&mut raw);
+    }
+    Ok(SegmentCode {
         tilemap_bytes: zstd::bulk::compress(
             &chunk::write_tilemap(&tiles, planes as u8),
             sp.zstd_level,
@@ -322,7 +376,48 @@ pub fn code_segment(
         .expect("zstd"),
         coeff_bytes: zstd::bulk::compress(&raw, sp.zstd_level).expect("zstd"),
         tiles,
+    })
+}
+
+/// The cheapest (luma, chroma) degrees within budget — on average over the segment's
+/// frames, and in every frame within WORST_FRAME_SHARE of it, so that a tile's error
+/// cannot gather in the one frame where the light turns — each bubble costing one plane
+/// for luma and two for chroma.
+fn choose_degrees(
+    err: &[Vec<f64>; 2],
+    count: usize,
+    m: usize,
+    nb: usize,
+    planes: usize,
+    fit_budget: f64,
+) -> (u8, u8) {
+    let budget = fit_budget * fit_budget * count as f64;
+    let frame_err = |dl: usize, dc: usize, j: usize| {
+        err[0][dl * m + j] + if planes == 3 { err[1][dc * m + j] } else { 0.0 }
+    };
+    let mut best = (nb + 1, nb + 1, usize::MAX);
+    for dl in 0..=nb {
+        for dc in 0..=dl {
+            let cost = dl + 2 * dc;
+            if cost >= best.2 {
+                continue;
+            }
+            let (mut sum, mut worst) = (0.0, 0.0f64);
+            for j in 0..m {
+                let e = frame_err(dl, dc, j);
+                sum += e;
+                worst = worst.max(e);
+            }
+            if sum <= budget * m.max(1) as f64 && worst <= WORST_FRAME_SHARE * budget {
+                best = (dl, dc, cost);
+            }
+        }
     }
+    if best.2 == usize::MAX {
+        best = (nb, if planes == 3 { nb } else { 0 }, 0);
+    }
+    let dc = if planes == 3 { best.1 } else { 0 };
+    ((best.0 + 1) as u8, (dc + 1) as u8)
 }
 
 /// Codes a keyframe: intra, or as the difference from the previous decoded keyframe.

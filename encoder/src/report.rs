@@ -41,6 +41,11 @@ pub struct EncodeReport {
     pub segment_lengths: Vec<u32>,
     pub keyframes: u32,
     pub intra_keyframes: usize,
+    /// Tile rows per band where the frames were coded a band at a time (the frames did
+    /// not fit `memory_limit` whole); `None`: whole frames.
+    pub band_tiles: Option<usize>,
+    /// What the encode expected to hold at its peak, bytes (the plan's estimate).
+    pub memory_estimate: u64,
     /// Filled by [`EncodeReport::verify`].
     pub mean_psnr: Option<f64>,
     pub worst_psnr: Option<f64>,
@@ -112,6 +117,8 @@ impl EncodeReport {
             internal_tolerance_db: cfg.tolerance_db,
             aim: None,
             calibration: Vec::new(),
+            band_tiles: None,
+            memory_estimate: 0,
             max_degree: cfg.max_degree,
             degree_histogram: hist,
             chroma_degree_histogram: chist,
@@ -392,10 +399,23 @@ impl std::fmt::Display for EncodeReport {
             mx,
             lens
         )?;
-        write!(
+        writeln!(
             f,
             "keyframes   {} ({} intra)",
             self.keyframes, self.intra_keyframes
+        )?;
+        let held = match self.band_tiles {
+            Some(b) => format!(
+                "in bands of {b} tile row(s) of {} ({} bands)",
+                self.tiles.1,
+                self.tiles.1.div_ceil(b)
+            ),
+            None => "whole frames".into(),
+        };
+        write!(
+            f,
+            "memory      {held}, about {:.2} GB at the peak (estimated)",
+            self.memory_estimate as f64 / 1e9
         )?;
         if let Some(why) = self.aim.as_ref().and_then(|a| a.skipped.as_ref()) {
             write!(

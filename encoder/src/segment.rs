@@ -18,9 +18,13 @@ const WORST_TILE_FACTOR: f64 = 3.0;
 /// the worst frames gather.
 const WORST_FRAME_FACTOR: f64 = 1.25;
 
-/// The frames the search sees: coded frames by number, and how to fit them.
+/// The frames the search sees: coded frames by number, subsampled as the search reads
+/// them ([`Domain::subsampled`]), and how to fit them.
 pub(crate) struct Search<'a> {
+    /// The subsampled frames' domain.
     pub dom: &'a Domain,
+    /// Texels a side of a subsampled tile.
+    pub tile: usize,
     pub window: &'a BTreeMap<u32, Arc<CodedFrame>>,
     pub cfg: &'a EncoderConfig,
     pub params: &'a SegmentParams,
@@ -38,7 +42,7 @@ impl Search<'_> {
                 (b..=b + len).map(|i| self.window[&i].as_ref()).collect();
             let p = projectors.get(len, cfg.max_degree);
             let (rms, worst_tile, worst_frame) =
-                model::fit_error(self.dom, cfg.tile_size, cfg.search_stride, &frames, &p);
+                model::fit_error(self.dom, self.tile, 1, &frames, &p);
             rms <= sp.fit_budget
                 && worst_tile <= WORST_TILE_FACTOR * sp.fit_budget
                 && worst_frame <= WORST_FRAME_FACTOR * sp.fit_budget

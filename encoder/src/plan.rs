@@ -1,0 +1,128 @@
+//! How much of the sequence the encoder holds at once. The segment search reads only a
+//! subsample of each frame, and everything after it is local to a tile, so only three
+//! things need whole frames: the search's subsampled window, the decoded keyframes, and
+//! the keyframe being coded. The inner frames of a segment, which are most of what the
+//! encoder would hold, are held whole when they fit the memory limit and otherwise read
+//! from the input one band of tile rows at a time. The output is the same either way.
+
+use crate::domain::Domain;
+use crate::{EncodeError, EncoderConfig, SegmentMode, SourceInfo};
+
+/// How the encode holds the sequence.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Plan {
+    /// Tile rows per band (all of them when `whole`).
+    pub band_tiles: usize,
+    /// The segment's inner frames are held whole (read once); else read a band at a
+    /// time (each read twice: once whole for the search, once by bands).
+    pub whole: bool,
+    /// Frames read at once while loading the search's window.
+    pub readers: usize,
+    /// What the plan expects the encode to hold at its peak, bytes.
+    pub estimate: u64,
+}
+
+/// Chooses how to hold `info`'s frames within `cfg.memory_limit` (or `cfg.band_tiles`).
+pub(crate) fn plan(
+    info: &SourceInfo,
+    cfg: &EncoderConfig,
+    threads: usize,
+) -> Result<Plan, EncodeError> {
+    let ts = cfg.tile_size;
+    let (pw, ph) = (info.width.div_ceil(ts) * ts, info.height.div_ceil(ts) * ts);
+    let (tiles_x, tiles_y) = ((pw / ts) as u64, (ph / ts) as u64);
+    let t = (pw * ph) as u64;
+    let ch = info.channels as u64;
+    let nb = cfg.max_degree.saturating_sub(1) as u64;
+    let longest = match cfg.segment {
+        SegmentMode::Auto { max } | SegmentMode::Fixed(max) => max as u64,
+    }
+    .min(info.frames as u64);
+    // A coded frame: its planes and the sensitivity plane, f32.
+    let frame = t * (ch + 1) * 4;
+    let st = Domain::sub_tile(ts, cfg.search_stride) as u64;
+    let window = (longest + 2) * tiles_x * tiles_y * st * st * (ch + 1) * 4;
+    // The decoded keyframes at both ends of the segment and keyframe 0 (for the loop),
+    // and while a keyframe is coded: its source frame, a residual plane, both candidate
+    // payloads' blocks and the decoded result.
+    let keys = 3 * t * ch * 4 + frame + t * 4 + 3 * t * ch * 4;
+    // Reading a frame: the decoded file (f32 interleaved, and the reader's own copy)
+    // and the coded frame it becomes.
+    let read = t * ch * 4 * 2 + frame;
+    // Quantised streams held sparse until the segment is written (an allowance: about
+    // 2 bytes a coefficient at most at the tolerances of interest).
+    let sparse = t * ch * nb * 2;
+    // Per padded row of a band: z = Qᵀr (f64), the bubble planes and one stream's dense
+    // blocks per term and plane; in band mode also the inner frames' rows.
+    let work_row = pw as u64 * nb * ch * (8 + 4 + 4);
+    let band_row = work_row + pw as u64 * longest.saturating_sub(1) * (ch + 1) * 4;
+    let fixed = window + keys + sparse;
+    let whole_cost = fixed + (longest + 1) * frame + ph as u64 * work_row + threads as u64 * read;
+    let limit = cfg.memory_limit;
+    let readers = |left: u64| (left / read.max(1)).clamp(1, threads.max(1) as u64) as usize;
+    if let Some(b) = cfg.band_tiles {
+        let b = b.min(tiles_y as usize);
+        let whole = b == tiles_y as usize && whole_cost <= limit;
+        let estimate = if whole {
+            whole_cost
+        } else {
+            fixed + (b * ts) as u64 * band_row + read
+        };
+        return Ok(Plan {
+            band_tiles: b,
+            whole,
+            readers: if whole {
+                threads.max(1)
+            } else {
+                readers(limit.saturating_sub(estimate) + read)
+            },
+            estimate,
+        });
+    }
+    if whole_cost <= limit {
+        return Ok(Plan {
+            band_tiles: tiles_y as usize,
+            whole: true,
+            readers: threads.max(1),
+            estimate: whole_cost,
+        });
+    }
+    // Bands: what is left after the fixed costs and one frame being read.
+    let left = limit.saturating_sub(fixed + read);
+    let rows = left / band_row.max(1);
+    let band_tiles = (rows / ts as u64).min(tiles_y) as usize;
+    if band_tiles == 0 {
+        let need = fixed + read + ts as u64 * band_row;
+        return Err(EncodeError::Input(format!(
+            "{}: {}×{} with {} channel(s) needs about {} to encode in bands of one tile row \
+             ({} segments of up to {longest} frames), more than the memory limit of {}; \
+             raise --memory-limit, or shorten --segment or --tile",
+            info.name,
+            info.width,
+            info.height,
+            info.channels,
+            size(need),
+            match cfg.segment {
+                SegmentMode::Auto { .. } => "adaptive",
+                SegmentMode::Fixed(_) => "fixed",
+            },
+            size(limit),
+        )));
+    }
+    let estimate = fixed + read + (band_tiles * ts) as u64 * band_row;
+    Ok(Plan {
+        band_tiles,
+        whole: false,
+        readers: readers(limit - estimate + read),
+        estimate,
+    })
+}
+
+/// A size in SI units, as `--memory-limit` takes it.
+fn size(bytes: u64) -> String {
+    match bytes {
+        b if b >= 1_000_000_000 => format!("{:.2} GB", b as f64 / 1e9),
+        b if b >= 1_000_000 => format!("{:.1} MB", b as f64 / 1e6),
+        b => format!("{:.0} kB", b as f64 / 1e3),
+    }
+}

@@ -1,0 +1,129 @@
+//! Quantised blocks held sparse until their stream is written. A coefficient stream is
+//! written frequency-major across all its blocks (`vbim_format::plane::write_coefficients`),
+//! so a segment coded in bands must hold every band's blocks before writing any; as 64
+//! integers a block that is 4 bytes a texel and plane, most of them zeros. Held as a DC
+//! and the non-zero AC terms, a stream takes about what its entropy-coded form does.
+
+use vbim_format::dct::N;
+use vbim_format::varint;
+
+/// One coefficient stream's quantised blocks (zig-zag order), in stream order.
+#[derive(Default, Clone)]
+pub struct SparseBlocks {
+    dc: Vec<i32>,
+    /// Non-zero AC terms as (block, zig-zag index, value), in block order.
+    ac: Vec<(u32, u8, i32)>,
+}
+
+impl SparseBlocks {
+    /// Appends a block.
+    pub fn push(&mut self, q: &[i32; N * N]) {
+        let b = self.dc.len() as u32;
+        self.dc.push(q[0]);
+        for (f, &v) in q.iter().enumerate().skip(1) {
+            if v != 0 {
+                self.ac.push((b, f as u8, v));
+            }
+        }
+    }
+
+    /// Writes the stream exactly as `write_coefficients` writes the same blocks dense.
+    pub fn write(&self, out: &mut Vec<u8>) {
+        let n = self.dc.len() as u32;
+        let mut run = 0u32;
+        let mut prev_dc = 0i32;
+        for &d in &self.dc {
+            let v = d.wrapping_sub(prev_dc);
+            prev_dc = d;
+            if v == 0 {
+                run += 1;
+            } else {
+                varint::put_u32(out, run);
+                varint::put_i32(out, v);
+                run = 0;
+            }
+        }
+        // The AC terms by frequency, each frequency's in block order (a stable counting
+        // sort of terms already in block order).
+        let mut start = [0usize; N * N + 1];
+        for &(_, f, _) in &self.ac {
+            start[f as usize + 1] += 1;
+        }
+        for f in 1..=N * N {
+            start[f] += start[f - 1];
+        }
+        let mut at = start;
+        let mut by_f = vec![(0u32, 0i32); self.ac.len()];
+        for &(b, f, v) in &self.ac {
+            by_f[at[f as usize]] = (b, v);
+            at[f as usize] += 1;
+        }
+        for f in 1..N * N {
+            // Zeros before each term of this frequency, then after its last one.
+            let mut next = 0u32;
+            for &(b, v) in &by_f[start[f]..start[f + 1]] {
+                run += b - next;
+                varint::put_u32(out, run);
+                varint::put_i32(out, v);
+                run = 0;
+                next = b + 1;
+            }
+            run += n - next;
+        }
+        varint::put_u32(out, run);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vbim_format::plane::write_coefficients;
+
+    /// Blocks with runs of zeros, zero and repeated DCs, values of every size.
+    fn blocks(n: usize, seed: u64) -> Vec<[i32; N * N]> {
+        let mut s = seed;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) as u32
+        };
+        (0..n)
+            .map(|_| {
+                let mut q = [0i32; N * N];
+                q[0] = (next() % 5) as i32 - 2;
+                for v in q.iter_mut().skip(1) {
+                    let r = next();
+                    if r % 7 == 0 {
+                        *v = (r as i32 >> 8) % 100_000 - 50_000;
+                    } else if r % 5 == 0 {
+                        *v = (r % 3) as i32 - 1;
+                    }
+                }
+                q
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sparse_streams_are_written_as_the_dense_ones() {
+        for (n, seed) in [(0, 1), (1, 2), (3, 3), (500, 4)] {
+            let b = blocks(n, seed);
+            let mut dense = Vec::new();
+            write_coefficients(&b, &mut dense);
+            let mut s = SparseBlocks::default();
+            b.iter().for_each(|q| s.push(q));
+            let mut sparse = Vec::new();
+            s.write(&mut sparse);
+            assert_eq!(sparse, dense, "{n} blocks");
+        }
+        // All zeros: one run.
+        let z = vec![[0i32; N * N]; 10];
+        let (mut dense, mut sparse) = (Vec::new(), Vec::new());
+        write_coefficients(&z, &mut dense);
+        let mut s = SparseBlocks::default();
+        z.iter().for_each(|q| s.push(q));
+        s.write(&mut sparse);
+        assert_eq!(sparse, dense);
+    }
+}
