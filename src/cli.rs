@@ -463,6 +463,9 @@ pub struct BakeArgs {
     /// Moving cloud shadows on or off [default: the scene's `clouds.enabled`].
     #[arg(long)]
     pub clouds: Option<bool>,
+    /// Fractal detail below the height field's resolution, following its measured roughness, on or off [default: the scene's `detail.enabled`].
+    #[arg(long)]
+    pub detail: Option<bool>,
     /// Recompute the horizon, sky and obscurance maps even if cached in OUT/.vbim-cache.
     #[arg(long)]
     pub no_cache: bool,

@@ -16,6 +16,9 @@ pub fn run(a: BakeArgs) -> Result<(), String> {
     if let Some(c) = a.clouds {
         scene.clouds.enabled = c;
     }
+    if let Some(d) = a.detail {
+        scene.detail.enabled = d;
+    }
     scene
         .validate()
         .map_err(|e| format!("{}: {e}", a.scene.display()))?;

@@ -32,8 +32,8 @@ pub fn key(scene: &Scene) -> Result<u64, BakeError> {
     }
     let o = &scene.obscurance;
     let params = format!(
-        "{} {} {} {} {:?}",
-        scene.size, scene.azimuths, o.enabled, o.l_max_cells, o.tau_cells
+        "{} {} {} {} {:?} {:?}",
+        scene.size, scene.azimuths, o.enabled, o.l_max_cells, o.tau_cells, scene.detail
     );
     fnv(&mut h, params.as_bytes());
     Ok(h)
@@ -43,76 +43,82 @@ fn path(dir: &Path, key: u64) -> std::path::PathBuf {
     dir.join(format!("pre-{key:016x}.bin"))
 }
 
-fn put(out: &mut Vec<u8>, v: &[f32]) {
+fn put(out: &mut impl Write, v: &[f32]) -> std::io::Result<()> {
     for x in v {
-        out.extend_from_slice(&x.to_le_bytes());
+        out.write_all(&x.to_le_bytes())?;
     }
+    Ok(())
 }
 
+/// Writes the maps for `key`, streamed (the maps are 200 bytes a texel at 32 azimuths: a
+/// copy of them in memory was a third of a 4096² bake's peak).
 pub fn store(dir: &Path, key: u64, pre: &Precomputed) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let hf = &pre.hf;
-    let mut out = Vec::new();
-    out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&key.to_le_bytes());
-    for v in [hf.w as u64, hf.h as u64, pre.horizons.azimuths as u64] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out.extend_from_slice(&hf.cell_x.to_le_bytes());
-    out.extend_from_slice(&hf.cell_y.to_le_bytes());
-    put(&mut out, &hf.z);
-    put(&mut out, &pre.normals.concat());
-    put(&mut out, &pre.horizons.angles);
-    put(&mut out, &pre.sky.coef);
-    put(&mut out, &pre.sky.total);
-    put(&mut out, &pre.obscurance);
     let final_path = path(dir, key);
     let tmp = final_path.with_extension("tmp");
-    std::fs::File::create(&tmp)?.write_all(&out)?;
+    let mut out = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+    out.write_all(MAGIC)?;
+    out.write_all(&key.to_le_bytes())?;
+    for v in [hf.w as u64, hf.h as u64, pre.horizons.azimuths as u64] {
+        out.write_all(&v.to_le_bytes())?;
+    }
+    out.write_all(&hf.cell_x.to_le_bytes())?;
+    out.write_all(&hf.cell_y.to_le_bytes())?;
+    put(&mut out, &hf.z)?;
+    for n in &pre.normals {
+        put(&mut out, n)?;
+    }
+    put(&mut out, &pre.horizons.angles)?;
+    put(&mut out, &pre.sky.coef)?;
+    put(&mut out, &pre.sky.total)?;
+    put(&mut out, &pre.obscurance)?;
+    out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
     std::fs::rename(tmp, final_path)
 }
 
 /// Loads the cached maps for `key`, or `None` when absent or unreadable (then the caller
 /// recomputes them).
 pub fn load(dir: &Path, key: u64, scene: &Scene) -> Option<Precomputed> {
-    let mut bytes = Vec::new();
-    std::fs::File::open(path(dir, key))
-        .ok()?
-        .read_to_end(&mut bytes)
-        .ok()?;
-    if bytes.len() < 56 || &bytes[..8] != MAGIC || bytes[8..16] != key.to_le_bytes() {
+    let file = std::fs::File::open(path(dir, key)).ok()?;
+    let len = file.metadata().ok()?.len();
+    // Read array by array (a copy of the whole file in memory was as large as the maps).
+    let mut r = std::io::BufReader::new(file);
+    let mut head = [0u8; 56];
+    r.read_exact(&mut head).ok()?;
+    if &head[..8] != MAGIC || head[8..16] != key.to_le_bytes() {
         return None;
     }
-    let u = |i: usize| u64::from_le_bytes(bytes[i..i + 8].try_into().unwrap()) as usize;
+    let u = |i: usize| u64::from_le_bytes(head[i..i + 8].try_into().unwrap()) as usize;
     let (w, h, az) = (u(16), u(24), u(32));
     if w != scene.size || h != scene.size || az != scene.azimuths {
         return None;
     }
-    let cell_x = f64::from_le_bytes(bytes[40..48].try_into().unwrap());
-    let cell_y = f64::from_le_bytes(bytes[48..56].try_into().unwrap());
+    let cell_x = f64::from_le_bytes(head[40..48].try_into().unwrap());
+    let cell_y = f64::from_le_bytes(head[48..56].try_into().unwrap());
     let t = w * h;
-    let need = 56 + 4 * (t + 3 * t + az * t + SECTORS * t + t + t);
-    if bytes.len() != need {
+    let need = 56 + 4 * (t + 3 * t + az * t + SECTORS * t + t + t) as u64;
+    if len != need {
         return None;
     }
-    let mut pos = 56;
-    let mut take = |n: usize| {
-        let v: Vec<f32> = bytes[pos..pos + 4 * n]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-            .collect();
-        pos += 4 * n;
-        v
+    let mut take = |n: usize| -> Option<Vec<f32>> {
+        let mut v = vec![0f32; n];
+        let mut buf = [0u8; 4];
+        for x in v.iter_mut() {
+            r.read_exact(&mut buf).ok()?;
+            *x = f32::from_le_bytes(buf);
+        }
+        Some(v)
     };
-    let z = take(t);
-    let normals = take(3 * t)
+    let z = take(t)?;
+    let normals = take(3 * t)?
         .chunks_exact(3)
         .map(|c| [c[0], c[1], c[2]])
         .collect();
-    let angles = take(az * t);
-    let coef = take(SECTORS * t);
-    let total = take(t);
-    let obscurance = take(t);
+    let angles = take(az * t)?;
+    let coef = take(SECTORS * t)?;
+    let total = take(t)?;
+    let obscurance = take(t)?;
     let hf = crate::HeightField {
         w,
         h,

@@ -5,6 +5,7 @@
 
 pub mod cache;
 pub mod clouds;
+pub mod detail;
 pub mod heightfield;
 pub mod horizon;
 pub mod light;
@@ -59,8 +60,15 @@ pub struct BakeSummary {
 }
 
 /// Loads the scene's height field and resamples it to the bake's resolution.
+/// The scene's height field at the bake's resolution: resampled, with fractal detail
+/// below the source's resolution where the scene asks for it (module `detail`).
 pub fn load_terrain(scene: &Scene) -> Result<HeightField, BakeError> {
-    Ok(HeightField::load(&scene.heightfield)?.resample(scene.size, scene.size))
+    let source = HeightField::load(&scene.heightfield)?;
+    let mut hf = source.resample(scene.size, scene.size);
+    if scene.detail.enabled {
+        detail::add_detail(&mut hf, &source, &scene.detail);
+    }
+    Ok(hf)
 }
 
 /// Bakes the scene's day into `opts.out`: frames, `manifest.json`, `contact_sheet.png`.

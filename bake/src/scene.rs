@@ -43,6 +43,9 @@ pub struct Scene {
     pub obscurance: ObscuranceParams,
     #[serde(default)]
     pub clouds: CloudParams,
+    /// Fractal detail below the height field's resolution (off unless asked for).
+    #[serde(default)]
+    pub detail: crate::detail::DetailParams,
     /// How `vbim play --scene` shows the terrain (not used by the bake).
     #[serde(default)]
     pub view: ViewParams,
@@ -230,6 +233,7 @@ impl Scene {
                 self.clouds.coverage
             ));
         }
+        self.detail.validate()?;
         self.rate().map(|_| ())
     }
 }

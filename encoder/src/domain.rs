@@ -72,20 +72,51 @@ impl Domain {
 
     /// Padded rows `rows` of a frame, from the source rows starting at `first_row`
     /// (`data` holds source rows `first_row..`, and every source row `rows` needs:
-    /// [`Domain::source_rows`]). Each texel is coded as [`Domain::code`] codes it.
+    /// [`Domain::source_rows`]). Each texel is coded as [`Domain::code`] codes it; runs of
+    /// rows in parallel (a large frame read alone is coded by every core).
     pub fn code_rows(
         &self,
         data: &[f32],
         first_row: usize,
         rows: std::ops::Range<usize>,
     ) -> (Vec<Plane>, Vec<f32>) {
-        let ch = self.channels;
+        use rayon::prelude::*;
+        const RUN: usize = 16;
         let h = rows.len();
-        let mut planes = vec![Plane::zeros(self.pw, h); ch];
+        let mut planes = vec![Plane::zeros(self.pw, h); self.channels];
         let mut sens = vec![0f32; self.pw * h];
-        for (r, y) in rows.enumerate() {
+        // Each run of rows: its part of every plane and of the sensitivity.
+        let mut parts: Vec<_> = planes
+            .iter_mut()
+            .map(|p| p.data.chunks_mut(self.pw * RUN))
+            .collect();
+        let runs: Vec<(Vec<&mut [f32]>, &mut [f32])> = sens
+            .chunks_mut(self.pw * RUN)
+            .map(|s| (parts.iter_mut().map(|p| p.next().unwrap()).collect(), s))
+            .collect();
+        runs.into_par_iter()
+            .enumerate()
+            .for_each(|(r, (mut planes, sens))| {
+                let start = rows.start + r * RUN;
+                self.fill_rows(data, first_row, start, &mut planes, sens);
+            });
+        (planes, sens)
+    }
+
+    /// Codes padded rows from `start` into `planes` and `sens` (as many rows as they hold).
+    fn fill_rows(
+        &self,
+        data: &[f32],
+        first_row: usize,
+        start: usize,
+        planes: &mut [&mut [f32]],
+        sens: &mut [f32],
+    ) {
+        let ch = self.channels;
+        for (r, srow) in sens.chunks_mut(self.pw).enumerate() {
+            let y = start + r;
             let sy = y.min(self.height - 1) - first_row;
-            for x in 0..self.pw {
+            for (x, sv) in srow.iter_mut().enumerate() {
                 let sx = x.min(self.width - 1);
                 let s = (sy * self.width + sx) * ch;
                 let i = r * self.pw + x;
@@ -93,19 +124,18 @@ impl Domain {
                     let c = [0, 1, 2].map(|k| self.transfer.encode(data[s + k]));
                     let v = rgb_to_ycocg(c);
                     for k in 0..3 {
-                        planes[k].data[i] = v[k];
+                        planes[k][i] = v[k];
                     }
-                    sens[i] =
+                    *sv =
                         (self.sensitivity(c[0]) + self.sensitivity(c[1]) + self.sensitivity(c[2]))
                             / 3.0;
                 } else {
                     let c = self.transfer.encode(data[s]);
-                    planes[0].data[i] = c;
-                    sens[i] = self.sensitivity(c);
+                    planes[0][i] = c;
+                    *sv = self.sensitivity(c);
                 }
             }
         }
-        (planes, sens)
     }
 
     /// The source rows that padded rows `rows` are coded from (the padding repeats the

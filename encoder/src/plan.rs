@@ -41,58 +41,55 @@ pub(crate) fn plan(
     // A coded frame: its planes and the sensitivity plane, f32.
     let frame = t * (ch + 1) * 4;
     let st = Domain::sub_tile(ts, cfg.search_stride) as u64;
+    // Held throughout: the search's window of subsampled frames, the decoded keyframes
+    // at both ends of the segment and keyframe 0 (for the loop), and the quantised
+    // streams held sparse until a segment is written (an allowance: about 2 bytes a
+    // coefficient at most at the tolerances of interest).
     let window = (longest + 2) * tiles_x * tiles_y * st * st * (ch + 1) * 4;
-    // The decoded keyframes at both ends of the segment and keyframe 0 (for the loop),
-    // and while a keyframe is coded: its source frame, a residual plane, both candidate
-    // payloads' blocks and the decoded result.
-    let keys = 3 * t * ch * 4 + frame + t * 4 + 3 * t * ch * 4;
-    // Reading a frame: the decoded file (f32 interleaved, and the reader's own copy)
-    // and the coded frame it becomes.
+    let held = window + 3 * t * ch * 4 + t * ch * nb * 2;
+    // The phases, one at a time on top of that. Reading a frame: the decoded file (f32
+    // interleaved, and the reader's own copy) and the coded frame it becomes. Coding a
+    // keyframe: its frame read whole, a residual plane and both candidate payloads'
+    // blocks. A band: per padded row, z = Qᵀr (f64), the bubble planes and one stream's
+    // dense blocks per term and plane, and in band mode the inner frames' rows.
     let read = t * ch * 4 * 2 + frame;
-    // Quantised streams held sparse until the segment is written (an allowance: about
-    // 2 bytes a coefficient at most at the tolerances of interest).
-    let sparse = t * ch * nb * 2;
-    // Per padded row of a band: z = Qᵀr (f64), the bubble planes and one stream's dense
-    // blocks per term and plane; in band mode also the inner frames' rows.
+    let keyframe = read + t * 4 + 2 * t * ch * 4;
     let work_row = pw as u64 * nb * ch * (8 + 4 + 4);
     let band_row = work_row + pw as u64 * longest.saturating_sub(1) * (ch + 1) * 4;
-    let fixed = window + keys + sparse;
-    let whole_cost = fixed + (longest + 1) * frame + ph as u64 * work_row + threads as u64 * read;
     let limit = cfg.memory_limit;
-    let readers = |left: u64| (left / read.max(1)).clamp(1, threads.max(1) as u64) as usize;
+    let threads = threads.max(1) as u64;
+    let readers = |room: u64| (room / read.max(1)).clamp(1, threads) as usize;
+    // Whole: the window also holds every frame of the segment whole.
+    let whole_held = held + (longest + 1) * frame;
+    let whole_cost = whole_held + keyframe.max(threads * read).max(ph as u64 * work_row);
+    let band_cost = |tiles: usize| held + keyframe.max(read).max((tiles * ts) as u64 * band_row);
     if let Some(b) = cfg.band_tiles {
         let b = b.min(tiles_y as usize);
         let whole = b == tiles_y as usize && whole_cost <= limit;
-        let estimate = if whole {
-            whole_cost
-        } else {
-            fixed + (b * ts) as u64 * band_row + read
-        };
         return Ok(Plan {
             band_tiles: b,
             whole,
             readers: if whole {
-                threads.max(1)
+                threads as usize
             } else {
-                readers(limit.saturating_sub(estimate) + read)
+                readers(limit.saturating_sub(held))
             },
-            estimate,
+            estimate: if whole { whole_cost } else { band_cost(b) },
         });
     }
     if whole_cost <= limit {
         return Ok(Plan {
             band_tiles: tiles_y as usize,
             whole: true,
-            readers: threads.max(1),
+            readers: threads as usize,
             estimate: whole_cost,
         });
     }
-    // Bands: what is left after the fixed costs and one frame being read.
-    let left = limit.saturating_sub(fixed + read);
-    let rows = left / band_row.max(1);
-    let band_tiles = (rows / ts as u64).min(tiles_y) as usize;
-    if band_tiles == 0 {
-        let need = fixed + read + ts as u64 * band_row;
+    // Bands: as many tile rows as the room left by what is held allows.
+    let room = limit.saturating_sub(held);
+    let band_tiles = (room / (ts as u64 * band_row).max(1)).min(tiles_y) as usize;
+    if band_tiles == 0 || band_cost(band_tiles) > limit {
+        let need = band_cost(1);
         return Err(EncodeError::Input(format!(
             "{}: {}×{} with {} channel(s) needs about {} to encode in bands of one tile row \
              ({} segments of up to {longest} frames), more than the memory limit of {}; \
@@ -109,12 +106,11 @@ pub(crate) fn plan(
             size(limit),
         )));
     }
-    let estimate = fixed + read + (band_tiles * ts) as u64 * band_row;
     Ok(Plan {
         band_tiles,
         whole: false,
-        readers: readers(limit - estimate + read),
-        estimate,
+        readers: readers(room),
+        estimate: band_cost(band_tiles),
     })
 }
 
