@@ -189,6 +189,9 @@ pub enum BenchCommand {
     /// Draw a tolerance CSV (sequence,mode,asked,delivered,…; scripts/tolerance_bench.sh):
     /// the mean PSNR delivered minus the tolerance asked, against it, with the ±0.5 dB band.
     PlotTolerance(BenchPlotArgs),
+    /// Draw a size CSV (size,detail,frames,bake_s,bake_peak_mb,encode_s,encode_peak_mb,…;
+    /// scripts/size_bench.sh): the bake's and the encoder's peak memory against the size.
+    PlotSize(BenchPlotArgs),
     /// Sweep bandwidth caps from 0.25× to 2× the stream's mean rate under a stall pattern,
     /// for each policy; drift and shown error against bandwidth (CSV + PNG).
     Drift(BenchDriftArgs),
@@ -266,7 +269,7 @@ pub struct BenchLosslessArgs {
 
 #[derive(Args)]
 pub struct BenchPlotArgs {
-    /// The CSV written by scripts/rd_bench.sh (plot-rd) or scripts/tolerance_bench.sh.
+    /// The CSV written by scripts/rd_bench.sh (plot-rd), scripts/tolerance_bench.sh or scripts/size_bench.sh.
     pub csv: PathBuf,
     /// Output PNG.
     #[arg(short, long)]

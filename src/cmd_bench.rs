@@ -17,6 +17,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::Lossless(a) => bench_lossless(a),
         BenchCommand::PlotRd(a) => plot_rd(a),
         BenchCommand::PlotTolerance(a) => plot_tolerance(a),
+        BenchCommand::PlotSize(a) => plot_size(a),
         BenchCommand::Drift(a) => bench_drift(a),
         BenchCommand::Render(a) => bench_render(a),
         BenchCommand::Scale(a) => crate::bench_scale::run(a),
@@ -270,6 +271,34 @@ fn plot_tolerance(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
         "mean PSNR delivered − asked, dB (protocol metric)",
         &series,
         false,
+    )?;
+    println!("wrote {}", a.out.display());
+    Ok(())
+}
+
+fn plot_size(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
+    let mut series = Vec::new();
+    for (column, what) in [(4, "bake"), (6, "encode")] {
+        let s = csv_series(&a.csv, 7, |f, line| {
+            let size: f64 = f[0].parse().map_err(|_| format!("bad size in {line}"))?;
+            let mb: f64 = f[column]
+                .parse()
+                .map_err(|_| format!("bad peak in {line}"))?;
+            let detail = if f[1] == "true" { ", with detail" } else { "" };
+            Ok((format!("{what} peak{detail}"), (size * size, mb / 1000.0)))
+        })?;
+        series.extend(s);
+    }
+    if series.is_empty() {
+        return Err(format!("{}: no rows", a.csv.display()));
+    }
+    crate::plot::lines(
+        &a.out,
+        &a.title,
+        "texels per frame (log)",
+        "peak resident memory, GB",
+        &series,
+        true,
     )?;
     println!("wrote {}", a.out.display());
     Ok(())

@@ -125,6 +125,7 @@ pub(crate) fn code_sequence(
     let intra_every = cfg.intra_interval_frames();
     let plan = crate::plan::plan(&info, cfg, rayon::current_num_threads())?;
     let sub_dom = dom.subsampled(cfg.tile_size, cfg.search_stride);
+    let bands = (dom.ph / cfg.tile_size).div_ceil(plan.band_tiles) as u64;
     let mut window = Window::new(src, &dom, cfg, plan, end);
     let mut chunks: Vec<PendingChunk> = Vec::new();
     if let Some(m) = &cfg.metadata {
@@ -192,7 +193,13 @@ pub(crate) fn code_sequence(
             inner: (e - b).saturating_sub(1) as usize,
             sens_sq: (b + 1..e).map(|i| window.sens_sq[&i]).sum(),
             band_tiles: plan.band_tiles,
-            rows: |rows| window.rows(b + 1..e, rows),
+            rows: |rows: std::ops::Range<usize>| {
+                // Progress in frames × bands: a segment of a large frame takes a while.
+                let band = (rows.start / (plan.band_tiles * cfg.tile_size)) as u64;
+                let done = b as u64 * bands + (e - b) as u64 * band;
+                progress("encode", done, end as u64 * bands);
+                window.rows(b + 1..e, rows)
+            },
         };
         let code = model::code_segment(&dom, cfg.tile_size, input, &mut projectors, &sp)?;
         // Playback order: a segment's tile map and coefficients follow its closing keyframe.
@@ -215,7 +222,7 @@ pub(crate) fn code_sequence(
         // Frames before the new boundary are done (frame 0 stays for a loop's end).
         window.forget_before(e);
         b = e;
-        progress("encode", b as u64, end as u64);
+        progress("encode", b as u64 * bands, end as u64 * bands);
     }
     let segments = boundaries.len() as u32 - 1;
     let keyframes = if looping { segments } else { segments + 1 };

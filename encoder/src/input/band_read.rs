@@ -10,10 +10,10 @@ use std::path::Path;
 
 use super::{Frame, InputKind};
 
-/// Rows `rows` of an EXR file, or `None` where the file is not a single-layer flat image
+/// Rows `rows` of an EXR file (all of them: the whole image), or `None` where the file is not a single-layer flat image
 /// of scan lines or tiles at one resolution (the caller reads it whole). Values are those the whole-file reader
 /// gives: the R, G, B channels, or Y alone.
-pub fn exr_rows(path: &Path, rows: Range<usize>) -> Result<Option<Frame>, String> {
+pub fn exr_rows(path: &Path, rows: Option<Range<usize>>) -> Result<Option<Frame>, String> {
     use exr::block::reader::ChunksReader;
     use exr::meta::attribute::SampleType;
     use exr::meta::attribute::{LevelMode, TileDescription};
@@ -42,6 +42,7 @@ pub fn exr_rows(path: &Path, rows: Range<usize>) -> Result<Option<Frame>, String
         return Ok(None);
     }
     let (w, h) = (header.layer_size.0, header.layer_size.1);
+    let rows = rows.unwrap_or(0..h);
     if rows.end > h || rows.is_empty() {
         return Err(format!("rows {rows:?} of a frame {h} high"));
     }
@@ -194,4 +195,122 @@ pub fn png_rows(
         kind,
         data,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use exr::prelude::*;
+
+    const W: usize = 37;
+    const H: usize = 29;
+
+    fn value(x: usize, y: usize, c: usize) -> f32 {
+        ((x * 7 + y * 13 + c * 5) % 23) as f32 * 0.37 + c as f32
+    }
+
+    /// Bands of rows of `path`, against the image reader's whole file.
+    fn check_exr(path: &Path) {
+        let whole = read_first_rgba_layer_from_file(
+            path,
+            |res, _| vec![[0f32; 3]; res.width() * res.height()],
+            |px: &mut Vec<[f32; 3]>, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * W + pos.x()] = [r, g, b]
+            },
+        )
+        .unwrap()
+        .layer_data
+        .channel_data
+        .pixels;
+        for rows in [0..H, 0..1, 5..23, 28..29] {
+            let band = exr_rows(path, Some(rows.clone())).unwrap().unwrap();
+            assert_eq!((band.width, band.height, band.channels), (W, rows.len(), 3));
+            let want: Vec<f32> = whole[rows.start * W..rows.end * W]
+                .iter()
+                .flatten()
+                .copied()
+                .collect();
+            assert_eq!(band.data, want, "rows {rows:?}");
+        }
+    }
+
+    #[test]
+    fn bands_of_exr_scan_lines_and_tiles_are_the_image_readers_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        // f32 scan lines in blocks of 16 (ZIP), and f16 tiles of 8 × 8 (RLE): bands that
+        // start and end inside a block.
+        let lines = dir.path().join("lines.exr");
+        Image::from_encoded_channels(
+            (W, H),
+            Encoding {
+                compression: Compression::ZIP16,
+                blocks: Blocks::ScanLines,
+                line_order: LineOrder::Increasing,
+            },
+            SpecificChannels::rgb(|Vec2(x, y)| (value(x, y, 0), value(x, y, 1), value(x, y, 2))),
+        )
+        .write()
+        .to_file(&lines)
+        .unwrap();
+        check_exr(&lines);
+        let tiles = dir.path().join("tiles.exr");
+        Image::from_encoded_channels(
+            (W, H),
+            Encoding {
+                compression: Compression::RLE,
+                blocks: Blocks::Tiles(Vec2(8, 8)),
+                line_order: LineOrder::Increasing,
+            },
+            SpecificChannels::rgb(|Vec2(x, y)| {
+                (
+                    f16::from_f32(value(x, y, 0)),
+                    f16::from_f32(value(x, y, 1)),
+                    f16::from_f32(value(x, y, 2)),
+                )
+            }),
+        )
+        .write()
+        .to_file(&tiles)
+        .unwrap();
+        check_exr(&tiles);
+    }
+
+    #[test]
+    fn bands_of_png_rows_are_the_image_readers_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        let rgba = dir.path().join("rgba.png");
+        let px: Vec<u8> = (0..W * H * 4).map(|i| (i * 37 % 251) as u8).collect();
+        image::RgbaImage::from_raw(W as u32, H as u32, px)
+            .unwrap()
+            .save(&rgba)
+            .unwrap();
+        let grey = dir.path().join("grey16.png");
+        let px: Vec<u16> = (0..W * H * 2).map(|i| (i * 4099 % 65521) as u16).collect();
+        image::ImageBuffer::<image::LumaA<u16>, _>::from_raw(W as u32, H as u32, px)
+            .unwrap()
+            .save(&grey)
+            .unwrap();
+        let want_rgba: Vec<f32> = image::open(&rgba)
+            .unwrap()
+            .to_rgb8()
+            .into_raw()
+            .iter()
+            .map(|&v| v as f32 / 255.0)
+            .collect();
+        let want_grey: Vec<f32> = image::open(&grey)
+            .unwrap()
+            .to_rgb16()
+            .into_raw()
+            .iter()
+            .map(|&v| v as f32 / 1000.0)
+            .collect();
+        for rows in [0..H, 0..1, 5..23, 28..29] {
+            let r = png_rows(&rgba, Some(rows.clone()), 1000.0).unwrap();
+            assert_eq!((r.kind, r.channels), (InputKind::Srgb8, 3));
+            assert_eq!(r.data, want_rgba[rows.start * W * 3..rows.end * W * 3]);
+            let g = png_rows(&grey, Some(rows.clone()), 1000.0).unwrap();
+            assert_eq!((g.kind, g.channels), (InputKind::Hdr, 3));
+            assert_eq!(g.data, want_grey[rows.start * W * 3..rows.end * W * 3]);
+        }
+    }
 }
