@@ -292,6 +292,15 @@ fn plot_size(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
     if series.is_empty() {
         return Err(format!("{}: no rows", a.csv.display()));
     }
+    let texels = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+    let (lo, hi) = texels.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+        (l.min(x), h.max(x))
+    });
+    let limit = vbim_encoder::DEFAULT_MEMORY_LIMIT as f64 / 1e9;
+    series.push(crate::plot::Series {
+        name: format!("the encoder's default --memory-limit, {limit} GB"),
+        points: vec![(lo, limit), (hi, limit)],
+    });
     crate::plot::lines(
         &a.out,
         &a.title,
