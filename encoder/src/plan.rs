@@ -1,7 +1,7 @@
 //! How much of the sequence the encoder holds at once. The segment search reads only a
 //! subsample of each frame, and everything after it is local to a tile, so only three
-//! things need whole frames: the search's subsampled window, the decoded keyframes, and
-//! the keyframe being coded. The inner frames of a segment, which are most of what the
+//! things span the whole frame: the search's window of subsampled frames, the decoded
+//! keyframes, and the keyframe being coded. The inner frames of a segment, which are most of what the
 //! encoder would hold, are held whole when they fit the memory limit and otherwise read
 //! from the input one band of tile rows at a time. The output is the same either way.
 
@@ -48,12 +48,11 @@ pub(crate) fn plan(
     let window = (longest + 2) * tiles_x * tiles_y * st * st * (ch + 1) * 4;
     let held = window + 3 * t * ch * 4 + t * ch * nb * 2;
     // The phases, one at a time on top of that. Reading a frame: the decoded file (f32
-    // interleaved, and the reader's own copy) and the coded frame it becomes. Coding a
-    // keyframe: its frame read whole, a residual plane and both candidate payloads'
-    // blocks. A band: per padded row, z = Qᵀr (f64), the bubble planes and one stream's
+    // interleaved) and the coded frame it becomes. Coding a keyframe: the coded frame, a
+    // residual plane and both candidate payloads' blocks. A band: per padded row, z = Qᵀr (f64), the bubble planes and one stream's
     // dense blocks per term and plane, and in band mode the inner frames' rows.
-    let read = t * ch * 4 * 2 + frame;
-    let keyframe = read + t * 4 + 2 * t * ch * 4;
+    let read = t * ch * 4 + frame;
+    let keyframe = read.max(frame + t * 4 + 2 * t * ch * 4);
     let work_row = pw as u64 * nb * ch * (8 + 4 + 4);
     let band_row = work_row + pw as u64 * longest.saturating_sub(1) * (ch + 1) * 4;
     let limit = cfg.memory_limit;
@@ -120,5 +119,49 @@ fn size(bytes: u64) -> String {
         b if b >= 1_000_000_000 => format!("{:.2} GB", b as f64 / 1e9),
         b if b >= 1_000_000 => format!("{:.1} MB", b as f64 / 1e6),
         b => format!("{:.0} kB", b as f64 / 1e3),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{InputKind, Preset};
+
+    fn info(side: usize, channels: usize) -> SourceInfo {
+        SourceInfo {
+            width: side,
+            height: side,
+            channels,
+            kind: InputKind::Hdr,
+            frames: 240,
+            name: "day".into(),
+        }
+    }
+
+    #[test]
+    fn frames_are_whole_until_the_limit_and_in_bands_within_it_after() {
+        let cfg = EncoderConfig::preset(Preset::Default);
+        for side in [512, 1024, 2048] {
+            let p = plan(&info(side, 3), &cfg, 2).unwrap();
+            assert!(p.whole && p.estimate <= cfg.memory_limit, "{side}²: {p:?}");
+        }
+        let p = plan(&info(4096, 3), &cfg, 2).unwrap();
+        assert!(!p.whole && p.estimate <= cfg.memory_limit, "4096²: {p:?}");
+        assert!(p.band_tiles >= 1 && p.readers >= 1);
+        // 8192² holds more than 4 GB before any band (the window and the keyframes):
+        // refused, naming what it needs; within 10 GB, in bands.
+        let e = plan(&info(8192, 3), &cfg, 2).unwrap_err().to_string();
+        assert!(e.contains("8192×8192") && e.contains("GB"), "{e}");
+        let at = |gb: u64| EncoderConfig {
+            memory_limit: gb * 1_000_000_000,
+            ..cfg.clone()
+        };
+        let (a, b) = (
+            plan(&info(8192, 3), &at(10), 2).unwrap(),
+            plan(&info(8192, 3), &at(20), 2).unwrap(),
+        );
+        assert!(!a.whole && a.estimate <= 10_000_000_000, "{a:?}");
+        // More room, wider bands; no more threads than asked read at once.
+        assert!(b.band_tiles > a.band_tiles && b.readers <= 2, "{a:?} {b:?}");
     }
 }
