@@ -101,12 +101,17 @@ pub fn load(dir: &Path, key: u64, scene: &Scene) -> Option<Precomputed> {
     if len != need {
         return None;
     }
+    let mut buf = vec![0u8; 1 << 16];
     let mut take = |n: usize| -> Option<Vec<f32>> {
-        let mut v = vec![0f32; n];
-        let mut buf = [0u8; 4];
-        for x in v.iter_mut() {
-            r.read_exact(&mut buf).ok()?;
-            *x = f32::from_le_bytes(buf);
+        let mut v = Vec::with_capacity(n);
+        while v.len() < n {
+            let bytes = &mut buf[..4 * (n - v.len()).min(1 << 14)];
+            r.read_exact(bytes).ok()?;
+            v.extend(
+                bytes
+                    .chunks_exact(4)
+                    .map(|c| f32::from_le_bytes(c.try_into().unwrap())),
+            );
         }
         Some(v)
     };
