@@ -5,7 +5,7 @@
 //! and the non-zero AC terms, a stream takes about what its entropy-coded form does.
 
 use vbim_format::dct::N;
-use vbim_format::varint;
+use vbim_format::plane::RunWriter;
 
 /// One coefficient stream's quantised blocks (zig-zag order), in stream order.
 #[derive(Default, Clone)]
@@ -30,18 +30,11 @@ impl SparseBlocks {
     /// Writes the stream exactly as `write_coefficients` writes the same blocks dense.
     pub fn write(&self, out: &mut Vec<u8>) {
         let n = self.dc.len() as u32;
-        let mut run = 0u32;
+        let mut w = RunWriter::new(out);
         let mut prev_dc = 0i32;
         for &d in &self.dc {
-            let v = d.wrapping_sub(prev_dc);
+            w.value(d.wrapping_sub(prev_dc));
             prev_dc = d;
-            if v == 0 {
-                run += 1;
-            } else {
-                varint::put_u32(out, run);
-                varint::put_i32(out, v);
-                run = 0;
-            }
         }
         // The AC terms by frequency, each frequency's in block order (a stable counting
         // sort of terms already in block order).
@@ -62,15 +55,13 @@ impl SparseBlocks {
             // Zeros before each term of this frequency, then after its last one.
             let mut next = 0u32;
             for &(b, v) in &by_f[start[f]..start[f + 1]] {
-                run += b - next;
-                varint::put_u32(out, run);
-                varint::put_i32(out, v);
-                run = 0;
+                w.zeros(b - next);
+                w.value(v);
                 next = b + 1;
             }
-            run += n - next;
+            w.zeros(n - next);
         }
-        varint::put_u32(out, run);
+        w.finish();
     }
 }
 

@@ -96,27 +96,53 @@ pub fn all_blocks(p: &Plane) -> impl Iterator<Item = (usize, usize)> + use<> {
 /// zeros, so this is both smaller before zstd and far faster to decode than one varint
 /// per coefficient.
 pub fn write_coefficients(blocks: &[[i32; N * N]], out: &mut Vec<u8>) {
-    let mut run = 0u32;
-    let mut emit = |v: i32, out: &mut Vec<u8>| {
-        if v == 0 {
-            run += 1;
-        } else {
-            varint::put_u32(out, run);
-            varint::put_i32(out, v);
-            run = 0;
-        }
-    };
+    let mut w = RunWriter::new(out);
     let mut prev_dc = 0i32;
     for b in blocks {
-        emit(b[0].wrapping_sub(prev_dc), out);
+        w.value(b[0].wrapping_sub(prev_dc));
         prev_dc = b[0];
     }
     for f in 1..N * N {
         for b in blocks {
-            emit(b[f], out);
+            w.value(b[f]);
         }
     }
-    varint::put_u32(out, run);
+    w.finish();
+}
+
+/// The (zero run, value) pairs of a coefficient stream as [`write_coefficients`] writes
+/// them, for writers that hold their blocks in another form (the encoder's sparse ones).
+pub struct RunWriter<'a> {
+    out: &'a mut Vec<u8>,
+    run: u32,
+}
+
+impl<'a> RunWriter<'a> {
+    /// Writes onto the end of `out`.
+    pub fn new(out: &'a mut Vec<u8>) -> RunWriter<'a> {
+        RunWriter { out, run: 0 }
+    }
+
+    /// The next coefficient.
+    pub fn value(&mut self, v: i32) {
+        if v == 0 {
+            self.run += 1;
+        } else {
+            varint::put_u32(self.out, self.run);
+            varint::put_i32(self.out, v);
+            self.run = 0;
+        }
+    }
+
+    /// `n` zero coefficients.
+    pub fn zeros(&mut self, n: u32) {
+        self.run += n;
+    }
+
+    /// The final run, which reaches the end of the stream.
+    pub fn finish(self) {
+        varint::put_u32(self.out, self.run);
+    }
 }
 
 /// Decoded blocks of one coefficient stream, kept sparse: each block's DC term, and its
