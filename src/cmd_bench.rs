@@ -216,6 +216,19 @@ fn csv_series(
     Ok(series)
 }
 
+/// Adds a horizontal line at `y` across the x range of the series so far (a band or a
+/// limit to read the points against).
+fn push_level(series: &mut Vec<crate::plot::Series>, name: String, y: f64) {
+    let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+        (l.min(x), h.max(x))
+    });
+    series.push(crate::plot::Series {
+        name,
+        points: vec![(lo, y), (hi, y)],
+    });
+}
+
 fn plot_rd(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
     let mut series = csv_series(&a.csv, 5, |f, line| {
         let bpp = f[3].parse().map_err(|_| format!("bad bpp in {line}"))?;
@@ -254,15 +267,8 @@ fn plot_tolerance(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
     if series.is_empty() {
         return Err(format!("{}: no rows", a.csv.display()));
     }
-    let asked = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
-    let (lo, hi) = asked.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
-        (l.min(x), h.max(x))
-    });
     for (name, d) in [("−0.5 dB", -0.5), ("+0.5 dB", 0.5)] {
-        series.push(crate::plot::Series {
-            name: name.into(),
-            points: vec![(lo, d), (hi, d)],
-        });
+        push_level(&mut series, name.into(), d);
     }
     crate::plot::lines(
         &a.out,
@@ -292,15 +298,12 @@ fn plot_size(a: crate::cli::BenchPlotArgs) -> Result<(), String> {
     if series.is_empty() {
         return Err(format!("{}: no rows", a.csv.display()));
     }
-    let texels = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
-    let (lo, hi) = texels.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
-        (l.min(x), h.max(x))
-    });
     let limit = vbim_encoder::DEFAULT_MEMORY_LIMIT as f64 / 1e9;
-    series.push(crate::plot::Series {
-        name: format!("the encoder's default --memory-limit, {limit} GB"),
-        points: vec![(lo, limit), (hi, limit)],
-    });
+    push_level(
+        &mut series,
+        format!("the encoder's default --memory-limit, {limit} GB"),
+        limit,
+    );
     crate::plot::lines(
         &a.out,
         &a.title,
