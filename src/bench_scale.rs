@@ -97,6 +97,7 @@ fn stream_for(a: &BenchScaleArgs, size: usize) -> Result<PathBuf, String> {
     scene.size = size;
     scene.frames = a.frames;
     scene.clouds.enabled = a.clouds;
+    scene.detail.enabled = a.detail;
     let frames = a.out.join(format!("frames-{size}"));
     let stages = Stages::new();
     let progress = |s: &str, d: u64, t: u64| stages.report(s, d, t);

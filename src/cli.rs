@@ -236,6 +236,11 @@ pub struct BenchScaleArgs {
     /// Moving cloud shadows (the cloudy day is the harder one to stream).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub clouds: bool,
+    /// Fractal detail below the height field's resolution (`[detail]` in the scene): real
+    /// terrain at 2048² and up has it, and it costs 10–20× the bytes of a smooth blow-up,
+    /// so the runtime's figures should be taken on it too.
+    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    pub detail: bool,
     /// Display rate while measuring, Hz (uploads do not depend on it; GPU time per
     /// displayed frame does not either, but the run's length does).
     #[arg(long, default_value_t = 24)]

@@ -18,8 +18,6 @@
 use std::io::Cursor;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use rayon::prelude::*;
-
 use crate::secant::{bracket, next_tolerance, Pass};
 use crate::{EncodeError, EncoderConfig, FrameSource, MemorySource, Progress};
 
@@ -296,28 +294,27 @@ impl Sample {
         let chosen = stratified(whole, cols * rows);
         let (w, h, ch) = (cols * ts, rows * ts, info.channels);
         let done = AtomicU64::new(0);
-        let read: Vec<(Vec<f32>, f32)> = (0..info.frames)
-            .into_par_iter()
-            .map(|i| {
-                let f = src.read(i)?;
-                let mut out = vec![0f32; w * h * ch];
-                for (k, &t) in chosen.iter().enumerate() {
-                    let (sx, sy) = ((t % tx) * ts, (t / tx) * ts);
-                    let (dx, dy) = ((k % cols) * ts, (k / cols) * ts);
-                    for y in 0..ts {
-                        let s = ((sy + y) * info.width + sx) * ch;
-                        let d = ((dy + y) * w + dx) * ch;
-                        out[d..d + ts * ch].copy_from_slice(&f.data[s..s + ts * ch]);
-                    }
+        // Each read holds a frame whole: as many at once as the encode's plan allows.
+        let readers = crate::plan::plan(&info, cfg, rayon::current_num_threads())?.readers;
+        let read: Vec<(Vec<f32>, f32)> = crate::plan::read_frames(info.frames, readers, |i| {
+            let f = src.read(i)?;
+            let mut out = vec![0f32; w * h * ch];
+            for (k, &t) in chosen.iter().enumerate() {
+                let (sx, sy) = ((t % tx) * ts, (t / tx) * ts);
+                let (dx, dy) = ((k % cols) * ts, (k / cols) * ts);
+                for y in 0..ts {
+                    let s = ((sy + y) * info.width + sx) * ch;
+                    let d = ((dy + y) * w + dx) * ch;
+                    out[d..d + ts * ch].copy_from_slice(&f.data[s..s + ts * ch]);
                 }
-                progress(
-                    "sample",
-                    done.fetch_add(1, Ordering::Relaxed) + 1,
-                    info.frames as u64,
-                );
-                Ok((out, vbim_format::curve::max_green(&f.data, ch)))
-            })
-            .collect::<Result<_, EncodeError>>()?;
+            }
+            progress(
+                "sample",
+                done.fetch_add(1, Ordering::Relaxed) + 1,
+                info.frames as u64,
+            );
+            Ok((out, vbim_format::curve::max_green(&f.data, ch)))
+        })?;
         let greens: Vec<f32> = read.iter().map(|r| r.1).collect();
         let exposure = vbim_format::curve::exposure_from_max_greens(&greens);
         let frames = read.into_iter().map(|r| r.0).collect();

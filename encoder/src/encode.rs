@@ -63,24 +63,22 @@ pub(crate) fn code_sequence(
     let info = src.info();
     let n = info.frames;
     check_shape(&info)?;
+    let plan = crate::plan::plan(&info, cfg, rayon::current_num_threads())?;
     // Pass 1: validate every frame before any work, and learn the exposure (unless a
     // sample's reading did both).
     let e = match validated {
         Some(e) => e,
         None => {
             let done = AtomicU64::new(0);
-            let greens: Vec<f32> = (0..n)
-                .into_par_iter()
-                .map(|i| {
-                    let f = src.read(i)?;
-                    progress(
-                        "validate",
-                        done.fetch_add(1, Ordering::Relaxed) + 1,
-                        n as u64,
-                    );
-                    Ok(vbim_format::curve::max_green(&f.data, f.channels))
-                })
-                .collect::<Result<_, EncodeError>>()?;
+            let greens = crate::plan::read_frames(n, plan.readers, |i| {
+                let f = src.read(i)?;
+                progress(
+                    "validate",
+                    done.fetch_add(1, Ordering::Relaxed) + 1,
+                    n as u64,
+                );
+                Ok(vbim_format::curve::max_green(&f.data, f.channels))
+            })?;
             exposure_from_max_greens(&greens)
         }
     };
@@ -123,7 +121,6 @@ pub(crate) fn code_sequence(
     let looping = cfg.looping;
     let end = if looping { n } else { n - 1 } as u32;
     let intra_every = cfg.intra_interval_frames();
-    let plan = crate::plan::plan(&info, cfg, rayon::current_num_threads())?;
     let sub_dom = dom.subsampled(cfg.tile_size, cfg.search_stride);
     let bands = (dom.ph / cfg.tile_size).div_ceil(plan.band_tiles) as u64;
     let mut window = Window::new(src, &dom, cfg, plan, end);

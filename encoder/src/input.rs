@@ -263,8 +263,50 @@ pub fn read_file(path: &Path, png16_scale: f32) -> Result<Frame, EncodeError> {
     band_read::png_rows(path, None, png16_scale).map_err(err)
 }
 
+/// The first row of a frame file and the file's height: its shape, without reading the
+/// whole frame (0.8 GB at 8192² for an encode the memory plan may then refuse). Files
+/// that cannot be read by rows (layered or mip-mapped EXR) are read whole.
+fn first_row(path: &Path, png16_scale: f32) -> Result<(Frame, usize), EncodeError> {
+    let err = |m: String| EncodeError::Input(format!("{}: {m}", path.display()));
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    // Only a regular file is opened here (a FIFO would block); anything else goes
+    // through `read_file`, which says what is wrong with it.
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    let height = if !regular {
+        None
+    } else if ext.eq_ignore_ascii_case("exr") {
+        exr::meta::MetaData::read_from_file(path, false)
+            .ok()
+            .and_then(|m| m.headers.first().map(|h| h.layer_size.1))
+    } else if ext.eq_ignore_ascii_case("png") {
+        std::fs::File::open(path)
+            .ok()
+            .and_then(|f| {
+                png::Decoder::new(std::io::BufReader::new(f))
+                    .read_info()
+                    .ok()
+            })
+            .map(|r| r.info().height as usize)
+    } else {
+        None
+    };
+    if let Some(h) = height.filter(|&h| h > 0) {
+        let row = if ext.eq_ignore_ascii_case("exr") {
+            band_read::exr_rows(path, Some(0..1)).map_err(err)?
+        } else {
+            Some(band_read::png_rows(path, Some(0..1), png16_scale).map_err(err)?)
+        };
+        if let Some(row) = row {
+            return Ok((row, h));
+        }
+    }
+    let f = read_file(path, png16_scale)?;
+    let h = f.height;
+    Ok((f, h))
+}
+
 impl FrameSet {
-    /// Lists the frames and reads the first to learn the sequence's shape.
+    /// Lists the frames and reads the first one's shape.
     pub fn open(spec: &str) -> Result<FrameSet, EncodeError> {
         let (paths, notes, dir) = list(spec)?;
         let manifest = Some(dir.join(Manifest::FILE_NAME)).filter(|m| m.is_file());
@@ -273,11 +315,11 @@ impl FrameSet {
             .and_then(|m| Manifest::read(m).ok())
             .and_then(|m| m.png16_scale)
             .unwrap_or(65535.0);
-        let first = read_file(&paths[0], png16_scale)?;
+        let (first, height) = first_row(&paths[0], png16_scale)?;
         Ok(FrameSet {
             kind: first.kind,
             width: first.width,
-            height: first.height,
+            height,
             channels: first.channels,
             paths,
             png16_scale,

@@ -113,6 +113,28 @@ pub(crate) fn plan(
     })
 }
 
+/// `f(i)` for every frame `i < n`, at most `readers` at once: each call reads a frame
+/// whole, so the readers a plan allows (not the worker threads, which may be many more
+/// on a large machine) bound what the reads hold. Results in frame order.
+pub(crate) fn read_frames<T: Send>(
+    n: usize,
+    readers: usize,
+    f: impl Fn(usize) -> Result<T, EncodeError> + Sync,
+) -> Result<Vec<T>, EncodeError> {
+    use rayon::prelude::*;
+    let mut out = Vec::with_capacity(n);
+    let frames: Vec<usize> = (0..n).collect();
+    for group in frames.chunks(readers.max(1)) {
+        out.extend(
+            group
+                .par_iter()
+                .map(|&i| f(i))
+                .collect::<Result<Vec<T>, EncodeError>>()?,
+        );
+    }
+    Ok(out)
+}
+
 /// A size in SI units, as `--memory-limit` takes it.
 fn size(bytes: u64) -> String {
     match bytes {
@@ -163,5 +185,36 @@ mod tests {
         assert!(!a.whole && a.estimate <= 10_000_000_000, "{a:?}");
         // More room, wider bands; no more threads than asked read at once.
         assert!(b.band_tiles > a.band_tiles && b.readers <= 2, "{a:?} {b:?}");
+    }
+
+    #[test]
+    fn frames_are_read_at_most_readers_at_once_in_order() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(8)
+            .build()
+            .unwrap();
+        for readers in [1, 3] {
+            let (now, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+            let out = pool
+                .install(|| {
+                    read_frames(20, readers, |i| {
+                        let n = now.fetch_add(1, Ordering::SeqCst) + 1;
+                        most.fetch_max(n, Ordering::SeqCst);
+                        std::thread::sleep(std::time::Duration::from_millis(2));
+                        now.fetch_sub(1, Ordering::SeqCst);
+                        Ok(i * 10)
+                    })
+                })
+                .unwrap();
+            assert_eq!(out, (0..20).map(|i| i * 10).collect::<Vec<_>>());
+            assert!(most.load(Ordering::SeqCst) <= readers, "{readers}");
+        }
+        let e = read_frames(5, 2, |i| match i {
+            3 => Err(EncodeError::Input("frame 3: bad".into())),
+            _ => Ok(i),
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("frame 3"), "{e}");
     }
 }
