@@ -153,8 +153,11 @@ impl<'a> RunWriter<'a> {
 #[derive(Default)]
 pub struct Blocks {
     dc: Vec<i32>,
-    /// AC terms of block b: `ac[start[b]..start[b + 1]]`.
-    ac: Vec<(u8, i32)>,
+    /// AC terms of block b: zig-zag indices `ac_index[start[b]..start[b + 1]]` and their
+    /// values at the same places. (Two arrays, 5 bytes a term: a tuple would pad to 8, and
+    /// a dense 2048² keyframe plane holds 4 million terms.)
+    ac_index: Vec<u8>,
+    ac_value: Vec<i32>,
     start: Vec<u32>,
     /// Scratch: (block | zig-zag index << [`BLOCK_BITS`], value) in stream order, and
     /// bucket cursors. (8 bytes a term, not 12: the scratch is the largest thing the
@@ -185,9 +188,10 @@ impl Blocks {
     #[inline(always)]
     pub fn terms(&self, b: usize) -> impl Iterator<Item = (usize, i32)> + '_ {
         let dc = (self.dc[b] != 0).then_some((0, self.dc[b]));
-        let ac = &self.ac[self.start[b] as usize..self.start[b + 1] as usize];
+        let at = self.start[b] as usize..self.start[b + 1] as usize;
+        let (index, value) = (&self.ac_index[at.clone()], &self.ac_value[at]);
         dc.into_iter()
-            .chain(ac.iter().map(|&(i, v)| (i as usize, v)))
+            .chain(index.iter().zip(value).map(|(&i, &v)| (i as usize, v)))
     }
 
     /// Block `b` as 64 integers in zig-zag order.
@@ -245,13 +249,20 @@ pub fn read_blocks(buf: &[u8], pos: &mut usize, n: usize, out: &mut Blocks) -> R
     }
     out.cursor.clear();
     out.cursor.extend_from_slice(&out.start[..n]);
-    out.ac.clear();
-    out.ac.resize(out.parsed.len(), (0, 0));
+    out.ac_index.clear();
+    out.ac_index.resize(out.parsed.len(), 0);
+    out.ac_value.clear();
+    out.ac_value.resize(out.parsed.len(), 0);
     // (As slices, whose pointers stay in registers.)
-    let (cursor, ac) = (&mut out.cursor[..], &mut out.ac[..]);
+    let (cursor, index, value) = (
+        &mut out.cursor[..],
+        &mut out.ac_index[..],
+        &mut out.ac_value[..],
+    );
     for &(bf, v) in &out.parsed {
         let c = &mut cursor[(bf & BLOCK_MASK) as usize];
-        ac[*c as usize] = ((bf >> BLOCK_BITS) as u8, v);
+        index[*c as usize] = (bf >> BLOCK_BITS) as u8;
+        value[*c as usize] = v;
         *c += 1;
     }
     Ok(())
