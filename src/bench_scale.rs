@@ -43,6 +43,10 @@ pub struct Cost {
     pub render_cpu_ns: f64,
     pub gpu_ns: f64,
     pub display_hz: u32,
+    /// The adapter it played on (name and backend): wgpu falls back to OpenGL where
+    /// Vulkan is missing, and the GPU figures are not comparable across backends.
+    #[serde(default)]
+    pub adapter: String,
 }
 
 /// `vbim bench scale`: every size, each in a child process; a table, a CSV and plots.
@@ -124,7 +128,7 @@ fn stream_for(a: &BenchScaleArgs, size: usize) -> Result<PathBuf, String> {
 /// as JSON.
 pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
-    let (device, queue, _) = vbim_player::headless_device()?;
+    let (device, queue, info) = vbim_player::headless_device()?;
     let f = crate::sequence::open_input(&a.file)?;
     let file_bytes = f.metadata().map_err(|e| format!("{name}: {e}"))?.len();
     let cfg = PlayerConfig {
@@ -177,6 +181,7 @@ pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
         render_cpu_ns: mean(&cpu),
         gpu_ns: mean(&gpu),
         display_hz: a.display_hz,
+        adapter: format!("{} ({:?})", info.name, info.backend),
     };
     player
         .stop(std::time::Duration::from_secs(10))
@@ -252,6 +257,9 @@ fn report(a: &BenchScaleArgs, costs: &[Cost]) -> Result<(), String> {
             c.gpu_ns * 1e-6
         );
     }
+    let mut adapters: Vec<&str> = costs.iter().map(|c| c.adapter.as_str()).collect();
+    adapters.dedup();
+    println!("\nplayed on: {}", adapters.join(", "));
     write(&a.out.join("scale.csv"), &csv)?;
     let mtexels = |c: &Cost| c.texels as f64 / 1e6;
     let series = |name: &str, f: &dyn Fn(&Cost) -> f64| Series {
