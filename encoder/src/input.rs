@@ -534,4 +534,56 @@ mod tests {
             .to_string();
         assert!(e.contains("0000.exr"), "{e}");
     }
+
+    #[test]
+    fn opening_learns_the_shape_from_the_first_frames_header_and_row() {
+        use crate::FrameSource;
+        let dir = tempfile::tempdir().unwrap();
+        // 16-bit grey PNG and an RGB f32 EXR, 5 × 7: the shape, as the whole reader
+        // gives it.
+        let grey = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(5, 7, |x, y| {
+            image::Luma([(x * 1000 + y) as u16])
+        });
+        grey.save(dir.path().join("g_0.png")).unwrap();
+        grey.save(dir.path().join("g_1.png")).unwrap();
+        exr::prelude::write_rgb_file(dir.path().join("c_0.exr"), 5, 7, |x, y| {
+            (x as f32, y as f32, 1.0f32)
+        })
+        .unwrap();
+        for (spec, channels, kind) in [
+            ("g_%d.png", 1, super::InputKind::Hdr),
+            ("c_%d.exr", 3, super::InputKind::Hdr),
+        ] {
+            let set = super::FrameSet::open(dir.path().join(spec).to_str().unwrap()).unwrap();
+            let info = set.info();
+            assert_eq!(
+                (info.width, info.height, info.channels),
+                (5, 7, channels),
+                "{spec}"
+            );
+            assert_eq!(info.kind, kind, "{spec}");
+            let f = set.read(0).unwrap();
+            assert_eq!((f.width, f.height, f.channels), (5, 7, channels), "{spec}");
+        }
+    }
+
+    #[test]
+    fn a_first_frame_that_is_not_a_regular_file_is_refused_without_blocking() {
+        // (Listing skips such files; one can still take a frame's place after it.)
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("f_0.png");
+        assert!(std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let e = super::first_row(&fifo, 65535.0)
+            .err()
+            .expect("a FIFO is not a frame")
+            .to_string();
+        assert!(
+            e.contains("f_0.png") && e.contains("not a regular file"),
+            "{e}"
+        );
+    }
 }
