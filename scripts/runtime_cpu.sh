@@ -7,14 +7,15 @@
 #
 # Bakes and encodes each day once (kept in OUT), then plays each RUNS times for 10 s in
 # real time (`vbim play --headless --realtime`, threads as a game runs them) and prints
-# every run and the median of the sum.
+# every run and the median of the sum. The decoder's share follows the bytes it decodes, so
+# each row names its file's size: streams from another encoder build are another measurement.
 set -euo pipefail
 out=${1:-out/runtime_cpu}
 runs=${2:-3}
 vbim=${VBIM:-target/release/vbim}
 [ -x "$vbim" ] || cargo build --release
-echo "| day | reader | decoder | reader + decoder (median of $runs) |"
-echo "|---|---:|---:|---:|"
+echo "| day | file | reader | decoder | reader + decoder (median of $runs) |"
+echo "|---|---:|---:|---:|---:|"
 for sample in jacksboro aletsch; do
     for sky in clear cloudy; do
         dir="$out/$sample-$sky"
@@ -37,6 +38,6 @@ for sample in jacksboro aletsch; do
             reads+=("$r") decodes+=("$d") sums+=("$(python3 -c "print(f'{$r + $d:.2f}')")")
         done
         median=$(printf '%s\n' "${sums[@]}" | sort -n | awk '{a[NR]=$1} END {print a[int((NR + 1) / 2)]}')
-        echo "| $sample $sky | ${reads[*]}% | ${decodes[*]}% | **$median%** (${sums[*]}) |"
+        echo "| $sample $sky | $(stat -c %s "$file") bytes | ${reads[*]}% | ${decodes[*]}% | **$median%** (${sums[*]}) |"
     done
 done
