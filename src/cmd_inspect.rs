@@ -114,6 +114,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                 "max_degree": h.max_degree, "transfer": transfer, "segments": h.segment_count,
                 "keyframes": h.keyframe_count, "intra_interval_frames": h.intra_interval,
                 "chunks": h.chunk_count, "file_size": h.file_size,
+                "largest_payload": h.largest_payload,
                 "read_ahead": h.read_ahead.iter().map(|p| json!({"rate_bytes_per_s": p.rate, "bytes": p.bytes, "preroll_s": p.preroll_ns as f64 * 1e-9})).collect::<Vec<_>>(),
             },
             "chunks": chunks,
@@ -170,6 +171,10 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                 p.bytes,
                 p.preroll_ns as f64 * 1e-9
             );
+        }
+        match h.largest_payload {
+            Some(p) => println!("  payloads    at most {p} bytes decompressed"),
+            None => println!("  payloads    largest not stated (a 1.0 file)"),
         }
         println!("  chunks      {}:", h.chunk_count);
         println!(

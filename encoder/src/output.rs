@@ -69,6 +69,7 @@ pub(crate) fn header_for(
         file_size: 0,
         read_ahead: [ReadAhead::default(); READ_AHEAD_POINTS],
         index_checksum: 0,
+        largest_payload: None,
     }
 }
 

@@ -76,13 +76,23 @@ pub fn padded_size(h: &Header) -> (usize, usize) {
     (h.tiles_x() as usize * t, h.tiles_y() as usize * t)
 }
 
+/// The most a keyframe or coefficient payload of `blocks` coded blocks and `steps`
+/// quantiser steps may decompress to: the format's bound ([`payload_bound`]), and no more
+/// than the header's largest payload where it states one (1.1).
+pub fn payload_limit(h: &Header, blocks: usize, steps: usize, stored: usize) -> usize {
+    let bound = payload_bound(blocks, steps, stored);
+    h.largest_payload.map_or(bound, |p| {
+        bound.min(usize::try_from(p).unwrap_or(usize::MAX))
+    })
+}
+
 /// Decompresses a zstd frame, refusing output larger than `limit` bytes.
 pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
     let zstd_error = |e: std::io::Error| FormatError::Invalid(format!("zstd: {e}"));
     let capacity = match zstd::zstd_safe::get_frame_content_size(bytes) {
         Ok(Some(n)) if n > limit as u64 => {
             return Err(FormatError::Invalid(format!(
-                "payload claims {n} bytes decompressed (limit {limit}: the format's bound, or {}× its stored size)",
+                "payload claims {n} bytes decompressed (limit {limit}: the format's bound, the header's largest payload, or {}× its stored size)",
                 crate::limits::MAX_EXPANSION
             )));
         }
@@ -101,7 +111,7 @@ pub fn decompress(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
                 .map_err(zstd_error)?;
             if out.len() > limit {
                 return Err(FormatError::Invalid(format!(
-                    "payload decompresses to more than {limit} bytes (the format's bound, or {}× its stored size)",
+                    "payload decompresses to more than {limit} bytes (the format's bound, the header's largest payload, or {}× its stored size)",
                     crate::limits::MAX_EXPANSION
                 )));
             }
@@ -184,7 +194,10 @@ pub fn read_keyframe_from(
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
-    let raw = decompress(bytes, payload_bound(nblocks * planes, planes, bytes.len()))?;
+    let raw = decompress(
+        bytes,
+        payload_limit(h, nblocks * planes, planes, bytes.len()),
+    )?;
     keyframe_from_raw(h, &raw, prev)
 }
 
@@ -253,7 +266,10 @@ pub fn keyframe_blocks(
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
-    let raw = decompress(bytes, payload_bound(nblocks * planes, planes, bytes.len()))?;
+    let raw = decompress(
+        bytes,
+        payload_limit(h, nblocks * planes, planes, bytes.len()),
+    )?;
     let mut r = Bytes { b: &raw, pos: 0 };
     let head = r.take(4)?;
     let (mode, np) = (head[0], head[1] as usize);
@@ -492,7 +508,7 @@ impl<'t> CoeffReader<'t> {
         let dmax = tiles.max_degree();
         let raw = decompress(
             bytes,
-            payload_bound(total_blocks, planes * h.max_degree as usize, bytes.len()),
+            payload_limit(h, total_blocks, planes * h.max_degree as usize, bytes.len()),
         )?;
         let mut r = Bytes { b: &raw, pos: 0 };
         let head = r.take(4)?;

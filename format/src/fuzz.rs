@@ -168,6 +168,7 @@ fn small_header(a: u8, b: u8, c: u8, d: u8) -> Header {
         file_size: 0,
         read_ahead: Default::default(),
         index_checksum: 0,
+        largest_payload: None,
     }
 }
 

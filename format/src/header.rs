@@ -14,10 +14,14 @@ pub const ENTRY_SIZE: usize = 40;
 pub const MAGIC: [u8; 8] = [0xAB, b'V', b'B', b'I', b'M', 0xBB, 0x0D, 0x0A];
 /// The major version this crate reads and writes: a reader refuses any other.
 pub const VERSION_MAJOR: u16 = 1;
-/// The minor version this crate writes: a reader accepts any (they only add optional chunks).
-pub const VERSION_MINOR: u16 = 0;
-/// Bytes of a version 1.0 header. Later minor versions may append fields; readers skip them.
+/// The minor version this crate writes: a reader accepts any (they only append header
+/// fields and add optional chunks). 1.1 appends [`Header::largest_payload`].
+pub const VERSION_MINOR: u16 = 1;
+/// Bytes of a version 1.0 header: the shortest a reader accepts. Later minor versions
+/// append fields before the header's checksum; readers skip what they do not know.
 pub const HEADER_SIZE: usize = 192;
+/// Bytes of a version 1.1 header, the one this crate writes.
+pub const HEADER_SIZE_1_1: usize = 200;
 /// Number of (read rate, read-ahead) points of the buffer model.
 pub const READ_AHEAD_POINTS: usize = 4;
 
@@ -100,6 +104,11 @@ pub struct Header {
     pub read_ahead: [ReadAhead; READ_AHEAD_POINTS],
     /// XXH3-64 of the index's bytes.
     pub index_checksum: u64,
+    /// The largest decompressed payload of any keyframe or coefficient chunk, bytes
+    /// (version 1.1; `None` in a 1.0 file). A decoder plans its memory by it at open and
+    /// refuses a chunk that decompresses to more; without it, the bound is the format's
+    /// (up to 32× a chunk's stored size), which is 10–15× what real payloads take.
+    pub largest_payload: Option<u64>,
 }
 
 impl Header {
@@ -135,9 +144,20 @@ impl Header {
             .copied()
     }
 
-    /// The header as stored, checksum included.
-    pub fn to_bytes(&self) -> [u8; HEADER_SIZE] {
-        let mut b = [0u8; HEADER_SIZE];
+    /// Bytes of this header as stored: 1.1's when it states the largest payload, else
+    /// 1.0's.
+    pub fn header_size(&self) -> usize {
+        if self.largest_payload.is_some() {
+            HEADER_SIZE_1_1
+        } else {
+            HEADER_SIZE
+        }
+    }
+
+    /// The header as stored ([`Header::header_size`] bytes), checksum included.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let size = self.header_size();
+        let mut b = vec![0u8; size];
         let mut w = Cursor {
             buf: &mut b,
             pos: 0,
@@ -145,7 +165,7 @@ impl Header {
         w.put(&MAGIC);
         w.put(&VERSION_MAJOR.to_le_bytes());
         w.put(&self.version_minor.to_le_bytes());
-        w.put(&(HEADER_SIZE as u32).to_le_bytes());
+        w.put(&(size as u32).to_le_bytes());
         w.put(&self.width.to_le_bytes());
         w.put(&self.height.to_le_bytes());
         w.put(&[self.channels, self.color as u8]);
@@ -173,9 +193,12 @@ impl Header {
             w.put(&p.preroll_ns.to_le_bytes());
         }
         w.put(&self.index_checksum.to_le_bytes());
-        debug_assert_eq!(w.pos, HEADER_SIZE - 8);
-        let sum = xxh3(&b[..HEADER_SIZE - 8]);
-        b[HEADER_SIZE - 8..].copy_from_slice(&sum.to_le_bytes());
+        if let Some(p) = self.largest_payload {
+            w.put(&p.to_le_bytes());
+        }
+        debug_assert_eq!(w.pos, size - 8);
+        let sum = xxh3(&b[..size - 8]);
+        b[size - 8..].copy_from_slice(&sum.to_le_bytes());
         b
     }
 
@@ -262,6 +285,16 @@ impl Header {
             p.preroll_ns = r.u64();
         }
         let index_checksum = r.u64();
+        // 1.1 appends the largest payload. A 1.1 header too short to hold it is damaged.
+        let largest_payload = match (version_minor, header_size) {
+            (0, _) => None,
+            (_, n) if n >= HEADER_SIZE_1_1 => Some(r.u64()),
+            (m, n) => {
+                return Err(FormatError::InvalidHeader(format!(
+                    "a version 1.{m} header of {n} bytes (1.1 and later hold at least {HEADER_SIZE_1_1})"
+                )))
+            }
+        };
         let h = Header {
             version_minor,
             width,
@@ -283,6 +316,7 @@ impl Header {
             file_size,
             read_ahead,
             index_checksum,
+            largest_payload,
         };
         h.validate(header_size as u64)?;
         Ok(h)
@@ -379,6 +413,14 @@ impl Header {
         }
         if self.intra_interval == 0 {
             return bad("intra interval 0".into());
+        }
+        if let Some(p) = self.largest_payload {
+            if p == 0 || p > crate::limits::MAX_CHUNK_DECODED {
+                return bad(format!(
+                    "largest payload {p} bytes (must be 1 to {})",
+                    crate::limits::MAX_CHUNK_DECODED
+                ));
+            }
         }
         let index_len = self.chunk_count as u64 * ENTRY_SIZE as u64;
         if self.index_offset < header_size

@@ -6,7 +6,6 @@
 use crate::chunk;
 use crate::header::Header;
 use crate::index::{ChunkKind, IndexEntry};
-use crate::limits::payload_bound;
 use crate::{FormatError, Result};
 
 /// The memory a decoder may spend on one stream.
@@ -15,7 +14,8 @@ use crate::{FormatError, Result};
 /// needs ([`decoder_memory`], and the player's own count) against it when they open it, and
 /// refuse a stream that needs more before allocating any of it. The counts are upper
 /// bounds: what the texel count makes a decoder hold, exactly, plus what the largest
-/// payload may (a bound set by the file's own chunk sizes). The default lets every size
+/// payload may (the header's largest payload in a 1.1 file; for a 1.0 file a bound set
+/// by its chunks' stored sizes, 10–15× what they really take). The default lets every size
 /// the project targets through — the 4096² benchmark day (degree ≤ 4) counts 1.84 GB to
 /// decode on the CPU and about 1.58 GB to play on the GPU (1.06 GB measured) — and refuses
 /// a few-hundred-byte file that claims an 8192² stream (3.2 GB or more for its planes)
@@ -52,7 +52,8 @@ impl Default for Limits {
 }
 
 /// The largest decompressed payload any chunk of the stream may have
-/// ([`payload_bound`] of each keyframe and coefficient chunk).
+/// ([`crate::chunk::payload_limit`] of each keyframe and coefficient chunk: the header's
+/// largest payload where it states one, else the format's bound).
 pub fn largest_payload(h: &Header, entries: &[IndexEntry]) -> u64 {
     let (w, ht) = chunk::padded_size(h);
     let blocks = w * ht / 64;
@@ -69,7 +70,7 @@ pub fn largest_payload(h: &Header, entries: &[IndexEntry]) -> u64 {
                 ),
                 _ => return 0,
             };
-            payload_bound(n, steps, e.length as usize) as u64
+            crate::chunk::payload_limit(h, n, steps, e.length as usize) as u64
         })
         .max()
         .unwrap_or(0)

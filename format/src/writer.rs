@@ -5,7 +5,7 @@
 use std::io::{Seek, SeekFrom, Write};
 
 use crate::checksum::xxh3;
-use crate::header::{Header, HEADER_SIZE};
+use crate::header::{Header, HEADER_SIZE_1_1, VERSION_MINOR};
 use crate::index::{self, ChunkKind, IndexEntry, ENTRY_SIZE};
 use crate::{buffer_model, FormatError, Result};
 
@@ -15,6 +15,8 @@ pub struct Writer<W> {
     header: Header,
     entries: Vec<IndexEntry>,
     pos: u64,
+    /// The largest decompressed size of a keyframe or coefficient payload so far.
+    largest_payload: u64,
 }
 
 impl<W: Write + Seek> Writer<W> {
@@ -24,13 +26,15 @@ impl<W: Write + Seek> Writer<W> {
         if n == 0 || n > crate::limits::MAX_CHUNKS as usize {
             return Err(FormatError::Invalid(format!("cannot write {n} chunks")));
         }
-        let reserved = HEADER_SIZE + n * ENTRY_SIZE;
+        // The header this crate writes is 1.1's (it states the largest payload).
+        let reserved = HEADER_SIZE_1_1 + n * ENTRY_SIZE;
         out.write_all(&vec![0u8; reserved])?;
         Ok(Writer {
             out,
             header,
             entries: Vec::with_capacity(n),
             pos: reserved as u64,
+            largest_payload: 0,
         })
     }
 
@@ -47,6 +51,9 @@ impl<W: Write + Seek> Writer<W> {
             return Err(FormatError::Invalid(
                 "more chunks than the header announced".into(),
             ));
+        }
+        if matches!(kind, ChunkKind::Keyframe | ChunkKind::Coefficients) {
+            self.largest_payload = self.largest_payload.max(decompressed_size(bytes)?);
         }
         self.out.write_all(bytes)?;
         self.entries.push(IndexEntry {
@@ -78,12 +85,15 @@ impl<W: Write + Seek> Writer<W> {
             e.write(&mut raw);
         }
         let h = &mut self.header;
-        h.index_offset = HEADER_SIZE as u64;
+        h.version_minor = VERSION_MINOR;
+        h.largest_payload = Some(self.largest_payload.max(1));
+        let size = h.header_size() as u64;
+        h.index_offset = size;
         h.file_size = self.pos;
         h.index_checksum = xxh3(&raw);
         h.read_ahead = buffer_model::table(h, &self.entries);
-        h.validate(HEADER_SIZE as u64)?;
-        index::validate(h, &self.entries, HEADER_SIZE as u64 + raw.len() as u64)?;
+        h.validate(size)?;
+        index::validate(h, &self.entries, size + raw.len() as u64)?;
         self.out.seek(SeekFrom::Start(0))?;
         self.out.write_all(&h.to_bytes())?;
         self.out.write_all(&raw)?;
@@ -112,6 +122,26 @@ pub fn rewrite(
         .ok_or_else(|| FormatError::Invalid("the index no longer fits the stream".into()))?;
     room.copy_from_slice(&index);
     h.index_checksum = xxh3(&index);
-    bytes[..HEADER_SIZE].copy_from_slice(&h.to_bytes());
+    let head = h.to_bytes();
+    let stored = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+    if head.len() != stored {
+        return Err(FormatError::Invalid(format!(
+            "a {}-byte header cannot replace a {stored}-byte one",
+            head.len()
+        )));
+    }
+    bytes[..head.len()].copy_from_slice(&head);
     Ok(h)
+}
+
+/// The decompressed size of a zstd frame: what its header states (every frame this
+/// crate's encoder writes states it), or else what it decompresses to.
+fn decompressed_size(bytes: &[u8]) -> Result<u64> {
+    match zstd::zstd_safe::get_frame_content_size(bytes) {
+        Ok(Some(n)) => Ok(n),
+        _ => Ok(
+            crate::chunk::decompress(bytes, crate::limits::MAX_CHUNK_DECODED as usize)?.len()
+                as u64,
+        ),
+    }
 }

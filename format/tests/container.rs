@@ -32,6 +32,7 @@ fn header(frames: u32, segments: u32, looping: bool) -> Header {
         file_size: 0,
         read_ahead: [ReadAhead::default(); READ_AHEAD_POINTS],
         index_checksum: 0,
+        largest_payload: None,
     }
 }
 
@@ -279,7 +280,8 @@ fn hostile(edit: impl Fn(&mut Header)) -> Result<(), FormatError> {
     let mut h = Reader::open(Cursor::new(&bytes)).unwrap().header().clone();
     edit(&mut h);
     let mut bad = bytes.clone();
-    bad[..HEADER_SIZE].copy_from_slice(&h.to_bytes());
+    let head = h.to_bytes();
+    bad[..head.len()].copy_from_slice(&head);
     decode_all(&bad).map(|_| ())
 }
 
@@ -307,6 +309,19 @@ fn hostile_headers_are_refused_before_allocation() {
             Box::new(|h| h.transfer = Transfer::LogToe { v0: f32::NAN }),
         ),
         ("channels 4", Box::new(|h| h.channels = 4)),
+        (
+            "largest payload 0",
+            Box::new(|h| h.largest_payload = Some(0)),
+        ),
+        (
+            "largest payload 2^60",
+            Box::new(|h| h.largest_payload = Some(1 << 60)),
+        ),
+        // Smaller than the payloads are: the first chunk over it is refused, unread.
+        (
+            "largest payload 8",
+            Box::new(|h| h.largest_payload = Some(8)),
+        ),
     ];
     for (name, edit) in cases {
         let res = hostile(edit);
@@ -336,8 +351,10 @@ fn hostile_index_entries_are_refused() {
             let mut hh = h.clone();
             hh.index_checksum = vbim_format::checksum::xxh3(&raw);
             let mut bad = bytes.clone();
-            bad[..HEADER_SIZE].copy_from_slice(&hh.to_bytes());
-            bad[HEADER_SIZE..HEADER_SIZE + raw.len()].copy_from_slice(&raw);
+            let head = hh.to_bytes();
+            let at = hh.index_offset as usize;
+            bad[..head.len()].copy_from_slice(&head);
+            bad[at..at + raw.len()].copy_from_slice(&raw);
             let ok = Reader::open(Cursor::new(&bad)).is_ok();
             assert!(!ok, "entry {i} field {field} accepted");
         }
@@ -388,4 +405,44 @@ fn single_frame_sequence() {
     let (_, cur) = w.finish().unwrap();
     let frames = decode_all(&cur.into_inner()).unwrap();
     assert_eq!(frames.len(), 1);
+}
+
+#[test]
+fn version_1_1_states_the_largest_payload_and_1_0_files_read_as_before() {
+    let bytes = sample_file();
+    let h = Reader::open(Cursor::new(&bytes)).unwrap().header().clone();
+    assert_eq!(h.version_minor, 1);
+    // The largest decompressed keyframe or coefficient payload, exactly.
+    let r = Reader::open(Cursor::new(&bytes)).unwrap();
+    let largest = r
+        .entries()
+        .iter()
+        .filter(|e| matches!(e.kind, ChunkKind::Keyframe | ChunkKind::Coefficients))
+        .map(|e| {
+            let c = &bytes[e.offset as usize..(e.offset + e.length) as usize];
+            zstd::bulk::decompress(c, 1 << 24).unwrap().len() as u64
+        })
+        .max()
+        .unwrap();
+    assert_eq!(h.largest_payload, Some(largest));
+    // The same stream under a 1.0 header (192 bytes, no largest payload; the index stays
+    // where it is): read and decoded the same, its payloads bounded by the format alone.
+    let mut old = bytes.clone();
+    let h10 = Header {
+        version_minor: 0,
+        largest_payload: None,
+        ..h.clone()
+    };
+    let head = h10.to_bytes();
+    assert_eq!(head.len(), HEADER_SIZE);
+    old[..head.len()].copy_from_slice(&head);
+    let r10 = Reader::open(Cursor::new(&old)).unwrap();
+    assert_eq!(r10.header().largest_payload, None);
+    assert_eq!(decode_all(&old).unwrap(), decode_all(&bytes).unwrap());
+    // A 1.1 header too short to hold the field is damaged, not read as 1.0.
+    let mut short = old.clone();
+    short[10..12].copy_from_slice(&1u16.to_le_bytes());
+    let short = vbim_format::fuzz::with_checksums(&short);
+    let e = Reader::open(Cursor::new(&short)).unwrap_err().to_string();
+    assert!(e.contains("1.1") && e.contains("192"), "{e}");
 }
