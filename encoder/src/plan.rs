@@ -122,13 +122,13 @@ pub(crate) fn read_frames<T: Send>(
     f: impl Fn(usize) -> Result<T, EncodeError> + Sync,
 ) -> Result<Vec<T>, EncodeError> {
     use rayon::prelude::*;
+    let readers = readers.max(1);
     let mut out = Vec::with_capacity(n);
-    let frames: Vec<usize> = (0..n).collect();
-    for group in frames.chunks(readers.max(1)) {
+    for start in (0..n).step_by(readers) {
         out.extend(
-            group
-                .par_iter()
-                .map(|&i| f(i))
+            (start..(start + readers).min(n))
+                .into_par_iter()
+                .map(&f)
                 .collect::<Result<Vec<T>, EncodeError>>()?,
         );
     }

@@ -14,7 +14,7 @@ use std::time::Instant;
 use vbim_format::chunk::{self, CoeffReader};
 use vbim_format::dct::N;
 use vbim_format::plane::{read_blocks, Blocks};
-use vbim_format::{ChunkKind, Reader};
+use vbim_format::{varint, ChunkKind, Reader};
 
 /// An entry point of one stream: what a GPU invocation would be given to parse from.
 #[derive(Clone, Copy, Default, Debug)]
@@ -24,33 +24,28 @@ struct Entry {
     dc: i32,
 }
 
+/// Parses one (zero run, value) pair of a stream of `n` blocks at `*at`, from
+/// coefficient position `*p`: advances both, and adds the value to the running DC while
+/// still in the DC terms (the first `n` positions). `Some(true)` when the run was the
+/// final one, reaching the end; `None` where a varint is truncated or malformed.
 #[inline(always)]
-fn varint(buf: &[u8], at: &mut usize) -> Option<u32> {
-    let b = *buf.get(*at)?;
-    *at += 1;
-    if b < 0x80 {
-        return Some(b as u32);
+fn pair(buf: &[u8], n: usize, at: &mut usize, p: &mut u64, dc: &mut i32) -> Option<bool> {
+    *p += varint::get_u32(buf, at).ok()? as u64;
+    if *p >= (n * N * N) as u64 {
+        return Some(true);
     }
-    let mut v = (b & 0x7f) as u32;
-    for s in [7, 14, 21, 28] {
-        let b = *buf.get(*at)?;
-        *at += 1;
-        v |= ((b & 0x7f) as u32) << s;
-        if b < 0x80 {
-            return Some(v);
-        }
+    let v = varint::get_i32(buf, at).ok()?;
+    if *p < n as u64 {
+        *dc = dc.wrapping_add(v);
     }
-    None
+    *p += 1;
+    Some(false)
 }
 
 /// Scans one stream of `n` blocks from `*pos`, pushing an entry every `every` pairs.
 fn scan(buf: &[u8], pos: &mut usize, n: usize, every: usize, out: &mut Vec<Entry>) -> Option<()> {
-    let total = (n * N * N) as u64;
-    let mut p = 0u64;
-    let mut dc = 0i32;
-    let mut pairs = 0usize;
-    let mut at = *pos;
-    loop {
+    let (mut at, mut p, mut dc) = (*pos, 0u64, 0i32);
+    for pairs in 0usize.. {
         if pairs.is_multiple_of(every) {
             out.push(Entry {
                 byte: at as u32,
@@ -58,18 +53,11 @@ fn scan(buf: &[u8], pos: &mut usize, n: usize, every: usize, out: &mut Vec<Entry
                 dc,
             });
         }
-        p += varint(buf, &mut at)? as u64;
-        if p >= total {
+        if pair(buf, n, &mut at, &mut p, &mut dc)? {
             break;
         }
-        let u = varint(buf, &mut at)?;
-        if p < n as u64 {
-            dc = dc.wrapping_add(((u >> 1) as i32) ^ -((u & 1) as i32));
-        }
-        p += 1;
-        pairs += 1;
     }
-    (p == total).then_some(())?;
+    (p == (n * N * N) as u64).then_some(())?;
     *pos = at;
     Some(())
 }
@@ -80,12 +68,7 @@ fn check(buf: &[u8], n: usize, every: usize, entries: &[Entry]) -> Option<()> {
     for w in entries.windows(2) {
         let (mut at, mut p, mut dc) = (w[0].byte as usize, w[0].position as u64, w[0].dc);
         for _ in 0..every {
-            p += varint(buf, &mut at)? as u64;
-            let u = varint(buf, &mut at)?;
-            if p < n as u64 {
-                dc = dc.wrapping_add(((u >> 1) as i32) ^ -((u & 1) as i32));
-            }
-            p += 1;
+            pair(buf, n, &mut at, &mut p, &mut dc)?;
         }
         (at == w[1].byte as usize && p == w[1].position as u64 && dc == w[1].dc).then_some(())?;
     }

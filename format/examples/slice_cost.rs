@@ -50,12 +50,7 @@ fn write_plane(blocks: &[[i32; N * N]], slice: isize, out: &mut Vec<u8>) {
                 parts.push(v);
             }
         }
-        for p in &parts {
-            varint::put_u32(out, p.len() as u32);
-        }
-        for p in parts {
-            out.extend(p);
-        }
+        write_parts(parts, out);
         return;
     }
     let slice = slice as usize;
@@ -67,6 +62,11 @@ fn write_plane(blocks: &[[i32; N * N]], slice: isize, out: &mut Vec<u8>) {
             v
         })
         .collect();
+    write_parts(parts, out);
+}
+
+/// Independently parseable pieces, after a LEB128 table of their lengths.
+fn write_parts(parts: Vec<Vec<u8>>, out: &mut Vec<u8>) {
     for p in &parts {
         varint::put_u32(out, p.len() as u32);
     }
