@@ -2,7 +2,7 @@
 # Runs the fuzz targets of fuzz/ (cargo fuzz, stable Rust, no sanitizer) for SECONDS each
 # (default 60): `container` (header, index, metadata, chunk checksums), `chunks` (every
 # chunk payload parser), `decode` (the whole reference decode within small limits) and
-# `player_decoder` (the player's decoder thread: parsing and packing for the GPU; it
+# `player_decoder` (the player's decoder thread: scanning the streams for the GPU; it
 # starts from decode's seeds).
 # Checksums are made right before parsing (vbim_format::fuzz::with_checksums), so the
 # fuzzer reaches the semantic checks. A crash's input is copied into

@@ -180,7 +180,7 @@ pub enum BenchCommand {
     /// Time the baker: precomputation, per-frame lighting and file writing, apart.
     Bake(BenchBakeArgs),
     /// Time the player's decoder on a file: zstd alone, and the decoder's whole work (checks,
-    /// zstd, parsing and packing for the GPU), as a share of one core at the file's frame rate.
+    /// zstd, the scan for the GPU's entry points), as a share of one core at the file's frame rate.
     Decode(BenchDecodeArgs),
     /// Bytes of the protocol's lossless baseline: every frame's half-float RGB through zstd.
     Lossless(BenchLosslessArgs),

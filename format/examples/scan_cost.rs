@@ -1,11 +1,10 @@
-//! What the CPU's share of a GPU parse of today's streams would cost: every coefficient
-//! stream of a `.vbim` file (1) decompressed, (2) parsed into blocks as the player's
-//! decoder parses it now (`plane::read_blocks`), and (3) only scanned for entry points —
-//! every `E` pairs, the byte offset, the coefficient position and the running DC — from
-//! which GPU invocations could each parse a piece on their own. Times are wall-clock on
+//! The CPU's share of the GPU parse against a CPU parse: every coefficient stream of a
+//! `.vbim` file (1) decompressed, (2) parsed into blocks (`plane::read_blocks`, the
+//! reference decoder's parse), and (3) only scanned for entry points (`scan::scan`, what
+//! the player's decoder thread does), from which GPU invocations each parse a piece. Times are wall-clock on
 //! one thread, best of three passes over the file (run it on a quiet machine).
 //!
-//! `cargo run --release -p vbim-format --example scan_cost -- FILE [E]`
+//! `cargo run --release -p vbim-format --example scan_cost -- FILE`
 
 use std::fs::File;
 use std::io::BufReader;
@@ -14,66 +13,8 @@ use std::time::Instant;
 use vbim_format::chunk::{self, CoeffReader};
 use vbim_format::dct::N;
 use vbim_format::plane::{read_blocks, Blocks};
-use vbim_format::{varint, ChunkKind, Reader};
-
-/// An entry point of one stream: what a GPU invocation would be given to parse from.
-#[derive(Clone, Copy, Default, Debug)]
-struct Entry {
-    byte: u32,
-    position: u32,
-    dc: i32,
-}
-
-/// Parses one (zero run, value) pair of a stream of `n` blocks at `*at`, from
-/// coefficient position `*p`: advances both, and adds the value to the running DC while
-/// still in the DC terms (the first `n` positions). `Some(true)` when the run was the
-/// final one, reaching the end; `None` where a varint is truncated or malformed.
-#[inline(always)]
-fn pair(buf: &[u8], n: usize, at: &mut usize, p: &mut u64, dc: &mut i32) -> Option<bool> {
-    *p += varint::get_u32(buf, at).ok()? as u64;
-    if *p >= (n * N * N) as u64 {
-        return Some(true);
-    }
-    let v = varint::get_i32(buf, at).ok()?;
-    if *p < n as u64 {
-        *dc = dc.wrapping_add(v);
-    }
-    *p += 1;
-    Some(false)
-}
-
-/// Scans one stream of `n` blocks from `*pos`, pushing an entry every `every` pairs.
-fn scan(buf: &[u8], pos: &mut usize, n: usize, every: usize, out: &mut Vec<Entry>) -> Option<()> {
-    let (mut at, mut p, mut dc) = (*pos, 0u64, 0i32);
-    for pairs in 0usize.. {
-        if pairs.is_multiple_of(every) {
-            out.push(Entry {
-                byte: at as u32,
-                position: p as u32,
-                dc,
-            });
-        }
-        if pair(buf, n, &mut at, &mut p, &mut dc)? {
-            break;
-        }
-    }
-    (p == (n * N * N) as u64).then_some(())?;
-    *pos = at;
-    Some(())
-}
-
-/// Checks that each entry point is where parsing `every` pairs from the one before
-/// arrives: each piece can be parsed on its own.
-fn check(buf: &[u8], n: usize, every: usize, entries: &[Entry]) -> Option<()> {
-    for w in entries.windows(2) {
-        let (mut at, mut p, mut dc) = (w[0].byte as usize, w[0].position as u64, w[0].dc);
-        for _ in 0..every {
-            pair(buf, n, &mut at, &mut p, &mut dc)?;
-        }
-        (at == w[1].byte as usize && p == w[1].position as u64 && dc == w[1].dc).then_some(())?;
-    }
-    Some(())
-}
+use vbim_format::scan::{scan, ENTRY_PAIRS};
+use vbim_format::{ChunkKind, Reader};
 
 /// A raw stream and the blocks of each of its planes.
 struct Raw {
@@ -83,8 +24,8 @@ struct Raw {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let path = args.first().ok_or("usage: scan_cost FILE [E]")?;
-    let every: usize = args.get(1).map(|s| s.parse()).transpose()?.unwrap_or(256);
+    let path = args.first().ok_or("usage: scan_cost FILE")?;
+    let every = ENTRY_PAIRS;
     let mut r = Reader::open(BufReader::new(File::open(path)?))?;
     let h = r.header().clone();
     let entries = r.entries().to_vec();
@@ -167,13 +108,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     });
     let mut out = Vec::new();
-    for r in &raws {
-        for &(at, n) in &r.planes {
-            out.clear();
-            scan(&r.bytes, &mut at.clone(), n, every, &mut out).ok_or("scan failed")?;
-            check(&r.bytes, n, every, &out).ok_or("an entry point is not where parsing arrives")?;
-        }
-    }
     let mut points = 0;
     let t_scan = best(&mut || {
         points = 0;
@@ -181,7 +115,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for &(at, n) in &r.planes {
                 let mut at = at;
                 out.clear();
-                scan(&r.bytes, &mut at, n, every, &mut out).unwrap();
+                scan(&r.bytes, &mut at, n, &mut out).unwrap();
                 points += out.len();
                 std::hint::black_box(&out);
             }

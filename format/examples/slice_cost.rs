@@ -11,13 +11,15 @@ use std::io::BufReader;
 
 use vbim_format::chunk::{self, CoeffReader};
 use vbim_format::dct::N;
-use vbim_format::plane::{write_coefficients, Blocks};
+use vbim_format::plane::{read_blocks, write_coefficients, Blocks};
 use vbim_format::{varint, ChunkKind, Reader};
 
 /// zstd level of the default preset.
 const LEVEL: i32 = 9;
 
-fn blocks_of(q: &Blocks) -> Vec<[i32; N * N]> {
+fn blocks_of(s: chunk::Scanned<'_>) -> Vec<[i32; N * N]> {
+    let mut q = Blocks::default();
+    read_blocks(s.stream, &mut 0, s.blocks, &mut q).expect("scanned streams parse");
     (0..q.len()).map(|b| q.block(b)).collect()
 }
 
@@ -100,9 +102,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut head = Vec::new();
         match e.kind {
             ChunkKind::Keyframe => {
-                chunk::keyframe_blocks(&h, &bytes, |_, step, q| {
+                chunk::keyframe_streams(&h, &bytes, |_, step, s| {
                     head.extend(step.to_le_bytes());
-                    planes.push(blocks_of(q));
+                    planes.push(blocks_of(s));
                 })?;
             }
             ChunkKind::TileMap => {
@@ -115,9 +117,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let mut c = CoeffReader::open(&h, &bytes, &t)?;
                 for k in 2..=c.max_degree() {
                     for p in 0..h.channels as usize {
-                        c.read_plane_blocks(k, p, |step, q| {
+                        c.scan_plane(k, p, |step, s| {
                             head.extend(step.to_le_bytes());
-                            planes.push(blocks_of(q));
+                            planes.push(blocks_of(s));
                         })?;
                     }
                 }

@@ -6,6 +6,7 @@ use crate::dct::N;
 use crate::header::Header;
 use crate::limits::payload_bound;
 use crate::plane::{self, Onto, Plane};
+use crate::scan;
 use crate::{FormatError, Result};
 
 /// Keyframe mode byte: coded on its own.
@@ -16,6 +17,8 @@ pub const MODE_PREDICTED: u8 = 1;
 thread_local! {
     /// Block storage reused by every coefficient stream this thread decodes.
     static BLOCKS: std::cell::RefCell<plane::Blocks> = Default::default();
+    /// Entry points of the stream this thread scanned last.
+    static ENTRIES: std::cell::RefCell<Vec<scan::EntryPoint>> = Default::default();
 }
 
 /// One keyframe plane: `base` (the predecessor's plane; zeros for an intra keyframe) plus
@@ -252,16 +255,16 @@ fn keyframe_from_raw(
     Ok(out)
 }
 
-/// A keyframe chunk (checksum-verified) parsed as far as its quantised blocks, for a
-/// decoder that dequantises and transforms them elsewhere (the GPU player): calls
-/// `each(plane, step, blocks)` for every plane in order, with the plane's blocks in raster
-/// order over the padded plane. Returns the mode byte ([`MODE_INTRA`] or
-/// [`MODE_PREDICTED`]). Refuses everything [`read_keyframe`] refuses except a missing
-/// reference, which only the caller can know about.
-pub fn keyframe_blocks(
+/// A keyframe chunk (checksum-verified) decompressed and its coefficient streams scanned
+/// ([`scan::scan`]), for a decoder that parses, dequantises and transforms them elsewhere
+/// (the GPU player): calls `each(plane, step, stream)` for every plane in order, the
+/// stream's blocks being in raster order over the padded plane. Returns the mode byte
+/// ([`MODE_INTRA`] or [`MODE_PREDICTED`]). Refuses everything [`read_keyframe`] refuses
+/// except a missing reference, which only the caller can know about.
+pub fn keyframe_streams(
     h: &Header,
     bytes: &[u8],
-    mut each: impl FnMut(usize, f32, &plane::Blocks),
+    mut each: impl FnMut(usize, f32, Scanned<'_>),
 ) -> Result<u8> {
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
@@ -285,13 +288,9 @@ pub fn keyframe_blocks(
     }
     let steps: Vec<f32> = (0..planes).map(|_| r.f32()).collect::<Result<_>>()?;
     let mut pos = r.pos;
-    BLOCKS.with_borrow_mut(|q| -> Result<()> {
-        for (p, &step) in steps.iter().enumerate() {
-            plane::read_blocks(&raw, &mut pos, nblocks, q)?;
-            each(p, step, q);
-        }
-        Ok(())
-    })?;
+    for (p, &step) in steps.iter().enumerate() {
+        scanned(&raw, &mut pos, nblocks, |s| each(p, step, s))?;
+    }
     if pos != raw.len() {
         return Err(FormatError::Invalid(format!(
             "{} stray bytes after the planes",
@@ -299,6 +298,33 @@ pub fn keyframe_blocks(
         )));
     }
     Ok(mode)
+}
+
+/// One coefficient stream and its entry points, as [`keyframe_streams`] and
+/// [`CoeffReader::scan_plane`] hand them over (valid for the call only).
+#[derive(Clone, Copy, Debug)]
+pub struct Scanned<'a> {
+    /// The stream's bytes, from its first pair to the end of its final run.
+    pub stream: &'a [u8],
+    /// Where pieces of it can be parsed from, [`scan::ENTRY_PAIRS`] pairs apart.
+    pub entries: &'a [scan::EntryPoint],
+    /// Its number of blocks.
+    pub blocks: usize,
+}
+
+/// Scans the stream of `n` blocks at `raw[*pos..]`, moves past it and hands it to `each`.
+fn scanned(raw: &[u8], pos: &mut usize, n: usize, each: impl FnOnce(Scanned<'_>)) -> Result<()> {
+    ENTRIES.with_borrow_mut(|entries| {
+        entries.clear();
+        let start = *pos;
+        scan::scan(raw, pos, n, entries)?;
+        each(Scanned {
+            stream: &raw[start..*pos],
+            entries,
+            blocks: n,
+        });
+        Ok(())
+    })
 }
 
 /// The per-tile polynomial degrees of one segment: luma (plane 0) and chroma (planes 1–2).
@@ -474,7 +500,7 @@ pub fn spans(n: usize, keep: impl Fn(usize) -> bool) -> impl Iterator<Item = (us
 /// A coefficient chunk read plane by plane: decoded one band of tiles at a time, handing out
 /// finished rows (a band of 16 rows stays in cache, so a segment's bubble planes are never
 /// zeroed, accumulated and copied as whole planes in memory: the reference decoder's path),
-/// or parsed to its quantised blocks only ([`CoeffReader::read_plane_blocks`]: the GPU
+/// or only scanned for a parser elsewhere ([`CoeffReader::scan_plane`]: the GPU
 /// player's).
 pub struct CoeffReader<'t> {
     raw: Vec<u8>,
@@ -597,26 +623,23 @@ impl<'t> CoeffReader<'t> {
         })
     }
 
-    /// Parses bubble plane (`k`, `p`) — in stream order, as [`CoeffReader::read_plane`] —
-    /// as far as its quantised blocks, for a decoder that dequantises and transforms them
-    /// elsewhere (the GPU player): calls `each(step, blocks)` once, the blocks being those
-    /// of the tiles whose degree reaches `k`, tile by tile in raster order, each tile's
-    /// blocks as [`plane::tile_blocks`] orders them.
-    pub fn read_plane_blocks(
+    /// Scans bubble plane (`k`, `p`) — in stream order, as [`CoeffReader::read_plane`] —
+    /// for a decoder that parses, dequantises and transforms it elsewhere (the GPU
+    /// player): calls `each(step, stream)` once, the stream's blocks being those of the
+    /// tiles whose degree reaches `k`, tile by tile in raster order, each tile's blocks as
+    /// [`plane::tile_blocks`] orders them.
+    pub fn scan_plane(
         &mut self,
         k: u8,
         p: usize,
-        each: impl FnOnce(f32, &plane::Blocks),
+        each: impl FnOnce(f32, Scanned<'_>),
     ) -> Result<()> {
         self.take_plane(k, p)?;
         let per = self.tile_size / N;
         let step = self.steps[(k as usize - 2) * self.planes + p];
         let members = self.tiles.degrees(p).iter().filter(|&&d| d >= k).count();
-        let (raw, pos) = (&self.raw, &mut self.pos);
-        BLOCKS.with_borrow_mut(|q| {
-            plane::read_blocks(raw, pos, members * per * per, q)?;
-            each(step, q);
-            Ok(())
+        scanned(&self.raw, &mut self.pos, members * per * per, |s| {
+            each(step, s)
         })
     }
 

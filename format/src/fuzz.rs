@@ -110,7 +110,7 @@ pub fn chunks(data: &[u8]) {
     let (w, ht) = chunk::padded_size(&h);
     let zeros: Vec<Plane> = (0..h.channels).map(|_| Plane::zeros(w, ht)).collect();
     let _ = chunk::read_keyframe(&h, &z, Some(&zeros));
-    let _ = chunk::keyframe_blocks(&h, &z, |_, _, _| {});
+    let _ = chunk::keyframe_streams(&h, &z, |_, _, s| agrees(s));
     let _ = chunk::read_tilemap(&h, &z, 4);
     // A tile map of the header's degree, with a pattern of lower degrees.
     let n = h.tile_count();
@@ -127,7 +127,7 @@ pub fn chunks(data: &[u8]) {
     if let Ok(mut r) = CoeffReader::open(&h, &z, &tiles) {
         for k in 2..=r.max_degree() {
             for p in 0..h.channels as usize {
-                if r.read_plane_blocks(k, p, |_, _| {}).is_err() {
+                if r.scan_plane(k, p, |_, s| agrees(s)).is_err() {
                     return;
                 }
             }
@@ -137,6 +137,22 @@ pub fn chunks(data: &[u8]) {
 }
 
 /// A valid header of at most 72×72 texels picked by four bytes.
+/// A stream the scan accepted must parse whole (the GPU parser relies on the scan alone),
+/// and its entry points must lie inside it, in order.
+fn agrees(s: chunk::Scanned<'_>) {
+    let mut pos = 0;
+    let parsed = crate::plane::read_blocks(s.stream, &mut pos, s.blocks, &mut Default::default());
+    assert!(
+        parsed.is_ok() && pos == s.stream.len(),
+        "the scan accepted a stream the parser refuses: {parsed:?}"
+    );
+    assert!(s
+        .entries
+        .windows(2)
+        .all(|w| w[0].byte < w[1].byte && w[0].position <= w[1].position));
+    assert!(s.entries.iter().all(|e| (e.byte as usize) < s.stream.len()));
+}
+
 fn small_header(a: u8, b: u8, c: u8, d: u8) -> Header {
     let srgb = c & 2 != 0;
     Header {

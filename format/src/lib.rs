@@ -27,6 +27,7 @@ pub mod memory;
 pub mod metrics;
 pub mod plane;
 pub mod reader;
+pub mod scan;
 pub mod varint;
 pub mod writer;
 

@@ -1,48 +1,35 @@
-// Decodes a segment's coefficients on the GPU: dequantises the quantised DCT terms of
-// one plane (a "job") and inverse-transforms them into its resident texture.
+// Decodes a segment's coefficients on the GPU, one plane (a "job") at a time: parses the
+// plane's coefficient stream as the file codes it, then dequantises and inverse-transforms
+// its blocks into the resident textures.
 //
-// A job's blocks come in runs (player/src/compact.rs), a record of two words each:
-//   word 0: first block column | block row << 11 | (blocks − 1) << 22
-//   word 1: where the run's entries start, in u16 units from the job's first entry
-// and the blocks' terms as a stream of u16 entries, each block's last entry flagged:
-//   zig-zag index << 10 | last << 9 | value (9-bit two's complement), or, for a value
-//   outside −255…255, index << 10 | last << 9 | 0x100 followed by the value's low and
-//   high halves; an empty block is one entry of value 0 with `last` set.
-// One workgroup decodes one run, block after block; each texel sums its block's terms in
-// increasing zig-zag order, (value · step · T[ky][y]) · T[kx][x], as the reference
-// decoder's sparse path does.
-
-struct Job {
-    // Quantiser step of the plane.
-    step: f32,
-    // Bubbles: 1 / the plane's scale (stored value = round(x / scale), 16-bit signed).
-    inv_scale: f32,
-    // First record (word index) and number of records.
-    records: u32,
-    count: u32,
-    // First term and the end of the last block's terms (u16 index into `words`).
-    terms: u32,
-    terms_end: u32,
-    // Bubble layer written (the key passes write the layer their binding views).
-    layer: u32,
-    // Workgroups per row of the dispatch (records beyond 65 535 use more rows).
-    groups_x: u32,
-    // Texels of the plane (zero passes).
-    size: vec2<u32>,
-    pad0: u32,
-    pad1: u32,
-}
+// The stream (docs/FORMAT.md, "Coefficient streams") is a sequence of (zero run, value)
+// pairs of LEB128 varints over the positions f · n + b (zig-zag index f of block b, n
+// blocks), the first n positions holding each block's DC as the difference from the
+// previous block's. The decoder thread scanned it and noted an entry point every 256
+// pairs (byte, position, running DC), so that `parse` runs one invocation per entry point.
+// The scan refused malformed streams: the pairs seen here are well-formed.
+//
+// `parse` writes every non-zero coefficient into a dense plane of i32 coefficients, 64 per
+// block, and sets its bit in the block's 64-bit mask; the plane was cleared before it
+// (`clear_buffer`, a memset on lavapipe: putting each block back to zero after use in the
+// shaders needed barriers, which cost lavapipe more). The passes after it visit only a
+// block's set bits, in increasing zig-zag order: each texel sums
+// (value · step · T[ky][y]) · T[kx][x] in that order, as the reference decoder's sparse
+// path does.
+//
+// A plane of more blocks than one storage binding holds (8192² and up) goes in parts of
+// blocks [lo, hi): each part parses the whole stream and keeps the blocks in its range.
 
 // The DCT basis T[k][n] (row k, sample n) and the zig-zag order, from the reference
-// decoder's own tables, so that both use the same f32 values.
+// decoder's own tables, so that both use the same f32 values; and each basis row's
+// largest magnitude (the bubble bound's).
 struct Tables {
     basis: array<vec4<f32>, 16>,
     zigzag: array<vec4<u32>, 16>,
+    row_max: array<vec4<f32>, 2>,
 }
 
-@group(0) @binding(0) var<uniform> job: Job;
 @group(0) @binding(1) var<uniform> tables: Tables;
-@group(0) @binding(2) var<storage, read> words: array<u32>;
 // A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
 // 16-bit planes, two texels per R32Uint texel: the bubble planes (one layer per term and
@@ -51,6 +38,22 @@ struct Tables {
 // The previous keyframe's range per region of REGION² texels and plane: (lowest value,
 // step), region (x, y) of plane p at (p · regions.y + y) · regions.x + x.
 @group(0) @binding(5) var<storage, read_write> ranges: array<vec2<f32>>;
+// The dense plane `parse` filled: block d's coefficients at 64 · d …, its mask at d.
+@group(0) @binding(6) var<storage, read> coefs: array<i32>;
+@group(0) @binding(7) var<storage, read> masks: array<vec2<u32>>;
+// Per group of GROUP_BLOCKS blocks, which have a coefficient (a 64-bit set, from `parse`):
+// a workgroup visits only those. (Checking every block in every invocation cost lavapipe,
+// which runs a workgroup's invocations eight at a time, more than decoding the blocks of
+// a sparse predicted keyframe; so did sharing the check through workgroup memory, whose
+// barriers lavapipe pays for per workgroup.)
+@group(0) @binding(10) var<storage, read> groups: array<vec2<u32>>;
+// Per bubble layer, the largest |texel| / step of its blocks (f32 bits: for values ≥ 0
+// their order is the u32 order, so `atomicMax` takes the largest).
+@group(0) @binding(8) var<storage, read_write> bounds: array<atomic<u32>>;
+
+// Blocks one workgroup of a block pass decodes, one after another: 64, one per
+// invocation to look at first.
+const GROUP_BLOCKS: u32 = 64u;
 
 fn basis(k: u32, n: u32) -> f32 {
     let i = k * 8u + n;
@@ -61,81 +64,131 @@ fn zigzag(i: u32) -> u32 {
     return tables.zigzag[i / 4u][i % 4u];
 }
 
-fn term16(i: u32) -> u32 {
-    return (words[i / 2u] >> ((i % 2u) * 16u)) & 0xFFFFu;
+fn row_max(k: u32) -> f32 {
+    return tables.row_max[k / 4u][k % 4u];
 }
 
-fn record_index(wg: vec3<u32>) -> u32 {
-    return wg.y * job.groups_x + wg.x;
+
+// The member span that holds the tile of rank r: the last whose first rank is at most r
+// (a binary search, once per workgroup).
+fn find_span(r: u32) -> u32 {
+    var lo = 0u;
+    var hi = job.member_count;
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (words[job.members + 2u * mid + 1u] <= r) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
 }
 
-// The sums at two texels of a block, (x, y) and (x + 1, y), onto `acc`, and where the
-// next block's entries start. (One texel is the pair's first with `pair` false.)
-struct Sums {
-    a: f32,
-    b: f32,
-    next: u32,
+// Where block b of the stream lies in the plane (its first texel): raster order over a
+// keyframe plane; for a bubble plane, in the tile of rank b / per² among the members, in
+// member span `*span` or one after it (blocks come in increasing order, so the span only
+// moves forward).
+fn block_origin(b: u32, span: ptr<function, u32>) -> vec2<u32> {
+    if (job.member_count == 0u) {
+        return vec2<u32>(b % job.blocks_x, b / job.blocks_x) * 8u;
+    }
+    let per2 = job.per * job.per;
+    let r = b / per2;
+    let i = b % per2;
+    while (*span + 1u < job.member_count && words[job.members + 2u * (*span + 1u) + 1u] <= r) {
+        *span = *span + 1u;
+    }
+    let s = *span;
+    let tile = words[job.members + 2u * s] + (r - words[job.members + 2u * s + 1u]);
+    let t = vec2<u32>(tile % job.tiles_x, tile / job.tiles_x);
+    return (t * job.per + vec2<u32>(i % job.per, i / job.per)) * 8u;
 }
 
-// Adds the terms of the block whose entries start at `start` at samples (x, y) and, with
-// `pair`, (x + 1, y).
-fn block_sum(start: u32, x: u32, y: u32, acc: f32, pair: bool) -> Sums {
+// The span to start from for a workgroup whose first block is `first`.
+fn first_span(first: u32) -> u32 {
+    if (job.member_count == 0u) {
+        return 0u;
+    }
+    return find_span(first / (job.per * job.per));
+}
+
+// Block d's mask (in the part).
+fn mask(d: u32) -> vec2<u32> {
+    return masks[d];
+}
+
+// The next set bit of the 64-bit set (`bits` the low word still to visit, `high` the
+// high word, `base` 0 or 32), cleared; 64 when none is left.
+fn next_bit(bits: ptr<function, u32>, high: ptr<function, u32>, base: ptr<function, u32>) -> u32 {
+    if (*bits == 0u) {
+        if (*high == 0u) {
+            return 64u;
+        }
+        *bits = *high;
+        *high = 0u;
+        *base = 32u;
+    }
+    let i = *base + firstTrailingBit(*bits);
+    *bits = *bits & (*bits - 1u);
+    return i;
+}
+
+// The sums at texels (x, y) and, with `pair`, (x + 1, y) of block d (in the part) onto
+// `acc` and 0.
+fn block_sum(d: u32, m: vec2<u32>, x: u32, y: u32, acc: f32, pair: bool) -> vec2<f32> {
     var a = acc;
     var b = 0.0;
-    var i = start;
-    var more = true;
-    while (more) {
-        let e = term16(i);
-        i = i + 1u;
-        var q = i32(e & 0x1FFu);
-        if (q == 0x100) {
-            q = bitcast<i32>(term16(i) | (term16(i + 1u) << 16u));
-            i = i + 2u;
-        } else if (q > 0x100) {
-            q = q - 0x200;
-        }
-        if (q != 0) {
-            let pos = zigzag(e >> 10u);
-            let kx = pos % 8u;
-            let c = f32(q) * job.step * basis(pos / 8u, y);
-            a = a + c * basis(kx, x);
-            if (pair) {
-                b = b + c * basis(kx, x + 1u);
+    // One loop over the 64 bits (two nested loops cost lavapipe more).
+    var bits = m.x;
+    var high = m.y;
+    var base = 0u;
+    loop {
+        if (bits == 0u) {
+            if (high == 0u) {
+                break;
             }
+            bits = high;
+            high = 0u;
+            base = 32u;
         }
-        more = (e & 0x200u) == 0u;
+        let i = base + firstTrailingBit(bits);
+        bits = bits & (bits - 1u);
+        let pos = zigzag(i);
+        let kx = pos % 8u;
+        let c = f32(coefs[d * 64u + i]) * job.step * basis(pos / 8u, y);
+        a = a + c * basis(kx, x);
+        if (pair) {
+            b = b + c * basis(kx, x + 1u);
+        }
     }
-    return Sums(a, b, i);
+    return vec2<f32>(a, b);
 }
 
-struct Run {
-    x0: u32,
-    y0: u32,
-    blocks: u32,
-    first: u32,
-}
-
-fn run_of(r: u32) -> Run {
-    let w = words[job.records + 2u * r];
-    let first = job.terms + words[job.records + 2u * r + 1u];
-    return Run((w & 0x7FFu) * 8u, ((w >> 11u) & 0x7FFu) * 8u, (w >> 22u) + 1u, first);
-}
-
-// A keyframe plane's blocks added onto what the plane holds: the reference keyframe
-// (copied there first) for a predicted keyframe, zeros for an intra one.
+// A keyframe plane's blocks added onto what the plane holds: the reference keyframe for a
+// predicted keyframe, zeros (`key_zero` first) for an intra one.
 @compute @workgroup_size(8, 8)
-fn key_add(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>) {
-    let r = record_index(wg);
-    if (r >= job.count) {
-        return;
-    }
-    let run = run_of(r);
-    var i = run.first;
-    for (var j = 0u; j < run.blocks; j = j + 1u) {
-        let xy = vec2<u32>(run.x0 + j * 8u + l.x, run.y0 + l.y);
-        let s = block_sum(i, l.x, l.y, textureLoad(key_plane, xy).x, false);
-        textureStore(key_plane, xy, vec4<f32>(s.a, 0.0, 0.0, 0.0));
-        i = s.next;
+fn key_add(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) l: vec3<u32>,
+) {
+    let g = group_index(wg);
+    let first = job.lo + g * GROUP_BLOCKS;
+    let present = groups[g];
+    var span = first_span(first);
+    var bits = present.x;
+    var high = present.y;
+    var base = 0u;
+    loop {
+        let j = next_bit(&bits, &high, &base);
+        if (j == 64u) {
+            break;
+        }
+        let b = first + j;
+        let m = mask(b - job.lo);
+        let xy = block_origin(b, &span) + l.xy;
+        let s = block_sum(b - job.lo, m, l.x, l.y, textureLoad(key_plane, xy).x, false);
+        textureStore(key_plane, xy, vec4<f32>(s.x, 0.0, 0.0, 0.0));
     }
 }
 
@@ -147,31 +200,103 @@ fn key_zero(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(key_plane, id.xy, vec4<f32>(0.0));
 }
 
-fn quantize(x: f32) -> u32 {
-    let q = i32(clamp(round(x * job.inv_scale), -32767.0, 32767.0));
+// The scale of a bubble plane whose texels are at most `bound` in magnitude: 16-bit
+// signed steps that reach just past it (sums in f32 may exceed the bound by a little).
+// reconstruct.wgsl computes the same.
+fn bubble_scale(bound: f32) -> f32 {
+    if (bound > 0.0 && bound <= 3.4e38) {
+        return bound * 1.001 / 32767.0;
+    }
+    return 1.0;
+}
+
+// A bubble plane's bound, one invocation per block: the block's columns of the inverse
+// transform (exact), then each row's largest possible value,
+// |Σ_kx col[kx][y] · T[kx][x]| ≤ Σ_kx |col[kx][y]| · max |T[kx]|, in units of the step.
+// With more than one part, `bubble_write` parses each part again once the bound is known.
+@compute @workgroup_size(64)
+fn bubble_bound(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let b = job.lo + group_index(wg) * 64u + li;
+    if (b >= job.hi) {
+        return;
+    }
+    let d = b - job.lo;
+    let m = mask(d);
+    if ((m.x | m.y) == 0u) {
+        return;
+    }
+    var col: array<f32, 64>;
+    var touched = 0u;
+    for (var w = 0u; w < 2u; w = w + 1u) {
+        var bits = m[w];
+        while (bits != 0u) {
+            let i = w * 32u + firstTrailingBit(bits);
+            bits = bits & (bits - 1u);
+            let pos = zigzag(i);
+            let ky = pos / 8u;
+            let kx = pos % 8u;
+            touched = touched | (1u << kx);
+            let v = f32(coefs[d * 64u + i]);
+            for (var y = 0u; y < 8u; y = y + 1u) {
+                col[kx * 8u + y] = col[kx * 8u + y] + v * basis(ky, y);
+            }
+        }
+    }
+    var rows: array<f32, 8>;
+    while (touched != 0u) {
+        let kx = firstTrailingBit(touched);
+        touched = touched & (touched - 1u);
+        for (var y = 0u; y < 8u; y = y + 1u) {
+            rows[y] = rows[y] + abs(col[kx * 8u + y]) * row_max(kx);
+        }
+    }
+    var peak = 0.0;
+    for (var y = 0u; y < 8u; y = y + 1u) {
+        peak = max(peak, rows[y]);
+    }
+    atomicMax(&bounds[job.layer], bitcast<u32>(peak));
+}
+
+fn quantize(x: f32, inv_scale: f32) -> u32 {
+    let q = i32(clamp(round(x * inv_scale), -32767.0, 32767.0));
     return bitcast<u32>(q) & 0xFFFFu;
 }
 
-// A bubble plane's blocks, written whole (every other texel of the plane is zero): each
-// of the first four columns of invocations makes two horizontally adjacent texels, one
-// R32Uint texel of the layer. (Eight columns, half of them idle: with a workgroup of 4 × 8
-// lavapipe ran the loop over a run's blocks once only. Idle lanes cost what working ones
-// do on a SIMD machine, so the work is the same as 64 invocations of one texel.)
+// A bubble plane's blocks, written whole (the zero pass cleared the rest): each of the
+// first four columns of invocations makes two horizontally adjacent texels, one R32Uint
+// texel of the layer. (Eight columns, half of them idle: with a workgroup of 4 × 8
+// lavapipe ran the loop over a workgroup's blocks once only. Idle lanes cost what working
+// ones do on a SIMD machine, so the work is the same as 64 invocations of one texel.)
 @compute @workgroup_size(8, 8)
-fn bubble_write(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>) {
-    let r = record_index(wg);
-    if (r >= job.count || l.x >= 4u) {
+fn bubble_write(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) l: vec3<u32>,
+) {
+    let g = group_index(wg);
+    let first = job.lo + g * GROUP_BLOCKS;
+    let present = groups[g];
+    if (l.x >= 4u) {
         return;
     }
-    let run = run_of(r);
+    let bound = bitcast<f32>(atomicLoad(&bounds[job.layer])) * job.step;
+    let inv_scale = 1.0 / bubble_scale(bound);
     let x = 2u * l.x;
-    var i = run.first;
-    for (var j = 0u; j < run.blocks; j = j + 1u) {
-        let s = block_sum(i, x, l.y, 0.0, true);
-        let at = vec2<u32>(run.x0 / 2u + j * 4u + l.x, run.y0 + l.y);
-        let packed = quantize(s.a) | (quantize(s.b) << 16u);
+    var span = first_span(first);
+    var bits = present.x;
+    var high = present.y;
+    var base = 0u;
+    loop {
+        let j = next_bit(&bits, &high, &base);
+        if (j == 64u) {
+            break;
+        }
+        let b = first + j;
+        let m = mask(b - job.lo);
+        let s = block_sum(b - job.lo, m, x, l.y, 0.0, true);
+        let o = block_origin(b, &span);
+        let at = vec2<u32>(o.x / 2u + l.x, o.y + l.y);
+        let packed = quantize(s.x, inv_scale) | (quantize(s.y, inv_scale) << 16u);
         textureStore(planes16, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
-        i = s.next;
     }
 }
 

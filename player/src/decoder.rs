@@ -1,16 +1,18 @@
-//! The decoder: takes chunks from the ring, verifies them, parses keyframes and
-//! coefficients down to their quantised terms, and when a segment's keyframes, tile map
+//! The decoder: takes chunks from the ring, verifies them, decompresses and scans
+//! keyframes and coefficients, and when a segment's keyframes, tile map
 //! and coefficients are all there packs what the GPU needs for it into a box
 //! ([`SegmentData`]): the keyframe steps that bring the GPU's resident keyframes to the
-//! segment's K_s and K_{s+1}, and the segment's bubble planes, all in the compact form of
-//! `compact.rs`. Dequantisation, the inverse DCT and predicted keyframes are the GPU's.
+//! segment's K_s and K_{s+1}, and the segment's bubble planes: each plane's coefficient
+//! stream as coded, with the entry points its scan found (`coded.rs`). The scan is where a
+//! malformed stream is refused; parsing, dequantisation, the inverse DCT and predicted
+//! keyframes are the GPU's.
 //!
 //! A damaged chunk (checksum mismatch, or the source failed) is reported and makes what
 //! depends on it undecodable: a keyframe breaks the predicted chain until the next intra
 //! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
 //! first segment whose parts are all good.
 
-use crate::compact::{bubble_scale, Compact, PlaneSpan};
+use crate::coded::{Coded, PlaneSpan};
 use crate::cpu_time::thread_cpu_ns;
 use std::sync::Arc;
 
@@ -32,7 +34,7 @@ pub struct KeyStep {
 }
 
 /// A segment ready for the GPU: the keyframe steps (in order; the last two built are
-/// its K_s and K_{s+1}) and its bubble planes, as records and terms in `data`.
+/// its K_s and K_{s+1}) and its bubble planes, as streams and entry points in `data`.
 ///
 /// After the first segment, a box holds one step, K_{s+1}: the segment the decoder sent
 /// before closed on K_s, which the GPU built then. After a seek, damage or a failed
@@ -62,7 +64,7 @@ pub struct SegmentData {
     pub(crate) planes: Vec<PlaneSpan>,
     /// Where the bubble planes start in `planes`.
     pub bubbles: usize,
-    pub(crate) data: Compact,
+    pub(crate) data: Coded,
     /// The coefficients in a buffer of the GPU's (`data`'s layout), written by the thread
     /// that packed them, so that the render thread only records a copy; `None` where the
     /// decoder has no device (then the render thread uploads `data` itself).
@@ -93,26 +95,19 @@ impl SegmentData {
             keys_only: false,
             planes: Vec::new(),
             bubbles: 0,
-            data: Compact::default(),
+            data: Coded::default(),
             staged: None,
             decode_ns: 0,
         }
     }
 
-    /// Bytes the GPU upload of this box moves (records and terms).
+    /// Bytes the GPU upload of this box moves (streams, entry points, member spans).
     pub fn bytes(&self) -> u64 {
         self.staged.as_ref().map_or(self.data.bytes(), |s| s.bytes)
     }
 
-    /// Bytes of the records, which the terms follow.
-    pub(crate) fn record_bytes(&self) -> u64 {
-        self.staged
-            .as_ref()
-            .map_or(self.data.records.len() as u64 * 4, |s| s.record_bytes)
-    }
-
-    /// Moves the packed coefficients into a staging buffer of `device`'s, and frees their
-    /// CPU copy.
+    /// Moves the coded planes into a staging buffer of `device`'s, and frees their CPU
+    /// copy.
     fn stage(&mut self, device: &wgpu::Device) {
         let bytes = self.data.bytes();
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
@@ -121,22 +116,13 @@ impl SegmentData {
             usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: true,
         });
-        {
-            // Records, then terms padded to a whole word: the layout the decode pass reads.
-            let mut view = buffer.slice(..bytes).get_mapped_range_mut();
-            let records: &[u8] = bytemuck::cast_slice(&self.data.records);
-            let terms: &[u8] = bytemuck::cast_slice(&self.data.terms);
-            let (r, t) = (records.len(), records.len() + terms.len());
-            view.slice(..r).copy_from_slice(records);
-            view.slice(r..t).copy_from_slice(terms);
-            view.slice(t..).fill(0);
-        }
+        buffer
+            .slice(..bytes)
+            .get_mapped_range_mut()
+            .slice(..)
+            .copy_from_slice(bytemuck::cast_slice(&self.data.words));
         buffer.unmap();
-        self.staged = Some(Staged {
-            buffer,
-            record_bytes: self.data.records.len() as u64 * 4,
-            bytes,
-        });
+        self.staged = Some(Staged { buffer, bytes });
         self.data.release();
     }
 
@@ -151,8 +137,6 @@ impl SegmentData {
 /// the decode pass's storage buffer.
 pub(crate) struct Staged {
     pub buffer: wgpu::Buffer,
-    /// Bytes of records; the terms follow.
-    pub record_bytes: u64,
     /// Bytes in all (a whole number of words).
     pub bytes: u64,
 }
@@ -167,11 +151,11 @@ pub enum Event {
     Damaged(String),
 }
 
-/// A keyframe parsed to its terms.
+/// A keyframe's planes, scanned.
 struct KeyData {
     intra: bool,
     planes: Vec<PlaneSpan>,
-    data: Compact,
+    data: Coded,
 }
 
 /// The decoder's state between chunks: parsed keyframes back to the last intra one, and
@@ -188,12 +172,10 @@ pub struct DecoderCore {
     /// Segments whose tile map or coefficients were damaged: sent with their keyframes
     /// only, once the keyframe after their closing one shows they are complete.
     lost: Vec<bool>,
-    /// Keyframe parsing time not yet charged to a segment.
+    /// Keyframe scanning time not yet charged to a segment.
     key_ns: u64,
-    /// Scratch: each tile's rank among a bubble plane's member tiles.
-    ranks: Vec<u32>,
-    /// The device whose staging buffers the packed boxes go into (`None`: they stay on
-    /// the CPU, for benchmarks and tests of the packing alone).
+    /// The device whose staging buffers the boxes go into (`None`: they stay on the CPU,
+    /// for benchmarks and tests of the decoder thread alone).
     device: Option<wgpu::Device>,
     /// After a seek, the segment it is for: the ones before it get no box (the first box
     /// carries their keyframes in its chain), so that the GPU is not sent them one frame
@@ -218,7 +200,6 @@ impl DecoderCore {
             coeffs: vec![None; s],
             lost: vec![false; s],
             key_ns: 0,
-            ranks: Vec::new(),
             device: None,
             first_segment: 0,
             last_closing: None,
@@ -278,13 +259,10 @@ impl DecoderCore {
         match e.kind {
             ChunkKind::Keyframe => {
                 let t = thread_cpu_ns();
-                let mut data = Compact::default();
+                let mut data = Coded::default();
                 let mut planes = Vec::with_capacity(self.header.channels as usize);
-                let (w, ht) = chunk::padded_size(&self.header);
-                let (bw, bh) = (w / vbim_format::dct::N, ht / vbim_format::dct::N);
-                let mode = chunk::keyframe_blocks(&self.header, bytes, |_, step, blocks| {
-                    let at = |bx, by| Some(by * bw + bx);
-                    planes.push(data.push_plane(step, blocks, (bw, bh), at, false));
+                let mode = chunk::keyframe_streams(&self.header, bytes, |_, step, s| {
+                    planes.push(data.push_plane(step, s, None));
                 });
                 self.key_ns += thread_cpu_ns() - t;
                 let mode = match mode {
@@ -449,36 +427,17 @@ impl DecoderCore {
         };
         let mut bubbles = chunk::CoeffReader::open(h, &bytes, &tiles).map_err(context)?;
         let layers = 1 + bubbles.max_degree() as usize;
-        let tx = h.tiles_x() as usize;
-        let per = h.tile_size as usize / vbim_format::dct::N;
-        let (bw, bh) = (tx * per, h.tiles_y() as usize * per);
+        let n = h.tile_count();
         for k in 2..layers {
             for p in 0..ch {
-                // The plane's blocks are those of the tiles of degree ≥ k, tile by tile:
-                // a member tile's rank among them says where its blocks start.
+                // The plane's blocks are those of the tiles of degree ≥ k, tile by tile.
                 let degrees = tiles.degrees(p);
-                let ranks = &mut self.ranks;
-                ranks.clear();
-                let mut r = 0;
-                ranks.extend(degrees.iter().map(|&d| {
-                    if d >= k as u8 {
-                        r += 1;
-                        r - 1
-                    } else {
-                        u32::MAX
-                    }
-                }));
-                let at = |bx: usize, by: usize| {
-                    let rank = ranks[(by / per) * tx + bx / per];
-                    (rank != u32::MAX).then(|| (rank as usize * per + by % per) * per + bx % per)
-                };
+                let member = |t: usize| degrees[t] >= k as u8;
                 let data = &mut out.data;
                 let planes = &mut out.planes;
                 bubbles
-                    .read_plane_blocks(k as u8, p, |step, blocks| {
-                        let mut span = data.push_plane(step, blocks, (bw, bh), at, true);
-                        span.scale = bubble_scale(span.bound);
-                        planes.push(span);
+                    .scan_plane(k as u8, p, |step, s| {
+                        planes.push(data.push_plane(step, s, Some((n, &member))));
                     })
                     .map_err(context)?;
             }

@@ -1,7 +1,7 @@
 //! The decoder thread's work on hostile bytes, for the fuzz target `player_decoder`
 //! (`fuzz/`) and the test that replays what it kept: what a game's player does with a file
 //! before anything reaches the GPU — every chunk verified and parsed, every segment that
-//! becomes ready packed into the compact form.
+//! becomes ready filled into a box of scanned streams.
 
 use std::io::Cursor;
 

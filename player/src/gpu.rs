@@ -3,8 +3,11 @@
 //! R32Uint texel), one set of bubble planes (16-bit signed integers with a scale per
 //! plane, two to an R32Uint texel), the display texture the renderer samples and a held
 //! copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill
-//! them: the segment decode of `decode.wgsl` (dequantisation, inverse DCT, predicted
-//! keyframes) and the per-frame reconstruction of `reconstruct.wgsl`.
+//! them: the segment decode of `decode.wgsl` (parsing the coefficient streams,
+//! dequantisation, inverse DCT, predicted keyframes) and the per-frame reconstruction of
+//! `reconstruct.wgsl`. The decode parses each plane into a dense plane of i32
+//! coefficients with a 64-bit mask per block (4 bytes per texel of one plane, reused
+//! plane after plane), which the passes after it read and put back to zero.
 //!
 //! The head stays f32: the next predicted keyframe is built on it, and a 16-bit head
 //! would add its rounding at every step of the chain (docs/FORMAT.md, "What the GPU
@@ -14,7 +17,7 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::compact::Compact;
+use crate::coded::Coded;
 use crate::decoder::SegmentData;
 use crate::slots::MAX_BUBBLE_PLANES;
 
@@ -63,8 +66,9 @@ pub(crate) struct Params {
     /// Regions of the previous keyframe's ranges, across and down.
     pub regions: [u32; 2],
     pub _pad: [u32; 2],
-    /// Scale of each bubble plane.
-    pub scales: [f32; MAX_BUBBLE_PLANES],
+    /// Quantiser step of each bubble plane (its scale comes from its bound, which the
+    /// decode computed on the GPU).
+    pub steps: [f32; MAX_BUBBLE_PLANES],
 }
 
 /// One decode pass's parameters (`Job` in decode.wgsl), at a 256-byte stride in a uniform
@@ -73,22 +77,30 @@ pub(crate) struct Params {
 #[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 struct Job {
     step: f32,
-    inv_scale: f32,
-    records: u32,
-    count: u32,
-    terms: u32,
-    terms_end: u32,
     layer: u32,
+    stream: u32,
+    entries: u32,
+    count: u32,
+    blocks: u32,
+    lo: u32,
+    hi: u32,
+    members: u32,
+    member_count: u32,
     groups_x: u32,
+    blocks_x: u32,
+    per: u32,
+    tiles_x: u32,
     size: [u32; 2],
-    _pad: [u32; 2],
+    parts: u32,
+    _pad: u32,
 }
 
 const JOB_STRIDE: u64 = 256;
-/// Bytes [`Gpu::decode`] uploads for `seg`: its records and terms, and one job's
-/// parameters per plane decoded (and the bubbles' zero pass).
-pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool) -> u64 {
-    seg.bytes() + job_bytes(seg, bubbles)
+/// Bytes [`Gpu::decode`] uploads for `seg` on a GPU whose dense plane holds `part`
+/// blocks: its streams, entry points and member spans, and one job's parameters per part
+/// of each plane decoded (and the bubbles' zero pass).
+pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool, part: u32) -> u64 {
+    seg.bytes() + job_bytes(seg, bubbles, part)
 }
 
 /// The planes [`Gpu::decode`] decodes: the keyframe steps', and the bubbles' when wanted.
@@ -100,10 +112,40 @@ fn decoded_planes(seg: &SegmentData, bubbles: bool) -> usize {
     }
 }
 
-/// Bytes of the decode passes' parameters: one job per plane, and one for the bubbles'
-/// zero pass.
-fn job_bytes(seg: &SegmentData, bubbles: bool) -> u64 {
-    (decoded_planes(seg, bubbles) as u64 + 1) * JOB_STRIDE
+/// Bytes of the decode passes' parameters: one job per part of each plane, and one for
+/// the bubbles' zero pass.
+fn job_bytes(seg: &SegmentData, bubbles: bool, part: u32) -> u64 {
+    let jobs: u64 = seg.planes[..decoded_planes(seg, bubbles)]
+        .iter()
+        .map(|p| parts(p.blocks, part) as u64)
+        .sum();
+    (jobs + 1) * JOB_STRIDE
+}
+
+/// Parts a plane of `blocks` blocks is decoded in, `part` blocks at most each (at least
+/// one, so that an empty plane still has its job).
+fn parts(blocks: u32, part: u32) -> u32 {
+    blocks.div_ceil(part).max(1)
+}
+
+/// Blocks per workgroup of the block passes (`GROUP_BLOCKS` in decode.wgsl).
+const GROUP_BLOCKS: u32 = 64;
+/// Bytes of the dense plane per block: 64 i32 coefficients and a 64-bit mask (and the
+/// groups' sets: [`group_bytes`]).
+const DENSE_BLOCK_BYTES: u64 = 64 * 4 + 8;
+
+/// Bytes of the sets of blocks with a coefficient for `blocks` blocks: 64 bits per group
+/// of [`GROUP_BLOCKS`].
+fn group_bytes(blocks: u32) -> u64 {
+    blocks.div_ceil(GROUP_BLOCKS) as u64 * 8
+}
+
+/// Blocks the dense plane holds for planes of `plane` texels: a whole plane, or as many
+/// blocks as one storage binding of WebGPU's default limits holds.
+pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
+    let whole = (plane[0] / 8) * (plane[1] / 8);
+    let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
+    whole.min(binding as u32).max(1)
 }
 
 /// Workgroups per dispatch row: WebGPU's default limit per dimension.
@@ -115,6 +157,7 @@ const GROUPS_X: u32 = 65_535;
 struct Tables {
     basis: [f32; 64],
     zigzag: [u32; 64],
+    row_max: [f32; 8],
 }
 
 pub(crate) struct Gpu {
@@ -125,19 +168,31 @@ pub(crate) struct Gpu {
     hold: wgpu::ComputePipeline,
     hold_layout: wgpu::BindGroupLayout,
     hold_group: wgpu::BindGroup,
+    parse: wgpu::ComputePipeline,
     key_add: wgpu::ComputePipeline,
     key_zero: wgpu::ComputePipeline,
     key_pack: wgpu::ComputePipeline,
+    bubble_bound: wgpu::ComputePipeline,
     bubble_write: wgpu::ComputePipeline,
     bubble_zero: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,
     bubble_layout: wgpu::BindGroupLayout,
+    parse_layout: wgpu::BindGroupLayout,
     params: wgpu::Buffer,
     tables: wgpu::Buffer,
     /// Decode pass parameters, `JOB_STRIDE` apart; grows with the longest keyframe chain.
     jobs: wgpu::Buffer,
-    /// A segment's records and terms; grows with the largest segment.
+    /// A segment's streams, entry points and member spans; grows with the largest segment.
     words: wgpu::Buffer,
+    /// The dense plane: `part` blocks of 64 i32 coefficients, and their masks. Cleared
+    /// before each parse.
+    coefs: wgpu::Buffer,
+    masks: wgpu::Buffer,
+    /// Per group of [`GROUP_BLOCKS`] blocks of the dense plane, which have a coefficient.
+    groups: wgpu::Buffer,
+    part: u32,
+    /// Each bubble layer's bound (f32 bits), for the decode and the reconstruction.
+    bounds: wgpu::Buffer,
     /// The chain's head keyframe K_{s+1}, f32.
     keys: wgpu::Texture,
     /// One view per plane of the head, for the decode passes.
@@ -164,13 +219,19 @@ pub(crate) struct Gpu {
     /// `jobs` grow.
     key_groups: Vec<wgpu::BindGroup>,
     bubble_group: Option<wgpu::BindGroup>,
-    /// Scratch for the jobs of one segment (kept: no allocation per segment).
+    parse_group: Option<wgpu::BindGroup>,
+    /// Scratch for the jobs of one segment, and each plane's first job (kept: no
+    /// allocation per segment).
     job_bytes: Vec<u8>,
+    first_job: Vec<u64>,
     pub width: u32,
     pub height: u32,
     /// The padded planes' size (whole tiles).
     plane: [u32; 2],
     pub channels: u32,
+    /// Blocks across a tile, and tiles across a plane.
+    per: u32,
+    tiles_x: u32,
 }
 
 /// Bytes a buffer of at least `need` bytes is given: an eighth more (at least 64 KiB), so
@@ -261,9 +322,9 @@ fn texture_plans(
     ]
 }
 
-/// Bytes of the textures and range buffer [`Gpu::new`] creates for a stream
-/// ([`texture_plans`]'s), known before creating them, so that a stream is refused before
-/// anything that size exists.
+/// Bytes of the textures, the range buffer and the dense plane [`Gpu::new`] creates for a
+/// stream ([`texture_plans`]'s), known before creating them, so that a stream is refused
+/// before anything that size exists.
 pub(crate) fn planned_texture_bytes(
     size: (u32, u32),
     plane: [u32; 2],
@@ -275,11 +336,18 @@ pub(crate) fn planned_texture_bytes(
         .map(|d| extent_bytes(d.size, d.format))
         .sum::<u64>()
         + range_bytes(plane, channels)
+        + part_blocks(plane) as u64 * DENSE_BLOCK_BYTES
+        + group_bytes(part_blocks(plane))
+        + BOUND_BYTES
 }
+
+/// Bytes of the bubble bounds: one u32 per bubble plane.
+const BOUND_BYTES: u64 = MAX_BUBBLE_PLANES as u64 * 4;
 
 impl Gpu {
     /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
-    /// planes of `plane` texels (whole tiles), with bubble terms up to `max_degree`.
+    /// planes of `plane` texels (whole tiles of `tile_size`), with bubble terms up to
+    /// `max_degree`.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -287,6 +355,7 @@ impl Gpu {
         plane: [u32; 2],
         max_degree: u32,
         channels: u32,
+        tile_size: u32,
     ) -> Gpu {
         let [keys, previous, bubbles, display, held] =
             texture_plans((width, height), plane, max_degree, channels)
@@ -326,12 +395,16 @@ impl Gpu {
         let mut t = Tables {
             basis: [0.0; 64],
             zigzag: [0; 64],
+            row_max: [0.0; 8],
         };
         for (k, row) in vbim_format::dct::basis().iter().enumerate() {
             t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
         }
         for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
             t.zigzag[i] = z as u32;
+        }
+        for (m, row) in t.row_max.iter_mut().zip(vbim_format::dct::basis()) {
+            *m = row.iter().fold(0f32, |m, &v| m.max(v.abs()));
         }
         let tables = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("vbim dct tables"),
@@ -383,6 +456,7 @@ impl Gpu {
                 ),
                 entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
                 entry(6, storage(true)),
+                entry(9, storage(true)),
             ],
         });
         let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -427,6 +501,9 @@ impl Gpu {
                 ),
                 planes16,
                 entry(5, storage(false)),
+                entry(6, storage(true)),
+                entry(7, storage(true)),
+                entry(10, storage(true)),
             ],
         });
         let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -436,6 +513,20 @@ impl Gpu {
                 entry(1, uniform(false)),
                 words_entry,
                 planes16,
+                entry(6, storage(true)),
+                entry(7, storage(true)),
+                entry(8, storage(false)),
+                entry(10, storage(true)),
+            ],
+        });
+        let parse_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim parse"),
+            entries: &[
+                entry(0, uniform(true)),
+                words_entry,
+                entry(6, storage(false)),
+                entry(7, storage(false)),
+                entry(10, storage(false)),
             ],
         });
         let pipeline_for =
@@ -458,7 +549,8 @@ impl Gpu {
                     cache: None,
                 })
             };
-        let decode = include_str!("decode.wgsl");
+        let decode = concat!(include_str!("job.wgsl"), include_str!("decode.wgsl"));
+        let parse_source = concat!(include_str!("job.wgsl"), include_str!("parse.wgsl"));
         let pipeline = pipeline_for(
             "vbim reconstruct",
             include_str!("reconstruct.wgsl"),
@@ -472,12 +564,47 @@ impl Gpu {
             "hold",
         );
         let hold_group = hold_group(device, &hold_layout, &display_view, &held_view);
+        let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
+        let bubble_bound =
+            pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
         let bubble_write =
             pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
         let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
+        let buffer = |label: &str, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as B;
+        // Created zeroed (WebGPU clears new buffers); the passes keep them so.
+        let part = part_blocks(plane);
+        let coefs = buffer(
+            "vbim dense coefficients",
+            part as u64 * 256,
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+        );
+        let masks = buffer(
+            "vbim coefficient masks",
+            part as u64 * 8,
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+        );
+        // (COPY_SRC: tests read it back.)
+        let groups = buffer(
+            "vbim coefficient groups",
+            group_bytes(part),
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+        );
+        let bounds = buffer(
+            "vbim bubble bounds",
+            BOUND_BYTES,
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+        );
         let bind_group = reconstruct_group(
             device,
             &bgl,
@@ -488,18 +615,9 @@ impl Gpu {
                 &display_view,
                 &previous_view,
             ],
-            &ranges,
+            [&ranges, &bounds],
             &params,
         );
-        let buffer = |label: &str, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        use wgpu::BufferUsages as B;
         let jobs = buffer(
             "vbim decode jobs",
             64 * JOB_STRIDE,
@@ -513,17 +631,25 @@ impl Gpu {
             hold,
             hold_layout,
             hold_group,
+            parse,
             key_add,
             key_zero,
             key_pack,
+            bubble_bound,
             bubble_write,
             bubble_zero,
             key_layout,
             bubble_layout,
+            parse_layout,
             params,
             tables,
             jobs,
             words,
+            coefs,
+            masks,
+            groups,
+            part,
+            bounds,
             keys,
             key_views,
             previous,
@@ -542,11 +668,15 @@ impl Gpu {
             output: None,
             key_groups: Vec::new(),
             bubble_group: None,
+            parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
+            first_job: Vec::with_capacity(64),
             width,
             height,
             plane,
             channels,
+            per: tile_size / 8,
+            tiles_x: plane[0] / tile_size,
         };
         gpu.bind_decode();
         gpu
@@ -559,6 +689,7 @@ impl Gpu {
             offset: 0,
             size: wgpu::BufferSize::new(std::mem::size_of::<Job>() as u64),
         };
+        // The job, the streams and the dense plane, then the layout's own bindings.
         let group = |layout: &wgpu::BindGroupLayout, more: &[wgpu::BindGroupEntry]| {
             let mut entries = vec![
                 wgpu::BindGroupEntry {
@@ -566,15 +697,23 @@ impl Gpu {
                     resource: wgpu::BindingResource::Buffer(job.clone()),
                 },
                 wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.tables.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
                     binding: 2,
                     resource: self.words.as_entire_binding(),
                 },
             ];
             entries.extend_from_slice(more);
+            entries.push(wgpu::BindGroupEntry {
+                binding: 6,
+                resource: self.coefs.as_entire_binding(),
+            });
+            entries.push(wgpu::BindGroupEntry {
+                binding: 7,
+                resource: self.masks.as_entire_binding(),
+            });
+            entries.push(wgpu::BindGroupEntry {
+                binding: 10,
+                resource: self.groups.as_entire_binding(),
+            });
             self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vbim decode"),
                 layout,
@@ -585,6 +724,11 @@ impl Gpu {
             binding,
             resource: wgpu::BindingResource::TextureView(v),
         };
+        let tables = wgpu::BindGroupEntry {
+            binding: 1,
+            resource: self.tables.as_entire_binding(),
+        };
+        self.parse_group = Some(group(&self.parse_layout, &[]));
         self.key_groups = self
             .key_views
             .iter()
@@ -595,11 +739,23 @@ impl Gpu {
                 };
                 group(
                     &self.key_layout,
-                    &[view(3, v), view(4, &self.previous_view), ranges],
+                    &[
+                        tables.clone(),
+                        view(3, v),
+                        view(4, &self.previous_view),
+                        ranges,
+                    ],
                 )
             })
             .collect();
-        self.bubble_group = Some(group(&self.bubble_layout, &[view(4, &self.bubble_view)]));
+        let bounds = wgpu::BindGroupEntry {
+            binding: 8,
+            resource: self.bounds.as_entire_binding(),
+        };
+        self.bubble_group = Some(group(
+            &self.bubble_layout,
+            &[tables.clone(), view(4, &self.bubble_view), bounds],
+        ));
     }
 
     /// Bytes of the textures and buffers the player holds on the GPU (the budget's figure).
@@ -619,6 +775,10 @@ impl Gpu {
             + self.tables.size()
             + self.jobs.size()
             + self.words.size()
+            + self.coefs.size()
+            + self.masks.size()
+            + self.groups.size()
+            + self.bounds.size()
     }
 
     /// Whether a segment's coefficients fit one storage binding of this device.
@@ -634,22 +794,27 @@ impl Gpu {
         Ok(())
     }
 
+    /// Blocks the dense plane holds (a plane of more goes in parts).
+    pub fn part(&self) -> u32 {
+        self.part
+    }
+
     /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn on the
     /// head (the head packed into the previous keyframe before the last step), then
-    /// (with `bubbles`) its bubble planes. The records and terms go through
-    /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
-    /// that carries `enc`. It uploads [`upload_bytes`].
+    /// (with `bubbles`) its bubble planes. Each plane is parsed into the dense plane, part
+    /// by part, and read from there. The streams go through `Queue::write_buffer`, which
+    /// takes effect at the queue's next submission: the one that carries `enc`. It
+    /// uploads [`upload_bytes`].
     pub fn decode(&mut self, enc: &mut wgpu::CommandEncoder, seg: &SegmentData, bubbles: bool) {
         let ch = self.channels as usize;
-        let rec_bytes = seg.record_bytes();
         let words = seg.bytes();
         let planes = decoded_planes(seg, bubbles);
-        let jobs = job_bytes(seg, bubbles);
+        let jobs = job_bytes(seg, bubbles, self.part);
         if words > self.words.size() || jobs > self.jobs.size() {
             use wgpu::BufferUsages as B;
             if words > self.words.size() {
                 self.words = self.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("vbim coefficients"),
+                    label: Some("vbim coefficient streams"),
                     size: grown(words),
                     usage: B::STORAGE | B::COPY_DST,
                     mapped_at_creation: false,
@@ -666,43 +831,52 @@ impl Gpu {
             self.bind_decode();
         }
         match &seg.staged {
-            // Packed into a staging buffer by the decoder thread: a copy on the GPU, no
+            // Written into a staging buffer by the decoder thread: a copy on the GPU, no
             // bytes through this thread.
             Some(staged) => {
                 enc.copy_buffer_to_buffer(&staged.buffer, 0, &self.words, 0, staged.bytes)
             }
             None => self.write_words(&seg.data),
         }
-        // Terms are addressed in u16 entries from the start of `words`.
-        let term0 = (rec_bytes / 2) as u32;
         let (pw, ph) = (self.plane[0], self.plane[1]);
+        // Each plane's first job; its parts follow.
+        let mut first_job = std::mem::take(&mut self.first_job);
+        first_job.clear();
         self.job_bytes.clear();
         for (i, span) in seg.planes[..planes].iter().enumerate() {
-            let job = Job {
-                step: span.step,
-                inv_scale: if span.scale > 0.0 {
-                    1.0 / span.scale
-                } else {
-                    0.0
-                },
-                records: span.records,
-                count: span.count,
-                terms: term0 + span.terms,
-                terms_end: term0 + span.terms_end,
-                // A bubble plane's layer; a keyframe plane's channel, the layer of the
-                // previous keyframe `key_pack` writes (the head's passes write the layer
-                // their binding views).
-                layer: if i < seg.bubbles {
-                    i % ch
-                } else {
-                    i - seg.bubbles
-                } as u32,
-                groups_x: GROUPS_X,
-                size: [pw, ph],
-                _pad: [0; 2],
-            };
-            self.push_job(job);
+            first_job.push(self.job_bytes.len() as u64);
+            let n = parts(span.blocks, self.part);
+            for k in 0..n {
+                let lo = k * self.part;
+                self.push_job(Job {
+                    step: span.step,
+                    // A bubble plane's layer; a keyframe plane's channel, the layer of the
+                    // previous keyframe `key_pack` writes (the head's passes write the
+                    // layer their binding views).
+                    layer: if i < seg.bubbles {
+                        i % ch
+                    } else {
+                        i - seg.bubbles
+                    } as u32,
+                    stream: span.stream,
+                    entries: span.entries,
+                    count: span.count,
+                    blocks: span.blocks,
+                    lo,
+                    hi: (lo + self.part).min(span.blocks),
+                    members: span.members,
+                    member_count: span.member_count,
+                    groups_x: GROUPS_X,
+                    blocks_x: pw / 8,
+                    per: self.per,
+                    tiles_x: self.tiles_x,
+                    size: [pw, ph],
+                    parts: n,
+                    _pad: 0,
+                });
+            }
         }
+        let zero_job = self.job_bytes.len() as u64;
         let bubble_layers = ((seg.layers.saturating_sub(2)) * ch) as u32;
         self.push_job(Job {
             layer: bubble_layers,
@@ -715,46 +889,113 @@ impl Gpu {
                 pass.dispatch_workgroups(count.min(GROUPS_X), count.div_ceil(GROUPS_X), 1);
             }
         };
+        // The parts of plane `plane`: (job offset, blocks in the part, entry points).
+        let jobs_of = &first_job;
+        let part_jobs = |plane: usize| {
+            let span = &seg.planes[plane];
+            let part = self.part;
+            (0..parts(span.blocks, part)).map(move |k| {
+                let lo = k * part;
+                let blocks = (lo + part).min(span.blocks) - lo.min(span.blocks);
+                let job = jobs_of[plane] + k as u64 * JOB_STRIDE;
+                (job as u32, blocks, span.count)
+            })
+        };
+        let bubble_group = self.bubble_group.as_ref().expect("made at creation");
         let last = seg.steps.len().saturating_sub(1);
         for (n, st) in seg.steps.iter().enumerate() {
             for p in 0..ch {
                 let plane = st.plane + p;
-                let offset = (plane as u64 * JOB_STRIDE) as u32;
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                pass.set_bind_group(0, &self.key_groups[p], &[offset]);
-                if n == last {
-                    // The head becomes the previous keyframe (the earlier steps' heads are
-                    // never shown).
-                    // (One invocation per region, 64 to a workgroup.)
-                    pass.set_pipeline(&self.key_pack);
-                    let [rx, ry] = self.regions;
-                    pass.dispatch_workgroups((rx * ry).div_ceil(64), 1, 1);
-                }
-                if st.intra {
-                    pass.set_pipeline(&self.key_zero);
-                    pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
+                {
+                    let mut pass = enc.begin_compute_pass(&Default::default());
+                    let (first, ..) = part_jobs(plane).next().expect("one part at least");
+                    pass.set_bind_group(0, &self.key_groups[p], &[first]);
+                    if n == last {
+                        // The head becomes the previous keyframe (the earlier steps' heads
+                        // are never shown).
+                        // (One invocation per region, 64 to a workgroup.)
+                        pass.set_pipeline(&self.key_pack);
+                        let [rx, ry] = self.regions;
+                        pass.dispatch_workgroups((rx * ry).div_ceil(64), 1, 1);
+                    }
+                    if st.intra {
+                        pass.set_pipeline(&self.key_zero);
+                        pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
+                    }
                 }
                 // A predicted keyframe is added onto the head: the keyframe it follows.
-                pass.set_pipeline(&self.key_add);
-                dispatch(&mut pass, seg.planes[plane].count);
+                for (job, blocks, entries) in part_jobs(plane) {
+                    if blocks == 0 {
+                        continue;
+                    }
+                    let mut pass = self.parse_part(enc, job, blocks, entries);
+                    pass.set_pipeline(&self.key_add);
+                    pass.set_bind_group(0, &self.key_groups[p], &[job]);
+                    dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
+                }
             }
         }
         if bubbles {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            let zero = (planes as u64 * JOB_STRIDE) as u32;
-            let bubble_group = self.bubble_group.as_ref().expect("made at creation");
-            pass.set_bind_group(0, bubble_group, &[zero]);
-            pass.set_pipeline(&self.bubble_zero);
-            if bubble_layers > 0 {
-                pass.dispatch_workgroups((pw / 2).div_ceil(8), ph.div_ceil(8), bubble_layers);
+            enc.clear_buffer(&self.bounds, 0, None);
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_bind_group(0, bubble_group, &[zero_job as u32]);
+                pass.set_pipeline(&self.bubble_zero);
+                if bubble_layers > 0 {
+                    pass.dispatch_workgroups((pw / 2).div_ceil(8), ph.div_ceil(8), bubble_layers);
+                }
             }
-            pass.set_pipeline(&self.bubble_write);
-            for (i, span) in seg.planes[seg.bubbles..planes].iter().enumerate() {
-                let plane = seg.bubbles + i;
-                pass.set_bind_group(0, bubble_group, &[(plane as u64 * JOB_STRIDE) as u32]);
-                dispatch(&mut pass, span.count);
+            for plane in seg.bubbles..planes {
+                // The bound first (over every part), then the blocks, parsed again if the
+                // plane went in parts.
+                let whole = parts(seg.planes[plane].blocks, self.part) == 1;
+                for (job, blocks, entries) in part_jobs(plane) {
+                    if blocks == 0 {
+                        continue;
+                    }
+                    let mut pass = self.parse_part(enc, job, blocks, entries);
+                    pass.set_bind_group(0, bubble_group, &[job]);
+                    pass.set_pipeline(&self.bubble_bound);
+                    dispatch(&mut pass, blocks.div_ceil(64));
+                    if whole {
+                        pass.set_pipeline(&self.bubble_write);
+                        dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
+                    }
+                }
+                if whole {
+                    continue;
+                }
+                for (job, blocks, entries) in part_jobs(plane) {
+                    let mut pass = self.parse_part(enc, job, blocks, entries);
+                    pass.set_bind_group(0, bubble_group, &[job]);
+                    pass.set_pipeline(&self.bubble_write);
+                    dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
+                }
             }
         }
+        self.first_job = first_job;
+    }
+
+    /// Clears the dense plane's first `blocks` blocks, then parses a part (job at `job`)
+    /// into it from its `entries` entry points: a pass that goes on with the passes that
+    /// read it.
+    fn parse_part<'e>(
+        &self,
+        enc: &'e mut wgpu::CommandEncoder,
+        job: u32,
+        blocks: u32,
+        entries: u32,
+    ) -> wgpu::ComputePass<'e> {
+        enc.clear_buffer(&self.coefs, 0, Some(blocks as u64 * 256));
+        enc.clear_buffer(&self.masks, 0, Some(blocks as u64 * 8));
+        enc.clear_buffer(&self.groups, 0, Some(group_bytes(blocks)));
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&self.parse);
+        let group = self.parse_group.as_ref().expect("made at creation");
+        pass.set_bind_group(0, group, &[job]);
+        let groups = entries.div_ceil(64);
+        pass.dispatch_workgroups(groups.min(GROUPS_X), groups.div_ceil(GROUPS_X), 1);
+        pass
     }
 
     fn push_job(&mut self, job: Job) {
@@ -802,7 +1043,7 @@ impl Gpu {
                 &view,
                 &self.previous_view,
             ],
-            &self.ranges,
+            [&self.ranges, &self.bounds],
             &self.params,
         );
         let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
@@ -824,29 +1065,12 @@ impl Gpu {
         pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
     }
 
-    /// Uploads `data` into the coefficient buffer from the CPU (a box packed by a decoder
-    /// without a device): records, then terms padded to a whole word.
-    fn write_words(&self, data: &Compact) {
-        let rec_bytes = data.records.len() as u64 * 4;
-        if rec_bytes > 0 {
+    /// Uploads `data` into the stream buffer from the CPU (a box filled by a decoder
+    /// without a device).
+    fn write_words(&self, data: &Coded) {
+        if !data.words.is_empty() {
             self.queue
-                .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.records));
-        }
-        if data.terms.is_empty() {
-            return;
-        }
-        let t: &[u8] = bytemuck::cast_slice(&data.terms);
-        if t.len().is_multiple_of(4) {
-            self.queue.write_buffer(&self.words, rec_bytes, t);
-        } else {
-            // Whole words only: the last entry goes with a zero beside it.
-            let (body, last) = t.split_at(t.len() - 2);
-            if !body.is_empty() {
-                self.queue.write_buffer(&self.words, rec_bytes, body);
-            }
-            let tail = [last[0], last[1], 0, 0];
-            self.queue
-                .write_buffer(&self.words, rec_bytes + body.len() as u64, &tail);
+                .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.words));
         }
     }
 
@@ -896,13 +1120,13 @@ impl Params {
 }
 
 /// The reconstruction's bind group: its parameters, then the head keyframe, bubble
-/// planes, held image, output and previous keyframe views, and the previous keyframe's
-/// ranges.
+/// planes, held image, output and previous keyframe views, the previous keyframe's
+/// ranges and the bubble planes' bounds.
 fn reconstruct_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     views: [&wgpu::TextureView; 5],
-    ranges: &wgpu::Buffer,
+    [ranges, bounds]: [&wgpu::Buffer; 2],
     params: &wgpu::Buffer,
 ) -> wgpu::BindGroup {
     let mut entries = vec![wgpu::BindGroupEntry {
@@ -918,6 +1142,10 @@ fn reconstruct_group(
     entries.push(wgpu::BindGroupEntry {
         binding: 6,
         resource: ranges.as_entire_binding(),
+    });
+    entries.push(wgpu::BindGroupEntry {
+        binding: 9,
+        resource: bounds.as_entire_binding(),
     });
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("vbim reconstruct"),
@@ -1031,7 +1259,9 @@ fn read_texture_layer(
 mod tests {
     use super::*;
 
+    use crate::coded::PlaneSpan;
     use crate::decoder::KeyStep;
+    use vbim_format::chunk::Scanned;
     use vbim_format::plane::{self, Blocks, Onto, Plane};
 
     fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
@@ -1052,125 +1282,182 @@ mod tests {
             .collect()
     }
 
+    /// A stream of `blocks` scanned and appended to `c` (with `members`, as a bubble
+    /// plane's).
+    fn coded_plane(
+        c: &mut Coded,
+        step: f32,
+        blocks: &[[i32; 64]],
+        members: Option<(usize, &dyn Fn(usize) -> bool)>,
+    ) -> (PlaneSpan, Blocks) {
+        let mut raw = Vec::new();
+        plane::write_coefficients(blocks, &mut raw);
+        let mut entries = Vec::new();
+        vbim_format::scan::scan(&raw, &mut 0, blocks.len(), &mut entries).unwrap();
+        let s = Scanned {
+            stream: &raw,
+            entries: &entries,
+            blocks: blocks.len(),
+        };
+        let mut parsed = Blocks::default();
+        plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
+        (c.push_plane(step, s, members), parsed)
+    }
+
+    /// Copies a buffer to the CPU: blocks until the GPU is done.
+    fn read_buffer(device: &wgpu::Device, queue: &wgpu::Queue, b: &wgpu::Buffer) -> Vec<u8> {
+        let out = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim readback"),
+            size: b.size(),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut enc = device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(b, 0, &out, 0, b.size());
+        queue.submit(Some(enc.finish()));
+        let slice = out.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        slice.get_mapped_range().to_vec()
+    }
+
     /// The keyframe passes on a real adapter: an intra keyframe, then a predicted one
     /// built on it, against the reference decoder's block kernel; the first, packed into
-    /// the previous keyframe, within half a 16-bit step of its region's range.
+    /// the previous keyframe, within half a 16-bit step of its region's range. With the
+    /// plane whole in the dense plane, and in parts of 7 blocks (as an 8192² plane goes
+    /// in two).
     #[test]
     fn keyframe_passes_match_the_reference_kernel() {
         let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
-        let (pw, ph) = (96u32, 24u32);
+        let (pw, ph) = (96u32, 32u32);
         let (bw, bh) = (pw as usize / 8, ph as usize / 8);
-        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1);
-        let mut seed = 3;
-        let mut want = Plane::zeros(pw as usize, ph as usize);
-        let mut first = None;
-        let mut seg = SegmentData::new();
-        for (n, step) in [(0usize, 0.01f32), (1, 0.002)] {
-            if n == 1 {
-                first = Some(want.clone());
+        for part in [None, Some(7)] {
+            let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+            if let Some(p) = part {
+                gpu.part = p;
             }
-            let blocks = random_blocks(bw * bh, &mut seed);
-            let mut raw = Vec::new();
-            plane::write_coefficients(&blocks, &mut raw);
-            let mut parsed = Blocks::default();
-            plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
-            let at = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
-            plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
-            let mut c = Compact::default();
-            let span = c.push_plane(step, &parsed, (bw, bh), |x, y| Some(y * bw + x), false);
-            seg.steps = vec![KeyStep {
-                number: n,
-                intra: n == 0,
-                plane: 0,
-            }];
-            seg.planes = vec![span];
-            seg.bubbles = 1;
-            seg.data = c;
-            seg.layers = 2;
-            let mut enc = device.create_command_encoder(&Default::default());
-            gpu.decode(&mut enc, &seg, false);
-            queue.submit([enc.finish()]);
-        }
-        let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 0);
-        let got: &[f32] = bytemuck::cast_slice(&raw);
-        let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
-        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
-            assert!(
-                (g - w).abs() <= 1e-5 * peak,
-                "texel {i}: GPU {g} against {w}"
-            );
-        }
-        // The previous keyframe: 16-bit steps of each 32² region's range.
-        let first = first.expect("two steps");
-        let raw = read_texture_layer(&device, &queue, &gpu.previous, 4, 0);
-        let q: &[u16] = bytemuck::cast_slice(&raw);
-        let (w, rs) = (pw as usize, REGION as usize);
-        for ry in 0..(ph as usize).div_ceil(rs) {
-            for rx in 0..w.div_ceil(rs) {
-                let at = |i: usize| (ry * rs + i / rs, rx * rs + i % rs);
-                let inside = (0..rs * rs)
-                    .map(at)
-                    .filter(|&(y, x)| y < ph as usize && x < w);
-                let vals: Vec<f32> = inside.clone().map(|(y, x)| first.data[y * w + x]).collect();
-                let lo = vals.iter().fold(f32::INFINITY, |m, &v| m.min(v));
-                let hi = vals.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
-                let step = (hi - lo) / 65535.0;
-                for ((y, x), v) in inside.zip(vals) {
-                    let g = lo + q[y * w + x] as f32 * step;
-                    assert!(
-                        (g - v).abs() <= 0.5001 * step + 1e-6 * hi.abs().max(lo.abs()),
-                        "previous keyframe at ({x}, {y}): {g} against {v} (step {step})"
-                    );
+            let mut seed = 3;
+            let mut want = Plane::zeros(pw as usize, ph as usize);
+            let mut first = None;
+            let mut seg = SegmentData::new();
+            for (n, step) in [(0usize, 0.01f32), (1, 0.002)] {
+                if n == 1 {
+                    first = Some(want.clone());
+                }
+                let blocks = random_blocks(bw * bh, &mut seed);
+                let mut c = Coded::default();
+                let (span, parsed) = coded_plane(&mut c, step, &blocks, None);
+                let at = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+                plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
+                seg.steps = vec![KeyStep {
+                    number: n,
+                    intra: n == 0,
+                    plane: 0,
+                }];
+                seg.planes = vec![span];
+                seg.bubbles = 1;
+                seg.data = c;
+                seg.layers = 2;
+                let mut enc = device.create_command_encoder(&Default::default());
+                gpu.decode(&mut enc, &seg, false);
+                queue.submit([enc.finish()]);
+            }
+
+            let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 0);
+            let got: &[f32] = bytemuck::cast_slice(&raw);
+            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+                assert!(
+                    (g - w).abs() <= 1e-5 * peak,
+                    "parts {part:?}, texel {i}: GPU {g} against {w}"
+                );
+            }
+            // The previous keyframe: 16-bit steps of each 32² region's range.
+            let first = first.expect("two steps");
+            let raw = read_texture_layer(&device, &queue, &gpu.previous, 4, 0);
+            let q: &[u16] = bytemuck::cast_slice(&raw);
+            let (w, rs) = (pw as usize, REGION as usize);
+            for ry in 0..(ph as usize).div_ceil(rs) {
+                for rx in 0..w.div_ceil(rs) {
+                    let at = |i: usize| (ry * rs + i / rs, rx * rs + i % rs);
+                    let inside = (0..rs * rs)
+                        .map(at)
+                        .filter(|&(y, x)| y < ph as usize && x < w);
+                    let vals: Vec<f32> =
+                        inside.clone().map(|(y, x)| first.data[y * w + x]).collect();
+                    let lo = vals.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+                    let hi = vals.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+                    let step = (hi - lo) / 65535.0;
+                    for ((y, x), v) in inside.zip(vals) {
+                        let g = lo + q[y * w + x] as f32 * step;
+                        assert!(
+                            (g - v).abs() <= 0.5001 * step + 1e-6 * hi.abs().max(lo.abs()),
+                            "previous keyframe at ({x}, {y}): {g} against {v} (step {step})"
+                        );
+                    }
                 }
             }
         }
     }
 
-    /// The bubble pass: a plane whose tiles of columns 4–7 are absent, written as
-    /// 16-bit integers times its scale, zeros outside its blocks.
+    /// The bubble passes: a plane whose tiles of columns 2–3 are not members, written as
+    /// 16-bit integers times the scale its bound gives, zeros outside its tiles; the
+    /// bound within 3× of the plane's peak. Whole and in parts of 7 blocks.
     #[test]
     fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
-        let (pw, ph) = (96u32, 24u32);
-        let (bw, bh) = (pw as usize / 8, ph as usize / 8);
-        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1);
-        let blocks = random_blocks(bw * bh, &mut 11);
-        let mut raw = Vec::new();
-        plane::write_coefficients(&blocks, &mut raw);
-        let mut parsed = Blocks::default();
-        plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
+        let (pw, ph, ts) = (96u32, 32u32, 16usize);
+        let tiles_x = pw as usize / ts;
+        let tiles = tiles_x * (ph as usize / ts);
+        let member = |t: usize| !(2..4).contains(&(t % tiles_x));
+        let members = (0..tiles).filter(|&t| member(t)).count();
+        let per2 = (ts / 8) * (ts / 8);
+        let blocks = random_blocks(members * per2, &mut 11);
         let step = 0.004;
-        let order = |x: usize, y: usize| (!(4..8).contains(&x)).then_some(y * bw + x);
-        let mut want = Plane::zeros(pw as usize, ph as usize);
-        for (x, y) in (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y))) {
-            if let Some(b) = order(x, y) {
-                let at = std::iter::once((x, y));
-                plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, b, step);
+        for part in [None, Some(7)] {
+            let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, ts as u32);
+            if let Some(p) = part {
+                gpu.part = p;
             }
-        }
-        let mut c = Compact::default();
-        let mut span = c.push_plane(step, &parsed, (bw, bh), order, true);
-        span.scale = crate::compact::bubble_scale(span.bound);
-        let mut seg = SegmentData::new();
-        seg.steps = Vec::new();
-        seg.planes = vec![span];
-        seg.bubbles = 0;
-        seg.data = c;
-        seg.layers = 3;
-        let mut enc = device.create_command_encoder(&Default::default());
-        gpu.decode(&mut enc, &seg, true);
-        queue.submit([enc.finish()]);
-        let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
-        let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
-            .iter()
-            .map(|&q| q as f32 * span.scale)
-            .collect();
-        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+            let mut c = Coded::default();
+            // A keyframe plane before it, so that the bubble plane's offsets are not 0.
+            coded_plane(&mut c, 1.0, &random_blocks(4, &mut 5), None);
+            let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, &member)));
+            let mut want = Plane::zeros(pw as usize, ph as usize);
+            for (rank, t) in (0..tiles).filter(|&t| member(t)).enumerate() {
+                let at = plane::tile_blocks(t, tiles_x, ts);
+                plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, rank * per2, step);
+            }
+            let mut seg = SegmentData::new();
+            seg.steps = Vec::new();
+            seg.planes = vec![span, span];
+            seg.bubbles = 1;
+            seg.data = c;
+            seg.layers = 3;
+            let mut enc = device.create_command_encoder(&Default::default());
+            gpu.decode(&mut enc, &seg, true);
+            queue.submit([enc.finish()]);
+
+            let bound = bytemuck::cast_slice::<u8, f32>(&read_buffer(&device, &queue, &gpu.bounds))
+                [0]
+                * step;
+            let scale = bound * (1.0 + 1e-3) / 32767.0;
+            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
             assert!(
-                (g - w).abs() <= 0.5001 * span.scale,
-                "texel {i}: GPU {g} against {w} (scale {})",
-                span.scale
+                bound >= peak && bound < 3.0 * peak,
+                "parts {part:?}: bound {bound} for a peak of {peak}"
             );
+            let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
+            let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
+                .iter()
+                .map(|&q| q as f32 * scale)
+                .collect();
+            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+                assert!(
+                    (g - w).abs() <= 0.5001 * scale,
+                    "parts {part:?}, texel {i}: GPU {g} against {w} (scale {scale})"
+                );
+            }
         }
     }
 
@@ -1181,7 +1468,7 @@ mod tests {
     fn the_held_image_keeps_nine_bits_of_each_texels_largest_channel() {
         let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
         let (w, h) = (16u32, 8u32);
-        let mut gpu = Gpu::new(&device, &queue, (w, h), [w, h], 2, 3);
+        let mut gpu = Gpu::new(&device, &queue, (w, h), [w, h], 2, 3, 8);
         use wgpu::TextureUsages as U;
         let screen = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("on screen"),

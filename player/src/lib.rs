@@ -5,10 +5,11 @@
 //! nanoseconds, and sample [`Player::view`] — the reconstructed lightmap, linear RGB in an
 //! `Rgba16Float` texture the player owns. Reading and decoding run on two threads of their
 //! own (paper 001's figure 13): a reader pulls chunks into a bounded ring of compressed
-//! bytes, reading ahead and wrapping at the loop point; a decoder parses them down to
-//! their quantised coefficients; the render thread uploads a segment's coefficients when
-//! it goes on screen, and compute shaders dequantise, inverse-transform and build the
-//! predicted keyframes into compact resident textures, then evaluate the time basis. When data is
+//! bytes, reading ahead and wrapping at the loop point; a decoder verifies and decompresses
+//! them and scans each coefficient stream for entry points; the render thread uploads a
+//! segment's streams when it goes on screen, and compute shaders parse them, dequantise,
+//! inverse-transform and build the predicted keyframes into compact resident textures,
+//! then evaluate the time basis. When data is
 //! late the chosen [`Policy`] decides what is shown, and every frame's [`FrameRecord`] says
 //! how bandwidth turned into drift. A renderer that submits once per frame records the
 //! player's work into its own encoder with [`Player::advance_into`] and calls
@@ -17,7 +18,7 @@
 //! The player depends on `vbim-format` only, never on the encoder.
 //!
 //! Modules, in the order a chunk meets them: `reader` (source → ring), `decoder` (ring →
-//! parsed coefficients, in the form of `compact`), `pipeline` (the two threads and the
+//! scanned coefficient streams, in the form of `coded`), `pipeline` (the two threads and the
 //! boxes between them), `slots` (what the GPU holds), `gpu` (the decode and
 //! reconstruction passes), `display`
 //! (the clock and the stall policies), `player` (the render thread's frame);
@@ -25,7 +26,7 @@
 #![deny(missing_docs)]
 
 mod clock;
-mod compact;
+mod coded;
 mod config;
 mod cpu_time;
 mod decoder;

@@ -101,9 +101,9 @@ fn preroll_ns(h: &Header, cfg: &PlayerConfig) -> u64 {
 }
 
 /// What a stream can make the player hold, checked before any of it exists: the textures,
-/// exactly; the ring; and the decoder's boxes, parsed keyframes, parse scratch and the
-/// coefficient buffer, each at most a few times the largest payload (which the file's own
-/// chunk sizes bound: `limits::MAX_EXPANSION`).
+/// exactly (the dense plane the parse fills among them); the ring; and the decoder's
+/// payloads, boxes, scanned keyframes and the stream buffer, each at most a few times the
+/// largest payload (which the file's own chunk sizes bound: `limits::MAX_EXPANSION`).
 pub(crate) fn memory_needed(header: &Header, entries: &[IndexEntry], ring_bytes: usize) -> u64 {
     let (pw, ph) = vbim_format::chunk::padded_size(header);
     let textures = planned_texture_bytes(
@@ -166,6 +166,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             [pw as u32, ph as u32],
             header.max_degree as u32,
             header.channels as u32,
+            header.tile_size as u32,
         );
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
@@ -309,16 +310,16 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let show = placement == Placement::Show;
         if show {
             if self.keys.holds(b.keys) {
-                let mut scales = [0f32; MAX_BUBBLE_PLANES];
-                for (s, p) in scales.iter_mut().zip(&b.planes[b.bubbles..]) {
-                    *s = p.scale;
+                let mut steps = [0f32; MAX_BUBBLE_PLANES];
+                for (s, p) in steps.iter_mut().zip(&b.planes[b.bubbles..]) {
+                    *s = p.step;
                 }
                 self.resident = Some(Resident {
                     index: b.index,
                     start: range.0,
                     end: range.1,
                     layers: b.layers,
-                    scales,
+                    steps,
                 });
                 self.totals.segments_uploaded += 1;
             }
@@ -326,7 +327,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             self.totals.segments_dropped += 1;
         }
         let show = show && self.resident.is_some();
-        let bytes = crate::gpu::upload_bytes(&b, show);
+        let bytes = crate::gpu::upload_bytes(&b, show, self.gpu.part());
         self.to_decode = Some((b, show));
         bytes
     }
@@ -490,7 +491,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             params.transfer = tr;
             params.v0 = v0;
             params.channels = self.header.channels as u32;
-            params.scales = r.scales;
+            params.steps = r.steps;
             params.alpha = alpha;
             params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
             if hold_first {

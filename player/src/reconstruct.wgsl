@@ -19,8 +19,8 @@ struct Params {
     regions: vec2<u32>,
     pad0: u32,
     pad1: u32,
-    // Scale of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
-    scales: array<vec4<f32>, 6>,
+    // Quantiser step of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
+    steps: array<vec4<f32>, 6>,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -35,6 +35,18 @@ struct Params {
 // to an R32Uint texel, one layer per plane.
 @group(0) @binding(5) var previous: texture_2d_array<u32>;
 @group(0) @binding(6) var<storage, read> ranges: array<vec2<f32>>;
+// Each bubble layer's bound in units of its step (f32 bits), found by the decode
+// (decode.wgsl, bubble_bound).
+@group(0) @binding(9) var<storage, read> bounds: array<u32>;
+
+// A bubble layer's scale, as decode.wgsl's `bubble_write` computes it from the same bound.
+fn bubble_scale(layer: u32) -> f32 {
+    let bound = bitcast<f32>(bounds[layer]) * p.steps[layer / 4u][layer % 4u];
+    if (bound > 0.0 && bound <= 3.4e38) {
+        return bound * 1.001 / 32767.0;
+    }
+    return 1.0;
+}
 
 // The side of a region with its own range, in workgroups of 8 × 8 texels: a workgroup
 // lies in one region, so its ranges are read at addresses uniform across it (scalar
@@ -92,7 +104,7 @@ fn bubble_layer(xy: vec2<i32>, layer: u32) -> f32 {
     let w = textureLoad(bubbles, vec2<i32>(xy.x >> 1u, xy.y), i32(layer), 0).x;
     let half = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
     let q = bitcast<i32>(half << 16u) >> 16u;
-    return f32(q) * p.scales[layer / 4u][layer % 4u];
+    return f32(q) * bubble_scale(layer);
 }
 
 fn bubble(xy: vec2<i32>, k: u32) -> vec3<f32> {

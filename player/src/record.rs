@@ -50,7 +50,7 @@ pub struct FrameRecord {
     /// inline mode: inside this frame's `advance`), ns.
     pub read_ns: u64,
     /// CPU time the decoder spent since the previous frame, likewise, ns: checksums,
-    /// zstd, parsing and packing.
+    /// zstd and the scan of the coefficient streams.
     pub decode_ns: u64,
     /// Time spent in `advance` on the calling thread, ns.
     pub render_ns: u64,

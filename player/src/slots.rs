@@ -15,8 +15,8 @@
 use crate::decoder::KeyStep;
 use crate::time::{MediaTime, ONE_FRAME};
 
-/// Largest number of bubble planes (7 terms of 3 planes; `decode.wgsl` and
-/// `reconstruct.wgsl` hold their scales in 6 vec4s).
+/// Largest number of bubble planes (7 terms of 3 planes; `reconstruct.wgsl` holds their
+/// steps in 6 vec4s).
 pub(crate) const MAX_BUBBLE_PLANES: usize = 24;
 
 /// The two resident keyframes: the chain's head (f32) and the one before it (16-bit).
@@ -63,8 +63,8 @@ pub(crate) struct Resident {
     pub start: MediaTime,
     pub end: MediaTime,
     pub layers: usize,
-    /// Scale of each bubble plane.
-    pub scales: [f32; MAX_BUBBLE_PLANES],
+    /// Quantiser step of each bubble plane.
+    pub steps: [f32; MAX_BUBBLE_PLANES],
 }
 
 /// What to do with an arrived segment.
@@ -119,7 +119,7 @@ mod tests {
             start: s * 10 * F,
             end: (s + 1) * 10 * F,
             layers: 4,
-            scales: [0.0; MAX_BUBBLE_PLANES],
+            steps: [0.0; MAX_BUBBLE_PLANES],
         }
     }
 

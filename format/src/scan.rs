@@ -1,0 +1,247 @@
+//! Entry points into a coefficient stream, for a parser that starts mid-stream: the GPU
+//! player parses each plane's stream in many pieces at once, one invocation per entry
+//! point.
+//!
+//! A stream ([`crate::plane::write_coefficients`]) is a sequence of (zero run, value)
+//! pairs over the positions `f · n + b` (frequency f of block b, n blocks); the first n
+//! positions hold each block's DC as the difference from the previous block's. Parsing a
+//! pair needs the byte where it starts, the position its run counts from and, in the DC
+//! range, the running DC. [`scan`] walks the stream once and notes these three numbers
+//! every [`ENTRY_PAIRS`] pairs. It stores no coefficient, so it costs about half of what
+//! zstd does, and it refuses everything [`crate::plane::read_blocks`] refuses (a run past
+//! the end, a truncated or over-long varint): a parser that starts from its entry points
+//! only ever sees well-formed pairs.
+
+use crate::dct::N;
+use crate::{varint, FormatError, Result};
+
+/// Pairs between two entry points: a piece one invocation parses. (Fewer would cost more
+/// entry points, 12 bytes each; more, fewer invocations to share the work. At 256 the
+/// entry points add about 2% to the stream.)
+pub const ENTRY_PAIRS: usize = 256;
+
+/// Where the parse of a piece of a stream starts.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct EntryPoint {
+    /// The piece's first byte, from the start of the stream.
+    pub byte: u32,
+    /// The position the piece's first zero run counts from (`f · n + b`).
+    pub position: u32,
+    /// The DC of the block before `position` (0 before block 0), while in the DC range:
+    /// the piece adds its DC differences onto it.
+    pub dc: i32,
+}
+
+/// Scans the stream of `n` blocks at `buf[*pos..]`, pushing an entry point onto `out` for
+/// every [`ENTRY_PAIRS`] pairs (the first at the stream's start), and moves `*pos` past
+/// the stream. Fails where [`crate::plane::read_blocks`] fails.
+pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) -> Result<()> {
+    let total = n as u64 * (N * N) as u64;
+    // Positions and byte offsets are u32 on the GPU: a stream of more blocks than one
+    // chunk can decode to is refused anyway (`read_blocks`).
+    if n > crate::limits::MAX_CHUNK_DECODED as usize / (N * N) || total > u32::MAX as u64 {
+        return Err(FormatError::Invalid(format!("{n} blocks in one stream")));
+    }
+    if n > 0 && buf.len() <= *pos {
+        return Err(FormatError::Invalid(format!(
+            "coefficient stream empty for {n} blocks"
+        )));
+    }
+    let start = *pos;
+    let (mut at, mut p, mut dc) = (start, 0u64, 0i32);
+    let mut pairs = 0usize;
+    loop {
+        if pairs.is_multiple_of(ENTRY_PAIRS) {
+            let byte = u32::try_from(at - start)
+                .map_err(|_| FormatError::Invalid("coefficient stream over 4 GiB".into()))?;
+            out.push(EntryPoint {
+                byte,
+                position: p as u32,
+                dc,
+            });
+        }
+        pairs += 1;
+        p += varint::get_u32(buf, &mut at)? as u64;
+        if p >= total {
+            break;
+        }
+        let v = varint::get_i32(buf, &mut at)?;
+        if p < n as u64 {
+            dc = dc.wrapping_add(v);
+        }
+        p += 1;
+    }
+    if p != total {
+        return Err(FormatError::Invalid(format!(
+            "zero run past the end of {n} blocks"
+        )));
+    }
+    *pos = at;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plane::{read_blocks, write_coefficients, Blocks};
+
+    fn blocks(n: usize, seed: u32) -> Vec<[i32; 64]> {
+        let mut s = seed;
+        let mut next = move || {
+            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            s >> 8
+        };
+        (0..n)
+            .map(|_| {
+                let mut q = [0i32; 64];
+                for _ in 0..[0, 1, 1, 3, 12][(next() % 5) as usize] {
+                    q[(next() % 64) as usize] = (next() % 41) as i32 - 20;
+                }
+                if next() % 3 == 0 {
+                    q[0] = (next() % 100_001) as i32 - 50_000;
+                }
+                q
+            })
+            .collect()
+    }
+
+    /// Parses a piece from `e` the way the GPU does: `pairs` pairs, or to the end.
+    fn parse_piece(buf: &[u8], n: usize, e: EntryPoint, pairs: usize, q: &mut [[i32; 64]]) {
+        let (mut at, mut p, mut dc) = (e.byte as usize, e.position as u64, e.dc);
+        let total = (n * 64) as u64;
+        for _ in 0..pairs {
+            let run = varint::get_u32(buf, &mut at).unwrap() as u64;
+            // Blocks of the DC range inside the run keep the running DC.
+            for z in p..(p + run).min(n as u64) {
+                q[z as usize][0] = dc;
+            }
+            p += run;
+            if p >= total {
+                return;
+            }
+            let v = varint::get_i32(buf, &mut at).unwrap();
+            // Frequency f is the zig-zag index.
+            let (f, b) = ((p / n as u64) as usize, (p % n as u64) as usize);
+            if f == 0 {
+                dc = dc.wrapping_add(v);
+                q[b][0] = dc;
+            } else {
+                q[b][f] = v;
+            }
+            p += 1;
+        }
+    }
+
+    #[test]
+    fn pieces_parsed_from_the_entry_points_give_the_blocks() {
+        for (n, seed) in [(0, 1), (1, 2), (7, 3), (500, 4), (3000, 5)] {
+            let want = blocks(n, seed);
+            let mut buf = vec![9, 9];
+            write_coefficients(&want, &mut buf);
+            buf.push(7);
+            let mut pos = 2;
+            let mut entries = Vec::new();
+            scan(&buf, &mut pos, n, &mut entries).unwrap();
+            assert_eq!(
+                pos,
+                buf.len() - 1,
+                "{n} blocks: the scan ends where the stream does"
+            );
+            let stream = &buf[2..pos];
+            let mut got = vec![[0i32; 64]; n];
+            for e in &entries {
+                parse_piece(stream, n, *e, ENTRY_PAIRS, &mut got);
+            }
+            let mut check = Blocks::default();
+            read_blocks(stream, &mut 0, n, &mut check).unwrap();
+            for b in 0..n {
+                assert_eq!(got[b], check.block(b), "{n} blocks: block {b}");
+                assert_eq!(got[b], want[b], "{n} blocks: block {b}");
+            }
+            if n == 3000 {
+                assert!(entries.len() > 10, "{} entry points", entries.len());
+            }
+        }
+    }
+
+    #[test]
+    fn the_scan_refuses_what_read_blocks_refuses() {
+        let good = {
+            let mut b = Vec::new();
+            write_coefficients(&blocks(40, 9), &mut b);
+            b
+        };
+        let mut cases: Vec<Vec<u8>> = vec![
+            Vec::new(),
+            good[..good.len() - 1].to_vec(),
+            vec![0x80; 8],
+            vec![0xFF, 0xFF, 0xFF, 0xFF, 0x7F],
+        ];
+        let mut long = good.clone();
+        *long.last_mut().unwrap() = 5; // the final run goes past the end
+        cases.push(long);
+        for (i, c) in cases.iter().enumerate() {
+            let r = scan(c, &mut 0, 40, &mut Vec::new());
+            let b = read_blocks(c, &mut 0, 40, &mut Blocks::default());
+            assert!(r.is_err() && b.is_err(), "case {i}: {r:?} {b:?}");
+        }
+        assert!(scan(&good, &mut 0, 40, &mut Vec::new()).is_ok());
+        // No blocks: an empty final run only.
+        assert!(scan(&[0], &mut 0, 0, &mut Vec::new()).is_ok());
+        assert!(scan(&[1], &mut 0, 0, &mut Vec::new()).is_err());
+    }
+
+    #[test]
+    fn on_arbitrary_bytes_the_scan_and_the_parse_agree() {
+        // Short random streams of small varints (most bytes below 0x80 so that many
+        // parse), and valid streams with one byte changed: the scan accepts exactly what
+        // `read_blocks` accepts, and ends where it ends.
+        let mut seed = 99u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed >> 8
+        };
+        let mut valid = Vec::new();
+        write_coefficients(&blocks(30, 3), &mut valid);
+        let (mut accepted, mut refused) = (0, 0);
+        for case in 0..20_000 {
+            let (buf, n) = if case % 2 == 0 {
+                let len = 1 + (next() % 12) as usize;
+                let buf: Vec<u8> = (0..len)
+                    .map(|_| {
+                        if next() % 8 == 0 {
+                            0x80 | next() as u8
+                        } else {
+                            (next() % 6) as u8
+                        }
+                    })
+                    .collect();
+                (buf, (next() % 3) as usize)
+            } else {
+                let mut buf = valid.clone();
+                let at = next() as usize % buf.len();
+                buf[at] = next() as u8;
+                (buf, 30)
+            };
+            let (mut p1, mut p2) = (0, 0);
+            let a = scan(&buf, &mut p1, n, &mut Vec::new());
+            let b = read_blocks(&buf, &mut p2, n, &mut Blocks::default());
+            assert_eq!(
+                a.is_ok(),
+                b.is_ok(),
+                "{buf:?}, {n} blocks: {a:?} against {b:?}"
+            );
+            if a.is_ok() {
+                assert_eq!(p1, p2, "{buf:?}, {n} blocks");
+                accepted += 1;
+            } else {
+                refused += 1;
+            }
+        }
+        assert!(
+            accepted > 1000 && refused > 1000,
+            "{accepted} accepted, {refused} refused"
+        );
+    }
+}

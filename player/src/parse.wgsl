@@ -1,0 +1,89 @@
+
+// Parses one plane's coefficient stream into the dense plane (see decode.wgsl for the
+// stream and what reads the dense plane).
+
+// The dense plane of the part's coefficients, block d's at 64 · d …, and a 64-bit mask
+// of each block's non-zero coefficients. (Atomic here, where invocations parsing
+// different frequencies of a block set its bits; plain in decode.wgsl, which reads them.)
+@group(0) @binding(6) var<storage, read_write> coefs: array<i32>;
+@group(0) @binding(7) var<storage, read_write> masks: array<atomic<u32>>;
+// Per group of 64 blocks, which have a coefficient (a 64-bit set): the block passes visit
+// only those.
+@group(0) @binding(10) var<storage, read_write> groups: array<atomic<u32>>;
+
+// Pairs between entry points (vbim_format::scan::ENTRY_PAIRS).
+const ENTRY_PAIRS: u32 = 256u;
+
+fn stream_byte(at: u32) -> u32 {
+    return (words[job.stream + (at >> 2u)] >> ((at & 3u) * 8u)) & 0xFFu;
+}
+
+// One LEB128 varint at `*at`, advancing it.
+fn varint(at: ptr<function, u32>) -> u32 {
+    var u = 0u;
+    var shift = 0u;
+    loop {
+        let b = stream_byte(*at);
+        *at = *at + 1u;
+        u = u | ((b & 0x7Fu) << shift);
+        if ((b & 0x80u) == 0u) {
+            break;
+        }
+        shift = shift + 7u;
+    }
+    return u;
+}
+
+// Coefficient f of block b, if the block is in this part and the value is not zero.
+fn put(b: u32, f: u32, v: i32) {
+    if (v == 0 || b < job.lo || b >= job.hi) {
+        return;
+    }
+    let d = b - job.lo;
+    coefs[d * 64u + f] = v;
+    let before = atomicOr(&masks[d * 2u + f / 32u], 1u << (f % 32u));
+    // The first bit of a mask word marks the block (at most twice per block).
+    if (before == 0u) {
+        atomicOr(&groups[d / 32u], 1u << (d % 32u));
+    }
+}
+
+// Parses the piece of the stream from one entry point: ENTRY_PAIRS pairs, or to the end.
+@compute @workgroup_size(64)
+fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let e = group_index(wg) * 64u + li;
+    if (e >= job.count) {
+        return;
+    }
+    let base = job.entries + 3u * e;
+    var at = words[base];
+    var p = words[base + 1u];
+    var dc = bitcast<i32>(words[base + 2u]);
+    let n = job.blocks;
+    // Below 2^32: the scan refuses larger streams.
+    let total = n * 64u;
+    for (var k = 0u; k < ENTRY_PAIRS; k = k + 1u) {
+        let run = varint(&at);
+        // The blocks a zero run passes in the DC range keep the running DC. (The scan
+        // checked that no run goes past the end, so p + run ≤ total.)
+        if (p < n && dc != 0) {
+            let end = min(p + run, n);
+            for (var b = p; b < end; b = b + 1u) {
+                put(b, 0u, dc);
+            }
+        }
+        p = p + run;
+        if (p >= total) {
+            break;
+        }
+        let u = varint(&at);
+        let v = bitcast<i32>(u >> 1u) ^ -bitcast<i32>(u & 1u);
+        if (p < n) {
+            dc = dc + v;
+            put(p, 0u, dc);
+        } else {
+            put(p % n, p / n, v);
+        }
+        p = p + 1u;
+    }
+}
