@@ -324,6 +324,11 @@ pub struct BenchDecodeArgs {
     /// Repetitions; the median and the spread are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
+    /// Also decode every segment on the GPU (the default adapter), one after another,
+    /// each submitted and waited for: the GPU decode's time alone, which `bench scale`'s
+    /// GPU time per frame only includes.
+    #[arg(long)]
+    pub gpu: bool,
 }
 
 #[derive(Args)]

@@ -148,8 +148,8 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
         }
         zstd_t.push(t.elapsed().as_secs_f64());
         std::hint::black_box(total);
-        // The player's decoder: every chunk in playback order, every segment packed for
-        // the GPU (parsed coefficients; the GPU does the rest).
+        // The player's decoder: every chunk in playback order, every segment filled for
+        // the GPU (scanned streams; the GPU does the rest).
         let t = Instant::now();
         let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
         let mut packed = SegmentData::new();
@@ -160,6 +160,10 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
         }
         full_t.push(t.elapsed().as_secs_f64());
     }
+    let gpu = a
+        .gpu
+        .then(|| gpu_decode(&h, &layout, &entries, &chunks, a.runs))
+        .transpose()?;
     let (zm, z0, z1) = stats(&mut zstd_t);
     let (fm, f0, f1) = stats(&mut full_t);
     println!(
@@ -169,7 +173,45 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
     );
     println!("zstd alone      median {:.3} s (min {z0:.3}, max {z1:.3}) = {:.2}% of one core in real time", zm, 100.0 * zm / duration);
     println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);
+    if let Some((adapter, mut times, boxes)) = gpu {
+        let (gm, g0, g1) = stats(&mut times);
+        println!(
+            "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}",
+            1e3 * gm / boxes.max(1) as f64
+        );
+    }
     Ok(())
+}
+
+/// The GPU decode of every segment of a stream, `runs` times: the adapter, each run's
+/// seconds, and the number of segments.
+fn gpu_decode(
+    h: &vbim_format::Header,
+    layout: &vbim_format::index::Layout,
+    entries: &[vbim_format::IndexEntry],
+    chunks: &[&[u8]],
+    runs: usize,
+) -> Result<(String, Vec<f64>, usize), String> {
+    use vbim_player::bench::{DecoderCore, Event, GpuDecoder, SegmentData};
+    let (device, queue, info) = vbim_player::headless_device()?;
+    let adapter = format!("{} ({:?})", info.name, info.backend);
+    let mut gpu = GpuDecoder::new(&device, &queue, h);
+    let (mut times, mut boxes) = (Vec::new(), 0);
+    for _ in 0..runs.max(1) {
+        let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.to_vec());
+        let mut seg = SegmentData::new();
+        let (mut t, mut n) = (0.0, 0);
+        for (i, c) in chunks.iter().enumerate() {
+            if let Event::Ready(s) = dec.take(i, Some(c)) {
+                dec.fill(s, 0, 0, &mut seg)?;
+                t += gpu.decode(&seg).as_secs_f64();
+                n += 1;
+            }
+        }
+        times.push(t);
+        boxes = n;
+    }
+    Ok((adapter, times, boxes))
 }
 
 fn bench_lossless(a: crate::cli::BenchLosslessArgs) -> Result<(), String> {

@@ -130,14 +130,22 @@ fn parts(blocks: u32, part: u32) -> u32 {
 
 /// Blocks per workgroup of the block passes (`GROUP_BLOCKS` in decode.wgsl).
 const GROUP_BLOCKS: u32 = 64;
-/// Bytes of the dense plane per block: 64 i32 coefficients and a 64-bit mask (and the
-/// groups' sets: [`group_bytes`]).
-const DENSE_BLOCK_BYTES: u64 = 64 * 4 + 8;
-
 /// Bytes of the sets of blocks with a coefficient for `blocks` blocks: 64 bits per group
 /// of [`GROUP_BLOCKS`].
 fn group_bytes(blocks: u32) -> u64 {
     blocks.div_ceil(GROUP_BLOCKS) as u64 * 8
+}
+
+/// Where the sets start in the mask buffer of a dense plane of `part` blocks: after the
+/// masks, at a storage binding's offset alignment (WebGPU's default, 256), so that one
+/// clear covers both.
+fn groups_offset(part: u32) -> u64 {
+    (part as u64 * 8).next_multiple_of(256)
+}
+
+/// Bytes of the mask buffer of a dense plane of `part` blocks: masks, then sets.
+fn mask_bytes(part: u32) -> u64 {
+    groups_offset(part) + group_bytes(part)
 }
 
 /// Blocks the dense plane holds for planes of `plane` texels: a whole plane, or as many
@@ -184,12 +192,11 @@ pub(crate) struct Gpu {
     jobs: wgpu::Buffer,
     /// A segment's streams, entry points and member spans; grows with the largest segment.
     words: wgpu::Buffer,
-    /// The dense plane: `part` blocks of 64 i32 coefficients, and their masks. Cleared
-    /// before each parse.
+    /// The dense plane: `part` blocks of 64 i32 coefficients; their masks, then per group
+    /// of [`GROUP_BLOCKS`] blocks which have a coefficient ([`groups_offset`]). The masks
+    /// and sets are cleared before each parse.
     coefs: wgpu::Buffer,
     masks: wgpu::Buffer,
-    /// Per group of [`GROUP_BLOCKS`] blocks of the dense plane, which have a coefficient.
-    groups: wgpu::Buffer,
     part: u32,
     /// Each bubble layer's bound (f32 bits), for the decode and the reconstruction.
     bounds: wgpu::Buffer,
@@ -336,8 +343,8 @@ pub(crate) fn planned_texture_bytes(
         .map(|d| extent_bytes(d.size, d.format))
         .sum::<u64>()
         + range_bytes(plane, channels)
-        + part_blocks(plane) as u64 * DENSE_BLOCK_BYTES
-        + group_bytes(part_blocks(plane))
+        + part_blocks(plane) as u64 * 256
+        + mask_bytes(part_blocks(plane))
         + BOUND_BYTES
 }
 
@@ -582,24 +589,14 @@ impl Gpu {
             })
         };
         use wgpu::BufferUsages as B;
-        // Created zeroed (WebGPU clears new buffers); the passes keep them so.
         let part = part_blocks(plane);
-        let coefs = buffer(
-            "vbim dense coefficients",
-            part as u64 * 256,
-            B::STORAGE | B::COPY_DST | B::COPY_SRC,
-        );
+        let coefs = buffer("vbim dense coefficients", part as u64 * 256, B::STORAGE);
         let masks = buffer(
-            "vbim coefficient masks",
-            part as u64 * 8,
-            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+            "vbim coefficient masks and sets",
+            mask_bytes(part),
+            B::STORAGE | B::COPY_DST,
         );
         // (COPY_SRC: tests read it back.)
-        let groups = buffer(
-            "vbim coefficient groups",
-            group_bytes(part),
-            B::STORAGE | B::COPY_DST | B::COPY_SRC,
-        );
         let bounds = buffer(
             "vbim bubble bounds",
             BOUND_BYTES,
@@ -647,7 +644,6 @@ impl Gpu {
             words,
             coefs,
             masks,
-            groups,
             part,
             bounds,
             keys,
@@ -706,13 +702,22 @@ impl Gpu {
                 binding: 6,
                 resource: self.coefs.as_entire_binding(),
             });
+            let sets = groups_offset(self.part);
             entries.push(wgpu::BindGroupEntry {
                 binding: 7,
-                resource: self.masks.as_entire_binding(),
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &self.masks,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(self.part as u64 * 8),
+                }),
             });
             entries.push(wgpu::BindGroupEntry {
                 binding: 10,
-                resource: self.groups.as_entire_binding(),
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &self.masks,
+                    offset: sets,
+                    size: wgpu::BufferSize::new(group_bytes(self.part)),
+                }),
             });
             self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vbim decode"),
@@ -777,7 +782,6 @@ impl Gpu {
             + self.words.size()
             + self.coefs.size()
             + self.masks.size()
-            + self.groups.size()
             + self.bounds.size()
     }
 
@@ -906,11 +910,10 @@ impl Gpu {
         for (n, st) in seg.steps.iter().enumerate() {
             for p in 0..ch {
                 let plane = st.plane + p;
-                {
-                    let mut pass = enc.begin_compute_pass(&Default::default());
-                    let (first, ..) = part_jobs(plane).next().expect("one part at least");
-                    pass.set_bind_group(0, &self.key_groups[p], &[first]);
-                    if n == last {
+                for (k, (job, blocks, entries)) in part_jobs(plane).enumerate() {
+                    let mut pass = self.parse_part(enc, job, blocks, entries);
+                    pass.set_bind_group(0, &self.key_groups[p], &[job]);
+                    if k == 0 && n == last {
                         // The head becomes the previous keyframe (the earlier steps' heads
                         // are never shown).
                         // (One invocation per region, 64 to a workgroup.)
@@ -918,19 +921,12 @@ impl Gpu {
                         let [rx, ry] = self.regions;
                         pass.dispatch_workgroups((rx * ry).div_ceil(64), 1, 1);
                     }
-                    if st.intra {
+                    if k == 0 && st.intra {
                         pass.set_pipeline(&self.key_zero);
                         pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
                     }
-                }
-                // A predicted keyframe is added onto the head: the keyframe it follows.
-                for (job, blocks, entries) in part_jobs(plane) {
-                    if blocks == 0 {
-                        continue;
-                    }
-                    let mut pass = self.parse_part(enc, job, blocks, entries);
+                    // A predicted keyframe is added onto the head: the keyframe it follows.
                     pass.set_pipeline(&self.key_add);
-                    pass.set_bind_group(0, &self.key_groups[p], &[job]);
                     dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
                 }
             }
@@ -976,9 +972,10 @@ impl Gpu {
         self.first_job = first_job;
     }
 
-    /// Clears the dense plane's first `blocks` blocks, then parses a part (job at `job`)
-    /// into it from its `entries` entry points: a pass that goes on with the passes that
-    /// read it.
+    /// Clears the masks and sets of the dense plane's first `blocks` blocks, then parses a
+    /// part (job at `job`) into it from its `entries` entry points: a pass that goes on
+    /// with the passes that read it. (The coefficients themselves need no clearing: only
+    /// those whose mask bit the parse sets are ever read.)
     fn parse_part<'e>(
         &self,
         enc: &'e mut wgpu::CommandEncoder,
@@ -986,9 +983,8 @@ impl Gpu {
         blocks: u32,
         entries: u32,
     ) -> wgpu::ComputePass<'e> {
-        enc.clear_buffer(&self.coefs, 0, Some(blocks as u64 * 256));
-        enc.clear_buffer(&self.masks, 0, Some(blocks as u64 * 8));
-        enc.clear_buffer(&self.groups, 0, Some(group_bytes(blocks)));
+        let sets = groups_offset(self.part) + group_bytes(blocks);
+        enc.clear_buffer(&self.masks, 0, Some(sets));
         let mut pass = enc.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.parse);
         let group = self.parse_group.as_ref().expect("made at creation");
@@ -1255,6 +1251,39 @@ fn read_texture_layer(
     out
 }
 
+/// The GPU decode alone, for `vbim bench decode --gpu`: boxes filled by a decoder without
+/// a device, decoded one after another on a GPU of the stream's size.
+#[cfg(feature = "bench")]
+pub struct GpuDecoder(Gpu);
+
+#[cfg(feature = "bench")]
+impl GpuDecoder {
+    /// GPU state for the stream `h` describes.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Self {
+        let (pw, ph) = vbim_format::chunk::padded_size(h);
+        GpuDecoder(Gpu::new(
+            device,
+            queue,
+            (h.width, h.height),
+            [pw as u32, ph as u32],
+            h.max_degree as u32,
+            h.channels as u32,
+            h.tile_size as u32,
+        ))
+    }
+
+    /// Decodes `seg` (its keyframes and bubble planes), waits for the GPU and returns the
+    /// wall-clock time from recording to completion.
+    pub fn decode(&mut self, seg: &SegmentData) -> std::time::Duration {
+        let t = std::time::Instant::now();
+        let mut enc = self.0.device.create_command_encoder(&Default::default());
+        self.0.decode(&mut enc, seg, true);
+        self.0.queue.submit([enc.finish()]);
+        self.0.wait();
+        t.elapsed()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1335,6 +1364,7 @@ mod tests {
             let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
             if let Some(p) = part {
                 gpu.part = p;
+                gpu.bind_decode();
             }
             let mut seed = 3;
             let mut want = Plane::zeros(pw as usize, ph as usize);
@@ -1418,6 +1448,7 @@ mod tests {
             let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, ts as u32);
             if let Some(p) = part {
                 gpu.part = p;
+                gpu.bind_decode();
             }
             let mut c = Coded::default();
             // A keyframe plane before it, so that the bubble plane's offsets are not 0.

@@ -54,12 +54,14 @@ pub use throttle::{Stall, Throttle};
 /// The memory a stream may take ([`PlayerConfig::limits`]).
 pub use vbim_format::Limits;
 
-/// The decoder alone, without threads or a GPU, for `vbim bench decode`, the tests that
-/// check what it stages and the fuzz target. Not a stable API.
+/// The decoder alone, without threads or a GPU, and the GPU decode alone, for
+/// `vbim bench decode`, the tests that check what it stages and the fuzz target. Not a
+/// stable API.
 #[cfg(feature = "bench")]
 pub mod bench {
     pub use crate::decoder::{DecoderCore, Event, KeyStep, SegmentData};
     pub use crate::fuzz::decoder as fuzz_decoder;
+    pub use crate::gpu::GpuDecoder;
 }
 
 /// Why a player could not be opened or stopped.
