@@ -14,7 +14,6 @@
 
 use crate::coded::{Coded, PlaneSpan};
 use crate::cpu_time::thread_cpu_ns;
-use std::sync::Arc;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::index::Layout;
@@ -151,11 +150,14 @@ pub enum Event {
     Damaged(String),
 }
 
-/// A keyframe's planes, scanned.
+/// A keyframe the decoder keeps: its chunk as stored, and its scanned planes until a box
+/// has carried them. A chain re-sent after a seek or damage scans the stored chunks again,
+/// so the keyframes kept back to the last intra one cost their stored size (a detailed
+/// 2048² day keeps up to 24, of 2–5 MB each once scanned).
 struct KeyData {
     intra: bool,
-    planes: Vec<PlaneSpan>,
-    data: Coded,
+    chunk: Vec<u8>,
+    scanned: Option<(Vec<PlaneSpan>, Coded)>,
 }
 
 /// The decoder's state between chunks: parsed keyframes back to the last intra one, and
@@ -166,7 +168,7 @@ pub struct DecoderCore {
     entries: Vec<IndexEntry>,
     /// Parsed keyframes still needed, by number: keyframe 0 (a loop's end), and the chain
     /// from the last intra keyframe on.
-    keys: Vec<Option<Arc<KeyData>>>,
+    keys: Vec<Option<KeyData>>,
     tiles: Vec<Option<TileMap>>,
     coeffs: Vec<Option<Vec<u8>>>,
     /// Segments whose tile map or coefficients were damaged: sent with their keyframes
@@ -281,11 +283,11 @@ impl DecoderCore {
                     self.keys[n] = None;
                     return Event::Nothing;
                 }
-                self.keys[n] = Some(Arc::new(KeyData {
+                self.keys[n] = Some(KeyData {
                     intra,
-                    planes,
-                    data,
-                }));
+                    chunk: bytes.to_vec(),
+                    scanned: Some((planes, data)),
+                });
                 // Segments before n − 1 are complete or lost by now (their chunks come
                 // first). Segment n − 1 may need its chain from the last intra keyframe
                 // before it: keep that one on (and keyframe 0, for a loop's end).
@@ -400,14 +402,24 @@ impl DecoderCore {
         let chain = first.map_or(0..0, |f| f..s + 1);
         for k in chain.chain(std::iter::once(k1n)) {
             let key = self.keys[k]
-                .as_ref()
+                .as_mut()
                 .ok_or_else(|| format!("keyframe {k} missing"))?;
             out.steps.push(KeyStep {
                 number: k,
                 intra: key.intra,
                 plane: out.planes.len(),
             });
-            out.data.push_copy(&key.data, &key.planes, &mut out.planes);
+            // Scanned when it arrived, unless a box has carried it since: then again.
+            match key.scanned.take() {
+                Some((planes, data)) => out.data.push_copy(&data, &planes, &mut out.planes),
+                None => {
+                    let (data, planes) = (&mut out.data, &mut out.planes);
+                    chunk::keyframe_streams(&self.header, &key.chunk, |_, step, s| {
+                        planes.push(data.push_plane(step, s, None));
+                    })
+                    .map_err(|e| format!("keyframe {k}: {e}"))?;
+                }
+            }
         }
         out.keys_only = std::mem::take(&mut self.lost[s]);
         out.bubbles = out.planes.len();
