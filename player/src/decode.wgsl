@@ -118,19 +118,29 @@ fn mask(d: u32) -> vec2<u32> {
     return masks[d];
 }
 
-// The next set bit of the 64-bit set (`bits` the low word still to visit, `high` the
-// high word, `base` 0 or 32), cleared; 64 when none is left.
-fn next_bit(bits: ptr<function, u32>, high: ptr<function, u32>, base: ptr<function, u32>) -> u32 {
-    if (*bits == 0u) {
-        if (*high == 0u) {
+// A 64-bit set being visited in increasing order: the word still to visit, the high word
+// after it, and the first bit's number in `bits` (0 or 32). One loop over the 64 bits:
+// two nested loops, one per word, cost lavapipe more.
+struct Bits {
+    bits: u32,
+    high: u32,
+    base: u32,
+}
+
+fn bits_of(m: vec2<u32>) -> Bits {
+    return Bits(m.x, m.y, 0u);
+}
+
+// The next set bit of `*s`, taken out of it; 64 when none is left.
+fn next_bit(s: ptr<function, Bits>) -> u32 {
+    if ((*s).bits == 0u) {
+        if ((*s).high == 0u) {
             return 64u;
         }
-        *bits = *high;
-        *high = 0u;
-        *base = 32u;
+        *s = Bits((*s).high, 0u, 32u);
     }
-    let i = *base + firstTrailingBit(*bits);
-    *bits = *bits & (*bits - 1u);
+    let i = (*s).base + firstTrailingBit((*s).bits);
+    (*s).bits = (*s).bits & ((*s).bits - 1u);
     return i;
 }
 
@@ -139,21 +149,12 @@ fn next_bit(bits: ptr<function, u32>, high: ptr<function, u32>, base: ptr<functi
 fn block_sum(d: u32, m: vec2<u32>, x: u32, y: u32, acc: f32, pair: bool) -> vec2<f32> {
     var a = acc;
     var b = 0.0;
-    // One loop over the 64 bits (two nested loops cost lavapipe more).
-    var bits = m.x;
-    var high = m.y;
-    var base = 0u;
+    var terms = bits_of(m);
     loop {
-        if (bits == 0u) {
-            if (high == 0u) {
-                break;
-            }
-            bits = high;
-            high = 0u;
-            base = 32u;
+        let i = next_bit(&terms);
+        if (i == 64u) {
+            break;
         }
-        let i = base + firstTrailingBit(bits);
-        bits = bits & (bits - 1u);
         let pos = zigzag(i);
         let kx = pos % 8u;
         let c = f32(coefs[d * 64u + i]) * job.step * basis(pos / 8u, y);
@@ -174,13 +175,10 @@ fn key_add(
 ) {
     let g = group_index(wg);
     let first = job.lo + g * GROUP_BLOCKS;
-    let present = groups[g];
+    var present = bits_of(groups[g]);
     var span = first_span(first);
-    var bits = present.x;
-    var high = present.y;
-    var base = 0u;
     loop {
-        let j = next_bit(&bits, &high, &base);
+        let j = next_bit(&present);
         if (j == 64u) {
             break;
         }
@@ -227,19 +225,19 @@ fn bubble_bound(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
     }
     var col: array<f32, 64>;
     var touched = 0u;
-    for (var w = 0u; w < 2u; w = w + 1u) {
-        var bits = m[w];
-        while (bits != 0u) {
-            let i = w * 32u + firstTrailingBit(bits);
-            bits = bits & (bits - 1u);
-            let pos = zigzag(i);
-            let ky = pos / 8u;
-            let kx = pos % 8u;
-            touched = touched | (1u << kx);
-            let v = f32(coefs[d * 64u + i]);
-            for (var y = 0u; y < 8u; y = y + 1u) {
-                col[kx * 8u + y] = col[kx * 8u + y] + v * basis(ky, y);
-            }
+    var terms = bits_of(m);
+    loop {
+        let i = next_bit(&terms);
+        if (i == 64u) {
+            break;
+        }
+        let pos = zigzag(i);
+        let ky = pos / 8u;
+        let kx = pos % 8u;
+        touched = touched | (1u << kx);
+        let v = f32(coefs[d * 64u + i]);
+        for (var y = 0u; y < 8u; y = y + 1u) {
+            col[kx * 8u + y] = col[kx * 8u + y] + v * basis(ky, y);
         }
     }
     var rows: array<f32, 8>;
@@ -274,7 +272,7 @@ fn bubble_write(
 ) {
     let g = group_index(wg);
     let first = job.lo + g * GROUP_BLOCKS;
-    let present = groups[g];
+    var present = bits_of(groups[g]);
     if (l.x >= 4u) {
         return;
     }
@@ -282,11 +280,8 @@ fn bubble_write(
     let inv_scale = 1.0 / bubble_scale(bound);
     let x = 2u * l.x;
     var span = first_span(first);
-    var bits = present.x;
-    var high = present.y;
-    var base = 0u;
     loop {
-        let j = next_bit(&bits, &high, &base);
+        let j = next_bit(&present);
         if (j == 64u) {
             break;
         }

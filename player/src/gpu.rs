@@ -91,8 +91,7 @@ struct Job {
     per: u32,
     tiles_x: u32,
     size: [u32; 2],
-    parts: u32,
-    _pad: u32,
+    _pad: [u32; 2],
 }
 
 const JOB_STRIDE: u64 = 256;
@@ -352,6 +351,21 @@ pub(crate) fn planned_texture_bytes(
 const BOUND_BYTES: u64 = MAX_BUBBLE_PLANES as u64 * 4;
 
 impl Gpu {
+    /// GPU state for the stream `h` describes (its size, padded planes, degree, channels
+    /// and tiles).
+    pub fn for_stream(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Gpu {
+        let (pw, ph) = vbim_format::chunk::padded_size(h);
+        Gpu::new(
+            device,
+            queue,
+            (h.width, h.height),
+            [pw as u32, ph as u32],
+            h.max_degree as u32,
+            h.channels as u32,
+            h.tile_size as u32,
+        )
+    }
+
     /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
     /// planes of `plane` texels (whole tiles of `tile_size`), with bubble terms up to
     /// `max_degree`.
@@ -875,8 +889,7 @@ impl Gpu {
                     per: self.per,
                     tiles_x: self.tiles_x,
                     size: [pw, ph],
-                    parts: n,
-                    _pad: 0,
+                    _pad: [0; 2],
                 });
             }
         }
@@ -1260,16 +1273,7 @@ pub struct GpuDecoder(Gpu);
 impl GpuDecoder {
     /// GPU state for the stream `h` describes.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Self {
-        let (pw, ph) = vbim_format::chunk::padded_size(h);
-        GpuDecoder(Gpu::new(
-            device,
-            queue,
-            (h.width, h.height),
-            [pw as u32, ph as u32],
-            h.max_degree as u32,
-            h.channels as u32,
-            h.tile_size as u32,
-        ))
+        GpuDecoder(Gpu::for_stream(device, queue, h))
     }
 
     /// Decodes `seg` (its keyframes and bubble planes), waits for the GPU and returns the

@@ -26,9 +26,8 @@ struct Job {
     tiles_x: u32,
     // Texels of the plane (zero passes).
     size: vec2<u32>,
-    // The number of parts the plane goes in.
-    parts: u32,
     pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> job: Job;

@@ -159,15 +159,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             ),
             memory_needed(&header, &entries, ring_bytes),
         )?;
-        let gpu = Gpu::new(
-            device,
-            queue,
-            (header.width, header.height),
-            [pw as u32, ph as u32],
-            header.max_degree as u32,
-            header.channels as u32,
-            header.tile_size as u32,
-        );
+        let gpu = Gpu::for_stream(device, queue, &header);
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         Ok(Player {
