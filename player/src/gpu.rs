@@ -21,18 +21,34 @@ use crate::coded::Coded;
 use crate::decoder::SegmentData;
 use crate::slots::MAX_BUBBLE_PLANES;
 
-/// Finds an adapter and opens a device without a window. With no adapter, the error says
-/// what to install.
+/// Finds an adapter and opens a device without a window, on the backends `WGPU_BACKEND`
+/// names (all of them by default). With no adapter, the error says what to install.
 pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    open_headless(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+}
+
+/// [`headless_device`] on `backends` alone (for example `wgpu::Backends::GL`, the backend
+/// WebGL and older machines give), whatever `WGPU_BACKEND` says.
+pub fn headless_device_on(
+    backends: wgpu::Backends,
+) -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    desc.backends = backends;
+    open_headless(desc)
+}
+
+fn open_headless(
+    desc: wgpu::InstanceDescriptor,
+) -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
+    let backends = desc.backends;
+    let instance = wgpu::Instance::new(desc);
     let adapter =
         pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
             .map_err(|e| {
                 format!(
-            "no GPU adapter found ({e}). On a machine without a GPU install a software one: \
-             `apt-get install -y libvulkan1 mesa-vulkan-drivers` (Vulkan, lavapipe) or \
-             `libegl1 libegl-mesa0 libgl1-mesa-dri` (OpenGL, llvmpipe)"
+            "no GPU adapter found on {backends:?} ({e}). On a machine without a GPU install \
+             a software one: `apt-get install -y libvulkan1 mesa-vulkan-drivers` (Vulkan, \
+             lavapipe) or `libegl1 libegl-mesa0 libgl1-mesa-dri` (OpenGL, llvmpipe)"
         )
             })?;
     let info = adapter.get_info();
@@ -265,15 +281,29 @@ fn range_bytes(plane: [u32; 2], channels: u32) -> u64 {
     rx as u64 * ry as u64 * channels as u64 * 8
 }
 
+/// The fewest layers an array texture may have on `device`'s backend. wgpu's GL backend
+/// decides whether a texture is an array from its layer count alone (one layer: a plain
+/// 2D texture), and a one-layer texture bound as `texture_2d_array` there reads back
+/// garbage; a second, unused layer keeps it an array. Other backends need no padding.
+pub(crate) fn min_array_layers(device: &wgpu::Device) -> u32 {
+    if device.adapter_info().backend == wgpu::Backend::Gl {
+        2
+    } else {
+        1
+    }
+}
+
 /// The textures [`Gpu::new`] creates for a stream of `width × height` texels coded on
 /// planes of `plane` texels with bubble terms up to `max_degree`: the head keyframe
 /// (f32), the previous keyframe and the bubble planes (16-bit pairs), the lightmap
-/// (Rgba16Float) and its held copy (RGB9E5 packed into R32Uint).
+/// (Rgba16Float) and its held copy (RGB9E5 packed into R32Uint). Array textures have at
+/// least `min_layers` layers ([`min_array_layers`]).
 fn texture_plans(
     (width, height): (u32, u32),
     plane: [u32; 2],
     max_degree: u32,
     channels: u32,
+    min_layers: u32,
 ) -> [wgpu::TextureDescriptor<'static>; 5] {
     use wgpu::TextureUsages as U;
     let texture =
@@ -291,7 +321,8 @@ fn texture_plans(
             usage,
             view_formats: &[],
         };
-    let bubble_layers = (max_degree.saturating_sub(1) * channels).max(1);
+    let bubble_layers = (max_degree.saturating_sub(1) * channels).max(min_layers);
+    let channels = channels.max(min_layers);
     [
         texture(
             "vbim head keyframe",
@@ -336,8 +367,9 @@ pub(crate) fn planned_texture_bytes(
     plane: [u32; 2],
     max_degree: u32,
     channels: u32,
+    min_layers: u32,
 ) -> u64 {
-    texture_plans(size, plane, max_degree, channels)
+    texture_plans(size, plane, max_degree, channels, min_layers)
         .iter()
         .map(|d| extent_bytes(d.size, d.format))
         .sum::<u64>()
@@ -378,9 +410,14 @@ impl Gpu {
         channels: u32,
         tile_size: u32,
     ) -> Gpu {
-        let [keys, previous, bubbles, display, held] =
-            texture_plans((width, height), plane, max_degree, channels)
-                .map(|d| device.create_texture(&d));
+        let [keys, previous, bubbles, display, held] = texture_plans(
+            (width, height),
+            plane,
+            max_degree,
+            channels,
+            min_array_layers(device),
+        )
+        .map(|d| device.create_texture(&d));
         let display_view = display.create_view(&Default::default());
         let held_view = held.create_view(&Default::default());
         let array_view = |t: &wgpu::Texture| {

@@ -46,7 +46,7 @@ mod time;
 pub use clock::{Clock, SimClock, SystemClock};
 pub use config::{PlayerConfig, Policy};
 pub use cpu_time::thread_cpu_ns;
-pub use gpu::{headless_device, read_texture};
+pub use gpu::{headless_device, headless_device_on, read_texture};
 pub use player::Player;
 pub use record::{Frame, FrameRecord, FrameState, Totals};
 pub use stats::{frames_csv, Summary};

@@ -12,7 +12,7 @@ use vbim_format::{Header, IndexEntry, Reader, Transfer};
 use crate::config::{PlayerConfig, Policy};
 use crate::decoder::SegmentData;
 use crate::display::{Display, Step};
-use crate::gpu::{planned_texture_bytes, Gpu, Params};
+use crate::gpu::{min_array_layers, planned_texture_bytes, Gpu, Params};
 use crate::pipeline::Pipeline;
 use crate::record::{Frame, FrameRecord, FrameState, Totals};
 use crate::slots::{place, KeySlots, Placement, Resident, MAX_BUBBLE_PLANES};
@@ -104,13 +104,20 @@ fn preroll_ns(h: &Header, cfg: &PlayerConfig) -> u64 {
 /// exactly (the dense plane the parse fills among them); the ring; and the decoder's
 /// payloads, boxes, scanned keyframes and the stream buffer, each at most a few times the
 /// largest payload (which the file's own chunk sizes bound: `limits::MAX_EXPANSION`).
-pub(crate) fn memory_needed(header: &Header, entries: &[IndexEntry], ring_bytes: usize) -> u64 {
+/// Array textures have at least `min_layers` layers.
+pub(crate) fn memory_needed(
+    header: &Header,
+    entries: &[IndexEntry],
+    ring_bytes: usize,
+    min_layers: u32,
+) -> u64 {
     let (pw, ph) = vbim_format::chunk::padded_size(header);
     let textures = planned_texture_bytes(
         (header.width, header.height),
         [pw as u32, ph as u32],
         header.max_degree as u32,
         header.channels as u32,
+        min_layers,
     );
     let payload = vbim_format::memory::largest_payload(header, entries);
     textures + ring_bytes as u64 + 8 * payload
@@ -157,7 +164,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 "playing a {}×{} stream of {} channel(s), degree ≤ {}",
                 header.width, header.height, header.channels, header.max_degree
             ),
-            memory_needed(&header, &entries, ring_bytes),
+            memory_needed(&header, &entries, ring_bytes, min_array_layers(device)),
         )?;
         let gpu = Gpu::for_stream(device, queue, &header);
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
