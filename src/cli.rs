@@ -208,6 +208,32 @@ pub enum BenchCommand {
     /// One stream of `bench scale`, measured in this process (JSON on stdout).
     #[command(hide = true)]
     ScaleOne(BenchScaleOneArgs),
+    /// How much of the lightmap each displayed frame changes, at several media rates: the
+    /// share of tiles a player would have to re-evaluate, found with the reference decoder
+    /// (what re-evaluating only the tiles that change could save).
+    Changes(BenchChangesArgs),
+}
+
+#[derive(Args)]
+pub struct BenchChangesArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Media rates to play at, in frames per second (`1/6`: a frame every 6 seconds).
+    #[arg(long, default_value = "24,6,1,1/6")]
+    pub rates: String,
+    /// The display's refresh rate.
+    #[arg(long, default_value_t = 60.0)]
+    pub display_hz: f64,
+    /// Displayed frames per phase.
+    #[arg(long, default_value_t = 120)]
+    pub shown: usize,
+    /// Starting points spread evenly over the day (night, sunrise, noon, sunset, …).
+    #[arg(long, default_value_t = 8)]
+    pub phases: usize,
+    /// A tile is re-evaluated when a texel of it would be further than this share of the
+    /// protocol's bound from the true value.
+    #[arg(long, default_value_t = 0.25)]
+    pub share: f64,
 }
 
 #[derive(Args)]

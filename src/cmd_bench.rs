@@ -22,6 +22,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::Render(a) => bench_render(a),
         BenchCommand::Scale(a) => crate::bench_scale::run(a),
         BenchCommand::ScaleOne(a) => crate::bench_scale::run_one(a),
+        BenchCommand::Changes(a) => crate::bench_changes::run(a),
     }
 }
 

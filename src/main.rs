@@ -1,6 +1,7 @@
 //! `vbim`: bake, encode, inspect, decode and compare video-based illumination maps.
 //! A thin command line over the crates; each subcommand lives in its own module.
 
+mod bench_changes;
 mod bench_scale;
 mod cli;
 mod cmd_bake;

@@ -162,6 +162,36 @@ fn bake_encode_inspect_decode_compare() {
     assert_eq!(phases, ["0.200", "0.400"], "{csv}");
     assert!(drift.join("drift.png").is_file() && drift.join("shown_error.png").is_file());
 
+    // `bench changes`: at the file's own rate a day changes nearly every tile per displayed
+    // frame; at a frame a day, nearly none (each mean is the table's fourth column).
+    let table = ok(&[
+        "bench",
+        "changes",
+        s(&file),
+        "--rates",
+        "24,1/86400",
+        "--shown",
+        "10",
+        "--phases",
+        "2",
+    ]);
+    let mean = |rate: &str| -> f64 {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with(&format!("| {rate} fps |")))
+            .unwrap_or_else(|| panic!("no {rate} row:\n{table}"));
+        row.split('|')
+            .nth(3)
+            .unwrap()
+            .trim()
+            .trim_end_matches('%')
+            .parse()
+            .unwrap()
+    };
+    assert!(mean("24") > 50.0 && mean("1/86400") < 5.0, "{table}");
+    let o = vbim(&["bench", "changes", s(&file), "--rates", "0"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--rates"));
+
     let decoded = dir.path().join("decoded");
     ok(&["decode", s(&file), "-o", s(&decoded)]);
     assert!(decoded.join("frame_0011.exr").is_file());
