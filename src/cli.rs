@@ -219,8 +219,8 @@ pub struct BenchChangesArgs {
     /// The .vbim file.
     pub file: PathBuf,
     /// Media rates to play at, in frames per second (`1/6`: a frame every 6 seconds).
-    #[arg(long, default_value = "24,6,1,1/6")]
-    pub rates: String,
+    #[arg(long, default_value = "24,6,1,1/6", value_delimiter = ',', value_parser = crate::units::parse_rate)]
+    pub rates: Vec<(u32, u32)>,
     /// The display's refresh rate.
     #[arg(long, default_value_t = 60.0)]
     pub display_hz: f64,
