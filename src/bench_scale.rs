@@ -71,6 +71,7 @@ pub fn run(a: BenchScaleArgs) -> Result<(), String> {
             .args(["bench", "scale-one"])
             .arg(&file)
             .args(["--display-hz", &a.display_hz.to_string()])
+            .args(["--memory-limit", &a.memory.limits.memory.to_string()])
             .output()
             .map_err(|e| e.to_string())?;
         if !out.status.success() {
@@ -115,6 +116,7 @@ fn stream_for(a: &BenchScaleArgs, size: usize) -> Result<PathBuf, String> {
     let fs = FrameSet::open(&frames.to_string_lossy()).map_err(|e| e.to_string())?;
     let cfg = EncoderConfig {
         rate: (24, 1),
+        memory_limit: a.encoder_limits.memory,
         ..EncoderConfig::preset(Preset::Default)
     };
     encode_file(&fs, &cfg, &file, &progress).map_err(|e| e.to_string())?;
@@ -133,6 +135,7 @@ pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
     let file_bytes = f.metadata().map_err(|e| format!("{name}: {e}"))?.len();
     let cfg = PlayerConfig {
         threaded: false,
+        limits: a.memory.limits,
         ..PlayerConfig::default()
     };
     let mut player = Player::open(&device, &queue, std::io::BufReader::new(f), cfg)

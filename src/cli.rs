@@ -278,6 +278,12 @@ pub struct BenchScaleArgs {
     /// Only draw the table and plots again from `costs.json`.
     #[arg(long)]
     pub replot: bool,
+    /// The encoder's memory limit (SI: `10GB`; an 8192² day needs about 10GB).
+    #[arg(long = "encoder-memory-limit", default_value = "4GB", value_parser = crate::units::parse_memory_limit)]
+    pub encoder_limits: vbim_format::Limits,
+    // The player's, `--memory-limit` (an 8192² day needs about 4–5GB).
+    #[command(flatten)]
+    pub memory: MemoryArgs,
 }
 
 #[derive(Args)]
@@ -287,6 +293,8 @@ pub struct BenchScaleOneArgs {
     /// Display rate, Hz.
     #[arg(long, default_value_t = 24)]
     pub display_hz: u32,
+    #[command(flatten)]
+    pub memory: MemoryArgs,
 }
 
 #[derive(Args)]

@@ -46,7 +46,17 @@ fn range(series: &[Series], f: impl Fn(&(f64, f64)) -> f64, log: bool) -> (f64, 
         return (0.0, 1.0);
     }
     if log {
-        (lo / 1.3, hi * 1.3)
+        let (lo, hi) = (lo / 1.3, hi * 1.3);
+        // Under a decade (one size alone), plotters puts no tick on a log axis: widen it
+        // to the decades around the points.
+        if hi / lo < 10.0 {
+            (
+                10f64.powf(lo.log10().floor()),
+                10f64.powf(hi.log10().ceil()),
+            )
+        } else {
+            (lo, hi)
+        }
     } else {
         // A flat series (no drift at all) gets a unit of room; values that are never
         // negative get no negative axis.
@@ -150,5 +160,11 @@ mod tests {
         assert!((0.0..0.5).contains(&lo) && hi > 3.0, "{lo} {hi}");
         let (lo, _) = range(&[s(&[(1.0, -1.0), (2.0, 3.0)])], y, false);
         assert!(lo < -1.0);
+        let x = |p: &(f64, f64)| p.0;
+        assert_eq!(range(&[s(&[(4e6, 1.0)])], x, true), (1e6, 1e7));
+        assert_eq!(
+            range(&[s(&[(1e3, 1.0), (1e6, 1.0)])], x, true),
+            (1e3 / 1.3, 1.3e6)
+        );
     }
 }
