@@ -10,14 +10,15 @@
 # only). Each is encoded with the default preset at every tolerance in TOLERANCES in three
 # modes — `aim` (the default: one pass, the budget found on a sample, with the worst-frame
 # floor of T − 7 dB), `aim-mean` (the same without the floor, --worst-margin inf) and, at
-# PLAIN_TOLERANCES only, `no-aim` (the budget as it is) — and measured with the reference
-# decoder. Writes
+# PLAIN_TOLERANCES only, `no-aim` (the budget as it is); MODES picks some of them — and
+# measured with the reference decoder. Writes
 # OUT/tolerance.csv and OUT/tolerance.png (the default mode and the budget as it is).
 set -euo pipefail
 out=${1:-out/tolerance}
 vbim=${VBIM:-target/release/vbim}
 tols=${TOLERANCES:-38 41 44 45 47 50}
 plain_tols=${PLAIN_TOLERANCES:-38 45 50} # --no-aim only at these (it is the "before")
+modes=${MODES:-aim aim-mean no-aim}      # e.g. MODES=aim to measure the default alone
 [ -x "$vbim" ] || cargo build --release
 if ! command -v ffmpeg >/dev/null; then
     export DEBIAN_FRONTEND=noninteractive
@@ -81,7 +82,7 @@ for s in $seqs; do
     ts=$tols
     [ "$s" = jacksboro-1000 ] && ts=45
     for t in $ts; do
-        for mode in aim aim-mean no-aim; do
+        for mode in $modes; do
             [ "$mode" = no-aim ] && [[ " $plain_tols " != *" $t "* ]] && continue
             flags=(--tolerance "$t" --fps 24/1 --report "$out/r.json")
             case "$mode" in
@@ -110,6 +111,8 @@ import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 for mode in ("aim", "aim-mean", "no-aim"):
     sel = [r for r in rows if r["mode"] == mode]
+    if not sel:
+        continue
     d = [float(r["delivered"]) - float(r["asked"]) for r in sel]
     t = [float(r["seconds"]) for r in sel]
     floor = sum(1 for r in sel if float(r["worst"]) >= float(r["asked"]) - 7.0)

@@ -397,7 +397,7 @@ pub struct EncodeArgs {
     /// Use the tolerance as the internal budget as it is, without first finding on a sample the budget that delivers it (quicker; over-delivers by 3–6.5 dB on a day with dark nights).
     #[arg(long)]
     pub no_aim: bool,
-    /// Keep every frame's PSNR within this of the tolerance, raising the budget where the mean alone would not, up to a mean 0.2 dB above it (`inf`: no floor) [default: 7, the protocol's 45 dB mean with a 38 dB worst frame].
+    /// Keep every frame's PSNR within this of the tolerance: the frames below get tighter budgets and the rest of the day pays for them (`inf`: no floor) [default: 7, the protocol's 45 dB mean with a 38 dB worst frame].
     #[arg(long, conflicts_with = "no_aim")]
     pub worst_margin: Option<f64>,
     /// Highest polynomial degree in time, 1–8 (1 = keyframe interpolation) [default: preset's, 4].

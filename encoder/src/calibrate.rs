@@ -46,6 +46,8 @@ pub fn encode_to_tolerance(
     let mut met: Option<(EncodeReport, Temporary)> = None;
     let mut missed: Option<(EncodeReport, Temporary)> = None;
     let mut internal = target;
+    // The frames the first pass's aim raised for the worst frame stay raised.
+    let mut raise = cfg.frame_raise_db.clone();
     let result = (|| {
         for k in 0..MAX_PASSES {
             // The first pass aims at the band's middle from a sample (when `cfg.aim`), the
@@ -58,6 +60,7 @@ pub fn encode_to_tolerance(
                 _ => EncoderConfig {
                     tolerance_db: internal,
                     aim: false,
+                    frame_raise_db: raise.clone(),
                     ..cfg.clone()
                 },
             };
@@ -66,6 +69,9 @@ pub fn encode_to_tolerance(
             if let Err(e) = rep.verify_file(src, path.path(), progress) {
                 let _ = std::fs::remove_file(path.path());
                 return Err(e);
+            }
+            if let Some(a) = rep.aim.as_ref().filter(|_| k == 0) {
+                raise = a.frame_raise_db.clone();
             }
             let p = rep.mean_psnr.unwrap_or(f64::INFINITY);
             passes.push((rep.internal_tolerance_db, p, rep.bytes));

@@ -35,9 +35,10 @@ pub struct EncoderConfig {
     /// is the tolerance itself and a day with dark nights pools 3 to 6.5 dB above it.
     pub aim: bool,
     /// With `aim`: no frame's PSNR more than this below `tolerance_db` (the protocol pairs
-    /// a 45 dB mean with a 38 dB worst frame); where the mean alone would allow it, the
-    /// budget is raised, up to a mean 0.2 dB above the tolerance on the aim's sample.
-    /// Infinite: no floor.
+    /// a 45 dB mean with a 38 dB worst frame). The frames below it are raised
+    /// (`frame_raise_db`) and the rest of the day pays for them, so that the mean stays
+    /// at the tolerance; where that cannot reach the floor, the whole budget is raised, up
+    /// to a mean 0.2 dB above the tolerance on the aim's sample. Infinite: no floor.
     pub worst_margin_db: f64,
     /// Highest polynomial degree in time (1 = keyframe interpolation only).
     pub max_degree: usize,
@@ -70,6 +71,13 @@ pub struct EncoderConfig {
     pub deadzone: f32,
     /// Chroma steps relative to luma.
     pub chroma_step_factor: f32,
+    /// Extra accuracy asked of single frames, dB above `tolerance_db`'s budget, one value
+    /// per frame (empty: none). The keyframe at a frame, and the bubble planes of the
+    /// segment around it, are quantised finer by its raise (a segment by the largest
+    /// among its frames); segment lengths do not change. With `aim`, this is the starting point: the
+    /// aim adds the raises that bring the worst frames up to the floor of
+    /// `worst_margin_db` (docs/MODEL.md, "Evening the error out in time").
+    pub frame_raise_db: Vec<f64>,
 }
 
 impl EncoderConfig {
@@ -94,6 +102,7 @@ impl EncoderConfig {
             band_tiles: None,
             deadzone: 0.2,
             chroma_step_factor: 1.5,
+            frame_raise_db: Vec::new(),
         };
         match p {
             Preset::Fast => EncoderConfig {
@@ -151,6 +160,14 @@ impl EncoderConfig {
         if self.band_tiles == Some(0) {
             return Err(ConfigError::EmptyBands);
         }
+        if let Some((frame, &raise)) = self
+            .frame_raise_db
+            .iter()
+            .enumerate()
+            .find(|(_, r)| !(0.0..=MAX_FRAME_RAISE_DB).contains(*r))
+        {
+            return Err(ConfigError::FrameRaise { frame, raise });
+        }
         if self.threads > max_threads() {
             return Err(ConfigError::Threads {
                 threads: self.threads,
@@ -168,6 +185,9 @@ impl EncoderConfig {
         ((self.intra_interval_s * self.rate.0 as f64 / self.rate.1 as f64).floor() as u32).max(1)
     }
 }
+
+/// The most extra accuracy a frame may be asked for ([`EncoderConfig::frame_raise_db`]), dB.
+pub const MAX_FRAME_RAISE_DB: f64 = 40.0;
 
 /// The encoder's memory limit unless told otherwise: 4 GB, which holds a 2048² day's
 /// frames whole and codes 4096² and 8192² in bands.
@@ -216,6 +236,22 @@ pub enum ConfigError {
     /// `band_tiles` of 0.
     #[error("bands must be at least 1 tile row high")]
     EmptyBands,
+    /// A value of `frame_raise_db` outside 0 to [`MAX_FRAME_RAISE_DB`].
+    #[error("frame {frame}'s raise {raise} dB is outside 0 to {MAX_FRAME_RAISE_DB}")]
+    FrameRaise {
+        /// The frame.
+        frame: usize,
+        /// Its raise, dB.
+        raise: f64,
+    },
+    /// `frame_raise_db` neither empty nor one value per frame.
+    #[error("{given} frame raises for a sequence of {frames} frames")]
+    FrameRaiseLength {
+        /// Values given.
+        given: usize,
+        /// Frames in the sequence.
+        frames: usize,
+    },
     /// The worker pool could not be started.
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads {

@@ -21,7 +21,9 @@ use crate::model::{self, CodedFrame, Projectors, Rows, SegmentInput, SegmentPara
 use crate::output::{header_for, pack_metadata, PendingChunk};
 use crate::plan::Plan;
 use crate::segment::Search;
-use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress, SegmentMode};
+use crate::{
+    ConfigError, EncodeError, EncoderConfig, FrameSource, InputKind, Progress, SegmentMode,
+};
 
 /// Error budgets, as shares of the total RMS error the tolerance allows. They were set by
 /// measurement (BENCHMARKS.md, "What moved the encoder …"): a tight fit (long segments
@@ -63,6 +65,7 @@ pub(crate) fn code_sequence(
     let info = src.info();
     let n = info.frames;
     check_shape(&info)?;
+    let raise = Raise::new(&cfg.frame_raise_db, n)?;
     let plan = crate::plan::plan(&info, cfg, rayon::current_num_threads())?;
     // Pass 1: validate every frame before any work, and learn the exposure (unless a
     // sample's reading did both).
@@ -137,7 +140,7 @@ pub(crate) fn code_sequence(
     // The header keyframes are decoded against (their shape and curve only).
     let key_header = header_for(&info, cfg, (color, transfer), 0, 0, 1);
     window.load(0)?;
-    let first = keyframe::code(&*window.full(0)?, None, &key_header, kp)?;
+    let first = keyframe::code(&*window.full(0)?, None, &key_header, raise.key(kp, 0))?;
     let k0 = first.decoded.clone();
     chunks.push(keyframe_chunk(first, 0, 0));
     let mut boundaries = vec![0u32];
@@ -175,7 +178,7 @@ pub(crate) fn code_sequence(
             k0.clone()
         } else {
             let prev = (e - last_intra <= intra_every).then(|| prev_key.as_slice());
-            let k = keyframe::code(&*window.full(e)?, prev, &key_header, kp)?;
+            let k = keyframe::code(&*window.full(e)?, prev, &key_header, raise.key(kp, e))?;
             if k.intra {
                 last_intra = e;
                 intra_keyframes += 1;
@@ -198,7 +201,8 @@ pub(crate) fn code_sequence(
                 window.rows(b + 1..e, rows)
             },
         };
-        let code = model::code_segment(&dom, cfg.tile_size, input, &mut projectors, &sp)?;
+        let scaled = raise.segment(&sp, b..=e);
+        let code = model::code_segment(&dom, cfg.tile_size, input, &mut projectors, &scaled)?;
         // Playback order: a segment's tile map and coefficients follow its closing keyframe.
         let parts = [
             (ChunkKind::TileMap, code.tilemap_bytes),
@@ -241,6 +245,56 @@ pub(crate) fn code_sequence(
         plan,
         started,
     })
+}
+
+/// The budgets' scale for frames raised by [`EncoderConfig::frame_raise_db`]: the
+/// quantisation budgets of the keyframe at a frame and of the bubble planes of the segment
+/// around it; a segment takes the largest raise among its frames. The fit budget, which
+/// sets segment lengths, is left alone: tightening it too moved the worst frame less
+/// and erratically (shorter segments, more keyframes; BENCHMARKS.md, session 19).
+struct Raise<'a> {
+    db: &'a [f64],
+}
+
+impl<'a> Raise<'a> {
+    fn new(db: &'a [f64], frames: usize) -> Result<Self, ConfigError> {
+        if !db.is_empty() && db.len() != frames {
+            return Err(ConfigError::FrameRaiseLength {
+                given: db.len(),
+                frames,
+            });
+        }
+        Ok(Raise { db })
+    }
+
+    /// The budget factor of the frames in `f` (frame numbers run past the end at a loop's
+    /// seam).
+    fn scale(&self, f: std::ops::RangeInclusive<u32>) -> f64 {
+        if self.db.is_empty() {
+            return 1.0;
+        }
+        let n = self.db.len();
+        let most = f.map(|i| self.db[i as usize % n]).fold(0.0, f64::max);
+        10f64.powf(-most / 20.0)
+    }
+
+    /// Keyframe `e`'s parameters (its own frame's raise: its error is whole there, and
+    /// fades into the segments on either side).
+    fn key(&self, kp: KeyParams, e: u32) -> KeyParams {
+        KeyParams {
+            budget: kp.budget * self.scale(e..=e),
+            ..kp
+        }
+    }
+
+    /// The parameters of the segment over frames `f` (its bubble planes' budget).
+    fn segment(&self, sp: &SegmentParams, f: std::ops::RangeInclusive<u32>) -> SegmentParams {
+        let s = self.scale(f);
+        SegmentParams {
+            quant_budget: sp.quant_budget * s,
+            ..*sp
+        }
+    }
 }
 
 /// Refuses a sequence longer or larger than the format allows (before reading a frame).

@@ -92,6 +92,7 @@ pub fn encode<W: Write + Seek>(
             let c = EncoderConfig {
                 tolerance_db: a.internal_db,
                 aim: false,
+                frame_raise_db: a.frame_raise_db.clone(),
                 ..cfg.clone()
             };
             (c, Some(a), validated)

@@ -174,6 +174,7 @@ pub struct SegmentCode {
     pub coeff_bytes: Vec<u8>,
 }
 
+#[derive(Clone, Copy)]
 pub struct SegmentParams {
     pub max_degree: usize,
     /// Budget of the fit, RMS in metric units per tile.

@@ -431,7 +431,13 @@ impl std::fmt::Display for EncodeReport {
                 a.predicted_db,
                 a.sample_texels,
                 a.passes.len(),
-                if a.held_by_worst_frame { ", raised for the worst frame" } else { "" }
+                match a.raised_frames {
+                    0 => String::new(),
+                    n => format!(
+                        ", {n} frame(s) raised by up to {:.1} dB for the worst frame",
+                        a.max_raise_db
+                    ),
+                }
             )?;
         }
         if !self.calibration.is_empty() {
