@@ -222,9 +222,8 @@ pub(crate) fn aim(
         raises.push(raise.clone());
         let most = (MAX_PASSES - passes.len()).min(3);
         let mut this = Vec::new();
-        let r = raise.clone();
         internal_db = solve(&mut this, target, Some(internal_db), mean, most, &mut |t| {
-            run(t, &r, round)
+            run(t, &raise, round)
         })?;
         passes.extend(this.iter().cloned());
         at = this;

@@ -70,7 +70,8 @@ pub fn encode_to_tolerance(
                 let _ = std::fs::remove_file(path.path());
                 return Err(e);
             }
-            if let Some(a) = rep.aim.as_ref().filter(|_| k == 0) {
+            // Only the first pass aims (the others code at `internal` as it is).
+            if let Some(a) = &rep.aim {
                 raise = a.frame_raise_db.clone();
             }
             let p = rep.mean_psnr.unwrap_or(f64::INFINITY);

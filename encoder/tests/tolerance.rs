@@ -5,7 +5,18 @@
 use std::io::Cursor;
 
 use vbim_encoder::BAND_DB;
-use vbim_encoder::{encode, encode_to_tolerance, EncoderConfig, InputKind, MemorySource, Preset};
+use vbim_encoder::{
+    encode, encode_to_tolerance, EncodeReport, EncoderConfig, InputKind, MemorySource, Preset,
+};
+
+/// `src` encoded with `cfg` and measured with the reference decoder.
+fn measured(src: &MemorySource, cfg: &EncoderConfig) -> EncodeReport {
+    let mut stream = Cursor::new(Vec::new());
+    let mut rep = encode(src, cfg, &mut stream, &|_, _, _| {}).unwrap();
+    rep.verify_bytes(src, stream.get_ref(), "the sequence", &|_, _, _| {})
+        .unwrap();
+    rep
+}
 
 /// Half a day of light with a shadow edge sweeping across, then a static night.
 fn day_and_night(w: usize, h: usize, n: usize) -> MemorySource {
@@ -100,13 +111,7 @@ fn aletsch_day() -> MemorySource {
 #[test]
 fn one_pass_delivers_the_tolerance_asked() {
     let src = aletsch_day();
-    let measured = |cfg: &EncoderConfig| {
-        let mut stream = Cursor::new(Vec::new());
-        let mut rep = encode(&src, cfg, &mut stream, &|_, _, _| {}).unwrap();
-        rep.verify_bytes(&src, stream.get_ref(), "aletsch", &|_, _, _| {})
-            .unwrap();
-        rep
-    };
+    let measured = |cfg: &EncoderConfig| measured(&src, cfg);
     for t in [40.0, 46.0] {
         let cfg = EncoderConfig {
             tolerance_db: t,
@@ -156,13 +161,7 @@ fn one_pass_delivers_the_tolerance_asked() {
 fn raised_frames_come_out_more_accurate() {
     let n = 96;
     let src = day_and_night(128, 96, n);
-    let measured = |cfg: &EncoderConfig| {
-        let mut stream = Cursor::new(Vec::new());
-        let mut rep = encode(&src, cfg, &mut stream, &|_, _, _| {}).unwrap();
-        rep.verify_bytes(&src, stream.get_ref(), "day", &|_, _, _| {})
-            .unwrap();
-        rep
-    };
+    let measured = |cfg: &EncoderConfig| measured(&src, cfg);
     let cfg = EncoderConfig {
         tolerance_db: 30.0,
         aim: false,
@@ -186,7 +185,7 @@ fn raised_frames_come_out_more_accurate() {
     assert!(after >= before + 3.0, "{before:.2} → {after:.2} dB");
     // A raise only tightens: the other frames come out no worse (the day after the raised
     // frames better, its predicted keyframes starting from a more accurate one).
-    let rest = |r: &vbim_encoder::EncodeReport| mean(r, raised.end..n);
+    let rest = |r: &EncodeReport| mean(r, raised.end..n);
     assert!(
         rest(&shaped) >= rest(&plain) - 0.1,
         "{:.2} vs {:.2} dB",
