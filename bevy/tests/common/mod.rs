@@ -1,6 +1,8 @@
 //! What the Bevy tests share: a headless app on a real adapter, and reading an image back.
 
+use std::ops::{Deref, DerefMut};
 use std::path::Path;
+use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use bevy::app::PluginsState;
@@ -27,7 +29,9 @@ fn collect(mut events: MessageReader<VbimEvent>, mut seen: ResMut<Seen>) {
 /// The app a game would have, without a window: Bevy's default plugins, rendering
 /// synchronously in `update` (no pipelined rendering) so that a frame's image can be read
 /// right after it, and a fixed 60 Hz virtual clock.
-pub fn app(assets: &Path) -> App {
+pub fn app(assets: &Path) -> TestApp {
+    // Taken before anything touches the GPU, and held until the app is gone.
+    let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     // Fail with what to install, rather than Bevy's panic, when there is no adapter.
     if let Err(e) = vbim_player::headless_device() {
         panic!("{e}");
@@ -60,7 +64,33 @@ pub fn app(assets: &Path) -> App {
     }
     app.finish();
     app.cleanup();
-    app
+    TestApp { app, _turn: turn }
+}
+
+/// One Bevy app at a time in this test process. A game has one; the test harness runs
+/// tests on parallel threads, and NVIDIA's Vulkan driver (580, on an H200) hangs when
+/// several apps create and drive their devices at once in one process: the four playback
+/// tests in parallel never ended, the same four one after another passed in 5 s.
+/// Lavapipe does not mind, so CI would not have shown it.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// A test's app, holding its turn on the GPU (fields drop in order: the app first).
+pub struct TestApp {
+    app: App,
+    _turn: MutexGuard<'static, ()>,
+}
+
+impl Deref for TestApp {
+    type Target = App;
+    fn deref(&self) -> &App {
+        &self.app
+    }
+}
+
+impl DerefMut for TestApp {
+    fn deref_mut(&mut self) -> &mut App {
+        &mut self.app
+    }
 }
 
 /// Bevy's texture behind `image`, read back: RGBA f32, row by row.
