@@ -212,6 +212,23 @@ pub enum BenchCommand {
     /// share of tiles a player would have to re-evaluate, found with the reference decoder
     /// (what re-evaluating only the tiles that change could save).
     Changes(BenchChangesArgs),
+    /// What a context-adaptive entropy coder would make of the file's coefficient streams:
+    /// the ideal code length of an adaptive binary model (which an arithmetic coder
+    /// reaches within about 1%) against their bytes now (zstd of run/value pairs), by kind
+    /// of stream. Measures what a change of the format's entropy coding would buy.
+    Entropy(BenchEntropyArgs),
+}
+
+#[derive(Args)]
+pub struct BenchEntropyArgs {
+    /// The .vbim file.
+    pub file: PathBuf,
+    /// Cut every stream into substreams of this many blocks, each parsed on its own (its
+    /// probabilities learnt from scratch, no context from another): what parsing on the
+    /// GPU in parallel would cost (0: one substream per stream). Every chunk starts from
+    /// scratch in any case, so that a player can seek to it.
+    #[arg(long, default_value_t = 0)]
+    pub substream: usize,
 }
 
 #[derive(Args)]

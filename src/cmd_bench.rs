@@ -23,6 +23,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::Scale(a) => crate::bench_scale::run(a),
         BenchCommand::ScaleOne(a) => crate::bench_scale::run_one(a),
         BenchCommand::Changes(a) => crate::bench_changes::run(a),
+        BenchCommand::Entropy(a) => crate::bench_entropy::run(a),
     }
 }
 

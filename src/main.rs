@@ -2,6 +2,7 @@
 //! A thin command line over the crates; each subcommand lives in its own module.
 
 mod bench_changes;
+mod bench_entropy;
 mod bench_scale;
 mod cli;
 mod cmd_bake;

@@ -192,6 +192,31 @@ fn bake_encode_inspect_decode_compare() {
     let o = vbim(&["bench", "changes", s(&file), "--rates", "0"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--rates"));
 
+    // `bench entropy`: a context-adaptive model needs fewer bytes than zstd of the
+    // run/value pairs, and cutting the streams into substreams of 4 blocks costs it some.
+    let all = |table: &str| -> (f64, f64) {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with("| all chunks |"))
+            .unwrap_or_else(|| panic!("no total:\n{table}"));
+        let cell = |i: usize| {
+            row.split('|')
+                .nth(i)
+                .unwrap()
+                .trim()
+                .trim_end_matches(" B")
+                .parse::<f64>()
+                .unwrap()
+        };
+        (cell(3), cell(4))
+    };
+    let (now, model) = all(&ok(&["bench", "entropy", s(&file)]));
+    let (now_cut, cut) = all(&ok(&["bench", "entropy", s(&file), "--substream", "4"]));
+    assert!(
+        model < now && now_cut == now && cut > model,
+        "{now} {model} {cut}"
+    );
+
     let decoded = dir.path().join("decoded");
     ok(&["decode", s(&file), "-o", s(&decoded)]);
     assert!(decoded.join("frame_0011.exr").is_file());
@@ -545,6 +570,7 @@ fn help_states_each_default_once() {
         &["bench", "plot-rd"],
         &["bench", "drift"],
         &["bench", "render"],
+        &["bench", "entropy"],
     ];
     for c in commands {
         let mut args = c.to_vec();
