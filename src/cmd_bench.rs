@@ -175,30 +175,52 @@ fn bench_decode(a: crate::cli::BenchDecodeArgs) -> Result<(), String> {
     );
     println!("zstd alone      median {:.3} s (min {z0:.3}, max {z1:.3}) = {:.2}% of one core in real time", zm, 100.0 * zm / duration);
     println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);
-    if let Some((adapter, mut times, boxes)) = gpu {
+    if let Some((adapter, mut times, boxes, passes)) = gpu {
         let (gm, g0, g1) = stats(&mut times);
         println!(
             "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}",
             1e3 * gm / boxes.max(1) as f64
         );
+        if passes.is_empty() {
+            println!(
+                "GPU time by pass: not measured (the adapter has no timestamps inside passes)"
+            );
+        } else {
+            let total: f64 = passes.iter().map(|p| p.1).sum();
+            println!(
+                "GPU time by pass, per segment (timestamps, mean over runs): {:.2} ms in all",
+                total / 1e6
+            );
+            for (label, ns) in passes {
+                println!(
+                    "  {label:<24} {:>9.3} ms  {:>5.1}%",
+                    ns / 1e6,
+                    100.0 * ns / total.max(1.0)
+                );
+            }
+        }
     }
     Ok(())
 }
 
-/// The GPU decode of every segment of a stream, `runs` times: the adapter, each run's
-/// seconds, and the number of segments.
+/// The adapter, each run's seconds, the number of segments, and the GPU time per segment
+/// of each kind of pass (ns; empty where the adapter has no timestamps inside passes).
+type GpuTimes = (String, Vec<f64>, usize, Vec<(&'static str, f64)>);
+
+/// The GPU decode of every segment of a stream, `runs` times.
 fn gpu_decode(
     h: &vbim_format::Header,
     layout: &vbim_format::index::Layout,
     entries: &[vbim_format::IndexEntry],
     chunks: &[&[u8]],
     runs: usize,
-) -> Result<(String, Vec<f64>, usize), String> {
-    use vbim_player::bench::{DecoderCore, Event, GpuDecoder, SegmentData};
-    let (device, queue, info) = vbim_player::headless_device()?;
+) -> Result<GpuTimes, String> {
+    use vbim_player::bench::{timing_device, DecoderCore, Event, GpuDecoder, SegmentData};
+    let (device, queue, info) = timing_device()?;
     let adapter = format!("{} ({:?})", info.name, info.backend);
     let mut gpu = GpuDecoder::new(&device, &queue, h);
     let (mut times, mut boxes) = (Vec::new(), 0);
+    let mut passes: Vec<(&'static str, f64)> = Vec::new();
     for _ in 0..runs.max(1) {
         let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.to_vec());
         let mut seg = SegmentData::new();
@@ -212,8 +234,17 @@ fn gpu_decode(
         }
         times.push(t);
         boxes = n;
+        for (label, ns) in gpu.pass_times() {
+            match passes.iter_mut().find(|(l, _)| *l == label) {
+                Some((_, t)) => *t += ns,
+                None => passes.push((label, ns)),
+            }
+        }
     }
-    Ok((adapter, times, boxes))
+    // Per segment, the mean over runs.
+    let per = (runs.max(1) * boxes.max(1)) as f64;
+    let passes = passes.into_iter().map(|(l, ns)| (l, ns / per)).collect();
+    Ok((adapter, times, boxes, passes))
 }
 
 fn bench_lossless(a: crate::cli::BenchLosslessArgs) -> Result<(), String> {

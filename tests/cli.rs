@@ -192,6 +192,21 @@ fn bake_encode_inspect_decode_compare() {
     let o = vbim(&["bench", "changes", s(&file), "--rates", "0"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--rates"));
 
+    // `bench decode --gpu`: the GPU decode, and where lavapipe (which has timestamps inside
+    // passes) spends it, pass by pass.
+    let table = ok(&["bench", "decode", s(&file), "--gpu", "--runs", "1"]);
+    assert!(table.contains("GPU decode "), "{table}");
+    let pass = |label: &str| -> f64 {
+        let row = table
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{label} ")))
+            .unwrap_or_else(|| panic!("no {label} row:\n{table}"));
+        row.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    // Each pass has its row; together they take time (each alone may round to 0).
+    let total: f64 = ["parse", "key_add", "bubble_write"].map(pass).iter().sum();
+    assert!(total > 0.0, "{table}");
+
     // `bench entropy`: a context-adaptive model needs fewer bytes than zstd of the
     // run/value pairs, and cutting the streams into substreams of 4 blocks costs it some.
     let all = |table: &str| -> (f64, f64) {

@@ -37,8 +37,26 @@ pub fn headless_device_on(
     open_headless(desc)
 }
 
+/// [`headless_device`] with GPU timestamps between dispatches where the adapter has them,
+/// for `vbim bench decode --gpu`'s time per pass.
+#[cfg(feature = "bench")]
+pub fn timing_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
+    open_headless_with(
+        wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+        crate::marks::NEEDS,
+    )
+}
+
 fn open_headless(
     desc: wgpu::InstanceDescriptor,
+) -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
+    open_headless_with(desc, wgpu::Features::empty())
+}
+
+/// A device with `wanted`'s features that the adapter has (the others are left out).
+fn open_headless_with(
+    desc: wgpu::InstanceDescriptor,
+    wanted: wgpu::Features,
 ) -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String> {
     let backends = desc.backends;
     let instance = wgpu::Instance::new(desc);
@@ -54,7 +72,7 @@ fn open_headless(
     let info = adapter.get_info();
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("vbim"),
-        required_features: wgpu::Features::empty(),
+        required_features: wanted & adapter.features(),
         // WebGPU's defaults, not the adapter's maxima: what Bevy and browsers give.
         required_limits: wgpu::Limits::default(),
         ..Default::default()
@@ -246,6 +264,9 @@ pub(crate) struct Gpu {
     /// allocation per segment).
     job_bytes: Vec<u8>,
     first_job: Vec<u64>,
+    /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).
+    #[cfg(feature = "bench")]
+    marks: Option<crate::marks::Marks>,
     pub width: u32,
     pub height: u32,
     /// The padded planes' size (whole tiles).
@@ -718,6 +739,8 @@ impl Gpu {
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
             first_job: Vec::with_capacity(64),
+            #[cfg(feature = "bench")]
+            marks: None,
             width,
             height,
             plane,
@@ -970,14 +993,17 @@ impl Gpu {
                         pass.set_pipeline(&self.key_pack);
                         let [rx, ry] = self.regions;
                         pass.dispatch_workgroups((rx * ry).div_ceil(64), 1, 1);
+                        self.mark(&mut pass, "key_pack");
                     }
                     if k == 0 && st.intra {
                         pass.set_pipeline(&self.key_zero);
                         pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
+                        self.mark(&mut pass, "key_zero");
                     }
                     // A predicted keyframe is added onto the head: the keyframe it follows.
                     pass.set_pipeline(&self.key_add);
                     dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
+                    self.mark(&mut pass, "key_add");
                 }
             }
         }
@@ -985,11 +1011,13 @@ impl Gpu {
             enc.clear_buffer(&self.bounds, 0, None);
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
+                self.mark(&mut pass, "clears and pass changes");
                 pass.set_bind_group(0, bubble_group, &[zero_job as u32]);
                 pass.set_pipeline(&self.bubble_zero);
                 if bubble_layers > 0 {
                     pass.dispatch_workgroups((pw / 2).div_ceil(8), ph.div_ceil(8), bubble_layers);
                 }
+                self.mark(&mut pass, "bubble_zero");
             }
             for plane in seg.bubbles..planes {
                 // The bound first (over every part), then the blocks, parsed again if the
@@ -1003,9 +1031,11 @@ impl Gpu {
                     pass.set_bind_group(0, bubble_group, &[job]);
                     pass.set_pipeline(&self.bubble_bound);
                     dispatch(&mut pass, blocks.div_ceil(64));
+                    self.mark(&mut pass, "bubble_bound");
                     if whole {
                         pass.set_pipeline(&self.bubble_write);
                         dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
+                        self.mark(&mut pass, "bubble_write");
                     }
                 }
                 if whole {
@@ -1016,10 +1046,23 @@ impl Gpu {
                     pass.set_bind_group(0, bubble_group, &[job]);
                     pass.set_pipeline(&self.bubble_write);
                     dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
+                    self.mark(&mut pass, "bubble_write");
                 }
             }
         }
         self.first_job = first_job;
+    }
+
+    /// A timestamp after what `pass` recorded so far (`vbim bench decode --gpu`), where
+    /// the device has them; nothing otherwise.
+    #[inline]
+    fn mark(&self, pass: &mut wgpu::ComputePass, label: &'static str) {
+        #[cfg(feature = "bench")]
+        if let Some(m) = &self.marks {
+            m.mark(pass, label);
+        }
+        #[cfg(not(feature = "bench"))]
+        let _ = (pass, label);
     }
 
     /// Clears the masks and sets of the dense plane's first `blocks` blocks, then parses a
@@ -1036,11 +1079,13 @@ impl Gpu {
         let sets = groups_offset(self.part) + group_bytes(blocks);
         enc.clear_buffer(&self.masks, 0, Some(sets));
         let mut pass = enc.begin_compute_pass(&Default::default());
+        self.mark(&mut pass, "clears and pass changes");
         pass.set_pipeline(&self.parse);
         let group = self.parse_group.as_ref().expect("made at creation");
         pass.set_bind_group(0, group, &[job]);
         let groups = entries.div_ceil(64);
         pass.dispatch_workgroups(groups.min(GROUPS_X), groups.div_ceil(GROUPS_X), 1);
+        self.mark(&mut pass, "parse");
         pass
     }
 
@@ -1310,7 +1355,19 @@ pub struct GpuDecoder(Gpu);
 impl GpuDecoder {
     /// GPU state for the stream `h` describes.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Self {
-        GpuDecoder(Gpu::for_stream(device, queue, h))
+        let mut gpu = Gpu::for_stream(device, queue, h);
+        gpu.marks = crate::marks::Marks::new(device);
+        GpuDecoder(gpu)
+    }
+
+    /// The GPU time of each kind of pass over the decodes since the last call (ns; empty
+    /// unless the device has timestamps inside passes: [`timing_device`]). A first mark
+    /// at the start of each decode, so that the time before it is not counted.
+    pub fn pass_times(&mut self) -> Vec<(&'static str, f64)> {
+        let g = &self.0;
+        g.marks
+            .as_ref()
+            .map_or_else(Vec::new, |m| m.read(&g.device, &g.queue))
     }
 
     /// Decodes `seg` (its keyframes and bubble planes), waits for the GPU and returns the
@@ -1318,6 +1375,10 @@ impl GpuDecoder {
     pub fn decode(&mut self, seg: &SegmentData) -> std::time::Duration {
         let t = std::time::Instant::now();
         let mut enc = self.0.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.0.mark(&mut pass, crate::marks::START);
+        }
         self.0.decode(&mut enc, seg, true);
         self.0.queue.submit([enc.finish()]);
         self.0.wait();
@@ -1328,6 +1389,7 @@ impl GpuDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::readback::read_buffer;
 
     use crate::coded::PlaneSpan;
     use crate::decoder::KeyStep;
@@ -1372,23 +1434,6 @@ mod tests {
         let mut parsed = Blocks::default();
         plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
         (c.push_plane(step, s, members), parsed)
-    }
-
-    /// Copies a buffer to the CPU: blocks until the GPU is done.
-    fn read_buffer(device: &wgpu::Device, queue: &wgpu::Queue, b: &wgpu::Buffer) -> Vec<u8> {
-        let out = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vbim readback"),
-            size: b.size(),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut enc = device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(b, 0, &out, 0, b.size());
-        queue.submit(Some(enc.finish()));
-        let slice = out.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        slice.get_mapped_range().to_vec()
     }
 
     /// The keyframe passes on a real adapter: an intra keyframe, then a predicted one

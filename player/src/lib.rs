@@ -34,8 +34,12 @@ mod display;
 #[cfg(feature = "bench")]
 mod fuzz;
 mod gpu;
+#[cfg(feature = "bench")]
+mod marks;
 mod pipeline;
 mod player;
+#[cfg(any(test, feature = "bench"))]
+mod readback;
 mod reader;
 mod record;
 mod slots;
@@ -61,7 +65,7 @@ pub use vbim_format::Limits;
 pub mod bench {
     pub use crate::decoder::{DecoderCore, Event, KeyStep, SegmentData};
     pub use crate::fuzz::decoder as fuzz_decoder;
-    pub use crate::gpu::GpuDecoder;
+    pub use crate::gpu::{timing_device, GpuDecoder};
 }
 
 /// Why a player could not be opened or stopped.
