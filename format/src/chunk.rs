@@ -306,7 +306,8 @@ pub fn keyframe_streams(
 pub struct Scanned<'a> {
     /// The stream's bytes, from its first pair to the end of its final run.
     pub stream: &'a [u8],
-    /// Where pieces of it can be parsed from, [`scan::ENTRY_PAIRS`] pairs apart.
+    /// Where pieces of it can be parsed from: at most [`scan::ENTRY_PAIRS`] pairs apart,
+    /// and inside long runs of equal DC every [`scan::FILL_BLOCKS`] blocks.
     pub entries: &'a [scan::EntryPoint],
     /// Its number of blocks.
     pub blocks: usize,

@@ -11,6 +11,13 @@
 //! zstd does, and it refuses everything [`crate::plane::read_blocks`] refuses (a run past
 //! the end, a truncated or over-long varint): a parser that starts from its entry points
 //! only ever sees well-formed pairs.
+//!
+//! In the DC range a zero run means "the same DC again" for every block it passes, and a
+//! parser writes that DC into each of them. On a smooth plane one run can pass the whole
+//! plane: a million blocks at 8192², which one GPU invocation took half a second to write
+//! (BENCHMARKS.md, session 20). So the scan also starts a piece inside such a run every
+//! [`FILL_BLOCKS`] blocks: a piece starts filling at its entry's `from` and stops where
+//! the next piece starts filling, and no piece fills more than [`FILL_BLOCKS`] blocks.
 
 use crate::dct::N;
 use crate::{varint, FormatError, Result};
@@ -19,6 +26,9 @@ use crate::{varint, FormatError, Result};
 /// entry points, 12 bytes each; more, fewer invocations to share the work. At 256 the
 /// entry points add about 2% to the stream.)
 pub const ENTRY_PAIRS: usize = 256;
+
+/// The most blocks of the DC range whose DC one piece writes in zero runs.
+pub const FILL_BLOCKS: u64 = 256;
 
 /// Where the parse of a piece of a stream starts.
 #[repr(C)]
@@ -31,6 +41,10 @@ pub struct EntryPoint {
     /// The DC of the block before `position` (0 before block 0), while in the DC range:
     /// the piece adds its DC differences onto it.
     pub dc: i32,
+    /// The first position the piece writes: `position`, or a block inside the first
+    /// pair's zero run where a long run of equal DC is shared out. The piece ends where
+    /// the next one's `from` is (the stream's end for the last).
+    pub from: u32,
 }
 
 /// Scans the stream of `n` blocks at `buf[*pos..]`, pushing an entry point onto `out` for
@@ -51,18 +65,40 @@ pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) ->
     let start = *pos;
     let (mut at, mut p, mut dc) = (start, 0u64, 0i32);
     let mut pairs = 0usize;
+    // DC blocks the current piece writes.
+    let mut fill = 0u64;
+    let entry = |at: usize, p: u64, dc: i32, from: u64| -> Result<EntryPoint> {
+        let byte = u32::try_from(at - start)
+            .map_err(|_| FormatError::Invalid("coefficient stream over 4 GiB".into()))?;
+        // (Positions are below `total`, checked above to fit in u32.)
+        Ok(EntryPoint {
+            byte,
+            position: p as u32,
+            dc,
+            from: from as u32,
+        })
+    };
     loop {
+        let pair = at;
         if pairs.is_multiple_of(ENTRY_PAIRS) {
-            let byte = u32::try_from(at - start)
-                .map_err(|_| FormatError::Invalid("coefficient stream over 4 GiB".into()))?;
-            out.push(EntryPoint {
-                byte,
-                position: p as u32,
-                dc,
-            });
+            out.push(entry(pair, p, dc, p)?);
+            fill = 0;
         }
         pairs += 1;
-        p += varint::get_u32(buf, &mut at)? as u64;
+        let run = varint::get_u32(buf, &mut at)? as u64;
+        if p < n as u64 && dc != 0 {
+            // The run writes `dc` into its blocks of the DC range: a new piece starts
+            // inside it whenever this one has written FILL_BLOCKS.
+            let end = (p + run).min(n as u64);
+            let mut b = p;
+            while end - b > FILL_BLOCKS - fill {
+                b += FILL_BLOCKS - fill;
+                out.push(entry(pair, p, dc, b)?);
+                fill = 0;
+            }
+            fill += end - b;
+        }
+        p += run;
         if p >= total {
             break;
         }
@@ -106,19 +142,22 @@ mod tests {
             .collect()
     }
 
-    /// Parses a piece from `e` the way the GPU does: `pairs` pairs, or to the end.
-    fn parse_piece(buf: &[u8], n: usize, e: EntryPoint, pairs: usize, q: &mut [[i32; 64]]) {
+    /// Parses a piece from `e` the way the GPU does: from `e.from` to `end` (the next
+    /// piece's `from`, or the stream's end). Returns the DC blocks it wrote in zero runs.
+    fn parse_piece(buf: &[u8], n: usize, e: EntryPoint, end: u64, q: &mut [[i32; 64]]) -> u64 {
         let (mut at, mut p, mut dc) = (e.byte as usize, e.position as u64, e.dc);
         let total = (n * 64) as u64;
-        for _ in 0..pairs {
+        let mut filled = 0;
+        loop {
             let run = varint::get_u32(buf, &mut at).unwrap() as u64;
             // Blocks of the DC range inside the run keep the running DC.
-            for z in p..(p + run).min(n as u64) {
+            for z in p.max(e.from as u64)..(p + run).min(n as u64).min(end) {
                 q[z as usize][0] = dc;
+                filled += (dc != 0) as u64;
             }
             p += run;
-            if p >= total {
-                return;
+            if p >= total || p >= end {
+                return filled;
             }
             let v = varint::get_i32(buf, &mut at).unwrap();
             // Frequency f is the zig-zag index.
@@ -130,7 +169,25 @@ mod tests {
                 q[b][f] = v;
             }
             p += 1;
+            if p >= end {
+                return filled;
+            }
         }
+    }
+
+    /// Parses every piece, checking that none writes more than [`FILL_BLOCKS`] DCs in
+    /// zero runs and that the pieces' `from` increase.
+    fn parse_all(stream: &[u8], n: usize, entries: &[EntryPoint]) -> Vec<[i32; 64]> {
+        let mut got = vec![[0i32; 64]; n];
+        for (i, e) in entries.iter().enumerate() {
+            let end = entries
+                .get(i + 1)
+                .map_or((n * 64) as u64, |x| x.from as u64);
+            assert!(end >= e.from as u64, "entry {i}: {e:?}, next from {end}");
+            let filled = parse_piece(stream, n, *e, end, &mut got);
+            assert!(filled <= FILL_BLOCKS, "entry {i} wrote {filled} DCs");
+        }
+        got
     }
 
     #[test]
@@ -149,10 +206,7 @@ mod tests {
                 "{n} blocks: the scan ends where the stream does"
             );
             let stream = &buf[2..pos];
-            let mut got = vec![[0i32; 64]; n];
-            for e in &entries {
-                parse_piece(stream, n, *e, ENTRY_PAIRS, &mut got);
-            }
+            let got = parse_all(stream, n, &entries);
             let mut check = Blocks::default();
             read_blocks(stream, &mut 0, n, &mut check).unwrap();
             for b in 0..n {
@@ -163,6 +217,33 @@ mod tests {
                 assert!(entries.len() > 10, "{} entry points", entries.len());
             }
         }
+    }
+
+    #[test]
+    fn long_runs_of_equal_dc_are_shared_out() {
+        // A smooth plane: the DC steps now and then and stays for long runs (one run
+        // passes 5000 blocks), a few AC terms here and there.
+        let n = 9000;
+        let mut want = vec![[0i32; 64]; n];
+        for (b, q) in want.iter_mut().enumerate() {
+            q[0] = match b {
+                0..=99 => 40,
+                100..=5099 => -7,
+                5100..=5102 => 3,
+                _ => 12,
+            };
+            if b % 997 == 0 {
+                q[5] = 2;
+            }
+        }
+        let mut buf = Vec::new();
+        write_coefficients(&want, &mut buf);
+        let mut entries = Vec::new();
+        scan(&buf, &mut 0, n, &mut entries).unwrap();
+        // Every 256 blocks of a run, a piece: about 9000 / 256 of them, where the pairs
+        // alone would give one.
+        assert!(entries.len() >= 34, "{} entry points", entries.len());
+        assert_eq!(parse_all(&buf, n, &entries), want);
     }
 
     #[test]

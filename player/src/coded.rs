@@ -5,7 +5,8 @@
 //!
 //! All of it goes in one buffer of words, plane after plane:
 //! - the stream's bytes, little-endian four to a word, the last word padded with zeros;
-//! - its entry points, three words each: byte offset, position, running DC;
+//! - its entry points, four words each: byte offset, position, running DC, and the first
+//!   position the piece writes (`vbim_format::scan::EntryPoint`);
 //! - a bubble plane's member spans, two words each: the span's first tile (raster order
 //!   over the plane's tiles) and the rank of that tile among the plane's member tiles.
 //!   Block b of the stream lies in the tile of rank b / (blocks per tile); the span with
@@ -81,7 +82,7 @@ impl Coded {
         }
         let entries = self.words.len() as u32;
         for e in s.entries {
-            self.words.extend([e.byte, e.position, e.dc as u32]);
+            self.words.extend([e.byte, e.position, e.dc as u32, e.from]);
         }
         let at = self.words.len() as u32;
         let mut rank = 0u32;
@@ -129,11 +130,13 @@ mod tests {
                 byte: 0,
                 position: 0,
                 dc: 0,
+                from: 0,
             },
             EntryPoint {
                 byte: 4,
                 position: 9,
                 dc: -3,
+                from: 11,
             },
         ];
         let s = Scanned {
@@ -153,19 +156,19 @@ mod tests {
             "little-endian, the tail padded with zeros"
         );
         assert_eq!((key.stream, key.entries, key.count), (1, 3, 2));
-        assert_eq!(&c.words[3..9], &[0, 0, 0, 4, 9, (-3i32) as u32]);
+        assert_eq!(&c.words[3..11], &[0, 0, 0, 0, 4, 9, (-3i32) as u32, 11]);
         assert_eq!((key.members, key.member_count, key.blocks), (0, 0, 12));
-        assert_eq!(bubble.stream, 9);
-        assert_eq!((bubble.members, bubble.member_count), (17, 3));
+        assert_eq!(bubble.stream, 11);
+        assert_eq!((bubble.members, bubble.member_count), (21, 3));
         // Each span: its first tile and the rank of that tile among the members.
-        assert_eq!(&c.words[17..], &[0, 0, 4, 2, 9, 5]);
+        assert_eq!(&c.words[21..], &[0, 0, 4, 2, 9, 5]);
         // A copy moves the offsets with the words.
         let mut d = Coded::default();
         d.words.extend([1, 2, 3]);
         let mut spans = Vec::new();
         d.push_copy(&c, &[key, bubble], &mut spans);
         assert_eq!(spans[0].stream, 4);
-        assert_eq!((spans[1].members, spans[1].member_count), (20, 3));
+        assert_eq!((spans[1].members, spans[1].member_count), (24, 3));
         assert_eq!(&d.words[3..], &c.words[..]);
         assert_eq!(d.bytes(), (3 + c.words.len() as u64) * 4);
     }

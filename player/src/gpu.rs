@@ -1436,6 +1436,64 @@ mod tests {
         (c.push_plane(step, s, members), parsed)
     }
 
+    /// A smooth plane whose DC repeats for hundreds of blocks: the scan cuts the runs into
+    /// pieces of `FILL_BLOCKS`, each parsed by an invocation of its own, and the GPU's
+    /// keyframe is the reference decoder's, in one part and in parts.
+    #[test]
+    fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let (pw, ph) = (512u32, 128u32);
+        let n = (pw as usize / 8) * (ph as usize / 8);
+        let blocks: Vec<[i32; 64]> = (0..n)
+            .map(|b| {
+                let mut q = [0i32; 64];
+                q[0] = if b < 600 { 40 } else { -9 };
+                if b % 97 == 0 {
+                    q[3] = 5;
+                }
+                q
+            })
+            .collect();
+        for part in [None, Some(100)] {
+            let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+            if let Some(p) = part {
+                gpu.part = p;
+                gpu.bind_decode();
+            }
+            let mut c = Coded::default();
+            let (span, parsed) = coded_plane(&mut c, 0.01, &blocks, None);
+            // One piece by the pairs, three more inside the two runs of 599 and 423
+            // blocks (every 256 blocks written).
+            assert_eq!(span.count, 4, "entry points");
+            let mut want = Plane::zeros(pw as usize, ph as usize);
+            let bw = pw as usize / 8;
+            let at = (0..n).map(|b| (b % bw, b / bw));
+            plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, 0.01);
+            let mut seg = SegmentData::new();
+            seg.steps = vec![KeyStep {
+                number: 0,
+                intra: true,
+                plane: 0,
+            }];
+            seg.planes = vec![span];
+            seg.bubbles = 1;
+            seg.data = c;
+            seg.layers = 2;
+            let mut enc = device.create_command_encoder(&Default::default());
+            gpu.decode(&mut enc, &seg, false);
+            queue.submit([enc.finish()]);
+            let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 0);
+            let got: &[f32] = bytemuck::cast_slice(&raw);
+            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+                assert!(
+                    (g - w).abs() <= 1e-5 * peak,
+                    "parts {part:?}, texel {i}: GPU {g} against {w}"
+                );
+            }
+        }
+    }
+
     /// The keyframe passes on a real adapter: an intra keyframe, then a predicted one
     /// built on it, against the reference decoder's block kernel; the first, packed into
     /// the previous keyframe, within half a 16-bit step of its region's range. With the

@@ -11,9 +11,6 @@
 // only those.
 @group(0) @binding(10) var<storage, read_write> groups: array<atomic<u32>>;
 
-// Pairs between entry points (vbim_format::scan::ENTRY_PAIRS).
-const ENTRY_PAIRS: u32 = 256u;
-
 fn stream_byte(at: u32) -> u32 {
     return (words[job.stream + (at >> 2u)] >> ((at & 3u) * 8u)) & 0xFFu;
 }
@@ -48,32 +45,41 @@ fn put(b: u32, f: u32, v: i32) {
     }
 }
 
-// Parses the piece of the stream from one entry point: ENTRY_PAIRS pairs, or to the end.
+// Parses the piece of the stream from one entry point: from its first position (`from`)
+// to where the next piece starts (vbim_format::scan: at most ENTRY_PAIRS pairs, and at
+// most FILL_BLOCKS blocks whose DC a zero run repeats), or to the end.
 @compute @workgroup_size(64)
 fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let e = group_index(wg) * 64u + li;
     if (e >= job.count) {
         return;
     }
-    let base = job.entries + 3u * e;
+    let base = job.entries + 4u * e;
     var at = words[base];
     var p = words[base + 1u];
     var dc = bitcast<i32>(words[base + 2u]);
+    let first = words[base + 3u];
     let n = job.blocks;
     // Below 2^32: the scan refuses larger streams.
     let total = n * 64u;
-    for (var k = 0u; k < ENTRY_PAIRS; k = k + 1u) {
+    var end = total;
+    if (e + 1u < job.count) {
+        end = words[base + 7u];
+    }
+    loop {
         let run = varint(&at);
-        // The blocks a zero run passes in the DC range keep the running DC. (The scan
-        // checked that no run goes past the end, so p + run ≤ total.)
+        // The blocks a zero run passes in the DC range keep the running DC: this piece
+        // writes those from `first` on and before `end`. (The scan checked that no run
+        // goes past the end, so p + run ≤ total.)
         if (p < n && dc != 0) {
-            let end = min(p + run, n);
-            for (var b = p; b < end; b = b + 1u) {
+            let stop = min(min(p + run, n), end);
+            for (var b = max(p, first); b < stop; b = b + 1u) {
                 put(b, 0u, dc);
             }
         }
         p = p + run;
-        if (p >= total) {
+        // A run that reaches `end` ends this piece; its value is a later piece's.
+        if (p >= total || p >= end) {
             break;
         }
         let u = varint(&at);
@@ -85,5 +91,8 @@ fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
             put(p % n, p / n, v);
         }
         p = p + 1u;
+        if (p >= end) {
+            break;
+        }
     }
 }

@@ -120,7 +120,16 @@ pub(crate) fn memory_needed(
         min_layers,
     );
     let payload = vbim_format::memory::largest_payload(header, entries);
-    textures + ring_bytes as u64 + 8 * payload
+    // The entry points the scan adds inside long runs of equal DC (16 bytes per
+    // `FILL_BLOCKS` blocks of a plane: the payload does not bound them), for every plane
+    // of the boxes in flight and their staging copies.
+    let blocks = (pw as u64 / 8) * (ph as u64 / 8);
+    let fill_entries = 48
+        * header.channels as u64
+        * header.max_degree.max(1) as u64
+        * (blocks / vbim_format::scan::FILL_BLOCKS + 1)
+        * 16;
+    textures + ring_bytes as u64 + 8 * payload + fill_entries
 }
 
 impl<R: Read + Seek + Send + 'static> Player<R> {
