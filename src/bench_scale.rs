@@ -66,7 +66,7 @@ pub fn run(a: BenchScaleArgs) -> Result<(), String> {
     for &size in &sizes {
         let file = stream_for(&a, size)?;
         eprintln!("playing {}", file.display());
-        let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+        let exe = this_binary()?;
         let out = std::process::Command::new(exe)
             .args(["bench", "scale-one"])
             .arg(&file)
@@ -90,6 +90,17 @@ pub fn run(a: BenchScaleArgs) -> Result<(), String> {
         &serde_json::to_string_pretty(&costs).expect("costs serialise"),
     )?;
     report(&a, &costs)
+}
+
+/// This very binary, for the measuring child processes. On Linux `/proc/self/exe`: it
+/// still runs this build when the file has been rebuilt or removed during a long run,
+/// where the path `current_exe` gives then names another build, or nothing.
+fn this_binary() -> Result<PathBuf, String> {
+    let own = Path::new("/proc/self/exe");
+    if cfg!(target_os = "linux") && own.exists() {
+        return Ok(own.to_path_buf());
+    }
+    std::env::current_exe().map_err(|e| e.to_string())
 }
 
 /// The stream of `size`², baked and encoded unless `out` already holds it.
