@@ -234,7 +234,8 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
     let planes = h.channels as usize;
     let (w, ht) = chunk::padded_size(&h);
     let (bw, bh) = (w / N, ht / N);
-    // One model per (kind, plane class), each adapting over the whole file in order.
+    // Each chunk's models (luma, chroma) start from scratch, so that a player can seek to
+    // the chunk.
     let fresh = || -> [Model; 2] { Default::default() };
     let sub = a.substream;
     let mut tally = [Tally::default(); 4];

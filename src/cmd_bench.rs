@@ -230,16 +230,17 @@ fn gpu_decode(
                 dec.fill(s, 0, 0, &mut seg)?;
                 t += gpu.decode(&seg).as_secs_f64();
                 n += 1;
+                // Summed per kind of pass, in the order they first came.
+                for (label, ns) in gpu.pass_times() {
+                    match passes.iter_mut().find(|(l, _)| *l == label) {
+                        Some((_, t)) => *t += ns,
+                        None => passes.push((label, ns)),
+                    }
+                }
             }
         }
         times.push(t);
         boxes = n;
-        for (label, ns) in gpu.pass_times() {
-            match passes.iter_mut().find(|(l, _)| *l == label) {
-                Some((_, t)) => *t += ns,
-                None => passes.push((label, ns)),
-            }
-        }
     }
     // Per segment, the mean over runs.
     let per = (runs.max(1) * boxes.max(1)) as f64;

@@ -1360,9 +1360,9 @@ impl GpuDecoder {
         GpuDecoder(gpu)
     }
 
-    /// The GPU time of each kind of pass over the decodes since the last call (ns; empty
-    /// unless the device has timestamps inside passes: [`timing_device`]). A first mark
-    /// at the start of each decode, so that the time before it is not counted.
+    /// The GPU time between the marks of the last decode, each to the pass it ends (ns;
+    /// empty unless the device has timestamps inside passes: [`timing_device`]). Call it
+    /// after each [`GpuDecoder::decode`]: the query set holds one decode's marks.
     pub fn pass_times(&mut self) -> Vec<(&'static str, f64)> {
         let g = &self.0;
         g.marks
@@ -1375,7 +1375,8 @@ impl GpuDecoder {
     pub fn decode(&mut self, seg: &SegmentData) -> std::time::Duration {
         let t = std::time::Instant::now();
         let mut enc = self.0.device.create_command_encoder(&Default::default());
-        {
+        if self.0.marks.is_some() {
+            // A first mark, so that the time before the decode is not counted.
             let mut pass = enc.begin_compute_pass(&Default::default());
             self.0.mark(&mut pass, crate::marks::START);
         }
@@ -1436,6 +1437,36 @@ mod tests {
         (c.push_plane(step, s, members), parsed)
     }
 
+    /// Decodes one keyframe step (plane 0 of a one-channel stream) onto the head.
+    fn decode_key_step(gpu: &mut Gpu, number: usize, span: PlaneSpan, data: Coded) {
+        let mut seg = SegmentData::new();
+        seg.steps = vec![KeyStep {
+            number,
+            intra: number == 0,
+            plane: 0,
+        }];
+        seg.planes = vec![span];
+        seg.bubbles = 1;
+        seg.data = data;
+        seg.layers = 2;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        gpu.decode(&mut enc, &seg, false);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// The head keyframe's plane 0 matches `want` within 1e-5 of its peak.
+    fn assert_head_matches(gpu: &Gpu, want: &Plane, part: Option<u32>) {
+        let raw = read_texture_layer(&gpu.device, &gpu.queue, &gpu.keys, 4, 0);
+        let got: &[f32] = bytemuck::cast_slice(&raw);
+        let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+            assert!(
+                (g - w).abs() <= 1e-5 * peak,
+                "parts {part:?}, texel {i}: GPU {g} against {w}"
+            );
+        }
+    }
+
     /// A smooth plane whose DC repeats for hundreds of blocks: the scan cuts the runs into
     /// pieces of `FILL_BLOCKS`, each parsed by an invocation of its own, and the GPU's
     /// keyframe is the reference decoder's, in one part and in parts.
@@ -1469,28 +1500,8 @@ mod tests {
             let bw = pw as usize / 8;
             let at = (0..n).map(|b| (b % bw, b / bw));
             plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, 0.01);
-            let mut seg = SegmentData::new();
-            seg.steps = vec![KeyStep {
-                number: 0,
-                intra: true,
-                plane: 0,
-            }];
-            seg.planes = vec![span];
-            seg.bubbles = 1;
-            seg.data = c;
-            seg.layers = 2;
-            let mut enc = device.create_command_encoder(&Default::default());
-            gpu.decode(&mut enc, &seg, false);
-            queue.submit([enc.finish()]);
-            let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 0);
-            let got: &[f32] = bytemuck::cast_slice(&raw);
-            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
-            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
-                assert!(
-                    (g - w).abs() <= 1e-5 * peak,
-                    "parts {part:?}, texel {i}: GPU {g} against {w}"
-                );
-            }
+            decode_key_step(&mut gpu, 0, span, c);
+            assert_head_matches(&gpu, &want, part);
         }
     }
 
@@ -1513,7 +1524,6 @@ mod tests {
             let mut seed = 3;
             let mut want = Plane::zeros(pw as usize, ph as usize);
             let mut first = None;
-            let mut seg = SegmentData::new();
             for (n, step) in [(0usize, 0.01f32), (1, 0.002)] {
                 if n == 1 {
                     first = Some(want.clone());
@@ -1523,29 +1533,9 @@ mod tests {
                 let (span, parsed) = coded_plane(&mut c, step, &blocks, None);
                 let at = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
                 plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
-                seg.steps = vec![KeyStep {
-                    number: n,
-                    intra: n == 0,
-                    plane: 0,
-                }];
-                seg.planes = vec![span];
-                seg.bubbles = 1;
-                seg.data = c;
-                seg.layers = 2;
-                let mut enc = device.create_command_encoder(&Default::default());
-                gpu.decode(&mut enc, &seg, false);
-                queue.submit([enc.finish()]);
+                decode_key_step(&mut gpu, n, span, c);
             }
-
-            let raw = read_texture_layer(&device, &queue, &gpu.keys, 4, 0);
-            let got: &[f32] = bytemuck::cast_slice(&raw);
-            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
-            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
-                assert!(
-                    (g - w).abs() <= 1e-5 * peak,
-                    "parts {part:?}, texel {i}: GPU {g} against {w}"
-                );
-            }
+            assert_head_matches(&gpu, &want, part);
             // The previous keyframe: 16-bit steps of each 32² region's range.
             let first = first.expect("two steps");
             let raw = read_texture_layer(&device, &queue, &gpu.previous, 4, 0);

@@ -11,8 +11,9 @@ pub const NEEDS: wgpu::Features =
 /// The label of the mark a decode starts with (no time is counted to it).
 pub const START: &str = "start";
 
-/// Marks one decode can hold: a dispatch writes one (a segment of degree 4 at 3
-/// channels, in parts, with a long keyframe chain stays far below).
+/// Marks one decode can hold between two reads: a dispatch writes one (a segment of
+/// degree 4 at 3 channels, in parts, with a long keyframe chain stays far below), so the
+/// marks are read after every decode.
 const CAPACITY: u32 = 4096;
 
 pub(crate) struct Marks {
@@ -58,8 +59,7 @@ impl Marks {
     }
 
     /// Reads the marks written by work already submitted and waited for, and forgets
-    /// them: the GPU time between consecutive marks, summed per label, in ns (labels in
-    /// the order they first came).
+    /// them: the GPU time between consecutive marks, each to its label, in ns.
     pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Vec<(&'static str, f64)> {
         let labels = std::mem::take(&mut *self.labels.borrow_mut());
         let n = labels.len() as u32;
@@ -72,18 +72,16 @@ impl Marks {
         let raw = crate::readback::read_buffer(device, queue, &self.resolved);
         let ticks: Vec<u64> = bytemuck::cast_slice::<u8, u64>(&raw[..n as usize * 8]).to_vec();
         let period = queue.get_timestamp_period() as f64;
-        let mut out: Vec<(&'static str, f64)> = Vec::new();
-        for (i, &label) in labels.iter().enumerate().skip(1) {
+        labels
+            .iter()
+            .enumerate()
+            .skip(1)
             // A decode's first mark: the time before it is the CPU's, between submissions.
-            if label == START {
-                continue;
-            }
-            let ns = ticks[i].saturating_sub(ticks[i - 1]) as f64 * period;
-            match out.iter_mut().find(|(l, _)| *l == label) {
-                Some((_, t)) => *t += ns,
-                None => out.push((label, ns)),
-            }
-        }
-        out
+            .filter(|&(_, &label)| label != START)
+            .map(|(i, &label)| {
+                let ns = ticks[i].saturating_sub(ticks[i - 1]) as f64 * period;
+                (label, ns)
+            })
+            .collect()
     }
 }
