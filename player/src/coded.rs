@@ -1,12 +1,12 @@
 //! The form in which the decoder hands a segment's coefficients to the GPU: each plane's
 //! coefficient stream as the file codes it (after zstd), its entry points
-//! (`vbim_format::scan`), and for a bubble plane the spans of tiles its blocks belong to.
+//! (`vbim_format::chunk::scan`), and for a bubble plane the spans of tiles its blocks belong to.
 //! `decode.wgsl` parses the streams, one invocation per entry point.
 //!
 //! All of it goes in one buffer of words, plane after plane:
 //! - the stream's bytes, little-endian four to a word, the last word padded with zeros;
 //! - its entry points, four words each: byte offset, position, running DC, and the first
-//!   position the piece writes (`vbim_format::scan::EntryPoint`);
+//!   position the piece writes (`vbim_format::chunk::EntryPoint`);
 //! - a bubble plane's member spans, two words each: the span's first tile (raster order
 //!   over the plane's tiles) and the rank of that tile among the plane's member tiles.
 //!   Block b of the stream lies in the tile of rank b / (blocks per tile); the span with
@@ -120,7 +120,7 @@ impl Coded {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use vbim_format::scan::EntryPoint;
+    use vbim_format::chunk::EntryPoint;
 
     #[test]
     fn a_plane_goes_in_as_words_entry_points_and_member_spans() {

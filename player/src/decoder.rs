@@ -17,7 +17,7 @@ use crate::cpu_time::thread_cpu_ns;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::index::Layout;
-use vbim_format::reader::verify_chunk;
+use vbim_format::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
 /// One keyframe for the GPU to build on its head keyframe: from zeros (intra) or onto the

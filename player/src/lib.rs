@@ -19,10 +19,20 @@
 //!
 //! Modules, in the order a chunk meets them: `reader` (source → ring), `decoder` (ring →
 //! scanned coefficient streams, in the form of `coded`), `pipeline` (the two threads and the
-//! boxes between them), `slots` (what the GPU holds), `gpu` (the decode and
-//! reconstruction passes), `display`
-//! (the clock and the stall policies), `player` (the render thread's frame);
-//! `config`, `record` and `stats` are its inputs and outputs.
+//! boxes between them), `slots` (what the GPU holds), `gpu` (a folder by concern: the
+//! device, the memory plan, the resources, the decode and reconstruction passes),
+//! `display` (the clock and the stall policies), `player` (the render thread's frame);
+//! `config`, `record` and `stats` are its inputs and outputs; `readback` reads GPU data
+//! back (tests, benchmarks, headless capture).
+//!
+//! Besides the player: [`headless_device`] opens a device where there is no window,
+//! [`lightmap_descriptor`] describes a texture the player can write into
+//! ([`Player::set_output`]), [`read_texture`] reads one back, and [`thread_cpu_ns`] is the
+//! clock the player's CPU figures use.
+//!
+//! # Features
+//! - `bench`: the decoder alone and the GPU decode alone ([`bench`](crate#features)), for
+//!   `vbim bench decode`, the fuzz target and the tests of what the decoder stages.
 #![deny(missing_docs)]
 
 mod clock;
@@ -38,7 +48,6 @@ mod gpu;
 mod marks;
 mod pipeline;
 mod player;
-#[cfg(any(test, feature = "bench"))]
 mod readback;
 mod reader;
 mod record;
@@ -50,8 +59,11 @@ mod time;
 pub use clock::{Clock, SimClock, SystemClock};
 pub use config::{PlayerConfig, Policy};
 pub use cpu_time::thread_cpu_ns;
-pub use gpu::{headless_device, headless_device_on, read_texture};
+pub use gpu::{
+    headless_device, headless_device_on, lightmap_descriptor, DeviceError, Headless, OutputError,
+};
 pub use player::Player;
+pub use readback::read_texture;
 pub use record::{Frame, FrameRecord, FrameState, Totals};
 pub use stats::{frames_csv, Summary};
 pub use throttle::{Stall, Throttle};
@@ -90,11 +102,25 @@ pub enum PlayerError {
         deadline: std::time::Duration,
     },
     /// The stream needs textures larger than the device allows.
-    #[error("{0}")]
-    Device(String),
+    #[error(
+        "a {width}×{height} stream (coded on {}×{}) needs textures larger than this \
+         device's {max_side} (wgpu::Limits::max_texture_dimension_2d)",
+        coded[0],
+        coded[1]
+    )]
+    TooLarge {
+        /// The stream's width.
+        width: u32,
+        /// The stream's height.
+        height: u32,
+        /// The padded planes it is coded on (whole tiles).
+        coded: [usize; 2],
+        /// The device's largest texture side.
+        max_side: u32,
+    },
     /// A texture given to [`Player::set_output`] does not fit the stream.
-    #[error("{0}")]
-    Output(String),
+    #[error(transparent)]
+    Output(#[from] OutputError),
     /// A player thread panicked (a bug).
     #[error("thread {thread} panicked")]
     Panicked {

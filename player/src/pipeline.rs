@@ -1,5 +1,5 @@
 //! The pipeline behind the render thread: a reader and a decoder joined by a ring of
-//! compressed bytes, and two boxes of parsed coefficients that travel decoder → render
+//! compressed bytes, and three boxes (`BOXES`) of scanned coefficient streams that travel decoder → render
 //! thread → decoder.
 //! They run on threads of their own (paper 001's figure 13), or are stepped inline inside
 //! `advance` so that simulated time is deterministic.
@@ -78,7 +78,7 @@ enum Mode<R> {
 }
 
 impl<R: Read + Seek + Send + 'static> Pipeline<R> {
-    /// Starts reading `src` into a ring of `ring_bytes`, with two boxes for the decoder.
+    /// Starts reading `src` into a ring of `ring_bytes`, with `BOXES` boxes for the decoder.
     pub fn start(
         device: &wgpu::Device,
         src: R,

@@ -119,7 +119,7 @@ pub(crate) fn memory_needed(
         header.channels as u32,
         min_layers,
     );
-    let payload = vbim_format::memory::largest_payload(header, entries);
+    let payload = vbim_format::largest_payload(header, entries);
     // The entry points the scan adds inside long runs of equal DC (16 bytes per
     // `FILL_BLOCKS` blocks of a plane: the payload does not bound them), for every plane
     // of the boxes in flight and their staging copies.
@@ -127,7 +127,7 @@ pub(crate) fn memory_needed(
     let fill_entries = 48
         * header.channels as u64
         * header.max_degree.max(1) as u64
-        * (blocks / vbim_format::scan::FILL_BLOCKS + 1)
+        * (blocks / vbim_format::chunk::FILL_BLOCKS + 1)
         * 16;
     textures + ring_bytes as u64 + 8 * payload + fill_entries
 }
@@ -162,11 +162,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let (pw, ph) = vbim_format::chunk::padded_size(&header);
         let max_side = device.limits().max_texture_dimension_2d;
         if pw.max(ph) > max_side as usize {
-            return Err(PlayerError::Device(format!(
-                "a {}×{} stream (coded on {pw}×{ph}) needs textures larger than this \
-                 device's {max_side} (wgpu::Limits::max_texture_dimension_2d)",
-                header.width, header.height
-            )));
+            return Err(PlayerError::TooLarge {
+                width: header.width,
+                height: header.height,
+                coded: [pw, ph],
+                max_side,
+            });
         }
         cfg.limits.check(
             &format!(

@@ -1,6 +1,6 @@
 //! What the GPU holds, as bookkeeping tested without a GPU: which keyframes are the
 //! chain's head and the one before it, which segment the bubble planes hold, and what to do with
-//! an arriving segment. `gpu.rs` records the passes a decision asks for.
+//! an arriving segment. `gpu` records the passes a decision asks for.
 //!
 //! The GPU builds a segment's keyframes and decodes its bubble planes in the frame that
 //! first shows it, in the same submission as the reconstruction, so one bubble set and

@@ -24,7 +24,7 @@ fn gl_device() -> (wgpu::Device, wgpu::Queue) {
 }
 
 fn opened(
-    device: Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), String>,
+    device: Result<vbim_player::Headless, vbim_player::DeviceError>,
 ) -> (wgpu::Device, wgpu::Queue) {
     match device {
         Ok((d, q, info)) => {
@@ -441,7 +441,7 @@ fn jacksboro_day(size: usize, n: usize) -> Vec<Vec<f32>> {
     (0..n)
         .map(|i| {
             let mut frame = vec![0f32; size * size * 3];
-            vbim_bake::light::light_frame(&pre, &scene, i, &mut frame);
+            vbim_bake::light_frame(&pre, &scene, i, &mut frame);
             frame
         })
         .collect()
@@ -911,7 +911,7 @@ fn a_hostile_buffer_model_is_bounded_by_the_file() {
     let (device, queue) = device();
     let src = sequence(32, 16, 48, InputKind::Hdr);
     let mut bytes = encode_bytes(&src, &config(SegmentMode::Fixed(8)));
-    let h = vbim_format::writer::rewrite(&mut bytes, |h, _| {
+    let h = vbim_format::rewrite(&mut bytes, |h, _| {
         for p in &mut h.read_ahead {
             p.bytes = 1 << 62;
             p.preroll_ns = u64::MAX;
@@ -953,7 +953,7 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
     let src = sequence(32, 16, 48, InputKind::Hdr);
     let mut bytes = encode_bytes(&src, &config(SegmentMode::Fixed(8)));
     let mut frame = None;
-    vbim_format::writer::rewrite(&mut bytes, |_, entries| {
+    vbim_format::rewrite(&mut bytes, |_, entries| {
         let k = entries
             .iter()
             .position(|e| e.kind == vbim_format::ChunkKind::Keyframe && !e.is_intra())
@@ -1113,22 +1113,8 @@ fn a_callers_texture_gets_what_the_players_own_would_show() {
         )
     };
     let open = || Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg()).unwrap();
-    let texture = |w, h, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("the engine's lightmap"),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba16Float,
-            usage,
-            view_formats: &[],
-        })
-    };
+    let texture =
+        |w, h, usage| device.create_texture(&vbim_player::lightmap_descriptor(w, h, usage));
     use wgpu::TextureUsages as U;
     let (mut own, mut theirs) = (open(), open());
     let e = theirs

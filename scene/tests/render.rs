@@ -1,7 +1,7 @@
 //! Rendering tests of the terrain scene on a real adapter (lavapipe/llvmpipe without a GPU).
 
 use glam::Vec3;
-use vbim_bake::light::light_frame;
+use vbim_bake::light_frame;
 use vbim_bake::{load_terrain, HeightField, Precomputed, Scene};
 use vbim_scene::{mesh::base_colour, Mesh, SceneRenderer, View, FORMAT};
 
@@ -28,20 +28,7 @@ fn lightmap(
     device
         .create_texture_with_data(
             queue,
-            &wgpu::TextureDescriptor {
-                label: None,
-                size: wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba16Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
+            &vbim_player::lightmap_descriptor(w, h, wgpu::TextureUsages::TEXTURE_BINDING),
             wgpu::util::TextureDataOrder::LayerMajor,
             &data,
         )
@@ -133,8 +120,8 @@ fn render_frame(
     v.target = target;
     v.detail = 0.5;
     // The sky of that moment, from the bake's sky model.
-    let sun = vbim_bake::light::sun_for_frame(s, frame);
-    let model = vbim_bake::light::sky_model(s);
+    let sun = vbim_bake::sun_for_frame(s, frame);
+    let model = vbim_bake::sky_model(s);
     let (base, glow) = (model.base(sun.elevation), model.glow(sun.elevation));
     v.sky_zenith = base.map(|c| c as f32);
     v.sky_horizon = [0, 1, 2].map(|c| (base[c] + glow[c]) as f32);

@@ -1,0 +1,99 @@
+//! One decode pass's parameters, declared once: the macro below makes both the Rust
+//! struct the player fills and the WGSL `struct Job` that `job.wgsl`, `parse.wgsl` and
+//! `decode.wgsl` read, field by field in the same order, so the two cannot drift apart.
+
+/// Declares `Job` (Rust) and [`JOB_WGSL`] (its WGSL declaration) from one list of fields,
+/// each with its Rust type and the WGSL type of the same size and alignment.
+macro_rules! job {
+    ($( $(#[doc = $doc:literal])* $name:ident : $rust:ty => $wgsl:literal ),* $(,)?) => {
+        /// One decode pass's parameters, at a [`JOB_STRIDE`] stride in a uniform buffer
+        /// bound with a dynamic offset.
+        #[repr(C)]
+        #[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+        pub(super) struct Job {
+            $( $(#[doc = $doc])* pub $name: $rust, )*
+        }
+
+        /// The WGSL declaration of [`Job`], put before the decode shaders' source.
+        pub(super) const JOB_WGSL: &str =
+            concat!("struct Job {\n", $( "    ", stringify!($name), ": ", $wgsl, ",\n", )* "}\n");
+
+        /// Each field's name, bytes and WGSL type (for the layout test).
+        #[cfg(test)]
+        const FIELDS: &[(&str, usize, &str)] =
+            &[$( (stringify!($name), std::mem::size_of::<$rust>(), $wgsl), )*];
+    };
+}
+
+job! {
+    /// Quantiser step of the plane.
+    step: f32 => "f32",
+    /// Keyframe passes: the plane's channel (the layer `key_pack` writes). Bubble passes:
+    /// the plane's layer. Zero passes: the number of layers.
+    layer: u32 => "u32",
+    /// The stream's first word.
+    stream: u32 => "u32",
+    /// The first entry point's first word.
+    entries: u32 => "u32",
+    /// How many entry points there are.
+    count: u32 => "u32",
+    /// Blocks the stream codes.
+    blocks: u32 => "u32",
+    /// The part [lo, hi) of the blocks this job keeps.
+    lo: u32 => "u32",
+    /// (See `lo`.)
+    hi: u32 => "u32",
+    /// A bubble plane's member spans: first word; 0 for a keyframe plane.
+    members: u32 => "u32",
+    /// The number of member spans.
+    member_count: u32 => "u32",
+    /// Workgroups per row of the dispatch (counts beyond 65 535 use more rows).
+    groups_x: u32 => "u32",
+    /// Blocks across a keyframe plane.
+    blocks_x: u32 => "u32",
+    /// Blocks across a tile.
+    per: u32 => "u32",
+    /// Tiles across the plane.
+    tiles_x: u32 => "u32",
+    /// Texels of the plane (zero passes).
+    size: [u32; 2] => "vec2<u32>",
+    /// Unused: keeps the struct a whole number of 8-byte words.
+    pad: [u32; 2] => "vec2<u32>",
+}
+
+/// Bytes between two jobs in the jobs buffer: WebGPU's default
+/// `min_uniform_buffer_offset_alignment`.
+pub(super) const JOB_STRIDE: u64 = 256;
+
+/// The WGSL source of a decode shader: the `Job` declaration, what the decode passes
+/// share (`job.wgsl`), then `body`.
+pub(super) fn decode_source(body: &str) -> String {
+    format!("{JOB_WGSL}{}{body}", include_str!("job.wgsl"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The WGSL struct has the Rust struct's fields in the same order at the same offsets:
+    /// every field is 4-byte scalars or an 8-byte vector at an offset its size divides
+    /// (WGSL's alignment rule for these types), and the Rust struct has no padding.
+    #[test]
+    fn the_wgsl_job_has_the_rust_layout() {
+        let mut offset = 0;
+        for &(name, bytes, wgsl) in FIELDS {
+            let wgsl_bytes = match wgsl {
+                "f32" | "u32" | "i32" => 4,
+                "vec2<u32>" | "vec2<f32>" => 8,
+                other => panic!("{name}: WGSL type {other} not checked here"),
+            };
+            assert_eq!(bytes, wgsl_bytes, "{name}: Rust and WGSL sizes differ");
+            assert_eq!(offset % wgsl_bytes, 0, "{name}: WGSL would pad before it");
+            offset += bytes;
+        }
+        assert_eq!(offset, std::mem::size_of::<Job>());
+        assert!(offset as u64 <= JOB_STRIDE);
+        assert!(JOB_WGSL.starts_with("struct Job {\n    step: f32,\n"));
+        assert!(!include_str!("job.wgsl").contains("struct Job"));
+    }
+}

@@ -1,0 +1,125 @@
+//! The GPU side: what stays resident — the chain's head keyframe (R32Float, one layer
+//! per plane), the keyframe before it (16-bit steps of a range per 32² region, two to an
+//! R32Uint texel), one set of bubble planes (16-bit signed integers with a scale per
+//! plane, two to an R32Uint texel), the display texture the renderer samples and a held
+//! copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill
+//! them: the segment decode of `decode.wgsl` (parsing the coefficient streams,
+//! dequantisation, inverse DCT, predicted keyframes) and the per-frame reconstruction of
+//! `reconstruct.wgsl`. The decode parses each plane into a dense plane of i32
+//! coefficients with a 64-bit mask per block (4 bytes per texel of one plane, reused
+//! plane after plane), which the passes after it read and put back to zero.
+//!
+//! The head stays f32: the next predicted keyframe is built on it, and a 16-bit head
+//! would add its rounding at every step of the chain (docs/FORMAT.md, "What the GPU
+//! decoder guarantees"). The previous keyframe is only displayed, and is packed afresh
+//! from the f32 head at every step, so it carries one rounding, like the bubble planes,
+//! which are rebuilt for every segment from their coefficients.
+//!
+//! By concern: `device` (opening one headless), `plan` (what the state holds, in bytes, before
+//! it exists), `resources` (creating it), `job` (a decode pass's parameters, as the shader
+//! declares them), `decode` (recording a segment's decode), `reconstruct` (recording a
+//! frame's reconstruction and the hold pass), `bench` (the decode alone, timed).
+
+#[cfg(feature = "bench")]
+mod bench;
+mod decode;
+mod device;
+mod job;
+mod plan;
+mod reconstruct;
+mod resources;
+#[cfg(test)]
+mod tests;
+
+#[cfg(feature = "bench")]
+pub use bench::GpuDecoder;
+#[cfg(feature = "bench")]
+pub use device::timing_device;
+pub use device::{headless_device, headless_device_on, DeviceError, Headless};
+pub use plan::lightmap_descriptor;
+pub(crate) use plan::{min_array_layers, planned_texture_bytes, upload_bytes};
+pub use reconstruct::OutputError;
+pub(crate) use reconstruct::Params;
+
+pub(crate) struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pipeline: wgpu::ComputePipeline,
+    /// Packs what is on screen into `held` (from the display, or the caller's output).
+    hold: wgpu::ComputePipeline,
+    hold_layout: wgpu::BindGroupLayout,
+    hold_group: wgpu::BindGroup,
+    parse: wgpu::ComputePipeline,
+    key_add: wgpu::ComputePipeline,
+    key_zero: wgpu::ComputePipeline,
+    key_pack: wgpu::ComputePipeline,
+    bubble_bound: wgpu::ComputePipeline,
+    bubble_write: wgpu::ComputePipeline,
+    bubble_zero: wgpu::ComputePipeline,
+    key_layout: wgpu::BindGroupLayout,
+    bubble_layout: wgpu::BindGroupLayout,
+    parse_layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+    tables: wgpu::Buffer,
+    /// Decode pass parameters, `JOB_STRIDE` apart; grows with the longest keyframe chain.
+    jobs: wgpu::Buffer,
+    /// A segment's streams, entry points and member spans; grows with the largest segment.
+    words: wgpu::Buffer,
+    /// The dense plane: `part` blocks of 64 i32 coefficients; their masks, then per group
+    /// of [`GROUP_BLOCKS`] blocks which have a coefficient ([`groups_offset`]). The masks
+    /// and sets are cleared before each parse.
+    coefs: wgpu::Buffer,
+    masks: wgpu::Buffer,
+    part: u32,
+    /// Each bubble layer's bound (f32 bits), for the decode and the reconstruction.
+    bounds: wgpu::Buffer,
+    /// The chain's head keyframe K_{s+1}, f32.
+    keys: wgpu::Texture,
+    /// One view per plane of the head, for the decode passes.
+    key_views: Vec<wgpu::TextureView>,
+    /// The previous keyframe K_s, 16-bit, and the range of each of its regions.
+    previous: wgpu::Texture,
+    previous_view: wgpu::TextureView,
+    ranges: wgpu::Buffer,
+    regions: [u32; 2],
+    bubbles: wgpu::Texture,
+    bubble_view: wgpu::TextureView,
+    display: wgpu::Texture,
+    pub display_view: wgpu::TextureView,
+    held: wgpu::Texture,
+    bind_group: wgpu::BindGroup,
+    /// The reconstruction's layout and inputs, for a bind group over a caller's texture.
+    reconstruct_layout: wgpu::BindGroupLayout,
+    keys_view: wgpu::TextureView,
+    held_view: wgpu::TextureView,
+    /// A texture of the caller's that the reconstruction writes instead of `display`, with
+    /// the reconstruction's and the hold pass's bind groups over it.
+    output: Option<(wgpu::Texture, wgpu::BindGroup, wgpu::BindGroup)>,
+    /// Decode bind groups (per keyframe layer, and the bubbles'): remade when `words` or
+    /// `jobs` grow.
+    key_groups: Vec<wgpu::BindGroup>,
+    bubble_group: Option<wgpu::BindGroup>,
+    parse_group: Option<wgpu::BindGroup>,
+    /// Scratch for the jobs of one segment, and each plane's first job (kept: no
+    /// allocation per segment).
+    job_bytes: Vec<u8>,
+    first_job: Vec<u64>,
+    /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).
+    #[cfg(feature = "bench")]
+    marks: Option<crate::marks::Marks>,
+    pub width: u32,
+    pub height: u32,
+    /// The padded planes' size (whole tiles).
+    plane: [u32; 2],
+    pub channels: u32,
+    /// Blocks across a tile, and tiles across a plane.
+    per: u32,
+    tiles_x: u32,
+}
+
+impl Gpu {
+    /// Waits for the GPU to finish what was submitted.
+    pub fn wait(&self) {
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+}

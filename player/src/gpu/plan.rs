@@ -1,0 +1,257 @@
+//! The memory plan: what the GPU state holds for a stream, in bytes, known before anything
+//! of that size is created (so that a stream is refused first), and the layout of the
+//! dense plane and its masks.
+
+use super::job::JOB_STRIDE;
+use super::Gpu;
+use crate::decoder::SegmentData;
+use crate::slots::MAX_BUBBLE_PLANES;
+
+/// Bytes [`Gpu::decode`] uploads for `seg` on a GPU whose dense plane holds `part`
+/// blocks: its streams, entry points and member spans, and one job's parameters per part
+/// of each plane decoded (and the bubbles' zero pass).
+pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool, part: u32) -> u64 {
+    seg.bytes() + job_bytes(seg, bubbles, part)
+}
+
+/// The planes [`Gpu::decode`] decodes: the keyframe steps', and the bubbles' when wanted.
+pub(super) fn decoded_planes(seg: &SegmentData, bubbles: bool) -> usize {
+    if bubbles {
+        seg.planes.len()
+    } else {
+        seg.bubbles
+    }
+}
+
+/// Bytes of the decode passes' parameters: one job per part of each plane, and one for
+/// the bubbles' zero pass.
+pub(super) fn job_bytes(seg: &SegmentData, bubbles: bool, part: u32) -> u64 {
+    let jobs: u64 = seg.planes[..decoded_planes(seg, bubbles)]
+        .iter()
+        .map(|p| parts(p.blocks, part) as u64)
+        .sum();
+    (jobs + 1) * JOB_STRIDE
+}
+
+/// Parts a plane of `blocks` blocks is decoded in, `part` blocks at most each (at least
+/// one, so that an empty plane still has its job).
+pub(super) fn parts(blocks: u32, part: u32) -> u32 {
+    blocks.div_ceil(part).max(1)
+}
+
+/// Blocks per workgroup of the block passes (`GROUP_BLOCKS` in decode.wgsl).
+pub(super) const GROUP_BLOCKS: u32 = 64;
+/// Bytes of the sets of blocks with a coefficient for `blocks` blocks: 64 bits per group
+/// of [`GROUP_BLOCKS`].
+pub(super) fn group_bytes(blocks: u32) -> u64 {
+    blocks.div_ceil(GROUP_BLOCKS) as u64 * 8
+}
+
+/// Where the sets start in the mask buffer of a dense plane of `part` blocks: after the
+/// masks, at a storage binding's offset alignment (WebGPU's default, 256), so that one
+/// clear covers both.
+pub(super) fn groups_offset(part: u32) -> u64 {
+    (part as u64 * 8).next_multiple_of(256)
+}
+
+/// Bytes of the mask buffer of a dense plane of `part` blocks: masks, then sets.
+pub(super) fn mask_bytes(part: u32) -> u64 {
+    groups_offset(part) + group_bytes(part)
+}
+
+/// Blocks the dense plane holds for planes of `plane` texels: a whole plane, or as many
+/// blocks as one storage binding of WebGPU's default limits holds.
+pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
+    let whole = (plane[0] / 8) * (plane[1] / 8);
+    let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
+    whole.min(binding as u32).max(1)
+}
+
+/// Workgroups per dispatch row: WebGPU's default limit per dimension.
+pub(super) const GROUPS_X: u32 = 65_535;
+
+/// Bytes a buffer of at least `need` bytes is given: an eighth more (at least 64 KiB), so
+/// that it grows a few times at the start of a stream and then never, without the up to
+/// 2× of rounding to a power of two (2 bytes per texel of a 2048² stream's coefficients).
+pub(super) fn grown(need: u64) -> u64 {
+    (need + need / 8)
+        .max(1 << 16)
+        .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
+}
+
+/// The side of a region of the previous keyframe with its own range (`REGION` in
+/// decode.wgsl; `REGION_GROUPS` workgroups of 8 × 8 in reconstruct.wgsl).
+pub(super) const REGION: u32 = 32;
+
+/// Regions of [`REGION`]² texels across and down a plane of `plane` texels.
+pub(super) fn regions(plane: [u32; 2]) -> [u32; 2] {
+    plane.map(|n| n.div_ceil(REGION))
+}
+
+/// Bytes of the previous keyframe's ranges: a (lowest value, step) pair of f32 per region
+/// and plane.
+pub(super) fn range_bytes(plane: [u32; 2], channels: u32) -> u64 {
+    let [rx, ry] = regions(plane);
+    rx as u64 * ry as u64 * channels as u64 * 8
+}
+
+/// The fewest layers an array texture may have on `device`'s backend. wgpu's GL backend
+/// decides whether a texture is an array from its layer count alone (one layer: a plain
+/// 2D texture), and a one-layer texture bound as `texture_2d_array` there reads back
+/// garbage; a second, unused layer keeps it an array. Other backends need no padding.
+pub(crate) fn min_array_layers(device: &wgpu::Device) -> u32 {
+    if device.adapter_info().backend == wgpu::Backend::Gl {
+        2
+    } else {
+        1
+    }
+}
+
+/// A 2D texture of `width × height × layers` texels of `format`: one mip level, no
+/// multisampling, no other view formats.
+pub(super) fn texture_descriptor(
+    label: &'static str,
+    (width, height, depth_or_array_layers): (u32, u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::TextureDescriptor<'static> {
+    wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    }
+}
+
+/// A lightmap texture of `width × height` texels as the player writes it: 2D,
+/// `Rgba16Float` (linear RGB in the stream's units, alpha 1), one mip level. A texture
+/// given to [`Player::set_output`](crate::Player::set_output) needs at least
+/// `STORAGE_BINDING | TEXTURE_BINDING` in `usage`.
+pub fn lightmap_descriptor(
+    width: u32,
+    height: u32,
+    usage: wgpu::TextureUsages,
+) -> wgpu::TextureDescriptor<'static> {
+    texture_descriptor(
+        "vbim lightmap",
+        (width, height, 1),
+        wgpu::TextureFormat::Rgba16Float,
+        usage,
+    )
+}
+
+/// The textures [`Gpu::new`] creates for a stream of `width × height` texels coded on
+/// planes of `plane` texels with bubble terms up to `max_degree`: the head keyframe
+/// (f32), the previous keyframe and the bubble planes (16-bit pairs), the lightmap
+/// (Rgba16Float) and its held copy (RGB9E5 packed into R32Uint). Array textures have at
+/// least `min_layers` layers ([`min_array_layers`]).
+pub(super) fn texture_plans(
+    (width, height): (u32, u32),
+    plane: [u32; 2],
+    max_degree: u32,
+    channels: u32,
+    min_layers: u32,
+) -> [wgpu::TextureDescriptor<'static>; 5] {
+    use wgpu::TextureUsages as U;
+    let bubble_layers = (max_degree.saturating_sub(1) * channels).max(min_layers);
+    let channels = channels.max(min_layers);
+    [
+        texture_descriptor(
+            "vbim head keyframe",
+            (plane[0], plane[1], channels),
+            wgpu::TextureFormat::R32Float,
+            // (COPY_SRC: tests read it back.)
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
+        ),
+        texture_descriptor(
+            "vbim previous keyframe",
+            (plane[0] / 2, plane[1], channels),
+            wgpu::TextureFormat::R32Uint,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
+        ),
+        texture_descriptor(
+            "vbim bubbles",
+            (plane[0] / 2, plane[1], bubble_layers),
+            wgpu::TextureFormat::R32Uint,
+            // (COPY_SRC: tests read it back.)
+            U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
+        ),
+        lightmap_descriptor(
+            width,
+            height,
+            U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
+        ),
+        texture_descriptor(
+            "vbim held",
+            (width, height, 1),
+            wgpu::TextureFormat::R32Uint,
+            U::TEXTURE_BINDING | U::STORAGE_BINDING,
+        ),
+    ]
+}
+
+/// Bytes of the textures, the range buffer and the dense plane [`Gpu::new`] creates for a
+/// stream ([`texture_plans`]'s), known before creating them, so that a stream is refused
+/// before anything that size exists.
+pub(crate) fn planned_texture_bytes(
+    size: (u32, u32),
+    plane: [u32; 2],
+    max_degree: u32,
+    channels: u32,
+    min_layers: u32,
+) -> u64 {
+    texture_plans(size, plane, max_degree, channels, min_layers)
+        .iter()
+        .map(|d| extent_bytes(d.size, d.format))
+        .sum::<u64>()
+        + range_bytes(plane, channels)
+        + part_blocks(plane) as u64 * 256
+        + mask_bytes(part_blocks(plane))
+        + BOUND_BYTES
+}
+
+/// Bytes of the bubble bounds: one u32 per bubble plane.
+pub(super) const BOUND_BYTES: u64 = MAX_BUBBLE_PLANES as u64 * 4;
+
+/// Bytes a texture holds (one mip level, every layer).
+pub(super) fn texture_bytes(t: &wgpu::Texture) -> u64 {
+    extent_bytes(t.size(), t.format())
+}
+
+/// Bytes of a texture of `size` texels of `format`.
+pub(super) fn extent_bytes(size: wgpu::Extent3d, format: wgpu::TextureFormat) -> u64 {
+    let texel = format.block_copy_size(None).unwrap_or(0) as u64;
+    size.width as u64 * size.height as u64 * size.depth_or_array_layers as u64 * texel
+}
+
+impl Gpu {
+    /// Bytes of the textures and buffers the player holds on the GPU (the budget's figure).
+    pub fn bytes(&self) -> u64 {
+        [
+            &self.keys,
+            &self.previous,
+            &self.bubbles,
+            &self.display,
+            &self.held,
+        ]
+        .iter()
+        .map(|t| texture_bytes(t))
+        .sum::<u64>()
+            + self.ranges.size()
+            + self.params.size()
+            + self.tables.size()
+            + self.jobs.size()
+            + self.words.size()
+            + self.coefs.size()
+            + self.masks.size()
+            + self.bounds.size()
+    }
+}

@@ -1,0 +1,151 @@
+//! The per-frame reconstruction (`reconstruct.wgsl`): the time basis evaluated over the
+//! resident keyframes and bubble planes into the lightmap, the hold pass that keeps what is
+//! on screen for catch-up blending, and the caller's output texture.
+
+use super::resources::{hold_group, reconstruct_group};
+use super::Gpu;
+use crate::slots::MAX_BUBBLE_PLANES;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct Params {
+    pub w: [f32; 12],
+    pub size: [u32; 2],
+    pub layers: u32,
+    pub transfer: u32,
+    pub v0: f32,
+    pub alpha: f32,
+    pub channels: u32,
+    pub blend: u32,
+    /// Regions of the previous keyframe's ranges, across and down.
+    pub regions: [u32; 2],
+    pub _pad: [u32; 2],
+    /// Quantiser step of each bubble plane (its scale comes from its bound, which the
+    /// decode computed on the GPU).
+    pub steps: [f32; MAX_BUBBLE_PLANES],
+}
+
+/// A texture given to [`Player::set_output`](crate::Player::set_output) that the player
+/// cannot write: it must be a `width × height` 2D `Rgba16Float` texture with
+/// `STORAGE_BINDING | TEXTURE_BINDING` usage ([`lightmap_descriptor`](crate::lightmap_descriptor)).
+#[derive(Debug, Clone, thiserror::Error)]
+#[error(
+    "the output must be a {width}×{height} 2D Rgba16Float texture with STORAGE_BINDING | \
+     TEXTURE_BINDING usage (the player reads it to keep the image on screen for catch-up \
+     blending); got {}×{}×{} {dimension:?} {format:?} with {usage:?}",
+    got.width,
+    got.height,
+    got.depth_or_array_layers
+)]
+pub struct OutputError {
+    /// The stream's width.
+    pub width: u32,
+    /// The stream's height.
+    pub height: u32,
+    /// The texture's size.
+    pub got: wgpu::Extent3d,
+    /// Its dimension.
+    pub dimension: wgpu::TextureDimension,
+    /// Its format.
+    pub format: wgpu::TextureFormat,
+    /// Its usages.
+    pub usage: wgpu::TextureUsages,
+}
+
+impl Gpu {
+    /// Makes the reconstruction write into `texture` (the caller's) instead of the
+    /// player's own lightmap, or into its own again with `None`.
+    pub fn set_output(&mut self, texture: Option<&wgpu::Texture>) -> Result<(), OutputError> {
+        let Some(t) = texture else {
+            self.output = None;
+            return Ok(());
+        };
+        use wgpu::TextureUsages as U;
+        let need = U::STORAGE_BINDING | U::TEXTURE_BINDING;
+        if t.format() != wgpu::TextureFormat::Rgba16Float
+            || (t.width(), t.height()) != (self.width, self.height)
+            || t.depth_or_array_layers() != 1
+            || t.dimension() != wgpu::TextureDimension::D2
+            || !t.usage().contains(need)
+        {
+            return Err(OutputError {
+                width: self.width,
+                height: self.height,
+                got: t.size(),
+                dimension: t.dimension(),
+                format: t.format(),
+                usage: t.usage(),
+            });
+        }
+        let view = t.create_view(&Default::default());
+        let group = reconstruct_group(
+            &self.device,
+            &self.reconstruct_layout,
+            [
+                &self.keys_view,
+                &self.bubble_view,
+                &self.held_view,
+                &view,
+                &self.previous_view,
+            ],
+            [&self.ranges, &self.bounds],
+            &self.params,
+        );
+        let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
+        self.output = Some((t.clone(), group, hold));
+        Ok(())
+    }
+
+    /// The texture the reconstruction writes: the caller's, or the player's own.
+    fn target(&self) -> &wgpu::Texture {
+        self.output.as_ref().map_or(&self.display, |(t, ..)| t)
+    }
+
+    /// Keeps what is on screen for blending (at the start of a catch-up).
+    pub fn hold(&self, encoder: &mut wgpu::CommandEncoder) {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&self.hold);
+        let group = self.output.as_ref().map_or(&self.hold_group, |(.., g)| g);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+    }
+
+    /// Records the reconstruction of one frame into `enc`. The parameters go through
+    /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
+    /// that carries `enc`.
+    pub fn reconstruct(&self, enc: &mut wgpu::CommandEncoder, params: &Params, hold_first: bool) {
+        let params = Params {
+            regions: self.regions,
+            ..*params
+        };
+        self.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        if hold_first {
+            self.hold(enc);
+        }
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: None,
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        let group = self.output.as_ref().map_or(&self.bind_group, |(_, g, _)| g);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+    }
+
+    /// Reads the texture the reconstruction writes back (RGBA, f32). For tests and error
+    /// measurement.
+    pub fn read_display(&self) -> Vec<f32> {
+        let raw = crate::readback::read_texture(&self.device, &self.queue, self.target(), 8);
+        bytemuck::cast_slice::<u8, half::f16>(&raw)
+            .iter()
+            .map(|v| v.to_f32())
+            .collect()
+    }
+}
+
+impl Params {
+    pub fn zeroed_params() -> Params {
+        bytemuck::Zeroable::zeroed()
+    }
+}

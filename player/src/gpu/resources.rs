@@ -1,0 +1,511 @@
+//! Creating the GPU state: textures, buffers, bind group layouts, pipelines, and the bind
+//! groups over them.
+
+use wgpu::util::DeviceExt;
+
+use super::job::{decode_source, Job, JOB_STRIDE};
+use super::plan::*;
+use super::reconstruct::Params;
+use super::Gpu;
+
+/// The DCT basis and zig-zag order (`Tables` in decode.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Tables {
+    basis: [f32; 64],
+    zigzag: [u32; 64],
+    row_max: [f32; 8],
+}
+
+impl Gpu {
+    /// GPU state for the stream `h` describes (its size, padded planes, degree, channels
+    /// and tiles).
+    pub fn for_stream(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Gpu {
+        let (pw, ph) = vbim_format::chunk::padded_size(h);
+        Gpu::new(
+            device,
+            queue,
+            (h.width, h.height),
+            [pw as u32, ph as u32],
+            h.max_degree as u32,
+            h.channels as u32,
+            h.tile_size as u32,
+        )
+    }
+
+    /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
+    /// planes of `plane` texels (whole tiles of `tile_size`), with bubble terms up to
+    /// `max_degree`.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        (width, height): (u32, u32),
+        plane: [u32; 2],
+        max_degree: u32,
+        channels: u32,
+        tile_size: u32,
+    ) -> Gpu {
+        let [keys, previous, bubbles, display, held] = texture_plans(
+            (width, height),
+            plane,
+            max_degree,
+            channels,
+            min_array_layers(device),
+        )
+        .map(|d| device.create_texture(&d));
+        let display_view = display.create_view(&Default::default());
+        let held_view = held.create_view(&Default::default());
+        let array_view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let keys_view = array_view(&keys);
+        let bubble_view = array_view(&bubbles);
+        let previous_view = array_view(&previous);
+        let ranges = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim previous keyframe ranges"),
+            size: range_bytes(plane, channels).max(8),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let key_views = (0..channels)
+            .map(|l| {
+                keys.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: l,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vbim params"),
+            contents: bytemuck::bytes_of(&Params::zeroed_params()),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+        let mut t = Tables {
+            basis: [0.0; 64],
+            zigzag: [0; 64],
+            row_max: [0.0; 8],
+        };
+        for (k, row) in vbim_format::dct::basis().iter().enumerate() {
+            t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
+        }
+        for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
+            t.zigzag[i] = z as u32;
+        }
+        for (m, row) in t.row_max.iter_mut().zip(vbim_format::dct::basis()) {
+            *m = row.iter().fold(0f32, |m, &v| m.max(v.abs()));
+        }
+        let tables = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vbim dct tables"),
+            contents: bytemuck::bytes_of(&t),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty,
+            count: None,
+        };
+        let uniform = |dynamic| wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        };
+        let storage = |read_only| wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        use wgpu::TextureViewDimension::{D2Array, D2};
+        let sampled = |sample_type, view_dimension| wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension,
+            multisampled: false,
+        };
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim reconstruct"),
+            entries: &[
+                entry(0, uniform(false)),
+                entry(
+                    1,
+                    sampled(
+                        wgpu::TextureSampleType::Float { filterable: false },
+                        D2Array,
+                    ),
+                ),
+                entry(2, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+                entry(3, sampled(wgpu::TextureSampleType::Uint, D2)),
+                entry(
+                    4,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::Rgba16Float,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                ),
+                entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+                entry(6, storage(true)),
+                entry(9, storage(true)),
+            ],
+        });
+        let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim hold"),
+            entries: &[
+                entry(
+                    7,
+                    sampled(wgpu::TextureSampleType::Float { filterable: false }, D2),
+                ),
+                entry(
+                    8,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::R32Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                ),
+            ],
+        });
+        let words_entry = entry(2, storage(true));
+        let planes16 = entry(
+            4,
+            wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::R32Uint,
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+            },
+        );
+        let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim keyframe decode"),
+            entries: &[
+                entry(0, uniform(true)),
+                entry(1, uniform(false)),
+                words_entry,
+                entry(
+                    3,
+                    wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::ReadWrite,
+                        format: wgpu::TextureFormat::R32Float,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                ),
+                planes16,
+                entry(5, storage(false)),
+                entry(6, storage(true)),
+                entry(7, storage(true)),
+                entry(10, storage(true)),
+            ],
+        });
+        let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim bubble decode"),
+            entries: &[
+                entry(0, uniform(true)),
+                entry(1, uniform(false)),
+                words_entry,
+                planes16,
+                entry(6, storage(true)),
+                entry(7, storage(true)),
+                entry(8, storage(false)),
+                entry(10, storage(true)),
+            ],
+        });
+        let parse_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim parse"),
+            entries: &[
+                entry(0, uniform(true)),
+                words_entry,
+                entry(6, storage(false)),
+                entry(7, storage(false)),
+                entry(10, storage(false)),
+            ],
+        });
+        let pipeline_for =
+            |label: &str, source: &str, layout: &wgpu::BindGroupLayout, entry: &str| {
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(label),
+                    source: wgpu::ShaderSource::Wgsl(source.into()),
+                });
+                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some(label),
+                    bind_group_layouts: &[Some(layout)],
+                    immediate_size: 0,
+                });
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(label),
+                    layout: Some(&layout),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+            };
+        let decode = &decode_source(include_str!("decode.wgsl"));
+        let parse_source = &decode_source(include_str!("parse.wgsl"));
+        let pipeline = pipeline_for(
+            "vbim reconstruct",
+            include_str!("reconstruct.wgsl"),
+            &bgl,
+            "main",
+        );
+        let hold = pipeline_for(
+            "vbim hold",
+            include_str!("reconstruct.wgsl"),
+            &hold_layout,
+            "hold",
+        );
+        let hold_group = hold_group(device, &hold_layout, &display_view, &held_view);
+        let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
+        let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
+        let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
+        let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
+        let bubble_bound =
+            pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
+        let bubble_write =
+            pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
+        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
+        let buffer = |label: &str, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as B;
+        let part = part_blocks(plane);
+        let coefs = buffer("vbim dense coefficients", part as u64 * 256, B::STORAGE);
+        let masks = buffer(
+            "vbim coefficient masks and sets",
+            mask_bytes(part),
+            B::STORAGE | B::COPY_DST,
+        );
+        // (COPY_SRC: tests read it back.)
+        let bounds = buffer(
+            "vbim bubble bounds",
+            BOUND_BYTES,
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+        );
+        let bind_group = reconstruct_group(
+            device,
+            &bgl,
+            [
+                &keys_view,
+                &bubble_view,
+                &held_view,
+                &display_view,
+                &previous_view,
+            ],
+            [&ranges, &bounds],
+            &params,
+        );
+        let jobs = buffer(
+            "vbim decode jobs",
+            64 * JOB_STRIDE,
+            B::UNIFORM | B::COPY_DST,
+        );
+        let words = buffer("vbim coefficients", grown(0), B::STORAGE | B::COPY_DST);
+        let mut gpu = Gpu {
+            device: device.clone(),
+            queue: queue.clone(),
+            pipeline,
+            hold,
+            hold_layout,
+            hold_group,
+            parse,
+            key_add,
+            key_zero,
+            key_pack,
+            bubble_bound,
+            bubble_write,
+            bubble_zero,
+            key_layout,
+            bubble_layout,
+            parse_layout,
+            params,
+            tables,
+            jobs,
+            words,
+            coefs,
+            masks,
+            part,
+            bounds,
+            keys,
+            key_views,
+            previous,
+            previous_view,
+            ranges,
+            regions: regions(plane),
+            bubbles,
+            bubble_view,
+            display,
+            display_view,
+            held,
+            bind_group,
+            reconstruct_layout: bgl,
+            keys_view,
+            held_view,
+            output: None,
+            key_groups: Vec::new(),
+            bubble_group: None,
+            parse_group: None,
+            job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
+            first_job: Vec::with_capacity(64),
+            #[cfg(feature = "bench")]
+            marks: None,
+            width,
+            height,
+            plane,
+            channels,
+            per: tile_size / 8,
+            tiles_x: plane[0] / tile_size,
+        };
+        gpu.bind_decode();
+        gpu
+    }
+
+    /// (Re)makes the decode passes' bind groups over the current `jobs` and `words`.
+    pub(super) fn bind_decode(&mut self) {
+        let job = wgpu::BufferBinding {
+            buffer: &self.jobs,
+            offset: 0,
+            size: wgpu::BufferSize::new(std::mem::size_of::<Job>() as u64),
+        };
+        // The job, the streams and the dense plane, then the layout's own bindings.
+        let group = |layout: &wgpu::BindGroupLayout, more: &[wgpu::BindGroupEntry]| {
+            let mut entries = vec![
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(job.clone()),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.words.as_entire_binding(),
+                },
+            ];
+            entries.extend_from_slice(more);
+            entries.push(wgpu::BindGroupEntry {
+                binding: 6,
+                resource: self.coefs.as_entire_binding(),
+            });
+            let sets = groups_offset(self.part);
+            entries.push(wgpu::BindGroupEntry {
+                binding: 7,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &self.masks,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(self.part as u64 * 8),
+                }),
+            });
+            entries.push(wgpu::BindGroupEntry {
+                binding: 10,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &self.masks,
+                    offset: sets,
+                    size: wgpu::BufferSize::new(group_bytes(self.part)),
+                }),
+            });
+            self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vbim decode"),
+                layout,
+                entries: &entries,
+            })
+        };
+        let view = |binding, v| wgpu::BindGroupEntry {
+            binding,
+            resource: wgpu::BindingResource::TextureView(v),
+        };
+        let tables = wgpu::BindGroupEntry {
+            binding: 1,
+            resource: self.tables.as_entire_binding(),
+        };
+        self.parse_group = Some(group(&self.parse_layout, &[]));
+        self.key_groups = self
+            .key_views
+            .iter()
+            .map(|v| {
+                let ranges = wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: self.ranges.as_entire_binding(),
+                };
+                group(
+                    &self.key_layout,
+                    &[
+                        tables.clone(),
+                        view(3, v),
+                        view(4, &self.previous_view),
+                        ranges,
+                    ],
+                )
+            })
+            .collect();
+        let bounds = wgpu::BindGroupEntry {
+            binding: 8,
+            resource: self.bounds.as_entire_binding(),
+        };
+        self.bubble_group = Some(group(
+            &self.bubble_layout,
+            &[tables.clone(), view(4, &self.bubble_view), bounds],
+        ));
+    }
+}
+
+/// The reconstruction's bind group: its parameters, then the head keyframe, bubble
+/// planes, held image, output and previous keyframe views, the previous keyframe's
+/// ranges and the bubble planes' bounds.
+pub(super) fn reconstruct_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    views: [&wgpu::TextureView; 5],
+    [ranges, bounds]: [&wgpu::Buffer; 2],
+    params: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    let mut entries = vec![wgpu::BindGroupEntry {
+        binding: 0,
+        resource: params.as_entire_binding(),
+    }];
+    for (i, v) in views.into_iter().enumerate() {
+        entries.push(wgpu::BindGroupEntry {
+            binding: i as u32 + 1,
+            resource: wgpu::BindingResource::TextureView(v),
+        });
+    }
+    entries.push(wgpu::BindGroupEntry {
+        binding: 6,
+        resource: ranges.as_entire_binding(),
+    });
+    entries.push(wgpu::BindGroupEntry {
+        binding: 9,
+        resource: bounds.as_entire_binding(),
+    });
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("vbim reconstruct"),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// The hold pass's bind group: what is on screen, and the held texture it packs it into.
+pub(super) fn hold_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    shown: &wgpu::TextureView,
+    held: &wgpu::TextureView,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("vbim hold"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 7,
+                resource: wgpu::BindingResource::TextureView(shown),
+            },
+            wgpu::BindGroupEntry {
+                binding: 8,
+                resource: wgpu::BindingResource::TextureView(held),
+            },
+        ],
+    })
+}

@@ -1,0 +1,304 @@
+//! The decode and hold passes on a real adapter, against the reference decoder.
+
+use super::plan::{lightmap_descriptor, REGION};
+use super::*;
+use crate::coded::Coded;
+use crate::decoder::SegmentData;
+use crate::readback::{read_buffer, read_texture_layer};
+
+use crate::coded::PlaneSpan;
+use crate::decoder::KeyStep;
+use vbim_format::chunk::Scanned;
+use vbim_format::plane::{self, Blocks, Onto, Plane};
+
+fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
+    let mut next = || {
+        *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        *seed >> 8
+    };
+    (0..n)
+        .map(|_| {
+            let mut q = [0i32; 64];
+            let density = [0, 0, 1, 1, 2, 9, 40][(next() % 7) as usize];
+            for _ in 0..density {
+                let v = (next() % 2001) as i32 - 1000;
+                q[(next() % 64) as usize] = if next() % 5 == 0 { v * 4001 } else { v / 100 };
+            }
+            q
+        })
+        .collect()
+}
+
+/// A stream of `blocks` scanned and appended to `c` (with `members`, as a bubble
+/// plane's).
+fn coded_plane(
+    c: &mut Coded,
+    step: f32,
+    blocks: &[[i32; 64]],
+    members: Option<(usize, &dyn Fn(usize) -> bool)>,
+) -> (PlaneSpan, Blocks) {
+    let mut raw = Vec::new();
+    plane::write_coefficients(blocks, &mut raw);
+    let mut entries = Vec::new();
+    vbim_format::chunk::scan(&raw, &mut 0, blocks.len(), &mut entries).unwrap();
+    let s = Scanned {
+        stream: &raw,
+        entries: &entries,
+        blocks: blocks.len(),
+    };
+    let mut parsed = Blocks::default();
+    plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
+    (c.push_plane(step, s, members), parsed)
+}
+
+/// Decodes one keyframe step (plane 0 of a one-channel stream) onto the head.
+fn decode_key_step(gpu: &mut Gpu, number: usize, span: PlaneSpan, data: Coded) {
+    let mut seg = SegmentData::new();
+    seg.steps = vec![KeyStep {
+        number,
+        intra: number == 0,
+        plane: 0,
+    }];
+    seg.planes = vec![span];
+    seg.bubbles = 1;
+    seg.data = data;
+    seg.layers = 2;
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    gpu.decode(&mut enc, &seg, false);
+    gpu.queue.submit([enc.finish()]);
+}
+
+/// The head keyframe's plane 0 matches `want` within 1e-5 of its peak.
+fn assert_head_matches(gpu: &Gpu, want: &Plane, part: Option<u32>) {
+    let raw = read_texture_layer(&gpu.device, &gpu.queue, &gpu.keys, 4, 0);
+    let got: &[f32] = bytemuck::cast_slice(&raw);
+    let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+    for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+        assert!(
+            (g - w).abs() <= 1e-5 * peak,
+            "parts {part:?}, texel {i}: GPU {g} against {w}"
+        );
+    }
+}
+
+/// A smooth plane whose DC repeats for hundreds of blocks: the scan cuts the runs into
+/// pieces of `FILL_BLOCKS`, each parsed by an invocation of its own, and the GPU's
+/// keyframe is the reference decoder's, in one part and in parts.
+#[test]
+fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph) = (512u32, 128u32);
+    let n = (pw as usize / 8) * (ph as usize / 8);
+    let blocks: Vec<[i32; 64]> = (0..n)
+        .map(|b| {
+            let mut q = [0i32; 64];
+            q[0] = if b < 600 { 40 } else { -9 };
+            if b % 97 == 0 {
+                q[3] = 5;
+            }
+            q
+        })
+        .collect();
+    for part in [None, Some(100)] {
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+        if let Some(p) = part {
+            gpu.part = p;
+            gpu.bind_decode();
+        }
+        let mut c = Coded::default();
+        let (span, parsed) = coded_plane(&mut c, 0.01, &blocks, None);
+        // One piece by the pairs, three more inside the two runs of 599 and 423
+        // blocks (every 256 blocks written).
+        assert_eq!(span.count, 4, "entry points");
+        let mut want = Plane::zeros(pw as usize, ph as usize);
+        let bw = pw as usize / 8;
+        let at = (0..n).map(|b| (b % bw, b / bw));
+        plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, 0.01);
+        decode_key_step(&mut gpu, 0, span, c);
+        assert_head_matches(&gpu, &want, part);
+    }
+}
+
+/// The keyframe passes on a real adapter: an intra keyframe, then a predicted one
+/// built on it, against the reference decoder's block kernel; the first, packed into
+/// the previous keyframe, within half a 16-bit step of its region's range. With the
+/// plane whole in the dense plane, and in parts of 7 blocks (as an 8192² plane goes
+/// in two).
+#[test]
+fn keyframe_passes_match_the_reference_kernel() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph) = (96u32, 32u32);
+    let (bw, bh) = (pw as usize / 8, ph as usize / 8);
+    for part in [None, Some(7)] {
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+        if let Some(p) = part {
+            gpu.part = p;
+            gpu.bind_decode();
+        }
+        let mut seed = 3;
+        let mut want = Plane::zeros(pw as usize, ph as usize);
+        let mut first = None;
+        for (n, step) in [(0usize, 0.01f32), (1, 0.002)] {
+            if n == 1 {
+                first = Some(want.clone());
+            }
+            let blocks = random_blocks(bw * bh, &mut seed);
+            let mut c = Coded::default();
+            let (span, parsed) = coded_plane(&mut c, step, &blocks, None);
+            let at = (0..bh).flat_map(|y| (0..bw).map(move |x| (x, y)));
+            plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
+            decode_key_step(&mut gpu, n, span, c);
+        }
+        assert_head_matches(&gpu, &want, part);
+        // The previous keyframe: 16-bit steps of each 32² region's range.
+        let first = first.expect("two steps");
+        let raw = read_texture_layer(&device, &queue, &gpu.previous, 4, 0);
+        let q: &[u16] = bytemuck::cast_slice(&raw);
+        let (w, rs) = (pw as usize, REGION as usize);
+        for ry in 0..(ph as usize).div_ceil(rs) {
+            for rx in 0..w.div_ceil(rs) {
+                let at = |i: usize| (ry * rs + i / rs, rx * rs + i % rs);
+                let inside = (0..rs * rs)
+                    .map(at)
+                    .filter(|&(y, x)| y < ph as usize && x < w);
+                let vals: Vec<f32> = inside.clone().map(|(y, x)| first.data[y * w + x]).collect();
+                let lo = vals.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+                let hi = vals.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+                let step = (hi - lo) / 65535.0;
+                for ((y, x), v) in inside.zip(vals) {
+                    let g = lo + q[y * w + x] as f32 * step;
+                    assert!(
+                        (g - v).abs() <= 0.5001 * step + 1e-6 * hi.abs().max(lo.abs()),
+                        "previous keyframe at ({x}, {y}): {g} against {v} (step {step})"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The bubble passes: a plane whose tiles of columns 2–3 are not members, written as
+/// 16-bit integers times the scale its bound gives, zeros outside its tiles; the
+/// bound within 3× of the plane's peak. Whole and in parts of 7 blocks.
+#[test]
+fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph, ts) = (96u32, 32u32, 16usize);
+    let tiles_x = pw as usize / ts;
+    let tiles = tiles_x * (ph as usize / ts);
+    let member = |t: usize| !(2..4).contains(&(t % tiles_x));
+    let members = (0..tiles).filter(|&t| member(t)).count();
+    let per2 = (ts / 8) * (ts / 8);
+    let blocks = random_blocks(members * per2, &mut 11);
+    let step = 0.004;
+    for part in [None, Some(7)] {
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, ts as u32);
+        if let Some(p) = part {
+            gpu.part = p;
+            gpu.bind_decode();
+        }
+        let mut c = Coded::default();
+        // A keyframe plane before it, so that the bubble plane's offsets are not 0.
+        coded_plane(&mut c, 1.0, &random_blocks(4, &mut 5), None);
+        let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, &member)));
+        let mut want = Plane::zeros(pw as usize, ph as usize);
+        for (rank, t) in (0..tiles).filter(|&t| member(t)).enumerate() {
+            let at = plane::tile_blocks(t, tiles_x, ts);
+            plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, rank * per2, step);
+        }
+        let mut seg = SegmentData::new();
+        seg.steps = Vec::new();
+        seg.planes = vec![span, span];
+        seg.bubbles = 1;
+        seg.data = c;
+        seg.layers = 3;
+        let mut enc = device.create_command_encoder(&Default::default());
+        gpu.decode(&mut enc, &seg, true);
+        queue.submit([enc.finish()]);
+
+        let bound =
+            bytemuck::cast_slice::<u8, f32>(&read_buffer(&device, &queue, &gpu.bounds))[0] * step;
+        let scale = bound * (1.0 + 1e-3) / 32767.0;
+        let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+        assert!(
+            bound >= peak && bound < 3.0 * peak,
+            "parts {part:?}: bound {bound} for a peak of {peak}"
+        );
+        let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
+        let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
+            .iter()
+            .map(|&q| q as f32 * scale)
+            .collect();
+        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+            assert!(
+                (g - w).abs() <= 0.5001 * scale,
+                "parts {part:?}, texel {i}: GPU {g} against {w} (scale {scale})"
+            );
+        }
+    }
+}
+
+/// The held image: what is on screen, packed by the hold pass and read back through
+/// a blend at its start (alpha 0), is within a 9-bit step of the texel's largest
+/// channel (and the output's half-float rounding), from zero to beyond RGB9E5's range.
+#[test]
+fn the_held_image_keeps_nine_bits_of_each_texels_largest_channel() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (w, h) = (16u32, 8u32);
+    let mut gpu = Gpu::new(&device, &queue, (w, h), [w, h], 2, 3, 8);
+    use wgpu::TextureUsages as U;
+    let screen = device.create_texture(&lightmap_descriptor(
+        w,
+        h,
+        U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC | U::COPY_DST,
+    ));
+    let texels = (w * h) as usize;
+    let want: Vec<[f32; 3]> = (0..texels)
+        .map(|i| {
+            let big = 2f32.powf(i as f32 * 0.37 - 20.0);
+            [
+                big,
+                big * ((i % 5) as f32 / 7.0),
+                big * 1e-3 * (i % 3) as f32,
+            ]
+        })
+        .collect();
+    let raw: Vec<half::f16> = want
+        .iter()
+        .flat_map(|c| [c[0], c[1], c[2], 1.0].map(half::f16::from_f32))
+        .collect();
+    queue.write_texture(
+        screen.as_image_copy(),
+        bytemuck::cast_slice(&raw),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(w * 8),
+            rows_per_image: Some(h),
+        },
+        screen.size(),
+    );
+    let on_screen: Vec<f32> = raw.iter().map(|v| v.to_f32()).collect();
+    gpu.set_output(Some(&screen)).unwrap();
+    let mut params = Params::zeroed_params();
+    params.size = [w, h];
+    params.channels = 3;
+    params.blend = 1;
+    params.alpha = 0.0;
+    let mut enc = device.create_command_encoder(&Default::default());
+    gpu.reconstruct(&mut enc, &params, true);
+    queue.submit([enc.finish()]);
+    let got = gpu.read_display();
+    for i in 0..texels {
+        let (g, s) = (&got[i * 4..i * 4 + 3], &on_screen[i * 4..i * 4 + 3]);
+        let peak = s.iter().fold(0f32, |m, v| m.max(*v)).min(65408.0);
+        for c in 0..3 {
+            let tol = peak / 512.0 + s[c].min(65408.0) / 1024.0 + 1e-7;
+            assert!(
+                (g[c] - s[c].min(65408.0)).abs() <= tol,
+                "texel {i} channel {c}: held {} against {} on screen",
+                g[c],
+                s[c]
+            );
+        }
+    }
+}
