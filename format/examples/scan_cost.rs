@@ -11,9 +11,9 @@ use std::io::BufReader;
 use std::time::Instant;
 
 use vbim_format::chunk::{self, CoeffReader};
+use vbim_format::chunk::{scan, ENTRY_PAIRS};
 use vbim_format::dct::N;
 use vbim_format::plane::{read_blocks, Blocks};
-use vbim_format::scan::{scan, ENTRY_PAIRS};
 use vbim_format::{ChunkKind, Reader};
 
 /// A raw stream and the blocks of each of its planes.

@@ -12,7 +12,7 @@ use std::io::BufReader;
 use vbim_format::chunk::{self, CoeffReader};
 use vbim_format::dct::N;
 use vbim_format::plane::{read_blocks, write_coefficients, Blocks};
-use vbim_format::{varint, ChunkKind, Reader};
+use vbim_format::{ChunkKind, Reader};
 
 /// zstd level of the default preset.
 const LEVEL: i32 = 9;
@@ -70,7 +70,7 @@ fn write_plane(blocks: &[[i32; N * N]], slice: isize, out: &mut Vec<u8>) {
 /// Independently parseable pieces, after a LEB128 table of their lengths.
 fn write_parts(parts: Vec<Vec<u8>>, out: &mut Vec<u8>) {
     for p in &parts {
-        varint::put_u32(out, p.len() as u32);
+        put_leb128(out, p.len() as u32);
     }
     for p in parts {
         out.extend(p);
@@ -160,4 +160,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// An unsigned LEB128 varint (the slice-length table's coding).
+fn put_leb128(out: &mut Vec<u8>, mut u: u32) {
+    while u >= 0x80 {
+        out.push(u as u8 | 0x80);
+        u >>= 7;
+    }
+    out.push(u as u8);
 }

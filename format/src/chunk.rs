@@ -7,6 +7,7 @@ use crate::header::Header;
 use crate::limits::payload_bound;
 use crate::plane::{self, Onto, Plane};
 use crate::scan;
+pub use crate::scan::{scan, EntryPoint, ENTRY_PAIRS, FILL_BLOCKS};
 use crate::{FormatError, Result};
 
 /// Keyframe mode byte: coded on its own.

@@ -2,38 +2,57 @@
 //!
 //! A file is a fixed-size [`Header`], an index of chunks ([`IndexEntry`]) and the chunks
 //! themselves, in playback order. `docs/FORMAT.md` specifies every byte; this crate is the
-//! executable version of that document. It also holds everything both sides must agree on
-//! bit for bit: the temporal basis ([`basis`]), the coding curves ([`curve`]), the colour
-//! transform ([`color`]), the spatial transform and plane coding ([`plane`]), and the CPU
-//! reference decoder ([`decode`]) that the GPU reconstruction is tested against.
+//! executable version of that document.
+//!
+//! - **Reading and writing a file**: [`Reader`] (header, index, checksummed chunks, with
+//!   [`Limits`] counted before anything is allocated), [`Writer`], [`Header`] and its
+//!   parts, [`ChunkKind`], [`FormatError`].
+//! - **What both sides must agree on bit for bit**, one module each: the temporal basis
+//!   ([`basis`]), the coding curves ([`curve`]), the colour transform ([`color`]), the 8×8
+//!   transform ([`dct`]), plane coding ([`plane`]), chunk payloads ([`chunk`], with the
+//!   entry points a parallel parser starts from), the index's flags ([`index`]), the
+//!   buffer model ([`buffer_model`]), the format's bounds ([`limits`]), the error metrics
+//!   ([`metrics`]), and the CPU reference decoder ([`decode`]) that the GPU reconstruction
+//!   is tested against.
+//! - **Hostile input**: with the `fuzz` feature, [`fuzz`](crate#features) holds the fuzz
+//!   targets' bodies, which `cargo test` also replays on the saved corpus.
 //!
 //! No threads, no GPU and no I/O beyond `Read`/`Write`/`Seek`.
+//!
+//! # Features
+//! - `fuzz`: the module `fuzz`, entry points for the fuzz targets (`fuzz/`) and the
+//!   tests that replay their corpus.
 #![deny(missing_docs)]
 
 pub mod basis;
 pub mod buffer_model;
-pub mod checksum;
+mod checksum;
 pub mod chunk;
 pub mod color;
 pub mod curve;
 pub mod dct;
 pub mod decode;
 mod error;
+#[cfg(feature = "fuzz")]
 pub mod fuzz;
-pub mod header;
+mod header;
 pub mod index;
 pub mod limits;
-pub mod memory;
+mod memory;
 pub mod metrics;
 pub mod plane;
-pub mod reader;
-pub mod scan;
-pub mod varint;
-pub mod writer;
+mod reader;
+mod scan;
+mod varint;
+mod writer;
 
+pub use checksum::xxh3;
 pub use error::{FormatError, Result};
-pub use header::{ColorEncoding, Header, ReadAhead, Transfer, MAGIC, VERSION_MAJOR, VERSION_MINOR};
+pub use header::{
+    ColorEncoding, Header, ReadAhead, Transfer, HEADER_SIZE, MAGIC, READ_AHEAD_POINTS,
+    VERSION_MAJOR, VERSION_MINOR,
+};
 pub use index::{ChunkKind, IndexEntry};
-pub use memory::Limits;
-pub use reader::Reader;
-pub use writer::Writer;
+pub use memory::{decoder_memory, largest_payload, Limits};
+pub use reader::{verify_chunk, Reader};
+pub use writer::{rewrite, Writer};

@@ -15,7 +15,7 @@
 //! In the DC range a zero run means "the same DC again" for every block it passes, and a
 //! parser writes that DC into each of them. On a smooth plane one run can pass the whole
 //! plane: a million blocks at 8192², which one GPU invocation took half a second to write
-//! (BENCHMARKS.md, session 20). So the scan also starts a piece inside such a run every
+//! (BENCHMARKS.md, "On a hardware GPU"). So the scan also starts a piece inside such a run every
 //! [`FILL_BLOCKS`] blocks: a piece starts filling at its entry's `from` and stops where
 //! the next piece starts filling, and no piece fills more than [`FILL_BLOCKS`] blocks.
 

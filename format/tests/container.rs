@@ -5,10 +5,10 @@ use std::io::Cursor;
 
 use vbim_format::chunk::{self, TileMap, MODE_INTRA, MODE_PREDICTED};
 use vbim_format::decode::{Decoder, Output};
-use vbim_format::header::{ReadAhead, HEADER_SIZE, READ_AHEAD_POINTS};
 use vbim_format::index::{FLAG_INTRA, FLAG_OPTIONAL};
 use vbim_format::plane::{self, Plane};
 use vbim_format::{ChunkKind, ColorEncoding, FormatError, Header, Reader, Transfer, Writer};
+use vbim_format::{ReadAhead, HEADER_SIZE, READ_AHEAD_POINTS};
 
 fn header(frames: u32, segments: u32, looping: bool) -> Header {
     Header {
@@ -349,7 +349,7 @@ fn hostile_index_entries_are_refused() {
                 x.write(&mut raw);
             }
             let mut hh = h.clone();
-            hh.index_checksum = vbim_format::checksum::xxh3(&raw);
+            hh.index_checksum = vbim_format::xxh3(&raw);
             let mut bad = bytes.clone();
             let head = hh.to_bytes();
             let at = hh.index_offset as usize;
