@@ -8,7 +8,6 @@
 //!   sky = D + D · (1 / (1 − C (1 − I/π)) − 1) · W + A · W           (paper 000, Eq. 5)
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
 use crate::clouds::CloudLayer;
 use crate::heightfield::HeightField;
@@ -17,6 +16,7 @@ use crate::obscurance;
 use crate::scene::Scene;
 use crate::sky::{sector_centre, SkyVisibility, SECTORS};
 use crate::sun::{sun_at, SkyModel, SunState};
+use crate::FrameInfo;
 
 /// Everything about the terrain that does not change over the day.
 pub struct Precomputed {
@@ -69,25 +69,6 @@ impl Precomputed {
 }
 
 /// What the manifest records about each frame.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct FrameInfo {
-    pub index: usize,
-    /// Local solar time, hours.
-    pub hours: f64,
-    pub sun_elevation_deg: f64,
-    pub sun_azimuth_deg: f64,
-    /// Unit vector towards the sun, map frame (x east, y south, z up).
-    pub sun_dir: [f64; 3],
-    /// Texel value of the direct sun at normal incidence (after the atmosphere), RGB.
-    pub sun_color: [f64; 3],
-    /// Sky radiance at the zenith and on the sun's side of the horizon, RGB, texel units.
-    pub sky_color: [f64; 3],
-    pub sky_horizon_sun_side: [f64; 3],
-    /// Largest green value of the frame (for the 8-bit export's exposure).
-    pub max_green: f32,
-}
-
 pub fn frame_time(scene: &Scene, i: usize) -> f64 {
     24.0 * i as f64 / scene.frames as f64
 }

@@ -1,120 +1,31 @@
-//! The bake's manifest (`manifest.json` beside the frames, and the metadata chunk of a
-//! `.vbim` encoded from them): what a sequence of frames is. The bake writes it; the
-//! encoder's input, `vbim decode`, `play` and `compare`, and the scene's sky read it —
-//! all through this one type, never by string key.
-//!
-//! Reading is lenient: a manifest written by another tool may lack any field (each
-//! defaults to absent or empty), so that what it does say is still used.
+//! The manifest of a bake ([`Manifest::of_bake`]'s counterpart in the shared type
+//! [`vbim_files::Manifest`]): what the bake writes beside its frames.
 
-use std::path::{Path, PathBuf};
+use vbim_files::{frame_name, FrameFormat, FrameInfo, Manifest};
 
-use serde::{Deserialize, Serialize};
-
-use crate::light::FrameInfo;
-use crate::output::{frame_name, write_text, FrameFormat};
 use crate::scene::Scene;
-use crate::BakeError;
 
-/// What a baked sequence is: its shape, timing, units, and each frame's sun and sky.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Manifest {
-    /// The program that wrote it.
-    pub generator: String,
-    /// The scene file's settings the bake ran with.
-    pub scene: Option<serde_json::Value>,
-    /// Frame width, texels.
-    pub width: usize,
-    /// Frame height, texels.
-    pub height: usize,
-    /// Frames in the day.
-    pub frames: usize,
-    /// Media frame rate as a rational (`24/1`, `1/6`).
-    pub fps: Option<String>,
-    /// Whether the day loops (frame N−1 is followed by frame 0).
-    pub looping: bool,
-    /// How the frames are stored.
-    pub format: Option<FrameFormat>,
-    /// What a texel holds (docs/CONVENTIONS.md).
-    pub units: String,
-    /// The 8-bit export curve's exposure e = 1.5 / median of per-frame max green.
-    pub exposure: Option<f32>,
-    /// 16-bit PNG frames: stored value = linear × this scale.
-    pub png16_scale: Option<f32>,
-    /// The frame files, in order.
-    pub files: Vec<String>,
-    /// Each frame's sun and sky.
-    pub per_frame: Vec<FrameInfo>,
-}
-
-impl Manifest {
-    /// The manifest's file name beside the frames.
-    pub const FILE_NAME: &'static str = "manifest.json";
-
-    /// The manifest of a bake of `scene` into `format` frames.
-    pub fn of_bake(
-        scene: &Scene,
-        format: FrameFormat,
-        exposure: f32,
-        png16_scale: Option<f32>,
-        per_frame: &[FrameInfo],
-    ) -> Manifest {
-        Manifest {
-            generator: concat!("vbim-bake ", env!("CARGO_PKG_VERSION")).into(),
-            scene: Some(serde_json::to_value(scene).expect("a scene serialises")),
-            width: scene.size,
-            height: scene.size,
-            frames: scene.frames,
-            fps: Some(scene.fps.clone()),
-            looping: true,
-            format: Some(format),
-            units: "linear irradiance / π, RGB; noon sun on a flat open surface ≈ 1".into(),
-            exposure: Some(exposure),
-            png16_scale,
-            files: (0..scene.frames).map(|i| frame_name(i, format)).collect(),
-            per_frame: per_frame.to_vec(),
-        }
-    }
-
-    /// Parses a manifest's JSON text.
-    pub fn parse(json: &str) -> Result<Manifest, String> {
-        serde_json::from_str(json).map_err(|e| format!("manifest: {e}"))
-    }
-
-    /// Reads the manifest at `path`.
-    pub fn read(path: &Path) -> Result<Manifest, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        Manifest::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
-    }
-
-    /// Writes it as `dir/manifest.json` (atomically); returns the path.
-    pub fn write(&self, dir: &Path) -> Result<PathBuf, BakeError> {
-        let path = dir.join(Self::FILE_NAME);
-        let text = serde_json::to_string_pretty(self).expect("a manifest serialises");
-        write_text(&path, &text)?;
-        Ok(path)
-    }
-
-    /// The sky colours of each frame: (zenith, horizon on the sun's side), RGB.
-    pub fn sky(&self) -> impl Iterator<Item = ([f32; 3], [f32; 3])> + '_ {
-        let f = |c: [f64; 3]| c.map(|v| v as f32);
-        self.per_frame
-            .iter()
-            .map(move |i| (f(i.sky_color), f(i.sky_horizon_sun_side)))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_sparse_manifest_still_gives_what_it_says() {
-        let m = Manifest::parse(r#"{"exposure": 2.5, "fps": "1/6", "other": 1}"#).unwrap();
-        assert_eq!(m.exposure, Some(2.5));
-        assert_eq!(m.fps.as_deref(), Some("1/6"));
-        assert_eq!(m.png16_scale, None);
-        assert!(m.per_frame.is_empty());
-        assert!(Manifest::parse("[1, 2]").is_err());
+/// The manifest of a bake of `scene` into `format` frames.
+pub fn of_bake(
+    scene: &Scene,
+    format: FrameFormat,
+    exposure: f32,
+    png16_scale: Option<f32>,
+    per_frame: &[FrameInfo],
+) -> Manifest {
+    Manifest {
+        generator: concat!("vbim-bake ", env!("CARGO_PKG_VERSION")).into(),
+        scene: Some(serde_json::to_value(scene).expect("a scene serialises")),
+        width: scene.size,
+        height: scene.size,
+        frames: scene.frames,
+        fps: Some(scene.fps.clone()),
+        looping: true,
+        format: Some(format),
+        units: "linear irradiance / π, RGB; noon sun on a flat open surface ≈ 1".into(),
+        exposure: Some(exposure),
+        png16_scale,
+        files: (0..scene.frames).map(|i| frame_name(i, format)).collect(),
+        per_frame: per_frame.to_vec(),
     }
 }

@@ -14,8 +14,10 @@ use crate::horizon::{azimuth, HorizonMap};
 /// Number of sky sectors whose radiance can differ (the sun-side glow is per sector).
 pub const SECTORS: usize = 8;
 
-/// Eq. 4's vector for a sector [a1, a2] with horizon at zenith angle `phi`.
-pub fn sector_vector(a1: f64, a2: f64, phi: f64) -> [f64; 3] {
+/// Eq. 4's vector for a sector [a1, a2] with horizon at zenith angle `phi`, as the paper
+/// writes it ([`Sector::visible`] is the same in the horizon's elevation; a test checks).
+#[cfg(test)]
+fn sector_vector(a1: f64, a2: f64, phi: f64) -> [f64; 3] {
     let t = phi - (2.0 * phi).sin() / 2.0;
     [
         0.5 * t * (a2.sin() - a1.sin()),
@@ -54,7 +56,8 @@ impl Sector {
 }
 
 /// N·V for the horizon elevation `beta` of the sector [a1, a2].
-pub fn visible(normal: &[f32; 3], a1: f64, a2: f64, beta: f64) -> f64 {
+#[cfg(test)]
+fn visible(normal: &[f32; 3], a1: f64, a2: f64, beta: f64) -> f64 {
     Sector::new(a1, a2).visible(normal, beta)
 }
 
@@ -124,5 +127,17 @@ mod tests {
             .map(|a| visible(&n, azimuth(a, k) - half, azimuth(a, k) + half, 0.0))
             .sum();
         assert!((i - std::f64::consts::PI).abs() < 1e-12, "{i}");
+    }
+
+    /// The sector's factored form is Eq. 4's vector dotted with the normal.
+    #[test]
+    fn the_factored_sector_is_eq_4() {
+        let n = [0.3f32, -0.2, 0.93];
+        for (a1, a2, beta) in [(0.0, 0.7, 0.1), (1.0, 1.4, -0.3), (-2.0, -1.2, 0.9)] {
+            let v = sector_vector(a1, a2, std::f64::consts::FRAC_PI_2 - beta);
+            let eq4: f64 = (0..3).map(|i| n[i] as f64 * v[i]).sum();
+            let got = Sector::new(a1, a2).visible(&n, beta);
+            assert!((eq4 - got).abs() < 1e-12, "{eq4} against {got}");
+        }
     }
 }

@@ -2,8 +2,8 @@
 
 use std::f64::consts::PI;
 
-use vbim_bake::light::{light_frame, light_with_sun, sun_visibility};
-use vbim_bake::sun::SunState;
+use vbim_bake::SunState;
+use vbim_bake::{light_frame, light_with_sun, sun_visibility};
 use vbim_bake::{HeightField, Precomputed, Scene};
 
 fn field(w: usize, h: usize, cell: f64, f: impl Fn(usize, usize) -> f32) -> HeightField {
@@ -65,7 +65,7 @@ fn without_albedo_the_sky_term_is_radiance_times_visibility() {
     let night = sun(-20.0, 0.0);
     let mut out = vec![0f32; 48 * 48 * 3];
     light_with_sun(&pre, &s, &night, 0, &mut out);
-    let l = vbim_bake::light::sky_model(&s).base(night.elevation);
+    let l = vbim_bake::sky_model(&s).base(night.elevation);
     for i in 0..48 * 48 {
         for c in 0..3 {
             let want = l[c] * pre.sky.total[i] as f64 / PI;

@@ -25,7 +25,7 @@ use crate::{EncodeError, EncoderConfig, FrameSource, MemorySource, Progress};
 
 /// Texels in a sample frame at most: an eighth of a 512² frame. (A quarter was measured
 /// to predict no better on the benchmark days, at a third more time; BENCHMARKS.md.)
-pub const SAMPLE_TEXELS: usize = 32_768;
+pub(crate) const SAMPLE_TEXELS: usize = 32_768;
 /// The sample takes one whole tile in this many, at most.
 const SAMPLE_SHARE: usize = 8;
 /// Memory the sample's frames may take, bytes (f32 values).
@@ -67,8 +67,9 @@ pub struct Aim {
     /// (the starting point's, plus what the aim added; empty: none), dB per frame.
     #[serde(skip)]
     pub frame_raise_db: Vec<f64>,
-    /// Frames the aim raised for the worst-frame floor, and the largest raise, dB.
+    /// Frames the aim raised for the worst-frame floor.
     pub raised_frames: usize,
+    /// The largest raise, dB.
     pub max_raise_db: f64,
     /// Every sample pass.
     pub passes: Vec<SamplePass>,
@@ -143,7 +144,7 @@ pub(crate) fn aim(
             ..cfg.clone()
         };
         let mut out = Cursor::new(Vec::new());
-        let mut rep = crate::encode_in_pool(source, &c, validated, &mut out, quiet)?;
+        let mut rep = crate::encode::encode_in_pool(source, &c, validated, &mut out, quiet)?;
         rep.verify_bytes(source, out.get_ref(), "the tolerance's sample", quiet)?;
         progress(
             "aim",
@@ -153,10 +154,10 @@ pub(crate) fn aim(
         Ok::<_, EncodeError>(SamplePass {
             internal_db: internal,
             round,
-            mean_db: rep.mean_psnr.unwrap_or(f64::INFINITY),
-            worst_db: rep.worst_psnr.unwrap_or(f64::INFINITY),
+            mean_db: rep.mean_psnr().unwrap_or(f64::INFINITY),
+            worst_db: rep.worst_psnr().unwrap_or(f64::INFINITY),
             bytes: rep.bytes,
-            frame_db: rep.frame_psnr,
+            frame_db: rep.measured.map(|m| m.frame_psnr).unwrap_or_default(),
         })
     };
     let mean = |p: &SamplePass| p.mean_db;

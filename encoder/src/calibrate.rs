@@ -10,12 +10,13 @@
 
 use std::path::Path;
 
-use vbim_bake::output::Temporary;
+use vbim_files::Temporary;
 
 use crate::secant::{next_tolerance, Pass};
 use crate::{encode_file, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
 
-/// Width of the accepted band above the tolerance, dB.
+/// Width of the band above the tolerance that [`encode_to_tolerance`] holds the measured
+/// mean PSNR in, dB: it delivers [T, T + `BAND_DB`].
 pub const BAND_DB: f64 = 0.5;
 /// Passes at most (the first is the plain encode).
 pub const MAX_PASSES: usize = 6;
@@ -74,12 +75,12 @@ pub fn encode_to_tolerance(
             if let Some(a) = &rep.aim {
                 raise = a.frame_raise_db.clone();
             }
-            let p = rep.mean_psnr.unwrap_or(f64::INFINITY);
+            let p = rep.mean_psnr().unwrap_or(f64::INFINITY);
             passes.push((rep.internal_tolerance_db, p, rep.bytes));
             let slot = if p >= target { &mut met } else { &mut missed };
             let better = slot.as_ref().is_none_or(|(r, _)| match p >= target {
                 true => rep.bytes < r.bytes,
-                false => p > r.mean_psnr.unwrap_or(0.0),
+                false => p > r.mean_psnr().unwrap_or(0.0),
             });
             if better {
                 if let Some((_, old)) = slot.take() {

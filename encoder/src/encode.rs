@@ -4,6 +4,7 @@
 //! search, and whole or a band of tile rows at a time for the model (module `plan`).
 
 use std::collections::BTreeMap;
+use std::io::{Seek, Write};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -22,7 +23,8 @@ use crate::output::{header_for, pack_metadata, PendingChunk};
 use crate::plan::Plan;
 use crate::segment::Search;
 use crate::{
-    ConfigError, EncodeError, EncoderConfig, FrameSource, InputKind, Progress, SegmentMode,
+    ConfigError, EncodeError, EncodeReport, EncoderConfig, FrameSource, InputKind, Progress,
+    SegmentMode,
 };
 
 /// Error budgets, as shares of the total RMS error the tolerance allows. They were set by
@@ -251,7 +253,7 @@ pub(crate) fn code_sequence(
 /// quantisation budgets of the keyframe at a frame and of the bubble planes of the segment
 /// around it; a segment takes the largest raise among its frames. The fit budget, which
 /// sets segment lengths, is left alone: tightening it too moved the worst frame less
-/// and erratically (shorter segments, more keyframes; BENCHMARKS.md, session 19).
+/// and erratically (shorter segments, more keyframes; BENCHMARKS.md, "The worst-frame floor").
 struct Raise<'a> {
     db: &'a [f64],
 }
@@ -460,4 +462,44 @@ impl<'a> Window<'a> {
         self.full.retain(|&i, _| i >= b);
         self.sens_sq.retain(|&i, _| i >= b);
     }
+}
+
+/// One encode at `cfg`'s budget as it is (inside the worker pool). `validated`: the
+/// frames were checked already and this is the exposure to code them at (a sample must
+/// be measured as the whole sequence is).
+pub(crate) fn encode_in_pool<W: Write + Seek>(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    validated: Option<f32>,
+    out: W,
+    progress: Progress,
+) -> Result<EncodeReport, EncodeError> {
+    let t_start = std::time::Instant::now();
+    let coded = code_sequence(src, cfg, validated, progress)?;
+    write_coded(src, cfg, coded, out, t_start)
+}
+
+/// Writes a coded sequence and reports on it.
+pub(crate) fn write_coded<W: Write + Seek>(
+    src: &dyn FrameSource,
+    cfg: &EncoderConfig,
+    coded: Coded,
+    out: W,
+    t_start: std::time::Instant,
+) -> Result<EncodeReport, EncodeError> {
+    let header = crate::output::write_chunks(out, coded.header, &coded.chunks)?;
+    let mut rep = EncodeReport::new(
+        src,
+        cfg,
+        &header,
+        &coded.boundaries,
+        &coded.tilemaps,
+        coded.started.elapsed().as_secs_f64(),
+        t_start.elapsed().as_secs_f64(),
+        coded.metric,
+    );
+    rep.intra_keyframes = coded.intra_keyframes;
+    rep.band_tiles = (!coded.plan.whole).then_some(coded.plan.band_tiles);
+    rep.memory_estimate = coded.plan.estimate;
+    Ok(rep)
 }

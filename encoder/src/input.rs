@@ -5,7 +5,7 @@
 mod band_read;
 
 use std::path::{Path, PathBuf};
-use vbim_bake::Manifest;
+use vbim_files::Manifest;
 
 use crate::EncodeError;
 
@@ -18,11 +18,17 @@ pub enum InputKind {
     Srgb8,
 }
 
+/// A sequence of frame files (a directory, a glob or a `%04d` pattern), opened: the files in
+/// order and the shape every one of them must have.
 #[derive(Clone, Debug)]
 pub struct FrameSet {
+    /// The frame files, in order.
     pub paths: Vec<PathBuf>,
+    /// What the files hold.
     pub kind: InputKind,
+    /// Frame width, texels.
     pub width: usize,
+    /// Frame height, texels.
     pub height: usize,
     /// 1 (Y) or 3 (RGB).
     pub channels: usize,
@@ -181,10 +187,15 @@ fn printf_pattern(spec: &str) -> Result<Option<Vec<PathBuf>>, EncodeError> {
 
 /// One decoded input frame: interleaved channels, linear (HDR) or code / 255 (8-bit).
 pub struct Frame {
+    /// Width, texels.
     pub width: usize,
+    /// Height, texels.
     pub height: usize,
+    /// Channels per texel: 1 (Y) or 3 (RGB).
     pub channels: usize,
+    /// What the file held.
     pub kind: InputKind,
+    /// The values, row by row, channels interleaved.
     pub data: Vec<f32>,
 }
 
@@ -328,9 +339,12 @@ impl FrameSet {
         })
     }
 
+    /// Frames in the sequence.
     pub fn len(&self) -> usize {
         self.paths.len()
     }
+
+    /// Whether it has no frame.
     pub fn is_empty(&self) -> bool {
         self.paths.is_empty()
     }
@@ -347,10 +361,15 @@ impl FrameSet {
 /// The shape of a sequence.
 #[derive(Clone, Debug)]
 pub struct SourceInfo {
+    /// Frame width, texels.
     pub width: usize,
+    /// Frame height, texels.
     pub height: usize,
+    /// Channels per texel: 1 (Y) or 3 (RGB).
     pub channels: usize,
+    /// What the frames hold.
     pub kind: InputKind,
+    /// Frames in the sequence.
     pub frames: usize,
     /// What to call the sequence in messages.
     pub name: String,
@@ -358,6 +377,7 @@ pub struct SourceInfo {
 
 /// Anything the encoder can read frames from: files ([`FrameSet`]) or memory.
 pub trait FrameSource: Sync {
+    /// The sequence's shape.
     fn info(&self) -> SourceInfo;
     /// Frame `i`, interleaved; implementations check it with [`check`].
     fn read(&self, i: usize) -> Result<Frame, EncodeError>;
@@ -421,7 +441,9 @@ impl FrameSource for FrameSet {
 
 /// Frames held in memory (synthetic sequences, tests, other front ends).
 pub struct MemorySource {
+    /// The sequence's shape.
     pub info: SourceInfo,
+    /// Each frame's values, row by row, channels interleaved.
     pub frames: Vec<Vec<f32>>,
 }
 

@@ -7,8 +7,8 @@ use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
 use std::path::Path;
 
-use vbim_format::header::{ReadAhead, READ_AHEAD_POINTS};
 use vbim_format::{ChunkKind, ColorEncoding, Header, Transfer, Writer};
+use vbim_format::{ReadAhead, READ_AHEAD_POINTS};
 
 use crate::{EncodeError, EncoderConfig, SourceInfo};
 
@@ -89,7 +89,7 @@ pub(crate) fn write_chunks<W: Write + Seek>(
 }
 
 /// Runs `write` on a new file that replaces `out` atomically when `write` succeeds
-/// (`vbim_bake::output::write_atomic`); on failure `out` is untouched.
+/// (`vbim_files::write_atomic`); on failure `out` is untouched.
 pub(crate) fn write_atomic<T>(
     out: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> Result<T, EncodeError>,
@@ -98,7 +98,7 @@ pub(crate) fn write_atomic<T>(
         path: out.to_path_buf(),
         msg: e.to_string(),
     };
-    vbim_bake::output::write_atomic(
+    vbim_files::write_atomic(
         out,
         |tmp| {
             let mut buf = BufWriter::new(File::create(tmp).map_err(oerr)?);

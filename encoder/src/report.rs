@@ -12,19 +12,32 @@ use vbim_format::{ColorEncoding, Header, Reader};
 
 use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress};
 
+/// What an encode did, as data: the stream's size and rate, how long it took, the budget it
+/// was coded at (and how the aim found it), how the model spent its terms, and — once
+/// [`EncodeReport::verify`] has decoded the stream — its error against the input
+/// ([`Measured`]). `Display` prints it for people; serialised (JSON) it is the command's
+/// `--report`.
 #[derive(Clone, Debug, Serialize)]
 pub struct EncodeReport {
+    /// Frames encoded.
     pub frames: usize,
+    /// Frame width, texels.
     pub width: usize,
+    /// Frame height, texels.
     pub height: usize,
+    /// The stream's size, bytes.
     pub bytes: u64,
+    /// Bits per texel per frame.
     pub bpp: f64,
     /// Raw size (8-bit: 1 byte per value; HDR: half floats) over the file's size.
     pub ratio_to_raw: f64,
+    /// Seconds spent coding (the pass over the sequence).
     pub encode_s: f64,
+    /// Seconds in all, the aim's sample passes and the writing included.
     pub total_s: f64,
     /// Texel-frames encoded per second of encode time.
     pub texel_frames_per_s: f64,
+    /// The tolerance asked for: the mean PSNR to deliver, dB.
     pub tolerance_db: f64,
     /// The budget the kept encode used, dB (the tolerance itself without `aim`).
     pub internal_tolerance_db: f64,
@@ -32,44 +45,65 @@ pub struct EncodeReport {
     pub aim: Option<crate::Aim>,
     /// With `--exact`: every pass as (internal tolerance, delivered mean PSNR, bytes).
     pub calibration: Vec<(f64, f64, u64)>,
+    /// The highest polynomial degree in time a tile could take.
     pub max_degree: usize,
     /// Tiles × segments per luma degree (index = degree).
     pub degree_histogram: Vec<u64>,
+    /// Tiles × segments per chroma degree (index = degree).
     pub chroma_degree_histogram: Vec<u64>,
     /// Share of tiles with curvature (luma degree > 1) whose chroma is linear (LRGB).
     pub lrgb_share: f64,
+    /// Each segment's length, frames.
     pub segment_lengths: Vec<u32>,
+    /// Keyframes in the stream.
     pub keyframes: u32,
+    /// Of which intra (independently decodable).
     pub intra_keyframes: usize,
     /// Tile rows per band where the frames were coded a band at a time (the frames did
     /// not fit `memory_limit` whole); `None`: whole frames.
     pub band_tiles: Option<usize>,
     /// What the encode expected to hold at its peak, bytes (the plan's estimate).
     pub memory_estimate: u64,
-    /// Filled by [`EncodeReport::verify`].
-    pub mean_psnr: Option<f64>,
-    pub worst_psnr: Option<f64>,
-    pub worst_frame: Option<usize>,
-    /// Largest error on the metric's 0–1 scale.
-    pub max_abs_error: Option<f64>,
-    /// HDR: largest relative error over texels brighter than 1% of white.
-    pub max_rel_error: Option<f64>,
-    /// The 99.9th percentile of every value's error, in 8-bit levels of the metric.
-    pub p999_levels: Option<f64>,
-    /// Per-frame PSNR.
-    pub frame_psnr: Vec<f64>,
+    /// The stream's error against the input, once [`EncodeReport::verify`] has measured
+    /// it (its fields appear at the top level of the JSON).
+    #[serde(flatten)]
+    pub measured: Option<Measured>,
     /// Luma degree of every tile in every segment: `tile_degrees[segment][tile]`, tiles in
     /// raster order of a `tiles.0 × tiles.1` grid (left out of the JSON report).
     #[serde(skip)]
     pub tile_degrees: Vec<Vec<u8>>,
+    /// Tiles across and down.
     pub tiles: (usize, usize),
+    /// The metric the error is measured in (from the input's kind).
     #[serde(skip)]
-    pub metric: Metric,
+    pub(crate) metric: Metric,
+}
+
+/// A stream's error against its input, with the protocol's metrics (docs/CONVENTIONS.md):
+/// what [`EncodeReport::verify`] measures by decoding the stream with the reference
+/// decoder.
+#[derive(Clone, Debug, Serialize)]
+pub struct Measured {
+    /// Mean PSNR over the frames, dB.
+    pub mean_psnr: f64,
+    /// The worst frame's PSNR, dB.
+    pub worst_psnr: f64,
+    /// The worst frame's number.
+    pub worst_frame: usize,
+    /// Largest error on the metric's 0–1 scale.
+    pub max_abs_error: f64,
+    /// HDR: largest relative error over texels brighter than 1% of white.
+    pub max_rel_error: Option<f64>,
+    /// The 99.9th percentile of every value's error, in 8-bit levels of the metric.
+    pub p999_levels: f64,
+    /// Each frame's PSNR, dB.
+    pub frame_psnr: Vec<f64>,
 }
 
 impl EncodeReport {
+    /// The report of an encode whose stream has header `h`, before any measurement.
     #[allow(clippy::too_many_arguments)]
-    pub fn new(
+    pub(crate) fn new(
         src: &dyn FrameSource,
         cfg: &EncoderConfig,
         h: &Header,
@@ -130,13 +164,7 @@ impl EncodeReport {
             segment_lengths: boundaries.windows(2).map(|w| w[1] - w[0]).collect(),
             keyframes: h.keyframe_count,
             intra_keyframes: 0,
-            mean_psnr: None,
-            worst_psnr: None,
-            worst_frame: None,
-            max_abs_error: None,
-            p999_levels: None,
-            max_rel_error: None,
-            frame_psnr: Vec::new(),
+            measured: None,
             tile_degrees: tilemaps.iter().map(|t| t.luma.clone()).collect(),
             tiles: (
                 info.width.div_ceil(cfg.tile_size),
@@ -200,15 +228,27 @@ impl EncodeReport {
         Ok(())
     }
 
+    /// The mean PSNR measured, dB (`None` before [`EncodeReport::verify`]).
+    pub fn mean_psnr(&self) -> Option<f64> {
+        self.measured.as_ref().map(|m| m.mean_psnr)
+    }
+
+    /// The worst frame's PSNR measured, dB (`None` before [`EncodeReport::verify`]).
+    pub fn worst_psnr(&self) -> Option<f64> {
+        self.measured.as_ref().map(|m| m.worst_psnr)
+    }
+
     fn take(&mut self, seq: SequenceError) {
-        let (wf, wp) = seq.worst();
-        self.mean_psnr = Some(seq.mean_psnr());
-        self.worst_psnr = Some(wp);
-        self.worst_frame = Some(wf);
-        self.max_abs_error = Some(seq.max_abs());
-        self.p999_levels = Some(seq.p999_levels());
-        self.max_rel_error = matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel());
-        self.frame_psnr = seq.frames.iter().map(|f| f.psnr()).collect();
+        let (worst_frame, worst_psnr) = seq.worst();
+        self.measured = Some(Measured {
+            mean_psnr: seq.mean_psnr(),
+            worst_psnr,
+            worst_frame,
+            max_abs_error: seq.max_abs(),
+            max_rel_error: matches!(self.metric, Metric::Hdr { .. }).then(|| seq.max_rel()),
+            p999_levels: seq.p999_levels(),
+            frame_psnr: seq.frames.iter().map(|f| f.psnr()).collect(),
+        });
     }
 }
 
@@ -345,11 +385,12 @@ impl std::fmt::Display for EncodeReport {
             "size        {} bytes, {:.4} bpp, {:.1}× smaller than raw",
             self.bytes, self.bpp, self.ratio_to_raw
         )?;
-        if let (Some(m), Some(w), Some(wf)) = (self.mean_psnr, self.worst_psnr, self.worst_frame) {
-            let max = self.max_abs_error.unwrap_or(0.0) * 255.0;
-            let p999 = self.p999_levels.unwrap_or(0.0);
+        if let Some(e) = &self.measured {
+            let (m, w, wf) = (e.mean_psnr, e.worst_psnr, e.worst_frame);
+            let max = e.max_abs_error * 255.0;
+            let p999 = e.p999_levels;
             write!(f, "error       mean PSNR {m:.2} dB, worst frame {w:.2} dB (frame {wf}), largest error {max:.2} levels of 255 (p99.9 {p999:.3})")?;
-            if let Some(r) = self.max_rel_error {
+            if let Some(r) = e.max_rel_error {
                 write!(
                     f,
                     ", largest relative error {:.2}% (texels > 1% of white)",

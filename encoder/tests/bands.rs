@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use vbim_bake::output::{write_frame, FrameFormat};
+use vbim_bake::{write_frame, FrameFormat};
 use vbim_encoder::{encode_file, EncodeReport, EncoderConfig, FrameSet, Preset};
 
 const W: usize = 200;

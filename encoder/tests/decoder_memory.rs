@@ -1,5 +1,5 @@
 //! The CPU reference decoder stays within the memory its limit check counts
-//! (`vbim_format::memory::decoder_memory`), measured by a counting allocator while it
+//! (`vbim_format::decoder_memory`), measured by a counting allocator while it
 //! decodes every frame of a day, seeks included. (A test binary of its own: the counter
 //! sees every thread of the process.)
 
@@ -60,7 +60,7 @@ fn the_decoder_holds_no_more_than_its_limit_check_counts() {
     let open = || Reader::open(Cursor::new(bytes.clone())).unwrap();
     let reader = open();
     let h = reader.header().clone();
-    let bound = vbim_format::memory::decoder_memory(&h, reader.entries());
+    let bound = vbim_format::decoder_memory(&h, reader.entries());
     let mut out = vec![0f32; h.texel_count() * h.channels as usize];
     // Just under the bound is refused...
     let Err(e) = Decoder::with_limits(reader, Limits { memory: bound - 1 }) else {

@@ -290,7 +290,7 @@ fn the_aim_settles_on_exact_constant_and_single_frame_sequences() {
         rep.verify_bytes(src, &bytes, "memory", &|_, _, _| {})
             .unwrap();
         let a = rep.aim.as_ref().expect("the aim ran");
-        let p = rep.mean_psnr.unwrap();
+        let p = rep.mean_psnr().unwrap();
         assert!(p >= t - 0.5, "T {t}: {p:.2} dB; {a:?}");
         assert!(
             (10.0..=99.0).contains(&a.internal_db) && a.passes.len() <= 8,
