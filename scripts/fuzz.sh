@@ -6,7 +6,7 @@
 # starts from decode's seeds).
 # Checksums are made right before parsing (vbim_format::fuzz::with_checksums), so the
 # fuzzer reaches the semantic checks. A crash's input is copied into
-# fuzz/regressions/TARGET/, which `cargo test` replays; the script then fails. The last
+# fuzz/regressions/TARGET/, which `cargo test --workspace --all-features` replays; the script then fails. The last
 # line per target gives executions per second and coverage (libFuzzer's cov / ft).
 set -euo pipefail
 cd "$(dirname "$0")/.."

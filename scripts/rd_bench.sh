@@ -20,7 +20,7 @@ sample=${SAMPLE:-jacksboro}
 frames=${FRAMES:-240}
 anchors=${ANCHORS-x265 x264 av1}
 vbim=${VBIM:-target/release/vbim}
-[ -x "$vbim" ] || cargo build --release
+[ -n "${VBIM:-}" ] || cargo build --release --features bench  # the bench commands
 if ! command -v ffmpeg >/dev/null; then
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -q && apt-get install -y -q ffmpeg

@@ -13,7 +13,7 @@ set -euo pipefail
 out=${1:-out/runtime_cpu}
 runs=${2:-3}
 vbim=${VBIM:-target/release/vbim}
-[ -x "$vbim" ] || cargo build --release
+[ -n "${VBIM:-}" ] || cargo build --release --features bench  # the bench commands
 echo "| day | file | reader | decoder | reader + decoder (median of $runs) |"
 echo "|---|---:|---:|---:|---:|"
 for sample in jacksboro aletsch; do

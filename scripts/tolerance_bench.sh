@@ -19,7 +19,7 @@ vbim=${VBIM:-target/release/vbim}
 tols=${TOLERANCES:-38 41 44 45 47 50}
 plain_tols=${PLAIN_TOLERANCES:-38 45 50} # --no-aim only at these (it is the "before")
 modes=${MODES:-aim aim-mean no-aim}      # e.g. MODES=aim to measure the default alone
-[ -x "$vbim" ] || cargo build --release
+[ -n "${VBIM:-}" ] || cargo build --release --features bench  # the bench commands
 if ! command -v ffmpeg >/dev/null; then
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -q && apt-get install -y -q ffmpeg

@@ -1,45 +1,12 @@
-//! The command line: every option with its unit and default.
+//! The command line's arguments, command by command: every option with its unit and
+//! default (`main.rs` holds the list of commands).
 
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser};
 use vbim_player::Policy;
 
 use crate::units::{Bandwidth, Span, StallSpec};
-
-#[derive(Parser)]
-#[command(
-    name = "vbim",
-    version,
-    about = "Video-based illumination maps: bake, encode and stream day/night terrain lightmap sequences"
-)]
-pub struct Cli {
-    #[command(subcommand)]
-    pub command: Command,
-}
-
-#[derive(Subcommand)]
-pub enum Command {
-    /// Bake a day of terrain lightmaps from a scene file (samples/*.toml).
-    Bake(BakeArgs),
-    /// Encode a sequence of EXR/PNG frames into a .vbim file.
-    Encode(EncodeArgs),
-    /// Print a .vbim file's header, chunk index and model summary.
-    Inspect(InspectArgs),
-    /// Decode every frame of a .vbim file with the CPU reference decoder.
-    Decode(DecodeArgs),
-    /// Compare two sequences (directories, patterns or .vbim files) with the protocol's metrics.
-    Compare(CompareArgs),
-    /// Play a .vbim file through the GPU player: headless (simulated or real time) with a
-    /// summary of drift against bandwidth, or in a terrain scene (`--scene`).
-    Play(PlayArgs),
-    /// The whole job on the shipped sample: bake a day, encode it, play it in the terrain
-    /// scene under a bandwidth cap with stalls, and write frames, a preview, plots and a report.
-    Demo(DemoArgs),
-    /// Benchmarks (results go in BENCHMARKS.md).
-    #[command(subcommand)]
-    Bench(BenchCommand),
-}
 
 /// `vbim play` parsed on its own (see [`PlayArgs::headless`]).
 #[derive(Parser)]
@@ -175,232 +142,6 @@ pub struct DemoArgs {
     pub clouds: Option<bool>,
 }
 
-#[derive(Subcommand)]
-pub enum BenchCommand {
-    /// Time the baker: precomputation, per-frame lighting and file writing, apart.
-    Bake(BenchBakeArgs),
-    /// Time the player's decoder on a file: zstd alone, and the decoder's whole work (checks,
-    /// zstd, the scan for the GPU's entry points), as a share of one core at the file's frame rate.
-    Decode(BenchDecodeArgs),
-    /// Bytes of the protocol's lossless baseline: every frame's half-float RGB through zstd.
-    Lossless(BenchLosslessArgs),
-    /// Draw a rate–distortion CSV (method,setting,bytes,bpp,mean_psnr,…) as a PNG plot.
-    PlotRd(BenchPlotArgs),
-    /// Draw a tolerance CSV (sequence,mode,asked,delivered,…; scripts/tolerance_bench.sh):
-    /// the mean PSNR delivered minus the tolerance asked, against it, with the ±0.5 dB band.
-    PlotTolerance(BenchPlotArgs),
-    /// Draw a size CSV (size,detail,frames,bake_s,bake_peak_mb,encode_s,encode_peak_mb,…;
-    /// scripts/size_bench.sh): the bake's and the encoder's peak memory against the size.
-    PlotSize(BenchPlotArgs),
-    /// Sweep bandwidth caps from 0.25× to 2× the stream's mean rate under a stall pattern,
-    /// for each policy; drift and shown error against bandwidth (CSV + PNG).
-    Drift(BenchDriftArgs),
-    /// The render thread's CPU time per displayed frame (`advance`: plan + record + submit,
-    /// waiting for the GPU between frames so that its execution is not counted), and the
-    /// GPU time apart; real time, 60 Hz, reader and decoder on their own threads.
-    Render(BenchRenderArgs),
-    /// What the runtime costs as the lightmap grows: for each size, a day baked and encoded
-    /// (default preset, 24/1 fps), then played in a process of its own: file bytes, the
-    /// player's GPU memory and the process's peak per texel, bytes uploaded against bytes
-    /// read over a loop, the decoder's share of a core, render-thread CPU and GPU time per
-    /// frame. A table, `scale.csv` and three plots.
-    Scale(BenchScaleArgs),
-    /// One stream of `bench scale`, measured in this process (JSON on stdout).
-    #[command(hide = true)]
-    ScaleOne(BenchScaleOneArgs),
-    /// How much of the lightmap each displayed frame changes, at several media rates: the
-    /// share of tiles a player would have to re-evaluate, found with the reference decoder
-    /// (what re-evaluating only the tiles that change could save).
-    Changes(BenchChangesArgs),
-    /// What a context-adaptive entropy coder would make of the file's coefficient streams:
-    /// the ideal code length of an adaptive binary model (which an arithmetic coder
-    /// reaches within about 1%) against their bytes now (zstd of run/value pairs), by kind
-    /// of stream. Measures what a change of the format's entropy coding would buy.
-    Entropy(BenchEntropyArgs),
-}
-
-#[derive(Args)]
-pub struct BenchEntropyArgs {
-    /// The .vbim file.
-    pub file: PathBuf,
-    /// Cut every stream into substreams of this many blocks, each parsed on its own (its
-    /// probabilities learnt from scratch, no context from another): what parsing on the
-    /// GPU in parallel would cost (0: one substream per stream). Every chunk starts from
-    /// scratch in any case, so that a player can seek to it.
-    #[arg(long, default_value_t = 0)]
-    pub substream: usize,
-}
-
-#[derive(Args)]
-pub struct BenchChangesArgs {
-    /// The .vbim file.
-    pub file: PathBuf,
-    /// Media rates to play at, in frames per second (`1/6`: a frame every 6 seconds).
-    #[arg(long, default_value = "24,6,1,1/6", value_delimiter = ',', value_parser = crate::units::parse_rate)]
-    pub rates: Vec<(u32, u32)>,
-    /// The display's refresh rate.
-    #[arg(long, default_value_t = 60.0)]
-    pub display_hz: f64,
-    /// Displayed frames per phase.
-    #[arg(long, default_value_t = 120)]
-    pub shown: usize,
-    /// Starting points spread evenly over the day (night, sunrise, noon, sunset, …).
-    #[arg(long, default_value_t = 8)]
-    pub phases: usize,
-    /// A tile is re-evaluated when a texel of it would be further than this share of the
-    /// protocol's bound from the true value.
-    #[arg(long, default_value_t = 0.25)]
-    pub share: f64,
-}
-
-#[derive(Args)]
-pub struct BenchRenderArgs {
-    /// The .vbim file.
-    pub file: PathBuf,
-    /// Displayed frames measured per run.
-    #[arg(long, default_value_t = 600)]
-    pub frames: u64,
-    /// Runs (each a fresh player); the figures are the median over runs and their spread.
-    #[arg(long, default_value_t = 5)]
-    pub runs: usize,
-}
-
-#[derive(Args)]
-pub struct BenchScaleArgs {
-    /// Scene file.
-    #[arg(default_value = "samples/jacksboro.toml")]
-    pub scene: PathBuf,
-    /// Lightmap sizes, texels per side (a 64² stream is always measured as the baseline).
-    #[arg(long, default_value = "512,1024,2048", value_delimiter = ',')]
-    pub sizes: Vec<usize>,
-    /// Frames per day.
-    #[arg(long, default_value_t = 240)]
-    pub frames: usize,
-    /// Moving cloud shadows (the cloudy day is the harder one to stream).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
-    pub clouds: bool,
-    /// Fractal detail below the height field's resolution (`[detail]` in the scene): real
-    /// terrain at 2048² and up has it, and it costs 10–20× the bytes of a smooth blow-up,
-    /// so the runtime's figures should be taken on it too.
-    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
-    pub detail: bool,
-    /// Display rate while measuring, Hz (uploads do not depend on it; GPU time per
-    /// displayed frame does not either, but the run's length does).
-    #[arg(long, default_value_t = 24)]
-    pub display_hz: u32,
-    /// Directory for the streams (kept for the next run), the measurements
-    /// (`costs.json`), the CSV and the plots.
-    #[arg(short, long, default_value = "out/scale")]
-    pub out: PathBuf,
-    /// Only draw the table and plots again from `costs.json`.
-    #[arg(long)]
-    pub replot: bool,
-    /// The encoder's memory limit (SI: `10GB`; an 8192² day needs about 10GB).
-    #[arg(long = "encoder-memory-limit", default_value = "4GB", value_parser = crate::units::parse_memory_limit)]
-    pub encoder_limits: vbim_format::Limits,
-    // The player's, `--memory-limit` (an 8192² day needs about 4–5GB).
-    #[command(flatten)]
-    pub memory: MemoryArgs,
-}
-
-#[derive(Args)]
-pub struct BenchScaleOneArgs {
-    /// The .vbim file.
-    pub file: PathBuf,
-    /// Display rate, Hz.
-    #[arg(long, default_value_t = 24)]
-    pub display_hz: u32,
-    #[command(flatten)]
-    pub memory: MemoryArgs,
-}
-
-#[derive(Args)]
-pub struct BenchLosslessArgs {
-    /// Frames (directory, glob or pattern).
-    pub input: String,
-    /// zstd level.
-    #[arg(long, default_value_t = 3)]
-    pub level: i32,
-}
-
-#[derive(Args)]
-pub struct BenchPlotArgs {
-    /// The CSV written by scripts/rd_bench.sh (plot-rd), scripts/tolerance_bench.sh or scripts/size_bench.sh.
-    pub csv: PathBuf,
-    /// Output PNG.
-    #[arg(short, long)]
-    pub out: PathBuf,
-    /// Plot title.
-    #[arg(long, default_value = "Rate against distortion")]
-    pub title: String,
-}
-
-#[derive(Args)]
-pub struct BenchDriftArgs {
-    /// The .vbim file.
-    pub file: PathBuf,
-    /// Output directory for drift.csv and drift.png.
-    #[arg(short, long, default_value = "out/bench-drift")]
-    pub out: PathBuf,
-    /// Stall pattern.
-    #[arg(long, default_value = "500ms@10s")]
-    pub stall: StallSpec,
-    /// Playback per point.
-    #[arg(long, default_value = "60s")]
-    pub duration: Span,
-    /// Multiples of the mean bit rate to sweep.
-    #[arg(
-        long,
-        default_value = "0.25,0.5,0.75,1,1.2,1.5,2",
-        value_delimiter = ','
-    )]
-    pub factors: Vec<f64>,
-    /// Measure shown error every N frames.
-    #[arg(long, default_value_t = 30)]
-    pub check_every: u64,
-    /// Run each point with the stall at N phases spread evenly over its period (a stall
-    /// whose period is the loop's length always lands at the same moment of the day); the
-    /// plots show the worst phase, the CSV every run.
-    #[arg(long, default_value_t = 1)]
-    pub phases: u32,
-    /// Added to the header's pre-roll, as `vbim play --preroll-margin`.
-    #[arg(long, default_value = "0s")]
-    pub preroll_margin: Span,
-}
-
-#[derive(Args)]
-pub struct BenchDecodeArgs {
-    /// The .vbim file.
-    pub file: PathBuf,
-    /// Repetitions; the median and the spread are reported.
-    #[arg(long, default_value_t = 5)]
-    pub runs: usize,
-    /// Also decode every segment on the GPU (the default adapter), one after another,
-    /// each submitted and waited for: the GPU decode's time alone, which `bench scale`'s
-    /// GPU time per frame only includes.
-    #[arg(long)]
-    pub gpu: bool,
-}
-
-#[derive(Args)]
-pub struct BenchBakeArgs {
-    /// Scene file.
-    #[arg(default_value = "samples/jacksboro.toml")]
-    pub scene: PathBuf,
-    /// Bake resolution, texels per side (8 to 8192).
-    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(8..=8192))]
-    pub size: u32,
-    /// Frames per day (2 to 100000).
-    #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(2..=100_000))]
-    pub frames: u32,
-    /// Repetitions; the median and the spread are reported.
-    #[arg(long, default_value_t = 5)]
-    pub runs: usize,
-    /// Moving clouds on or off.
-    #[arg(long, default_value_t = false)]
-    pub clouds: bool,
-}
-
 #[derive(Args)]
 pub struct EncodeArgs {
     /// Input frames: a directory, a glob (`frames/*.exr`) or a printf pattern (`frames/%04d.exr`).
@@ -421,8 +162,8 @@ pub struct EncodeArgs {
     #[arg(long)]
     pub max_degree: Option<usize>,
     /// Segment length: `auto` (adaptive, up to the preset's maximum), `auto:N` (adaptive up to N frames) or N frames.
-    #[arg(long)]
-    pub segment: Option<String>,
+    #[arg(long, value_parser = crate::units::parse_segment)]
+    pub segment: Option<crate::units::SegmentSpec>,
     /// zstd level, 1–22 [default: preset's, 9].
     #[arg(long)]
     pub zstd_level: Option<i32>,
@@ -430,11 +171,11 @@ pub struct EncodeArgs {
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Largest distance between independently decodable keyframes, media time (`4s`, `500ms`, `2min`) [default: 4s].
-    #[arg(long)]
-    pub intra_interval: Option<String>,
+    #[arg(long, value_parser = crate::units::parse_duration)]
+    pub intra_interval: Option<f64>,
     /// Media frame rate, frames per second as a rational (`24/1`, `1/6`) [default: the manifest's fps, else 24/1].
-    #[arg(long)]
-    pub fps: Option<String>,
+    #[arg(long, value_parser = crate::units::parse_rate)]
+    pub fps: Option<(u32, u32)>,
     /// The sequence loops: frame N−1 is followed by frame 0 (the default).
     #[arg(long = "loop", overrides_with = "no_loop")]
     pub looping: bool,

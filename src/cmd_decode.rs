@@ -1,7 +1,7 @@
 //! `vbim decode FILE --out DIR [--format exr|png8|png16]`
 
-use vbim_bake::output::{frame_name, write_file, write_frame};
 use vbim_bake::FrameFormat;
+use vbim_bake::{frame_name, write_file, write_frame};
 use vbim_format::curve::srgb_to_linear;
 
 use crate::cli::DecodeArgs;

@@ -15,7 +15,7 @@ use crate::session::Session;
 use crate::units::{parse_rate, Span};
 
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    vbim_bake::output::write_text(path, text).map_err(|e| e.to_string())
+    vbim_bake::write_text(path, text).map_err(|e| e.to_string())
 }
 
 pub fn run(a: DemoArgs) -> Result<(), String> {
@@ -86,7 +86,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         ..crate::cli::PlayArgs::headless(&file)
     };
     let s = Session::from_args(&play_args)?;
-    let (device, queue, adapter) = vbim_player::headless_device()?;
+    let (device, queue, adapter) = vbim_player::headless_device().map_err(|e| e.to_string())?;
     let adapter = format!("{} ({:?})", adapter.name, adapter.backend);
     let measured: Outcome = play(&s, &device, &queue, &adapter)?;
     drop((device, queue));
@@ -125,7 +125,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
             },
             Series {
                 name: format!("vbim, --tolerance {}", cfg.tolerance_db),
-                points: vec![(rep.bpp, rep.mean_psnr.unwrap_or(0.0))],
+                points: vec![(rep.bpp, rep.mean_psnr().unwrap_or(0.0))],
             },
         ],
         true,
@@ -183,7 +183,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
          Rendered frames: `render/` ({} PNG); a still: ![frame](frame.png)\n\n\
          Total time {:.1} s.\n",
         a.scene.display(), a.size, a.frames, a.fps,
-        cfg.tolerance_db, rep.bytes, rep.bpp, rep.ratio_to_raw, rep.mean_psnr.unwrap_or(0.0), rep.worst_psnr.unwrap_or(0.0), rep.encode_s,
+        cfg.tolerance_db, rep.bytes, rep.bpp, rep.ratio_to_raw, rep.mean_psnr().unwrap_or(0.0), rep.worst_psnr().unwrap_or(0.0), rep.encode_s,
         lossless, lossless_bpp, texel_frames * 6.0 / lossless as f64, cfg.max_degree,
         a.bandwidth, measured.read_rate.unwrap_or(0) as f64 / 1e3, measured.mean_rate / 1e3, a.stall, measured.ring_bytes, measured.preroll_ms, a.preroll_margin, duration, measured.adapter,
         measured.mean_drift, measured.p99_drift, measured.max_drift, measured.late_frames, measured.stalls,
@@ -199,7 +199,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         file.display(),
         rep.bytes,
         rep.bpp,
-        rep.mean_psnr.unwrap_or(0.0)
+        rep.mean_psnr().unwrap_or(0.0)
     );
     println!(
         "  playback: mean drift {:.3}, max {:.3} frames, {} stalls",

@@ -2,12 +2,12 @@
 
 use vbim_bake::Manifest;
 use vbim_encoder::{
-    encode_file, encode_to_tolerance, ConfigError, EncoderConfig, FrameSet, Preset, SegmentMode,
+    encode_file, encode_to_tolerance, ConfigError, EncoderConfig, FrameSet, Preset,
 };
 
 use crate::cli::EncodeArgs;
 use crate::progress::Stages;
-use crate::units::{parse_duration, parse_rate};
+use crate::units::parse_rate;
 
 pub fn run(a: EncodeArgs) -> Result<(), String> {
     let frames = FrameSet::open(&a.input).map_err(|e| e.to_string())?;
@@ -40,9 +40,9 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
         None => None,
     };
     cfg.metadata = manifest_text;
-    cfg.rate = match (&a.fps, manifest.as_ref().and_then(|m| m.fps.as_deref())) {
-        (Some(f), _) => parse_rate(f)?,
-        (None, Some(f)) => parse_rate(f)?,
+    cfg.rate = match (a.fps, manifest.as_ref().and_then(|m| m.fps.as_deref())) {
+        (Some(f), _) => f,
+        (None, Some(f)) => parse_rate(f).map_err(|e| format!("the manifest's fps: {e}"))?,
         (None, None) => (24, 1),
     };
     if let Some(t) = a.tolerance {
@@ -55,14 +55,14 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Some(d) = a.max_degree {
         cfg.max_degree = d;
     }
-    if let Some(s) = &a.segment {
-        cfg.segment = parse_segment(s, cfg.segment)?;
+    if let Some(s) = a.segment {
+        cfg.segment = s.mode(cfg.segment);
     }
     if let Some(z) = a.zstd_level {
         cfg.zstd_level = z;
     }
-    if let Some(i) = &a.intra_interval {
-        cfg.intra_interval_s = parse_duration(i)?;
+    if let Some(i) = a.intra_interval {
+        cfg.intra_interval_s = i;
     }
     if a.looping || a.no_loop {
         cfg.looping = !a.no_loop;
@@ -78,7 +78,7 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Err(e) = cfg.validate() {
         // A setting out of range is a bad argument: clap's message and exit status 2.
         use clap::CommandFactory;
-        crate::cli::Cli::command()
+        crate::Cli::command()
             .error(
                 clap::error::ErrorKind::ValueValidation,
                 format!("{}: {e}", flag_of(&e)),
@@ -114,23 +114,6 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
             .map_err(|e| format!("{}: {e}", p.display()))?;
     }
     Ok(())
-}
-
-fn parse_segment(s: &str, current: SegmentMode) -> Result<SegmentMode, String> {
-    let bad = || format!("--segment {s:?} (expected auto, auto:N or a number of frames)");
-    if s == "auto" {
-        return Ok(match current {
-            SegmentMode::Auto { max } => SegmentMode::Auto { max },
-            SegmentMode::Fixed(_) => SegmentMode::Auto { max: 32 },
-        });
-    }
-    if let Some(n) = s.strip_prefix("auto:") {
-        return n
-            .parse()
-            .map(|max| SegmentMode::Auto { max })
-            .map_err(|_| bad());
-    }
-    s.parse().map(SegmentMode::Fixed).map_err(|_| bad())
 }
 
 /// The flag that sets the setting a configuration error names.

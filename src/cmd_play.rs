@@ -282,7 +282,7 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
     if !a.headless {
         return Err("playback without --scene is headless only: add --headless".into());
     }
-    let (device, queue, info) = headless_device()?;
+    let (device, queue, info) = headless_device().map_err(|e| e.to_string())?;
     let adapter = format!("{} ({:?})", info.name, info.backend);
     let o = play(&s, &device, &queue, &adapter)?;
     print(&o, &s);
@@ -315,7 +315,7 @@ pub fn capture_scene(
 ) -> Result<Capture, String> {
     use vbim_scene::{orbit, SceneRenderer, View, FORMAT};
     let (mesh, hf) = scene_mesh(scene_file)?;
-    let (device, queue, info) = headless_device()?;
+    let (device, queue, info) = headless_device().map_err(|e| e.to_string())?;
     let mut player = s.open_player(&device, &queue, s.realtime)?;
     let h = player.header().clone();
     if (h.width, h.height) != (hf.w as u32, hf.h as u32) {
@@ -365,7 +365,7 @@ pub fn capture_scene(
             let px = renderer.read();
             let img = image::RgbaImage::from_raw(size.0, size.1, px).expect("size");
             let path = out.join(format!("frame_{captured:04}.png"));
-            vbim_bake::output::write_file(&path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
+            vbim_bake::write_file(&path, |tmp| img.save(tmp).map_err(|e| e.to_string()))
                 .map_err(|e| e.to_string())?;
             gif_frames.push(image::imageops::resize(
                 &img,
@@ -381,7 +381,7 @@ pub fn capture_scene(
     }
     let preview = out.join("preview.gif");
     let delay = image::Delay::from_numer_denom_ms(1000, 15);
-    vbim_bake::output::write_file(&preview, |tmp| {
+    vbim_bake::write_file(&preview, |tmp| {
         let file = File::create(tmp).map_err(|e| e.to_string())?;
         let mut enc =
             image::codecs::gif::GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);

@@ -1,12 +1,10 @@
 //! `vbim`: bake, encode, inspect, decode and compare video-based illumination maps.
 //! A thin command line over the crates; each subcommand lives in its own module.
 
-mod bench_changes;
-mod bench_entropy;
-mod bench_scale;
+#[cfg(feature = "bench")]
+mod bench;
 mod cli;
 mod cmd_bake;
-mod cmd_bench;
 mod cmd_compare;
 mod cmd_decode;
 mod cmd_demo;
@@ -22,7 +20,44 @@ mod window;
 
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::{Parser, Subcommand};
+
+/// `vbim`: the commands.
+#[derive(Parser)]
+#[command(
+    name = "vbim",
+    version,
+    about = "Video-based illumination maps: bake, encode and stream day/night terrain lightmap sequences"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// One subcommand with its arguments.
+#[derive(Subcommand)]
+pub enum Command {
+    /// Bake a day of terrain lightmaps from a scene file (samples/*.toml).
+    Bake(cli::BakeArgs),
+    /// Encode a sequence of EXR/PNG frames into a .vbim file.
+    Encode(cli::EncodeArgs),
+    /// Print a .vbim file's header, chunk index and model summary.
+    Inspect(cli::InspectArgs),
+    /// Decode every frame of a .vbim file with the CPU reference decoder.
+    Decode(cli::DecodeArgs),
+    /// Compare two sequences (directories, patterns or .vbim files) with the protocol's metrics.
+    Compare(cli::CompareArgs),
+    /// Play a .vbim file through the GPU player: headless (simulated or real time) with a
+    /// summary of drift against bandwidth, or in a terrain scene (`--scene`).
+    Play(cli::PlayArgs),
+    /// The whole job on the shipped sample: bake a day, encode it, play it in the terrain
+    /// scene under a bandwidth cap with stalls, and write frames, a preview, plots and a report.
+    Demo(cli::DemoArgs),
+    /// Benchmarks (results go in BENCHMARKS.md). Built with `--features bench`.
+    #[cfg(feature = "bench")]
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
 
 fn main() -> ExitCode {
     // Die quietly when the reader of our output goes away (`vbim inspect F | head`), as
@@ -36,19 +71,20 @@ fn main() -> ExitCode {
     // Ctrl-C or SIGTERM: remove the files being written (a frame's or a stream's temporary,
     // the passes of `--exact`), then exit as a shell expects of an interrupted command.
     let _ = ctrlc::set_handler(|| {
-        vbim_bake::output::remove_temporaries();
+        vbim_files::remove_temporaries();
         std::process::exit(130);
     });
-    let args = cli::Cli::parse();
+    let args = Cli::parse();
     let res = match args.command {
-        cli::Command::Bake(a) => cmd_bake::run(a),
-        cli::Command::Encode(a) => cmd_encode::run(a),
-        cli::Command::Inspect(a) => cmd_inspect::run(a),
-        cli::Command::Decode(a) => cmd_decode::run(a),
-        cli::Command::Compare(a) => cmd_compare::run(a),
-        cli::Command::Play(a) => cmd_play::run(a),
-        cli::Command::Demo(a) => cmd_demo::run(a),
-        cli::Command::Bench(b) => cmd_bench::run(b),
+        Command::Bake(a) => cmd_bake::run(a),
+        Command::Encode(a) => cmd_encode::run(a),
+        Command::Inspect(a) => cmd_inspect::run(a),
+        Command::Decode(a) => cmd_decode::run(a),
+        Command::Compare(a) => cmd_compare::run(a),
+        Command::Play(a) => cmd_play::run(a),
+        Command::Demo(a) => cmd_demo::run(a),
+        #[cfg(feature = "bench")]
+        Command::Bench(b) => bench::run(b),
     };
     match res {
         Ok(()) => ExitCode::SUCCESS,

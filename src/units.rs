@@ -68,7 +68,7 @@ pub fn parse_exposure(s: &str) -> Result<f32, String> {
 
 /// `24/1`, `1/6` or `24` → (num, den).
 pub fn parse_rate(s: &str) -> Result<(u32, u32), String> {
-    vbim_bake::scene::parse_rate(s)
+    vbim_bake::parse_rate(s)
 }
 
 /// A read rate: `2MB/s`, `500kB/s`, `1GB/s`, `800B/s` (SI), or `1.2x` (times the
@@ -241,6 +241,42 @@ impl std::fmt::Display for StallSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.text)
     }
+}
+
+/// `--segment`: how segment lengths are chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SegmentSpec {
+    /// `auto`: adaptive, up to the preset's maximum.
+    Auto,
+    /// `auto:N`: adaptive, up to N frames.
+    AutoUpTo(u32),
+    /// `N`: every segment N frames.
+    Fixed(u32),
+}
+
+impl SegmentSpec {
+    /// The encoder's setting, given the preset's (`auto` keeps its maximum).
+    pub fn mode(self, preset: vbim_encoder::SegmentMode) -> vbim_encoder::SegmentMode {
+        use vbim_encoder::SegmentMode;
+        match (self, preset) {
+            (SegmentSpec::Auto, SegmentMode::Auto { max }) => SegmentMode::Auto { max },
+            (SegmentSpec::Auto, SegmentMode::Fixed(_)) => SegmentMode::Auto { max: 32 },
+            (SegmentSpec::AutoUpTo(max), _) => SegmentMode::Auto { max },
+            (SegmentSpec::Fixed(n), _) => SegmentMode::Fixed(n),
+        }
+    }
+}
+
+/// Parses `--segment`: `auto`, `auto:N` or a number of frames.
+pub fn parse_segment(s: &str) -> Result<SegmentSpec, String> {
+    let bad = || format!("{s:?}: expected auto, auto:N or a number of frames");
+    if s == "auto" {
+        return Ok(SegmentSpec::Auto);
+    }
+    if let Some(n) = s.strip_prefix("auto:") {
+        return n.parse().map(SegmentSpec::AutoUpTo).map_err(|_| bad());
+    }
+    s.parse().map(SegmentSpec::Fixed).map_err(|_| bad())
 }
 
 #[cfg(test)]

@@ -405,9 +405,9 @@ fn fill_chunks(bytes: &mut [u8], kind: vbim_format::ChunkKind, all: bool, byte: 
     let mut sums = Vec::new();
     for &(i, at, len) in &hit {
         bytes[at..at + len].fill(byte);
-        sums.push((i, vbim_format::checksum::xxh3(&bytes[at..at + len])));
+        sums.push((i, vbim_format::xxh3(&bytes[at..at + len])));
     }
-    vbim_format::writer::rewrite(bytes, |_, entries| {
+    vbim_format::rewrite(bytes, |_, entries| {
         for &(i, sum) in &sums {
             entries[i].checksum = sum;
         }
@@ -423,7 +423,7 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     // A log toe of 3e38 is positive and finite, but every texel would decode to +inf
     // (compare printed 99 dB): the header's validation refuses it now.
     let mut bytes = std::fs::read(&file).unwrap();
-    vbim_format::writer::rewrite(&mut bytes, |h, _| {
+    vbim_format::rewrite(&mut bytes, |h, _| {
         h.transfer = vbim_format::Transfer::LogToe { v0: 3e38 }
     })
     .unwrap();
@@ -438,8 +438,7 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     );
     // A media frame rate no day has: it played no frame at all and exited 0.
     let mut bytes = std::fs::read(&file).unwrap();
-    vbim_format::writer::rewrite(&mut bytes, |h, _| (h.rate_num, h.rate_den) = (u32::MAX, 1))
-        .unwrap();
+    vbim_format::rewrite(&mut bytes, |h, _| (h.rate_num, h.rate_den) = (u32::MAX, 1)).unwrap();
     let fast = dir.path().join("fast.vbim");
     std::fs::write(&fast, &bytes).unwrap();
     let o = vbim(&["play", s(&fast), "--headless", "--duration", "1s"]);
@@ -692,7 +691,7 @@ fn tiny_files_that_claim_huge_work_are_refused_before_allocating() {
     // of planes. Refused before allocating, naming the file, the need and the limit, under
     // a 1 GB address space (the command's own binary and threads take part of it).
     let mut bytes = small.clone();
-    vbim_format::writer::rewrite(&mut bytes, |h, _| {
+    vbim_format::rewrite(&mut bytes, |h, _| {
         h.width = 8192;
         h.height = 8192;
     })
@@ -736,7 +735,7 @@ fn tiny_files_that_claim_huge_work_are_refused_before_allocating() {
     // Ten million frames from a few hundred bytes: one segment stretched over them. The
     // decode would write ten million files; it is refused unless asked for.
     let mut bytes = small.clone();
-    vbim_format::writer::rewrite(&mut bytes, |h, entries| {
+    vbim_format::rewrite(&mut bytes, |h, entries| {
         // Every frame number stretched by the same factor (the 4-frame stream loops:
         // its last segment ends at frame 4, keyframe 0 again).
         let k = 10_000_000 / h.frame_count;

@@ -14,7 +14,7 @@ use std::io::BufReader;
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::{ColorEncoding, Reader};
 
-use crate::cli::BenchChangesArgs;
+use super::BenchChangesArgs;
 use crate::progress::Stages;
 
 pub fn run(a: BenchChangesArgs) -> Result<(), String> {

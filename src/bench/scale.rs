@@ -12,7 +12,7 @@ use vbim_bake::{bake, BakeOptions, FrameFormat, Scene};
 use vbim_encoder::{encode_file, EncoderConfig, FrameSet, Preset};
 use vbim_player::{thread_cpu_ns, Player, PlayerConfig};
 
-use crate::cli::{BenchScaleArgs, BenchScaleOneArgs};
+use super::{BenchScaleArgs, BenchScaleOneArgs};
 use crate::plot::{lines, Series};
 use crate::progress::Stages;
 
@@ -141,7 +141,7 @@ fn stream_for(a: &BenchScaleArgs, size: usize) -> Result<PathBuf, String> {
 /// as JSON.
 pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
-    let (device, queue, info) = vbim_player::headless_device()?;
+    let (device, queue, info) = vbim_player::headless_device().map_err(|e| e.to_string())?;
     let f = crate::sequence::open_input(&a.file)?;
     let file_bytes = f.metadata().map_err(|e| format!("{name}: {e}"))?.len();
     let cfg = PlayerConfig {
@@ -340,5 +340,5 @@ fn report(a: &BenchScaleArgs, costs: &[Cost]) -> Result<(), String> {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    vbim_bake::output::write_text(path, text).map_err(|e| e.to_string())
+    vbim_bake::write_text(path, text).map_err(|e| e.to_string())
 }

@@ -27,7 +27,7 @@ use vbim_format::chunk::{self, TileMap};
 use vbim_format::dct::N;
 use vbim_format::{plane, ChunkKind, Header, Reader};
 
-use crate::cli::BenchEntropyArgs;
+use super::BenchEntropyArgs;
 use crate::progress::Stages;
 
 /// The largest payload decompressed: the format's own bound for one chunk.

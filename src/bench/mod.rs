@@ -1,0 +1,48 @@
+//! `vbim bench …`, built only with the `bench` feature (`cargo build --release --features
+//! bench`; CI and the benchmark scripts turn it on): the measurements of BENCHMARKS.md,
+//! timings reported as the median of several runs with their spread (docs/CONVENTIONS.md,
+//! "Units, flags and exit codes").
+//!
+//! `args` (the flags), `offline` (the baker, the lossless baseline, the plots of the
+//! scripts' CSVs), `runtime` (the decoder, drift under bandwidth caps, the render thread),
+//! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
+//! and `entropy` (what a context-adaptive coder would save: a research harness for the
+//! format's next coding).
+
+mod args;
+mod changes;
+mod entropy;
+mod offline;
+mod runtime;
+mod scale;
+
+pub use args::*;
+
+pub fn run(c: BenchCommand) -> Result<(), String> {
+    match c {
+        BenchCommand::Bake(a) => offline::bench_bake(a),
+        BenchCommand::Decode(a) => runtime::bench_decode(a),
+        BenchCommand::Lossless(a) => offline::bench_lossless(a),
+        BenchCommand::PlotRd(a) => offline::plot_rd(a),
+        BenchCommand::PlotTolerance(a) => offline::plot_tolerance(a),
+        BenchCommand::PlotSize(a) => offline::plot_size(a),
+        BenchCommand::Drift(a) => runtime::bench_drift(a),
+        BenchCommand::Render(a) => runtime::bench_render(a),
+        BenchCommand::Scale(a) => scale::run(a),
+        BenchCommand::ScaleOne(a) => scale::run_one(a),
+        BenchCommand::Changes(a) => changes::run(a),
+        BenchCommand::Entropy(a) => entropy::run(a),
+    }
+}
+
+/// Median, min and max of a set of timings.
+pub(super) fn stats(v: &mut [f64]) -> (f64, f64, f64) {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let med = if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    };
+    (med, v[0], v[n - 1])
+}
