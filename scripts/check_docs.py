@@ -5,7 +5,9 @@
    beside the checkout, and no relative path that climbs above the repository root from the file that names it.
 2. Every relative link in a Markdown file points at a file that exists.
 3. Every repository path that docs/ARCHITECTURE.md names (in backticks) exists, and every
-   source file (`*/src/*.rs`, `*.wgsl`) is named there: the tour stays complete.
+   source file (`*/src/**.rs`, `*.wgsl`) is named there: the tour stays complete.
+4. No document or comment is a work log: nothing names the working session that wrote it
+   ("session" and a number). Docs give current figures and reasons; history is git's.
 
 Exits 1 naming each offending file and line.
 """
@@ -21,7 +23,9 @@ SHARED = "../" + "shared"
 CLIMB = re.compile(r"(?:\.\./)+[A-Za-z0-9_.\-/]*")
 LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")
 TICKED = re.compile(r"`([A-Za-z0-9_.\-/]+)`")
-TOP = ("bake/", "bevy/", "encoder/", "format/", "player/", "scene/", "src/", "samples/", "docs/",
+# "session 20", "sessions 6–7", "Session 14's": a dated work log.
+WORKLOG = re.compile(r"\bsessions?[\s-]+\d+", re.IGNORECASE)
+TOP = ("bake/", "bevy/", "encoder/", "files/", "format/", "player/", "scene/", "src/", "samples/", "docs/",
        "scripts/", "tests/", "assets/", ".ci/")
 
 
@@ -51,6 +55,9 @@ def main():
             for m in CLIMB.finditer(line):
                 if not inside(os.path.join(here, m.group(0))):
                     bad.append(f"{f}:{n}: {m.group(0)} climbs out of the repository")
+            if WORKLOG.search(line) and f != "scripts/check_docs.py":
+                bad.append(f"{f}:{n}: names a working session ({WORKLOG.search(line).group(0)!r}): "
+                           "say what is true now and why, not when it was done")
             if f.endswith(".md"):
                 for m in LINK.finditer(line):
                     target = m.group(1)
@@ -69,7 +76,7 @@ def main():
                 bad.append(f"docs/ARCHITECTURE.md:{n}: names {p}, which does not exist")
     tour = open(arch, encoding="utf-8").read()
     for f in tracked():
-        if re.fullmatch(r"([a-z]+/)?src/[a-z_0-9]+\.(rs|wgsl)", f) and f not in tour:
+        if re.fullmatch(r"([a-z]+/)?src/([a-z_0-9]+/)*[a-z_0-9]+\.(rs|wgsl)", f) and f not in tour:
             bad.append(f"docs/ARCHITECTURE.md does not name {f}")
     for b in bad:
         print(b)
