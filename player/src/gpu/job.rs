@@ -94,6 +94,10 @@ mod tests {
         assert_eq!(offset, std::mem::size_of::<Job>());
         assert!(offset as u64 <= JOB_STRIDE);
         assert!(JOB_WGSL.starts_with("struct Job {\n    step: f32,\n"));
-        assert!(!include_str!("job.wgsl").contains("struct Job"));
+        let declared = |l: &str| l.trim_start().starts_with("struct Job");
+        assert!(
+            !include_str!("job.wgsl").lines().any(declared),
+            "declared twice"
+        );
     }
 }
