@@ -63,7 +63,7 @@ run_vbim() { # $1 = method, $2 = setting, rest = encoder flags
     echo "$method,$setting,$bytes,$(bpp "$bytes"),$sc,$(python3 -c "print(f'{$t1 - $t0:.2f}')"),$(cat "$dir/tail.txt")" >>"$csv"
     tail -1 "$csv"
 }
-# Keyframes at the default budget as it is (--no-aim): the baseline of earlier sessions.
+# Keyframes at the default budget as it is (--no-aim): the baseline before the aim.
 for n in 2 4 8; do run_vbim "keyframes + linear" "every $n" --max-degree 1 --segment "$n" --no-aim; done
 # --tolerance is the mean PSNR delivered (in one pass, with the worst-frame floor).
 for t in 40 42 44 45 46 48; do run_vbim "vbim default" "tol $t" --tolerance "$t"; done
