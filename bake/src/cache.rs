@@ -24,8 +24,8 @@ fn fnv(h: &mut u64, bytes: &[u8]) {
 pub fn key(scene: &Scene) -> Result<u64, BakeError> {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
     fnv(&mut h, MAGIC);
-    let hf = std::fs::read(&scene.heightfield)
-        .map_err(|e| BakeError::Input(format!("{}: {e}", scene.heightfield.display())))?;
+    let hf =
+        std::fs::read(&scene.heightfield).map_err(|e| BakeError::input(&scene.heightfield, e))?;
     fnv(&mut h, &hf);
     if let Ok(side) = std::fs::read(scene.heightfield.with_extension("json")) {
         fnv(&mut h, &side);

@@ -49,7 +49,7 @@ pub fn bake(
     opts: &BakeOptions,
     progress: Progress,
 ) -> Result<BakeSummary, BakeError> {
-    scene.validate().map_err(BakeError::Input)?;
+    scene.validate().map_err(BakeError::Setting)?;
     std::fs::create_dir_all(&opts.out).map_err(|e| out_err(&opts.out, e))?;
     let t0 = Instant::now();
     progress("precompute", 0, 1);

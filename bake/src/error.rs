@@ -5,9 +5,17 @@ use std::path::{Path, PathBuf};
 /// Why a bake failed.
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
-    /// The scene file, its height field or a setting cannot be used; the message names it.
+    /// A setting of the scene is out of range; the message names it.
     #[error("{0}")]
-    Input(String),
+    Setting(String),
+    /// An input file (the scene file, a height field or its sidecar) cannot be used.
+    #[error("{}: {msg}", path.display())]
+    Input {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        msg: String,
+    },
     /// An output file cannot be written.
     #[error("{path}: {msg}")]
     Output {
@@ -16,6 +24,16 @@ pub enum BakeError {
         /// What went wrong.
         msg: String,
     },
+}
+
+impl BakeError {
+    /// An input error naming `path`.
+    pub(crate) fn input(path: &Path, e: impl std::fmt::Display) -> BakeError {
+        BakeError::Input {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        }
+    }
 }
 
 /// An output error naming `path`.

@@ -89,21 +89,18 @@ impl HeightField {
     pub fn load(path: &Path) -> Result<HeightField, BakeError> {
         let sidecar_path: PathBuf = path.with_extension("json");
         let text = std::fs::read_to_string(&sidecar_path)
-            .map_err(|e| BakeError::Input(format!("{}: {e}", sidecar_path.display())))?;
-        let sc: Sidecar = serde_json::from_str(&text)
-            .map_err(|e| BakeError::Input(format!("{}: {e}", sidecar_path.display())))?;
+            .map_err(|e| BakeError::input(&sidecar_path, e))?;
+        let sc: Sidecar =
+            serde_json::from_str(&text).map_err(|e| BakeError::input(&sidecar_path, e))?;
         let (w, h) = (sc.width as usize, sc.height as usize);
         if !(2..=16384).contains(&w) || !(2..=16384).contains(&h) {
-            return Err(BakeError::Input(format!(
-                "{}: size {w}×{h}",
-                sidecar_path.display()
-            )));
+            return Err(BakeError::input(&sidecar_path, format!("size {w}×{h}")));
         }
         if !(sc.meters_per_pixel_x > 0.0 && sc.meters_per_pixel_y > 0.0) {
-            return Err(BakeError::Input(format!(
-                "{}: cell size must be positive",
-                sidecar_path.display()
-            )));
+            return Err(BakeError::input(
+                &sidecar_path,
+                "cell size must be positive",
+            ));
         }
         let ext = path
             .extension()
@@ -111,30 +108,32 @@ impl HeightField {
             .unwrap_or("")
             .to_ascii_lowercase();
         let z: Vec<f32> = if ext == "f32" || ext == "raw" {
-            let bytes = std::fs::read(path)
-                .map_err(|e| BakeError::Input(format!("{}: {e}", path.display())))?;
+            let bytes = std::fs::read(path).map_err(|e| BakeError::input(path, e))?;
             if bytes.len() != w * h * 4 {
-                return Err(BakeError::Input(format!(
-                    "{}: {} bytes, the sidecar's {w}×{h} f32 grid needs {}",
-                    path.display(),
-                    bytes.len(),
-                    w * h * 4
-                )));
+                return Err(BakeError::input(
+                    path,
+                    format!(
+                        "{} bytes, the sidecar's {w}×{h} f32 grid needs {}",
+                        bytes.len(),
+                        w * h * 4
+                    ),
+                ));
             }
             bytes
                 .chunks_exact(4)
                 .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
                 .collect()
         } else {
-            let img = image::open(path)
-                .map_err(|e| BakeError::Input(format!("{}: {e}", path.display())))?;
+            let img = image::open(path).map_err(|e| BakeError::input(path, e))?;
             if img.width() as usize != w || img.height() as usize != h {
-                return Err(BakeError::Input(format!(
-                    "{}: image is {}×{}, the sidecar says {w}×{h}",
-                    path.display(),
-                    img.width(),
-                    img.height()
-                )));
+                return Err(BakeError::input(
+                    path,
+                    format!(
+                        "image is {}×{}, the sidecar says {w}×{h}",
+                        img.width(),
+                        img.height()
+                    ),
+                ));
             }
             let g = img.into_luma16();
             let (lo, hi) = (sc.min_elevation_m, sc.max_elevation_m);
@@ -143,12 +142,10 @@ impl HeightField {
                 .collect()
         };
         if let Some(i) = z.iter().position(|v| !v.is_finite()) {
-            return Err(BakeError::Input(format!(
-                "{}: cell ({}, {}) is not finite",
-                path.display(),
-                i % w,
-                i / w
-            )));
+            return Err(BakeError::input(
+                path,
+                format!("cell ({}, {}) is not finite", i % w, i / w),
+            ));
         }
         Ok(HeightField {
             w,

@@ -179,15 +179,12 @@ fn d_azimuths() -> usize {
 impl Scene {
     /// Reads a scene file; the height field path becomes absolute (relative to the file).
     pub fn load(path: &Path) -> Result<Scene, BakeError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| BakeError::Input(format!("{}: {e}", path.display())))?;
-        let mut s: Scene = toml::from_str(&text)
-            .map_err(|e| BakeError::Input(format!("{}: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|e| BakeError::input(path, e))?;
+        let mut s: Scene = toml::from_str(&text).map_err(|e| BakeError::input(path, e))?;
         if s.heightfield.is_relative() {
             s.heightfield = path.parent().unwrap_or(Path::new(".")).join(&s.heightfield);
         }
-        s.validate()
-            .map_err(|e| BakeError::Input(format!("{}: {e}", path.display())))?;
+        s.validate().map_err(|e| BakeError::input(path, e))?;
         Ok(s)
     }
 

@@ -37,7 +37,7 @@ pub fn encode_to_tolerance(
         .and_then(|n| n.to_str())
         .ok_or_else(|| EncodeError::Output {
             path: out.to_path_buf(),
-            msg: "not a file name".into(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"),
         })?;
     let pass_path =
         |k: usize| out.with_file_name(format!(".{name}.pass{k}-{}", std::process::id()));
@@ -113,9 +113,9 @@ pub fn encode_to_tolerance(
         return Err(e);
     }
     let (mut rep, path) = chosen.expect("at least one pass ran");
-    std::fs::rename(path.path(), out).map_err(|e| EncodeError::Output {
+    std::fs::rename(path.path(), out).map_err(|source| EncodeError::Output {
         path: out.to_path_buf(),
-        msg: e.to_string(),
+        source,
     })?;
     rep.tolerance_db = target;
     rep.calibration = passes;

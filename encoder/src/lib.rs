@@ -50,13 +50,41 @@ pub enum EncodeError {
     /// A frame or the metadata cannot be used; the message names the file and texel.
     #[error("{0}")]
     Input(String),
+    /// The sequence cannot be encoded within the memory limit, even a band of one tile
+    /// row at a time: a caller may raise [`EncoderConfig::memory_limit`] to `need` and
+    /// try again.
+    #[error(
+        "{sequence} needs about {} to encode in bands of one tile row, more than the memory \
+         limit of {}; raise --memory-limit, or shorten --segment or --tile",
+        vbim_format::limits::human_bytes(*need),
+        vbim_format::limits::human_bytes(*limit)
+    )]
+    OverMemory {
+        /// The sequence and what makes it large (size, channels, segment lengths).
+        sequence: String,
+        /// Bytes it needs, about.
+        need: u64,
+        /// The limit, bytes.
+        limit: u64,
+    },
     /// The output cannot be written.
-    #[error("{path}: {msg}")]
+    #[error("{}: {source}", path.display())]
     Output {
         /// The output's path.
         path: PathBuf,
         /// What went wrong.
-        msg: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The stream just written could not be decoded again to measure it (a bug, or the
+    /// file changed under the encoder).
+    #[error("{stream}: {source}")]
+    Verify {
+        /// The stream's name (its path, or a pass's).
+        stream: String,
+        /// What the reader or the reference decoder said.
+        #[source]
+        source: vbim_format::FormatError,
     },
     /// A setting out of range.
     #[error(transparent)]

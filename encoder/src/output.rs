@@ -94,9 +94,9 @@ pub(crate) fn write_atomic<T>(
     out: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> Result<T, EncodeError>,
 ) -> Result<T, EncodeError> {
-    let oerr = |e: std::io::Error| EncodeError::Output {
+    let oerr = |source: std::io::Error| EncodeError::Output {
         path: out.to_path_buf(),
-        msg: e.to_string(),
+        source,
     };
     vbim_files::write_atomic(
         out,

@@ -89,21 +89,21 @@ pub(crate) fn plan(
     let band_tiles = (room / (ts as u64 * band_row).max(1)).min(tiles_y) as usize;
     if band_tiles == 0 || band_cost(band_tiles) > limit {
         let need = band_cost(1);
-        return Err(EncodeError::Input(format!(
-            "{}: {}×{} with {} channel(s) needs about {} to encode in bands of one tile row \
-             ({} segments of up to {longest} frames), more than the memory limit of {}; \
-             raise --memory-limit, or shorten --segment or --tile",
-            info.name,
-            info.width,
-            info.height,
-            info.channels,
-            size(need),
-            match cfg.segment {
-                SegmentMode::Auto { .. } => "adaptive",
-                SegmentMode::Fixed(_) => "fixed",
-            },
-            size(limit),
-        )));
+        return Err(EncodeError::OverMemory {
+            sequence: format!(
+                "{}: {}×{} with {} channel(s) ({} segments of up to {longest} frames)",
+                info.name,
+                info.width,
+                info.height,
+                info.channels,
+                match cfg.segment {
+                    SegmentMode::Auto { .. } => "adaptive",
+                    SegmentMode::Fixed(_) => "fixed",
+                },
+            ),
+            need,
+            limit,
+        });
     }
     Ok(Plan {
         band_tiles,
@@ -133,15 +133,6 @@ pub(crate) fn read_frames<T: Send>(
         );
     }
     Ok(out)
-}
-
-/// A size in SI units, as `--memory-limit` takes it.
-fn size(bytes: u64) -> String {
-    match bytes {
-        b if b >= 1_000_000_000 => format!("{:.2} GB", b as f64 / 1e9),
-        b if b >= 1_000_000 => format!("{:.1} MB", b as f64 / 1e6),
-        b => format!("{:.0} kB", b as f64 / 1e3),
-    }
 }
 
 #[cfg(test)]

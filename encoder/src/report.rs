@@ -207,7 +207,10 @@ impl EncodeReport {
         let open = || {
             std::fs::File::open(path)
                 .map(std::io::BufReader::new)
-                .map_err(|e| EncodeError::Input(format!("{name}: {e}")))
+                .map_err(|e| EncodeError::Verify {
+                    stream: name.clone(),
+                    source: e.into(),
+                })
         };
         let seq = measure_parallel(src, &open, &name, self.metric, progress)?;
         self.take(seq);
@@ -350,27 +353,30 @@ fn measure<R: Read + Seek>(
     progress: Progress,
 ) -> Result<SequenceError, EncodeError> {
     let info = src.info();
-    let reader = Reader::open(encoded).map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
+    let verify = |source| EncodeError::Verify {
+        stream: name.to_string(),
+        source,
+    };
+    let reader = Reader::open(encoded).map_err(verify)?;
     let h = reader.header().clone();
     if h.frame_count as usize != info.frames
         || h.width as usize != info.width
         || h.height as usize != info.height
     {
-        return Err(EncodeError::Input(format!(
-            "{name}: {}×{}×{} frames, the input is {}×{}×{}",
+        return Err(verify(vbim_format::FormatError::Invalid(format!(
+            "{}×{}×{} frames, the input is {}×{}×{}",
             h.width, h.height, h.frame_count, info.width, info.height, info.frames
-        )));
+        ))));
     }
     // The file was just written by this encoder: no limit (a large encode's verification
     // may need more than a player's default).
     let unlimited = vbim_format::Limits { memory: u64::MAX };
-    let mut dec = Decoder::with_limits(reader, unlimited)
-        .map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
+    let mut dec = Decoder::with_limits(reader, unlimited).map_err(verify)?;
     let mut seq = SequenceError::default();
     let mut out = vec![0f32; h.texel_count() * h.channels as usize];
     for i in frames {
         dec.frame(i as f64, Output::Stored, &mut out)
-            .map_err(|e| EncodeError::Input(format!("{name}: {e}")))?;
+            .map_err(verify)?;
         let src = src.read(i)?;
         seq.add(metric, &src.data, &out);
         progress("verify", i as u64 + 1, info.frames as u64);

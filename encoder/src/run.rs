@@ -70,7 +70,10 @@ pub fn encode_file(
         if input {
             return Err(EncodeError::Output {
                 path: path.to_path_buf(),
-                msg: "is one of the input frames".into(),
+                source: std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "is one of the input frames",
+                ),
             });
         }
     }
