@@ -57,6 +57,13 @@ pub enum Command {
     #[cfg(feature = "bench")]
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// (A build without the `bench` feature: `vbim bench …` says how to get it.)
+    #[cfg(not(feature = "bench"))]
+    #[command(hide = true)]
+    Bench {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<String>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -85,6 +92,10 @@ fn main() -> ExitCode {
         Command::Demo(a) => cmd_demo::run(a),
         #[cfg(feature = "bench")]
         Command::Bench(b) => bench::run(b),
+        #[cfg(not(feature = "bench"))]
+        Command::Bench { .. } => Err("this vbim was built without the benchmarks: build it with \
+             `cargo build --release --features bench` (BENCHMARKS.md)"
+            .into()),
     };
     match res {
         Ok(()) => ExitCode::SUCCESS,
