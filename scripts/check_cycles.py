@@ -34,7 +34,11 @@ DOCUMENTED = ["format", "files", "player", "encoder", "bevy"]
 
 
 def code_of(text):
-    text = text.split("#[cfg(test)]")[0]
+    # The inline test module (always last) is left out; so is a `mod tests;` declaration,
+    # whose file `modules` skips. Other test-only items early in a file (a helper under
+    # `#[cfg(test)]`) must not hide the code after them, so the cut is at the module only.
+    text = re.split(r"#\[cfg\(test\)\]\s*mod tests\s*\{", text)[0]
+    text = re.sub(r"#\[cfg\(test\)\]\s*mod \w+\s*;", "", text)
     return "\n".join(l for l in text.splitlines() if not l.lstrip().startswith("//"))
 
 
