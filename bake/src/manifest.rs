@@ -1,5 +1,5 @@
-//! The manifest of a bake ([`Manifest::of_bake`]'s counterpart in the shared type
-//! [`vbim_files::Manifest`]): what the bake writes beside its frames.
+//! The manifest of a bake: the shared [`vbim_files::Manifest`] filled from the scene and
+//! the frames' sun and sky, as the bake writes it beside its frames.
 
 use vbim_files::{frame_name, FrameFormat, FrameInfo, Manifest};
 

@@ -175,7 +175,7 @@ impl EncodeReport {
     }
 
     /// Decodes the encoded stream with the reference decoder and measures it against the
-    /// input, filling in the error fields. `name` names the stream in errors.
+    /// input, filling in [`EncodeReport::measured`]. `name` names the stream in errors.
     pub fn verify<R: Read + Seek>(
         &mut self,
         src: &dyn FrameSource,

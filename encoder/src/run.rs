@@ -9,7 +9,7 @@ use crate::{ConfigError, EncodeError, EncodeReport, EncoderConfig, FrameSource, 
 
 /// Encodes `src` with `cfg` into `out`. With `cfg.aim` (the default) it first finds, on a
 /// sample of the sequence, the internal budget that delivers `cfg.tolerance_db` (module
-/// `aim`). The report's error fields stay empty until [`EncodeReport::verify`] measures
+/// `aim`). The report's `measured` stays `None` until [`EncodeReport::verify`] measures
 /// the stream.
 pub fn encode<W: Write + Seek>(
     src: &dyn FrameSource,

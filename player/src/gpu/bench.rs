@@ -5,10 +5,8 @@ use crate::decoder::SegmentData;
 
 /// The GPU decode alone, for `vbim bench decode --gpu`: boxes filled by a decoder without
 /// a device, decoded one after another on a GPU of the stream's size.
-#[cfg(feature = "bench")]
 pub struct GpuDecoder(Gpu);
 
-#[cfg(feature = "bench")]
 impl GpuDecoder {
     /// GPU state for the stream `h` describes.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Self {

@@ -61,7 +61,7 @@ pub(super) fn mask_bytes(part: u32) -> u64 {
 
 /// Blocks the dense plane holds for planes of `plane` texels: a whole plane, or as many
 /// blocks as one storage binding of WebGPU's default limits holds.
-pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
+pub(super) fn part_blocks(plane: [u32; 2]) -> u32 {
     let whole = (plane[0] / 8) * (plane[1] / 8);
     let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
     whole.min(binding as u32).max(1)

@@ -85,163 +85,16 @@ impl Gpu {
             contents: bytemuck::bytes_of(&Params::zeroed_params()),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
-        let mut t = Tables {
-            basis: [0.0; 64],
-            zigzag: [0; 64],
-            row_max: [0.0; 8],
-        };
-        for (k, row) in vbim_format::dct::basis().iter().enumerate() {
-            t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
-        }
-        for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
-            t.zigzag[i] = z as u32;
-        }
-        for (m, row) in t.row_max.iter_mut().zip(vbim_format::dct::basis()) {
-            *m = row.iter().fold(0f32, |m, &v| m.max(v.abs()));
-        }
-        let tables = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("vbim dct tables"),
-            contents: bytemuck::bytes_of(&t),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty,
-            count: None,
-        };
-        let uniform = |dynamic| wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: dynamic,
-            min_binding_size: None,
-        };
-        let storage = |read_only| wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        };
-        use wgpu::TextureViewDimension::{D2Array, D2};
-        let sampled = |sample_type, view_dimension| wgpu::BindingType::Texture {
-            sample_type,
-            view_dimension,
-            multisampled: false,
-        };
-        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vbim reconstruct"),
-            entries: &[
-                entry(0, uniform(false)),
-                entry(
-                    1,
-                    sampled(
-                        wgpu::TextureSampleType::Float { filterable: false },
-                        D2Array,
-                    ),
-                ),
-                entry(2, sampled(wgpu::TextureSampleType::Uint, D2Array)),
-                entry(3, sampled(wgpu::TextureSampleType::Uint, D2)),
-                entry(
-                    4,
-                    wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::Rgba16Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                ),
-                entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
-                entry(6, storage(true)),
-                entry(9, storage(true)),
-            ],
-        });
-        let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vbim hold"),
-            entries: &[
-                entry(
-                    7,
-                    sampled(wgpu::TextureSampleType::Float { filterable: false }, D2),
-                ),
-                entry(
-                    8,
-                    wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::R32Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                ),
-            ],
-        });
-        let words_entry = entry(2, storage(true));
-        let planes16 = entry(
-            4,
-            wgpu::BindingType::StorageTexture {
-                access: wgpu::StorageTextureAccess::WriteOnly,
-                format: wgpu::TextureFormat::R32Uint,
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-            },
-        );
-        let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vbim keyframe decode"),
-            entries: &[
-                entry(0, uniform(true)),
-                entry(1, uniform(false)),
-                words_entry,
-                entry(
-                    3,
-                    wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::ReadWrite,
-                        format: wgpu::TextureFormat::R32Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                ),
-                planes16,
-                entry(5, storage(false)),
-                entry(6, storage(true)),
-                entry(7, storage(true)),
-                entry(10, storage(true)),
-            ],
-        });
-        let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vbim bubble decode"),
-            entries: &[
-                entry(0, uniform(true)),
-                entry(1, uniform(false)),
-                words_entry,
-                planes16,
-                entry(6, storage(true)),
-                entry(7, storage(true)),
-                entry(8, storage(false)),
-                entry(10, storage(true)),
-            ],
-        });
-        let parse_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vbim parse"),
-            entries: &[
-                entry(0, uniform(true)),
-                words_entry,
-                entry(6, storage(false)),
-                entry(7, storage(false)),
-                entry(10, storage(false)),
-            ],
-        });
+        let tables = dct_tables(device);
+        let Layouts {
+            reconstruct: bgl,
+            hold: hold_layout,
+            key: key_layout,
+            bubble: bubble_layout,
+            parse: parse_layout,
+        } = layouts(device);
         let pipeline_for =
-            |label: &str, source: &str, layout: &wgpu::BindGroupLayout, entry: &str| {
-                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(label),
-                    source: wgpu::ShaderSource::Wgsl(source.into()),
-                });
-                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some(label),
-                    bind_group_layouts: &[Some(layout)],
-                    immediate_size: 0,
-                });
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(label),
-                    layout: Some(&layout),
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-            };
+            |label, source, layout, entry| compute_pipeline(device, label, source, layout, entry);
         let decode = &decode_source(include_str!("decode.wgsl"));
         let parse_source = &decode_source(include_str!("parse.wgsl"));
         let pipeline = pipeline_for(
@@ -507,5 +360,194 @@ pub(super) fn hold_group(
                 resource: wgpu::BindingResource::TextureView(held),
             },
         ],
+    })
+}
+
+/// The DCT basis, the zig-zag order and each basis row's largest magnitude, from the
+/// reference decoder's own tables (`Tables` in decode.wgsl), in a uniform buffer.
+fn dct_tables(device: &wgpu::Device) -> wgpu::Buffer {
+    let mut t = Tables {
+        basis: [0.0; 64],
+        zigzag: [0; 64],
+        row_max: [0.0; 8],
+    };
+    for (k, row) in vbim_format::dct::basis().iter().enumerate() {
+        t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
+    }
+    for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
+        t.zigzag[i] = z as u32;
+    }
+    for (m, row) in t.row_max.iter_mut().zip(vbim_format::dct::basis()) {
+        *m = row.iter().fold(0f32, |m, &v| m.max(v.abs()));
+    }
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("vbim dct tables"),
+        contents: bytemuck::bytes_of(&t),
+        usage: wgpu::BufferUsages::UNIFORM,
+    })
+}
+
+/// The bind group layouts of the reconstruction, the hold pass and the decode passes
+/// (keyframe, bubble, parse): which binding of which shader is what.
+struct Layouts {
+    reconstruct: wgpu::BindGroupLayout,
+    hold: wgpu::BindGroupLayout,
+    key: wgpu::BindGroupLayout,
+    bubble: wgpu::BindGroupLayout,
+    parse: wgpu::BindGroupLayout,
+}
+
+fn layouts(device: &wgpu::Device) -> Layouts {
+    let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty,
+        count: None,
+    };
+    let uniform = |dynamic| wgpu::BindingType::Buffer {
+        ty: wgpu::BufferBindingType::Uniform,
+        has_dynamic_offset: dynamic,
+        min_binding_size: None,
+    };
+    let storage = |read_only| wgpu::BindingType::Buffer {
+        ty: wgpu::BufferBindingType::Storage { read_only },
+        has_dynamic_offset: false,
+        min_binding_size: None,
+    };
+    use wgpu::TextureViewDimension::{D2Array, D2};
+    let sampled = |sample_type, view_dimension| wgpu::BindingType::Texture {
+        sample_type,
+        view_dimension,
+        multisampled: false,
+    };
+    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim reconstruct"),
+        entries: &[
+            entry(0, uniform(false)),
+            entry(
+                1,
+                sampled(
+                    wgpu::TextureSampleType::Float { filterable: false },
+                    D2Array,
+                ),
+            ),
+            entry(2, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+            entry(3, sampled(wgpu::TextureSampleType::Uint, D2)),
+            entry(
+                4,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::Rgba16Float,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+            ),
+            entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+            entry(6, storage(true)),
+            entry(9, storage(true)),
+        ],
+    });
+    let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim hold"),
+        entries: &[
+            entry(
+                7,
+                sampled(wgpu::TextureSampleType::Float { filterable: false }, D2),
+            ),
+            entry(
+                8,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::R32Uint,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+            ),
+        ],
+    });
+    let words_entry = entry(2, storage(true));
+    let planes16 = entry(
+        4,
+        wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::R32Uint,
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+        },
+    );
+    let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim keyframe decode"),
+        entries: &[
+            entry(0, uniform(true)),
+            entry(1, uniform(false)),
+            words_entry,
+            entry(
+                3,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::ReadWrite,
+                    format: wgpu::TextureFormat::R32Float,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+            ),
+            planes16,
+            entry(5, storage(false)),
+            entry(6, storage(true)),
+            entry(7, storage(true)),
+            entry(10, storage(true)),
+        ],
+    });
+    let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim bubble decode"),
+        entries: &[
+            entry(0, uniform(true)),
+            entry(1, uniform(false)),
+            words_entry,
+            planes16,
+            entry(6, storage(true)),
+            entry(7, storage(true)),
+            entry(8, storage(false)),
+            entry(10, storage(true)),
+        ],
+    });
+    let parse_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim parse"),
+        entries: &[
+            entry(0, uniform(true)),
+            words_entry,
+            entry(6, storage(false)),
+            entry(7, storage(false)),
+            entry(10, storage(false)),
+        ],
+    });
+    Layouts {
+        reconstruct: bgl,
+        hold: hold_layout,
+        key: key_layout,
+        bubble: bubble_layout,
+        parse: parse_layout,
+    }
+}
+
+/// A compute pipeline running `entry` of the WGSL `source` over bind group 0 of `layout`.
+fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    layout: &wgpu::BindGroupLayout,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
     })
 }

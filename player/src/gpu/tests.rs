@@ -1,15 +1,13 @@
 //! The decode and hold passes on a real adapter, against the reference decoder.
 
-use super::plan::{lightmap_descriptor, REGION};
-use super::*;
-use crate::coded::Coded;
-use crate::decoder::SegmentData;
-use crate::readback::{read_buffer, read_texture_layer};
-
-use crate::coded::PlaneSpan;
-use crate::decoder::KeyStep;
 use vbim_format::chunk::Scanned;
 use vbim_format::plane::{self, Blocks, Onto, Plane};
+
+use super::plan::{lightmap_descriptor, REGION};
+use super::*;
+use crate::coded::{Coded, PlaneSpan};
+use crate::decoder::{KeyStep, SegmentData};
+use crate::readback::{read_buffer, read_texture_layer};
 
 fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
     let mut next = || {
