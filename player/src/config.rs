@@ -71,6 +71,17 @@ pub struct PlayerConfig {
     /// transition late. A margin as long as the stall to survive buys that back with
     /// start-up time (measured in BENCHMARKS.md).
     pub preroll_margin_ns: u64,
+    /// The most segment decode work one displayed frame records, in blocks (an 8×8
+    /// block of one plane through one pass; [`FrameRecord::decode_work`]). `None`: each
+    /// segment's decode is spread evenly over the first half of the frames before it is
+    /// shown, at the display rate the frames so far give, and a segment needed at once
+    /// (the first, or after a seek) is decoded at once. With a budget, a segment needed
+    /// before its decode is done is late (the display holds or waits, as the policy says)
+    /// and [`Totals::budget_late`] counts it: the budget is too small for the stream.
+    ///
+    /// [`FrameRecord::decode_work`]: crate::FrameRecord::decode_work
+    /// [`Totals::budget_late`]: crate::Totals::budget_late
+    pub decode_budget: Option<u64>,
     /// The memory the stream may take, GPU and CPU together ([`Player::open`] refuses a
     /// stream that could need more, before creating anything for it).
     ///
@@ -89,6 +100,7 @@ impl Default for PlayerConfig {
             clock: Arc::new(SystemClock::new()),
             preroll_ns: None,
             preroll_margin_ns: 0,
+            decode_budget: None,
             limits: Limits::default(),
         }
     }

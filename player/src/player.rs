@@ -12,13 +12,16 @@ use vbim_format::{Header, IndexEntry, Reader, Transfer};
 use crate::config::{PlayerConfig, Policy};
 use crate::decoder::SegmentData;
 use crate::display::{Display, Step};
-use crate::gpu::{min_array_layers, planned_texture_bytes, Gpu, Params};
+use crate::gpu::{min_array_layers, planned_texture_bytes, Gpu, Op, Params};
 use crate::pipeline::Pipeline;
 use crate::record::{Frame, FrameRecord, FrameState, Totals};
-use crate::slots::{place, KeySlots, Placement, Resident, MAX_BUBBLE_PLANES};
+use crate::slots::{KeySlots, Resident, MAX_BUBBLE_PLANES};
 use crate::throttle::Throttle;
 use crate::time::{frames_f64, ticks_to_media, MediaTime, ONE_FRAME};
+
+mod decoding;
 use crate::PlayerError;
+use decoding::Decoding;
 
 /// After a re-synchronisation, how long to let the reader catch up before another.
 const SEEK_COOLDOWN_NS: u64 = 2_000_000_000;
@@ -32,9 +35,16 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     pipeline: Pipeline<R>,
     /// The box received but not yet decoded on the GPU.
     incoming: Option<Box<SegmentData>>,
-    /// A box to decode on the GPU this frame, and whether its bubbles are wanted (not for
-    /// a dropped segment).
-    to_decode: Option<(Box<SegmentData>, bool)>,
+    /// The segment being decoded, a slice at a time.
+    decoding: Option<Decoding>,
+    /// The decode ops this frame records, and the box its upload needs.
+    frame_ops: Vec<Op>,
+    frame_box: Option<Box<SegmentData>>,
+    /// A retired decode's op and step lists, reused by the next.
+    spare: (Vec<Op>, Vec<crate::decoder::KeyStep>),
+    /// The per-frame decode budget, blocks, and the work this frame records.
+    budget: Option<u64>,
+    frame_work: u64,
     /// Which keyframes the GPU holds.
     keys: KeySlots,
     /// The segment the GPU can evaluate (its bubbles and keyframes are resident).
@@ -186,7 +196,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             gpu,
             pipeline,
             incoming: None,
-            to_decode: None,
+            decoding: None,
+            frame_ops: Vec::new(),
+            frame_box: None,
+            spare: (Vec::new(), Vec::new()),
+            budget: cfg.decode_budget,
+            frame_work: 0,
             keys: KeySlots::default(),
             resident: None,
             known_end: 0,
@@ -277,70 +292,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.header.frame_count as u64
     }
 
-    /// Decides what an arrived segment gets (see `slots.rs`): shown (its keyframes built
-    /// and bubbles decoded on the GPU this frame), kept for later, or dropped (its
-    /// keyframes still built: the next segment starts from them). Returns the bytes its
-    /// upload will move.
-    fn take_incoming(&mut self, b: Box<SegmentData>, pos: MediaTime, n: u64) -> u64 {
-        let base = b.pass as u64 * n;
-        let range = (
-            base + ((b.start as u64) << 32),
-            base + ((b.end as u64) << 32),
-        );
-        let placement = place(self.resident.as_ref(), range, pos, n, self.header.looping);
-        if placement == Placement::NotYet {
-            self.incoming = Some(b);
-            return 0;
-        }
-        // A segment whose own data was damaged cannot be shown; its keyframes are built.
-        let placement = match placement {
-            Placement::Show if b.keys_only => Placement::Drop,
-            p => p,
-        };
-        if let Err(e) = self.gpu.fits(&b) {
-            self.totals.damaged += 1;
-            self.totals.last_error = Some(e);
-            self.pipeline.give_back(b);
-            return 0;
-        }
-        if let Err(k) = self.keys.build(&b.steps) {
-            // The GPU's keyframes are not the ones this segment's chain continues (it
-            // follows one that never reached the GPU): read again from an intra keyframe.
-            self.totals.last_error = Some(format!(
-                "keyframe {k} does not follow the keyframes on the GPU: re-reading from an intra keyframe"
-            ));
-            self.pipeline.give_back(b);
-            self.seek(pos);
-            return 0;
-        }
-        // The resident keyframes changed: the segment on screen is gone.
-        self.resident = None;
-        self.known_end = range.1;
-        let show = placement == Placement::Show;
-        if show {
-            if self.keys.holds(b.keys) {
-                let mut steps = [0f32; MAX_BUBBLE_PLANES];
-                for (s, p) in steps.iter_mut().zip(&b.planes[b.bubbles..]) {
-                    *s = p.step;
-                }
-                self.resident = Some(Resident {
-                    index: b.index,
-                    start: range.0,
-                    end: range.1,
-                    layers: b.layers,
-                    steps,
-                });
-                self.totals.segments_uploaded += 1;
-            }
-        } else {
-            self.totals.segments_dropped += 1;
-        }
-        let show = show && self.resident.is_some();
-        let bytes = crate::gpu::upload_bytes(&b, show, self.gpu.part());
-        self.to_decode = Some((b, show));
-        bytes
-    }
-
     /// Advances playback by `dt` ns and renders the lightmap for the new time: [`plan`]
     /// then [`render`].
     ///
@@ -386,11 +337,15 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 
     /// Records the GPU work of a planned frame into `encoder` (see [`Player::advance_into`]).
     pub fn render_into(&mut self, frame: &Frame, encoder: &mut wgpu::CommandEncoder) {
-        if let Some((b, bubbles)) = self.to_decode.take() {
-            self.gpu.decode(encoder, &b, bubbles);
-            // Its bytes are with wgpu now (`write_buffer` copies them): the box goes back.
+        if !self.frame_ops.is_empty() {
+            self.gpu
+                .record(encoder, &self.frame_ops, self.frame_box.as_deref());
+            self.frame_ops.clear();
+        }
+        // Its bytes are with wgpu now (`write_buffer` copies them, the copy from staging
+        // is recorded): the box goes back.
+        if let Some(b) = self.frame_box.take() {
             self.pipeline.give_back(b);
-            self.last_eval = None;
         }
         if let Some((params, hold_first)) = &frame.eval {
             // The same parameters over the same resident data give the same image (a
@@ -427,17 +382,21 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         if !self.header.looping {
             pos = pos.min(n - ONE_FRAME);
         }
-        // Take an arrived segment: drop it if already in the past, else put it in the slot
-        // that is not on screen (never the displayed one).
+        // Start decoding an arrived segment into what is not on screen (one at a time),
+        // then record this frame's share of the decode in flight.
         let mut uploaded = 0;
-        if let Some(b) = self.incoming.take() {
-            if b.generation != self.generation {
-                // Decoded before a seek: no longer wanted.
-                self.pipeline.give_back(b);
-            } else {
-                uploaded = self.take_incoming(b, pos, n);
+        if self.decoding.is_none() {
+            if let Some(b) = self.incoming.take() {
+                if b.generation != self.generation {
+                    // Decoded before a seek: no longer wanted.
+                    self.pipeline.give_back(b);
+                } else {
+                    uploaded = self.start_decode(b, pos, n);
+                }
             }
         }
+        let per_frame = ticks_to_media(dt, rate.0, rate.1);
+        self.frame_work = self.step_decode(pos, per_frame, n);
         let missing = !self.resident.is_some_and(|r| r.start <= pos && pos < r.end);
         if missing && self.ticks.saturating_sub(self.last_seek) > SEEK_COOLDOWN_NS {
             // So far behind that reading on would only deliver the past: re-synchronise
@@ -499,8 +458,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             };
             params.transfer = tr;
             params.v0 = v0;
-            params.channels = self.header.channels as u32;
+            let ch = self.header.channels as u32;
+            params.channels = ch;
             params.steps = r.steps;
+            // K_s from its slot; K_{s+1} from the head until the next decode packs it.
+            let packed = self.keys.slot_of(r.keys[1]);
+            params.keys = [r.slot0 * ch, packed.unwrap_or(0) * ch];
+            params.head_f32 = packed.is_none() as u32;
+            params.set_base = r.set * self.gpu.set_layers;
             params.alpha = alpha;
             params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
             if hold_first {
@@ -542,7 +507,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             alpha,
             segment,
             u,
+            decode_work: self.frame_work,
         };
+        self.totals.decode_work += self.frame_work;
+        self.totals.decode_work_max = self.totals.decode_work_max.max(self.frame_work);
         self.frame += 1;
         self.totals.frames += 1;
         self.totals.bytes_uploaded += uploaded;
@@ -576,9 +544,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         if let Some(b) = self.incoming.take() {
             self.pipeline.give_back(b);
         }
-        if let Some((b, _)) = self.to_decode.take() {
-            self.pipeline.give_back(b);
+        if let Some(d) = self.decoding.take() {
+            self.retire(d);
         }
+        // (This frame's ops, if any, were chosen before the seek: they still record, on
+        // buffers nothing else reads before the next decode's upload.)
         self.resident = None;
         self.known_end = 0;
         self.keys.clear();

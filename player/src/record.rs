@@ -60,6 +60,11 @@ pub struct FrameRecord {
     pub segment: usize,
     /// The normalised time within that segment, 0 to 1.
     pub u: f64,
+    /// The segment decode work this frame records, in blocks (an 8×8 block of one plane
+    /// through one pass: what [`PlayerConfig::decode_budget`] bounds).
+    ///
+    /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
+    pub decode_work: u64,
 }
 
 /// A planned frame ([`Player::plan`](crate::Player::plan)): its record, and the GPU work
@@ -100,6 +105,17 @@ pub struct Totals {
     /// Re-synchronisations: [`Player::set_time`](crate::Player::set_time), or a display so
     /// far behind that reading on would only deliver the past.
     pub seeks: u64,
-    /// The last damage reported, naming the chunk.
+    /// Segment decode work recorded, in blocks ([`FrameRecord::decode_work`]).
+    pub decode_work: u64,
+    /// The most decode work one frame recorded.
+    pub decode_work_max: u64,
+    /// Frames that needed a segment whose decode the per-frame budget had not let finish
+    /// (the display held or waited instead): the budget is too small for the stream at
+    /// this display rate.
+    pub budget_late: u64,
+    /// Frames that recorded more than the budget because one step of the decode (a
+    /// slice of a pass, or a zero pass over whole planes) costs more than the budget.
+    pub over_budget: u64,
+    /// The last damage or budget shortfall reported, naming the chunk or segment.
     pub last_error: Option<String>,
 }

@@ -1,16 +1,16 @@
 //! What the GPU holds, as bookkeeping tested without a GPU: which keyframes are the
-//! chain's head and the one before it, which segment the bubble planes hold, and what to do with
+//! chain's head and in the 16-bit slots, which segment is on screen, and what to do with
 //! an arriving segment. `gpu` records the passes a decision asks for.
 //!
-//! The GPU builds a segment's keyframes and decodes its bubble planes in the frame that
-//! first shows it, in the same submission as the reconstruction, so one bubble set and
-//! two keyframes are enough: the head of the chain, K_{s+1}, in f32 (the next predicted
-//! keyframe is built on it in place), and the one before it, K_s, in 16 bits with a range
-//! per region (only the display reads it). Building K_{s+2} first packs K_{s+1} into the
-//! 16-bit slot, then adds the residual onto the head. A segment that arrives too late to
-//! show still has its keyframes built (the next one starts from its K_{s+1}); the segment
-//! on screen then loses its keyframes, and the display keeps the last image it showed
-//! until the next segment arrives.
+//! The next segment decodes while the one on screen plays, a slice at a time, so the GPU
+//! holds two bubble sets and two 16-bit keyframe slots beside the f32 head of the chain.
+//! The segment on screen reads K_s from a slot and K_{s+1} from the head; the next
+//! segment's decode first packs the head into the other slot (the display reads it there
+//! from then on), then adds its residual onto the head to build K_{s+2}, and decodes its
+//! bubble planes into the other set. Showing it is then only a change of parameters. A
+//! segment that arrives too late to show still has its keyframes built (the next one
+//! starts from its K_{s+1}); a chain rebuilt after a seek or damage takes the slots the
+//! display used, and the display keeps the last image it showed until it is done.
 
 use crate::decoder::KeyStep;
 use crate::time::{MediaTime, ONE_FRAME};
@@ -19,11 +19,11 @@ use crate::time::{MediaTime, ONE_FRAME};
 /// steps in 6 vec4s).
 pub(crate) const MAX_BUBBLE_PLANES: usize = 24;
 
-/// The two resident keyframes: the chain's head (f32) and the one before it (16-bit).
+/// The resident keyframes: the chain's head (f32, built in place) and the 16-bit slots.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct KeySlots {
     head: Option<usize>,
-    previous: Option<usize>,
+    slots: [Option<usize>; 2],
 }
 
 impl KeySlots {
@@ -32,34 +32,55 @@ impl KeySlots {
         *self = KeySlots::default();
     }
 
-    /// Builds `steps` in turn, each on the head, the head before it becoming the previous
-    /// keyframe. `Err(k)`: predicted keyframe `k` does not follow the head (the GPU's
-    /// chain is not the decoder's); nothing changes then.
-    pub fn build(&mut self, steps: &[KeyStep]) -> Result<(), usize> {
-        let mut t = *self;
+    /// The head's keyframe.
+    pub fn head(&self) -> Option<usize> {
+        self.head
+    }
+
+    /// The slot holding keyframe `k`, if one does.
+    pub fn slot_of(&self, k: usize) -> Option<u32> {
+        self.slots
+            .iter()
+            .position(|&s| s == Some(k))
+            .map(|s| s as u32)
+    }
+
+    /// Whether `steps` can be built in turn on the head: `Err(k)` where predicted keyframe
+    /// `k` does not follow the keyframe before it (the GPU's chain is not the decoder's).
+    pub fn check(&self, steps: &[KeyStep]) -> Result<(), usize> {
+        let mut head = self.head;
         for st in steps {
-            let follows = st.number > 0 && t.head == Some(st.number - 1);
+            let follows = st.number > 0 && head == Some(st.number - 1);
             if !st.intra && !follows {
                 return Err(st.number);
             }
-            t.previous = t.head;
-            t.head = Some(st.number);
+            head = Some(st.number);
         }
-        *self = t;
         Ok(())
     }
 
-    /// Whether keyframes `k0` (the previous one) and `k1` (the head) are resident.
-    pub fn holds(&self, [k0, k1]: [usize; 2]) -> bool {
-        self.previous == Some(k0) && self.head == Some(k1)
+    /// `steps` were built: the head is the last.
+    pub fn built(&mut self, steps: &[KeyStep]) {
+        if let Some(st) = steps.last() {
+            self.head = Some(st.number);
+        }
+    }
+
+    /// Slot `slot` now holds keyframe `k`.
+    pub fn packed(&mut self, slot: u32, k: usize) {
+        self.slots[slot as usize] = Some(k);
     }
 }
 
-/// The segment whose bubble planes the GPU holds, with its absolute media range
-/// (pass · N + frames). Its K_s and K_{s+1} are the resident keyframes.
+/// The segment the GPU can show, with its absolute media range (pass · N + frames): K_s
+/// in slot `slot0`, K_{s+1} (keyframe `keys[1]`) in the head or a slot, its bubble planes
+/// in set `set`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Resident {
     pub index: usize,
+    pub keys: [usize; 2],
+    pub slot0: u32,
+    pub set: u32,
     pub start: MediaTime,
     pub end: MediaTime,
     pub layers: usize,
@@ -116,6 +137,9 @@ mod tests {
     fn resident(s: u64) -> Resident {
         Resident {
             index: s as usize,
+            keys: [s as usize, s as usize + 1],
+            slot0: 0,
+            set: 0,
             start: s * 10 * F,
             end: (s + 1) * 10 * F,
             layers: 4,
@@ -124,7 +148,7 @@ mod tests {
     }
 
     #[test]
-    fn a_chain_ends_with_the_segments_keyframes() {
+    fn a_chain_is_checked_against_the_head_and_slots_remember_what_they_hold() {
         let mut k = KeySlots::default();
         // After a seek into segment 3: intra keyframe 1, then 2, 3 and the closing 4.
         let steps = [
@@ -133,31 +157,24 @@ mod tests {
             step(3, false),
             step(4, false),
         ];
-        k.build(&steps).unwrap();
-        assert!(k.holds([3, 4]));
+        assert_eq!(k.check(&steps), Ok(()));
+        k.built(&steps);
+        assert_eq!(k.head(), Some(4));
+        k.packed(0, 3);
+        assert_eq!(k.slot_of(3), Some(0));
+        assert_eq!(k.slot_of(4), None);
         // The next segment carries only its closing keyframe, built on the head.
-        k.build(&[step(5, false)]).unwrap();
-        assert!(k.holds([4, 5]));
-        assert!(!k.holds([3, 4]));
-    }
-
-    #[test]
-    fn a_predicted_keyframe_that_does_not_follow_the_head_changes_nothing() {
-        let mut k = KeySlots::default();
-        k.build(&[step(0, true), step(1, false)]).unwrap();
+        assert_eq!(k.check(&[step(5, false)]), Ok(()));
+        // One that skips a keyframe does not follow; nothing changes.
         let before = k;
-        assert_eq!(k.build(&[step(3, false)]), Err(3));
+        assert_eq!(k.check(&[step(6, false)]), Err(6));
         assert_eq!(k, before);
-        assert_eq!(KeySlots::default().build(&[step(0, false)]), Err(0));
-        // A loop: the last segment closes on keyframe 0 (intra), segment 0 follows.
-        k.build(&[step(0, true)]).unwrap();
-        assert!(k.holds([1, 0]));
-        k.build(&[step(1, false)]).unwrap();
-        assert!(k.holds([0, 1]));
-        // After a seek nothing is held: the first intra keyframe alone shows nothing.
+        assert_eq!(KeySlots::default().check(&[step(0, false)]), Err(0));
+        // A loop: the last segment closes on keyframe 0 (intra).
+        assert_eq!(k.check(&[step(0, true)]), Ok(()));
         k.clear();
-        k.build(&[step(4, true)]).unwrap();
-        assert!(!k.holds([3, 4]));
+        assert_eq!(k.head(), None);
+        assert_eq!(k.slot_of(3), None);
     }
 
     #[test]

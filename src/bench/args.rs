@@ -95,6 +95,10 @@ pub struct BenchRenderArgs {
     /// Runs (each a fresh player); the figures are the median over runs and their spread.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
+    /// The player's per-frame decode budget, blocks (`PlayerConfig::decode_budget`);
+    /// unset: the default, each segment spread over the frames before it is due.
+    #[arg(long)]
+    pub budget: Option<u64>,
 }
 
 #[derive(Args)]

@@ -4,7 +4,8 @@
 //! "Units, flags and exit codes").
 //!
 //! `args` (the flags), `offline` (the baker, the lossless baseline, the plots of the
-//! scripts' CSVs), `runtime` (the decoder, drift under bandwidth caps, the render thread),
+//! scripts' CSVs), `runtime` (the decoder, drift under bandwidth caps, the render thread; `frame_gpu`
+//! times each displayed frame's GPU work and the reference blend),
 //! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
 //! and `entropy` (what a context-adaptive coder would save: a research harness for the
 //! format's next coding).
@@ -12,6 +13,7 @@
 mod args;
 mod changes;
 mod entropy;
+mod frame_gpu;
 mod offline;
 mod runtime;
 mod scale;

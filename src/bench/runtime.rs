@@ -254,29 +254,36 @@ pub(super) fn bench_drift(a: BenchDriftArgs) -> Result<(), String> {
 }
 
 pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
+    use super::frame_gpu::{bytes_per_texel, FrameTimer};
     use vbim_player::{Player, PlayerConfig};
     let name = a.file.display().to_string();
-    let (device, queue, info) = vbim_player::headless_device().map_err(|e| e.to_string())?;
+    // Timestamps where the adapter has them (lavapipe does); the player asks for none.
+    let (device, queue, info) = vbim_player::bench::timing_device().map_err(|e| e.to_string())?;
     let summary = |v: &mut Vec<f64>| {
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         v.sort_by(f64::total_cmp);
-        [mean, v[((v.len() - 1) as f64 * 0.99) as usize]]
+        [
+            mean,
+            v[((v.len() - 1) as f64 * 0.99) as usize],
+            v[v.len() - 1],
+        ]
     };
-    // Per run: [cpu mean, cpu p99, wall mean, wall p99, plan mean, plan p99, gpu mean, gpu p99].
-    let mut runs: Vec<[f64; 8]> = Vec::new();
-    let mut h = None;
+    // Per run: cpu, wall, plan, GPU (timestamps, or waited for), blend: [mean, p99, max] each.
+    let mut runs: Vec<[[f64; 3]; 5]> = Vec::new();
+    let (mut h, mut timed, mut work) = (None, false, (0u64, 0u64));
     for _ in 0..a.runs.max(1) {
         let f = crate::sequence::open_input(&a.file)?;
-        let mut player = Player::open(
-            &device,
-            &queue,
-            std::io::BufReader::new(f),
-            PlayerConfig::default(),
-        )
-        .map_err(|e| e.to_string())?;
-        h = Some(player.header().clone());
-        let (mut cpu, mut wall_t, mut plan_t, mut gpu) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let cfg = PlayerConfig {
+            decode_budget: a.budget,
+            ..PlayerConfig::default()
+        };
+        let mut player = Player::open(&device, &queue, std::io::BufReader::new(f), cfg)
+            .map_err(|e| e.to_string())?;
+        let header = player.header().clone();
+        let timer = FrameTimer::new(&device, &queue, (header.width, header.height));
+        timed = timer.is_some();
+        h = Some(header);
+        let mut series: [Vec<f64>; 5] = Default::default();
         let start = Instant::now();
         let mut prev = 0u64;
         let warm = 60;
@@ -289,39 +296,52 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             let (c0, t0) = (thread_cpu_ns(), Instant::now());
             let frame = player.plan(t - prev);
             let t1 = Instant::now();
-            player.render(&frame);
+            let mut enc = device.create_command_encoder(&Default::default());
+            if let Some(timer) = &timer {
+                timer.begin(&mut enc);
+            }
+            player.render_into(&frame, &mut enc);
+            if let Some(timer) = &timer {
+                timer.end(&mut enc);
+            }
+            queue.submit([enc.finish()]);
+            player.submitted();
             let (c2, t2) = (thread_cpu_ns(), Instant::now());
             player.wait_for_gpu();
             let t3 = Instant::now();
+            let (gpu, blend) = match &timer {
+                Some(timer) => timer.read(&device),
+                None => ((t3 - t2).as_secs_f64() * 1e3, 0.0),
+            };
             prev = t;
             if k > warm {
-                plan_t.push((t1 - t0).as_secs_f64() * 1e3);
-                cpu.push((c2 - c0) as f64 * 1e-6);
-                wall_t.push((t2 - t0).as_secs_f64() * 1e3);
-                gpu.push((t3 - t2).as_secs_f64() * 1e3);
+                series[0].push((c2 - c0) as f64 * 1e-6);
+                series[1].push((t2 - t0).as_secs_f64() * 1e3);
+                series[2].push((t1 - t0).as_secs_f64() * 1e3);
+                series[3].push(gpu);
+                series[4].push(blend);
             }
         }
+        let t = player.totals();
+        work = (t.decode_work_max, t.budget_late);
         player
             .stop(std::time::Duration::from_secs(10))
             .map_err(|e| e.to_string())?;
-        let [cm, cp] = summary(&mut cpu);
-        let [wm, wp] = summary(&mut wall_t);
-        let [pm, pp] = summary(&mut plan_t);
-        let [gm, gp] = summary(&mut gpu);
-        runs.push([cm, cp, wm, wp, pm, pp, gm, gp]);
+        runs.push(series.map(|mut v| summary(&mut v)));
     }
     let h = h.expect("at least one run");
     // Median over runs of each figure, with the smallest and largest.
-    let stat = |i: usize| stats(&mut runs.iter().map(|r| r[i]).collect::<Vec<_>>());
+    let stat = |i: usize, j: usize| stats(&mut runs.iter().map(|r| r[i][j]).collect::<Vec<_>>());
     let line = |label: &str, i: usize, digits: usize| {
-        let ((m, m0, m1), (p, p0, p1)) = (stat(i), stat(i + 1));
+        let ((m, m0, m1), (p, p0, p1), (x, ..)) = (stat(i, 0), stat(i, 1), stat(i, 2));
         println!(
-            "{label:<50} mean {m:.digits$} ms ({m0:.digits$}–{m1:.digits$}), p99 {p:.digits$} ms ({p0:.digits$}–{p1:.digits$})"
+            "{label:<50} mean {m:.digits$} ms ({m0:.digits$}–{m1:.digits$}), p99 {p:.digits$} ms ({p0:.digits$}–{p1:.digits$}), max {x:.digits$} ms"
         );
     };
     println!(
-        "render benchmark: {name}, {}×{} at {}/{} fps, 60 Hz, {} frames × {} runs on {} ({:?}); median over runs (min–max)",
-        h.width, h.height, h.rate_num, h.rate_den, a.frames, runs.len(), info.name, info.backend
+        "render benchmark: {name}, {}×{} at {}/{} fps, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}; median over runs (min–max)",
+        h.width, h.height, h.rate_num, h.rate_den, a.frames, runs.len(), info.name, info.backend,
+        a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame"))
     );
     line(
         "render thread CPU time, advance = plan + record + submit",
@@ -330,10 +350,34 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     );
     line(
         "  the same, wall clock (preemption and waits included)",
-        2,
+        1,
         3,
     );
-    line("  of which plan (the player's own logic, wall clock)", 4, 4);
-    line("GPU execution (waited for apart, not targeted)", 6, 3);
+    line("  of which plan (the player's own logic, wall clock)", 2, 4);
+    if timed {
+        line("GPU time per displayed frame (timestamps)", 3, 3);
+        line("reference: blend two Rgba16Float frames (timestamps)", 4, 3);
+        let (g, b) = (stat(3, 0).0, stat(4, 0).0);
+        let (gp, gx) = (stat(3, 1).0, stat(3, 2).0);
+        println!(
+            "ratio to the reference blend: mean {:.2}×, p99 {:.2}×, max {:.2}×; p99 / mean {:.2}",
+            g / b.max(1e-9),
+            gp / b.max(1e-9),
+            gx / b.max(1e-9),
+            gp / g.max(1e-9)
+        );
+    } else {
+        line("GPU execution (waited for apart; no timestamps)", 3, 3);
+    }
+    let (head, packed, blend) = bytes_per_texel(&h);
+    println!(
+        "bytes per texel a frame touches at degree {}: {packed} (K_(s+1) packed), {head} (in the f32 head, until the next decode packs it); the blend {blend} ({:.2}×)",
+        h.max_degree,
+        packed as f64 / blend as f64
+    );
+    println!(
+        "decode work: at most {} blocks in one frame; frames late for the budget: {}",
+        work.0, work.1
+    );
     Ok(())
 }

@@ -1,11 +1,80 @@
-//! The segment decode: a segment's keyframe steps and bubble planes, recorded as compute
-//! passes over the coefficient streams (`job.wgsl`, `parse.wgsl`, `decode.wgsl`).
+//! The segment decode: a segment's keyframe steps and bubble planes as a list of passes
+//! over the coefficient streams (`job.wgsl`, `parse.wgsl`, `decode.wgsl`), planned at once
+//! and recorded a few at a time, so that the player can spread a segment's decode over the
+//! frames before it is shown ([`Op`], [`Gpu::plan_decode`], [`Gpu::record`]).
 
 use super::job::{Job, JOB_STRIDE};
 use super::plan::*;
 use super::Gpu;
 use crate::coded::Coded;
 use crate::decoder::SegmentData;
+
+/// Workgroups of one slice of a pass: a pass over more goes in several dispatches, which
+/// may land in different frames. (32 workgroups of 64 blocks: 131 072 texels of a plane.)
+pub(crate) const SLICE_GROUPS: u32 = 32;
+
+/// What one step of a decode records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    /// The segment's streams into the stream buffer (from the box's staging buffer, or
+    /// its words); the box is needed until this is recorded.
+    Upload,
+    /// The dense plane's masks and sets cleared for a part (`bytes` of them).
+    Clear {
+        bytes: u64,
+    },
+    Parse,
+    KeyZero,
+    KeyAdd,
+    KeyPack,
+    /// A bubble set's bounds cleared.
+    Bounds {
+        offset: u64,
+        bytes: u64,
+    },
+    BubbleZero,
+    BubbleBound,
+    BubbleWrite,
+}
+
+/// One step of a segment's decode: a dispatch (or a clear) and what it costs.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Op {
+    kind: Kind,
+    /// The job's offset in the jobs buffer.
+    job: u32,
+    groups: [u32; 3],
+    /// A keyframe pass's plane (which view of the head it binds).
+    channel: u32,
+    /// The work it records, in blocks: 8×8 texels of one plane through one pass (a parse
+    /// counts one per entry point, a zero pass one per 64 texels written, a pack 16 per
+    /// 32² region of a plane). What [`PlayerConfig::decode_budget`] counts.
+    ///
+    /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
+    pub cost: u64,
+    /// Whether this op packs the head into a slot: once all of a pack's ops are
+    /// recorded, the slot holds the head's keyframe.
+    pub packs: Option<u32>,
+}
+
+impl Op {
+    /// Whether recording it needs the segment's box (the upload).
+    pub fn needs_box(&self) -> bool {
+        self.kind == Kind::Upload
+    }
+}
+
+/// Where a segment's decode puts what it builds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Target {
+    /// Pack the head into this slot before building anything (the display then reads
+    /// K_{s+1} from the slot and the head is free).
+    pub pack_first: Option<u32>,
+    /// Pack the head into this slot before the last keyframe step (a chain's K_s).
+    pub pack_before_last: Option<u32>,
+    /// The bubble set the bubble planes go to; `None`: keyframes only.
+    pub set: Option<u32>,
+}
 
 impl Gpu {
     /// Whether a segment's coefficients fit one storage binding of this device.
@@ -21,185 +90,338 @@ impl Gpu {
         Ok(())
     }
 
-    /// Blocks the dense plane holds (a plane of more goes in parts).
-    pub fn part(&self) -> u32 {
-        self.part
-    }
-
-    /// Records the decode of `seg` into `enc`: its keyframe steps, built in turn on the
-    /// head (the head packed into the previous keyframe before the last step), then
-    /// (with `bubbles`) its bubble planes. Each plane is parsed into the dense plane, part
-    /// by part, and read from there. The streams go through `Queue::write_buffer`, which
-    /// takes effect at the queue's next submission: the one that carries `enc`. It
-    /// uploads [`upload_bytes`].
-    pub fn decode(&mut self, enc: &mut wgpu::CommandEncoder, seg: &SegmentData, bubbles: bool) {
-        let ch = self.channels as usize;
+    /// Plans the decode of `seg` into `target` (its jobs are written when its first op,
+    /// the upload, is recorded). Fills `ops` with the ops, in the order they must be recorded, and
+    /// returns the bytes the decode uploads (its streams and its jobs). Each keyframe plane is parsed into
+    /// the dense plane, part by part, and added onto the head; each bubble plane's bound
+    /// is found over every part before its blocks are written (parsed again if the plane
+    /// went in parts). Nothing else may use the dense plane or the stream buffer until
+    /// the last op is recorded.
+    pub fn plan_decode(&mut self, seg: &SegmentData, target: Target, ops: &mut Vec<Op>) -> u64 {
+        let ch = self.channels;
         let words = seg.bytes();
-        let planes = decoded_planes(seg, bubbles);
-        let jobs = job_bytes(seg, bubbles, self.part);
-        if words > self.words.size() || jobs > self.jobs.size() {
-            use wgpu::BufferUsages as B;
-            if words > self.words.size() {
-                self.words = self.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("vbim coefficient streams"),
-                    size: grown(words),
-                    usage: B::STORAGE | B::COPY_DST,
-                    mapped_at_creation: false,
-                });
-            }
-            if jobs > self.jobs.size() {
-                self.jobs = self.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("vbim decode jobs"),
-                    size: grown(jobs),
-                    usage: B::UNIFORM | B::COPY_DST,
-                    mapped_at_creation: false,
-                });
-            }
+        if words > self.words.size() {
+            self.words = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("vbim coefficient streams"),
+                size: grown(words),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             self.bind_decode();
         }
-        match &seg.staged {
-            // Written into a staging buffer by the decoder thread: a copy on the GPU, no
-            // bytes through this thread.
-            Some(staged) => {
-                enc.copy_buffer_to_buffer(&staged.buffer, 0, &self.words, 0, staged.bytes)
-            }
-            None => self.write_words(&seg.data),
-        }
         let (pw, ph) = (self.plane[0], self.plane[1]);
-        // Each plane's first job; its parts follow.
-        let mut first_job = std::mem::take(&mut self.first_job);
-        first_job.clear();
         self.job_bytes.clear();
-        for (i, span) in seg.planes[..planes].iter().enumerate() {
-            first_job.push(self.job_bytes.len() as u64);
-            let n = parts(span.blocks, self.part);
-            for k in 0..n {
-                let lo = k * self.part;
-                self.push_job(Job {
-                    step: span.step,
-                    // A bubble plane's layer; a keyframe plane's channel, the layer of the
-                    // previous keyframe `key_pack` writes (the head's passes write the
-                    // layer their binding views).
-                    layer: if i < seg.bubbles {
-                        i % ch
-                    } else {
-                        i - seg.bubbles
-                    } as u32,
-                    stream: span.stream,
-                    entries: span.entries,
-                    count: span.count,
-                    blocks: span.blocks,
-                    lo,
-                    hi: (lo + self.part).min(span.blocks),
-                    members: span.members,
-                    member_count: span.member_count,
-                    groups_x: GROUPS_X,
-                    blocks_x: pw / 8,
-                    per: self.per,
-                    tiles_x: self.tiles_x,
+        ops.clear();
+        ops.push(Op::new(Kind::Upload, 0, [0; 3], 0, 0));
+        let [rx, ry] = self.regions;
+        let pack = |gpu: &mut Gpu, ops: &mut Vec<Op>, slot: u32| {
+            for p in 0..ch {
+                let job = Job {
+                    layer: slot * ch + p,
                     size: [pw, ph],
-                    pad: [0; 2],
-                });
+                    ..gpu.base_job()
+                };
+                let n = ops.len();
+                // 16 blocks per region, 64 regions per workgroup.
+                let regions = (rx * ry) as u64;
+                gpu.sliced(
+                    ops,
+                    Kind::KeyPack,
+                    job,
+                    (rx * ry).div_ceil(64),
+                    p,
+                    (regions * 16, 1024),
+                );
+                for op in &mut ops[n..] {
+                    op.packs = Some(slot);
+                }
             }
+        };
+        if let Some(slot) = target.pack_first {
+            pack(self, ops, slot);
         }
-        let zero_job = self.job_bytes.len() as u64;
-        let bubble_layers = ((seg.layers.saturating_sub(2)) * ch) as u32;
-        self.push_job(Job {
-            layer: bubble_layers,
-            size: [pw / 2, ph],
-            ..Job::default()
-        });
-        self.queue.write_buffer(&self.jobs, 0, &self.job_bytes);
-        let dispatch = |pass: &mut wgpu::ComputePass, count: u32| {
-            if count > 0 {
-                pass.dispatch_workgroups(count.min(GROUPS_X), count.div_ceil(GROUPS_X), 1);
-            }
-        };
-        // The parts of plane `plane`: (job offset, blocks in the part, entry points).
-        let jobs_of = &first_job;
-        let part_jobs = |plane: usize| {
-            let span = &seg.planes[plane];
-            let part = self.part;
-            (0..parts(span.blocks, part)).map(move |k| {
-                let lo = k * part;
-                let blocks = (lo + part).min(span.blocks) - lo.min(span.blocks);
-                let job = jobs_of[plane] + k as u64 * JOB_STRIDE;
-                (job as u32, blocks, span.count)
-            })
-        };
-        let bubble_group = self.bubble_group.as_ref().expect("made at creation");
         let last = seg.steps.len().saturating_sub(1);
         for (n, st) in seg.steps.iter().enumerate() {
+            if n == last {
+                if let Some(slot) = target.pack_before_last {
+                    pack(self, ops, slot);
+                }
+            }
             for p in 0..ch {
-                let plane = st.plane + p;
-                for (k, (job, blocks, entries)) in part_jobs(plane).enumerate() {
-                    let mut pass = self.parse_part(enc, job, blocks, entries);
-                    pass.set_bind_group(0, &self.key_groups[p], &[job]);
-                    if k == 0 && n == last {
-                        // The head becomes the previous keyframe (the earlier steps' heads
-                        // are never shown).
-                        // (One invocation per region, 64 to a workgroup.)
-                        pass.set_pipeline(&self.key_pack);
-                        let [rx, ry] = self.regions;
-                        pass.dispatch_workgroups((rx * ry).div_ceil(64), 1, 1);
-                        self.mark(&mut pass, "key_pack");
-                    }
+                let span = &seg.planes[st.plane + p as usize];
+                for (k, job) in self.part_jobs(span, p).enumerate() {
+                    let blocks = job.hi - job.lo.min(job.hi);
+                    self.parse_ops(ops, job, blocks, p);
                     if k == 0 && st.intra {
-                        pass.set_pipeline(&self.key_zero);
-                        pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
-                        self.mark(&mut pass, "key_zero");
+                        let at = self.push_job(Job {
+                            size: [pw, ph],
+                            ..job
+                        });
+                        let zero = [pw.div_ceil(8), ph.div_ceil(8), 1];
+                        let texels = pw as u64 * ph as u64;
+                        ops.push(Op::new(Kind::KeyZero, at, zero, p, texels / 64));
                     }
                     // A predicted keyframe is added onto the head: the keyframe it follows.
-                    pass.set_pipeline(&self.key_add);
-                    dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
-                    self.mark(&mut pass, "key_add");
+                    let groups = blocks.div_ceil(GROUP_BLOCKS);
+                    let units = (blocks as u64, GROUP_BLOCKS as u64);
+                    self.sliced(ops, Kind::KeyAdd, job, groups, p, units);
                 }
             }
         }
-        if bubbles {
-            enc.clear_buffer(&self.bounds, 0, None);
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                self.mark(&mut pass, "clears and pass changes");
-                pass.set_bind_group(0, bubble_group, &[zero_job as u32]);
-                pass.set_pipeline(&self.bubble_zero);
-                if bubble_layers > 0 {
-                    pass.dispatch_workgroups((pw / 2).div_ceil(8), ph.div_ceil(8), bubble_layers);
-                }
-                self.mark(&mut pass, "bubble_zero");
+        if let Some(set) = target.set {
+            let set_layers = self.set_layers;
+            let base = set * set_layers;
+            ops.push(Op::new(
+                Kind::Bounds {
+                    offset: base as u64 * 4,
+                    bytes: set_layers as u64 * 4,
+                },
+                0,
+                [0; 3],
+                0,
+                0,
+            ));
+            let layers = (seg.layers.saturating_sub(2) as u32 * ch).min(set_layers);
+            // One layer a dispatch, so that the zeroing spreads like the rest.
+            for l in 0..layers {
+                let at = self.push_job(Job {
+                    layer: 1,
+                    base: base + l,
+                    size: [pw / 2, ph],
+                    ..self.base_job()
+                });
+                let zero = [(pw / 2).div_ceil(8), ph.div_ceil(8), 1];
+                let cost = (pw / 2) as u64 * ph as u64 / 64;
+                ops.push(Op::new(Kind::BubbleZero, at, zero, 0, cost));
             }
-            for plane in seg.bubbles..planes {
+            for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
+                let layer = base + (i - seg.bubbles) as u32;
+                let whole = parts(span.blocks, self.part) == 1;
                 // The bound first (over every part), then the blocks, parsed again if the
                 // plane went in parts.
-                let whole = parts(seg.planes[plane].blocks, self.part) == 1;
-                for (job, blocks, entries) in part_jobs(plane) {
+                for job in self.part_jobs(span, layer) {
+                    let blocks = job.hi - job.lo.min(job.hi);
                     if blocks == 0 {
                         continue;
                     }
-                    let mut pass = self.parse_part(enc, job, blocks, entries);
-                    pass.set_bind_group(0, bubble_group, &[job]);
-                    pass.set_pipeline(&self.bubble_bound);
-                    dispatch(&mut pass, blocks.div_ceil(64));
-                    self.mark(&mut pass, "bubble_bound");
+                    self.parse_ops(ops, job, blocks, 0);
+                    let units = (blocks as u64, 64);
+                    self.sliced(ops, Kind::BubbleBound, job, blocks.div_ceil(64), 0, units);
                     if whole {
-                        pass.set_pipeline(&self.bubble_write);
-                        dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
-                        self.mark(&mut pass, "bubble_write");
+                        let groups = blocks.div_ceil(GROUP_BLOCKS);
+                        self.sliced(ops, Kind::BubbleWrite, job, groups, 0, units);
                     }
                 }
                 if whole {
                     continue;
                 }
-                for (job, blocks, entries) in part_jobs(plane) {
-                    let mut pass = self.parse_part(enc, job, blocks, entries);
-                    pass.set_bind_group(0, bubble_group, &[job]);
-                    pass.set_pipeline(&self.bubble_write);
-                    dispatch(&mut pass, blocks.div_ceil(GROUP_BLOCKS));
-                    self.mark(&mut pass, "bubble_write");
+                for job in self.part_jobs(span, layer) {
+                    let blocks = job.hi - job.lo.min(job.hi);
+                    self.parse_ops(ops, job, blocks, 0);
+                    let groups = blocks.div_ceil(GROUP_BLOCKS);
+                    let units = (blocks as u64, 64);
+                    self.sliced(ops, Kind::BubbleWrite, job, groups, 0, units);
                 }
             }
         }
-        self.first_job = first_job;
+        let jobs = self.job_bytes.len() as u64;
+        if jobs > self.jobs.size() {
+            self.jobs = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("vbim decode jobs"),
+                size: grown(jobs),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.bind_decode();
+        }
+        words + jobs
+    }
+
+    /// Records `ops` (a run of a planned decode, in order) into `enc`; `seg` is the box
+    /// the decode was planned from, needed while the upload is among them.
+    pub fn record(&self, enc: &mut wgpu::CommandEncoder, ops: &[Op], seg: Option<&SegmentData>) {
+        let mut i = 0;
+        while i < ops.len() {
+            match ops[i].kind {
+                Kind::Upload => {
+                    // The jobs, through `Queue::write_buffer` (they land at the queue's next
+                    // submission: the one that carries `enc`).
+                    self.queue.write_buffer(&self.jobs, 0, &self.job_bytes);
+                    self.upload(enc, seg);
+                }
+                Kind::Clear { bytes } => enc.clear_buffer(&self.masks, 0, Some(bytes)),
+                Kind::Bounds { offset, bytes } => {
+                    enc.clear_buffer(&self.bounds, offset, Some(bytes))
+                }
+                _ => {
+                    // A run of dispatches: one compute pass.
+                    let mut pass = enc.begin_compute_pass(&Default::default());
+                    while i < ops.len() && ops[i].dispatches() {
+                        self.dispatch(&mut pass, &ops[i]);
+                        i += 1;
+                    }
+                    continue;
+                }
+            }
+            i += 1;
+        }
+    }
+
+    /// The segment's streams into the stream buffer.
+    fn upload(&self, enc: &mut wgpu::CommandEncoder, seg: Option<&SegmentData>) {
+        match seg.map(|s| (&s.staged, &s.data)) {
+            // Written into a staging buffer by the decoder thread: a copy on the GPU, no
+            // bytes through this thread.
+            Some((Some(staged), _)) => {
+                enc.copy_buffer_to_buffer(&staged.buffer, 0, &self.words, 0, staged.bytes)
+            }
+            Some((None, data)) => self.write_words(data),
+            None => debug_assert!(false, "an upload without its box"),
+        }
+    }
+
+    /// Plans and records the whole decode of `seg` at once: its keyframe steps (the head
+    /// packed into slot 0 before the last one) and, with `bubbles`, its bubble planes
+    /// into set 0. For tests and `vbim bench decode --gpu`.
+    #[cfg(any(test, feature = "bench"))]
+    pub fn decode(&mut self, enc: &mut wgpu::CommandEncoder, seg: &SegmentData, bubbles: bool) {
+        let target = Target {
+            pack_first: None,
+            pack_before_last: Some(0),
+            set: bubbles.then_some(0),
+        };
+        let mut ops = Vec::new();
+        self.plan_decode(seg, target, &mut ops);
+        #[cfg(feature = "bench")]
+        if self.marks.is_some() {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.mark(&mut pass, "clears and pass changes");
+        }
+        self.record(enc, &ops, Some(seg));
+    }
+
+    fn dispatch(&self, pass: &mut wgpu::ComputePass, op: &Op) {
+        let (pipeline, group, label) = match op.kind {
+            Kind::Parse => (&self.parse, self.parse_group.as_ref(), "parse"),
+            Kind::KeyZero => (
+                &self.key_zero,
+                self.key_groups.get(op.channel as usize),
+                "key_zero",
+            ),
+            Kind::KeyAdd => (
+                &self.key_add,
+                self.key_groups.get(op.channel as usize),
+                "key_add",
+            ),
+            Kind::KeyPack => (
+                &self.key_pack,
+                self.key_groups.get(op.channel as usize),
+                "key_pack",
+            ),
+            Kind::BubbleZero => (&self.bubble_zero, self.bubble_group.as_ref(), "bubble_zero"),
+            Kind::BubbleBound => (
+                &self.bubble_bound,
+                self.bubble_group.as_ref(),
+                "bubble_bound",
+            ),
+            Kind::BubbleWrite => (
+                &self.bubble_write,
+                self.bubble_group.as_ref(),
+                "bubble_write",
+            ),
+            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } => return,
+        };
+        let group = group.expect("made at creation");
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, group, &[op.job]);
+        let [x, y, z] = op.groups;
+        if x > 0 && y > 0 && z > 0 {
+            pass.dispatch_workgroups(x, y, z);
+        }
+        self.mark(pass, label);
+    }
+
+    /// A job with the plane's geometry and nothing else.
+    fn base_job(&self) -> Job {
+        Job {
+            groups_x: GROUPS_X,
+            blocks_x: self.plane[0] / 8,
+            per: self.per,
+            tiles_x: self.tiles_x,
+            ..Job::default()
+        }
+    }
+
+    /// The jobs of a plane's parts (not yet pushed): blocks [lo, hi) each.
+    fn part_jobs(
+        &self,
+        span: &crate::coded::PlaneSpan,
+        layer: u32,
+    ) -> impl Iterator<Item = Job> + 'static {
+        let (part, blocks) = (self.part, span.blocks);
+        let base = Job {
+            step: span.step,
+            layer,
+            stream: span.stream,
+            entries: span.entries,
+            count: span.count,
+            blocks: span.blocks,
+            members: span.members,
+            member_count: span.member_count,
+            size: self.plane,
+            ..self.base_job()
+        };
+        (0..parts(blocks, part)).map(move |k| {
+            let lo = k * part;
+            Job {
+                lo,
+                hi: (lo + part).min(blocks),
+                ..base
+            }
+        })
+    }
+
+    /// The masks and sets of the dense plane's first `blocks` blocks cleared, then the
+    /// part of `job` parsed into it from its entry points. (The coefficients themselves
+    /// need no clearing: only those whose mask bit the parse sets are ever read.)
+    fn parse_ops(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
+        let bytes = groups_offset(self.part) + group_bytes(blocks);
+        ops.push(Op::new(Kind::Clear { bytes }, 0, [0; 3], channel, 0));
+        let units = (job.count as u64, 64);
+        self.sliced(
+            ops,
+            Kind::Parse,
+            job,
+            job.count.div_ceil(64),
+            channel,
+            units,
+        );
+    }
+
+    /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`], each a
+    /// job of its own that starts at its first workgroup. The pass costs `units` blocks
+    /// in all, `per_group` in each whole workgroup.
+    #[allow(clippy::too_many_arguments)]
+    fn sliced(
+        &mut self,
+        ops: &mut Vec<Op>,
+        kind: Kind,
+        job: Job,
+        groups: u32,
+        channel: u32,
+        (units, per_group): (u64, u64),
+    ) {
+        let mut from = 0;
+        while from < groups {
+            let n = (groups - from).min(SLICE_GROUPS);
+            let at = self.push_job(Job {
+                first_group: from,
+                ..job
+            });
+            let cost = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
+            ops.push(Op::new(kind, at, [n, 1, 1], channel, cost));
+            from += n;
+        }
     }
 
     /// A timestamp after what `pass` recorded so far (`vbim bench decode --gpu`), where
@@ -214,34 +436,20 @@ impl Gpu {
         let _ = (pass, label);
     }
 
-    /// Clears the masks and sets of the dense plane's first `blocks` blocks, then parses a
-    /// part (job at `job`) into it from its `entries` entry points: a pass that goes on
-    /// with the passes that read it. (The coefficients themselves need no clearing: only
-    /// those whose mask bit the parse sets are ever read.)
-    fn parse_part<'e>(
-        &self,
-        enc: &'e mut wgpu::CommandEncoder,
-        job: u32,
-        blocks: u32,
-        entries: u32,
-    ) -> wgpu::ComputePass<'e> {
-        let sets = groups_offset(self.part) + group_bytes(blocks);
-        enc.clear_buffer(&self.masks, 0, Some(sets));
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        self.mark(&mut pass, "clears and pass changes");
-        pass.set_pipeline(&self.parse);
-        let group = self.parse_group.as_ref().expect("made at creation");
-        pass.set_bind_group(0, group, &[job]);
-        let groups = entries.div_ceil(64);
-        pass.dispatch_workgroups(groups.min(GROUPS_X), groups.div_ceil(GROUPS_X), 1);
-        self.mark(&mut pass, "parse");
-        pass
-    }
-
-    fn push_job(&mut self, job: Job) {
+    /// Appends `job` to the jobs of the decode being planned; returns its offset.
+    fn push_job(&mut self, job: Job) -> u32 {
+        // The passes over one part share its job (first slices start at workgroup 0):
+        // one upload of it, not one per pass.
+        let size = std::mem::size_of::<Job>();
+        if let Some(last) = self.job_bytes.len().checked_sub(JOB_STRIDE as usize) {
+            if self.job_bytes[last..last + size] == *bytemuck::bytes_of(&job) {
+                return last as u32;
+            }
+        }
         let at = self.job_bytes.len();
         self.job_bytes.extend_from_slice(bytemuck::bytes_of(&job));
         self.job_bytes.resize(at + JOB_STRIDE as usize, 0);
+        at as u32
     }
 
     /// Uploads `data` into the stream buffer from the CPU (a box filled by a decoder
@@ -251,5 +459,26 @@ impl Gpu {
             self.queue
                 .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.words));
         }
+    }
+}
+
+impl Op {
+    fn new(kind: Kind, job: u32, groups: [u32; 3], channel: u32, cost: u64) -> Op {
+        Op {
+            kind,
+            job,
+            groups,
+            channel,
+            cost,
+            packs: None,
+        }
+    }
+
+    /// Whether it is a dispatch (recorded inside a compute pass).
+    fn dispatches(&self) -> bool {
+        !matches!(
+            self.kind,
+            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. }
+        )
     }
 }

@@ -295,13 +295,14 @@ fn bubble_write(
     }
 }
 
-// Zeros the first `job.layer` layers of the bubble planes (`job.size` R32Uint texels each).
+// Zeros `job.layer` layers of the bubble planes from `job.base` on (`job.size` R32Uint
+// texels each).
 @compute @workgroup_size(8, 8)
 fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= job.size.x || id.y >= job.size.y || id.z >= job.layer) {
         return;
     }
-    textureStore(planes16, id.xy, id.z, vec4<u32>(0u));
+    textureStore(planes16, id.xy, job.base + id.z, vec4<u32>(0u));
 }
 
 // The side of a region of the previous keyframe with its own range. Small enough that a
@@ -309,19 +310,21 @@ fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
 // enough that the ranges cost nothing (8 bytes per 1024 texels and plane).
 const REGION: u32 = 32u;
 
-// Packs plane `job.layer` of the head keyframe into the previous keyframe's 16-bit plane:
+// Packs a plane of the head keyframe into layer `job.layer` of the 16-bit keyframes
+// (slot · channels + plane):
 // one invocation per region reads the region twice, first for its range, then to round
 // each pair of texels to 16-bit steps of it. (No workgroup memory or barriers: a reduction
 // in workgroup memory cost lavapipe, which runs a workgroup's invocations in turns
 // between barriers, more than the reads it saved.) The head is only read: the next
 // keyframe is added onto it afterwards.
 @compute @workgroup_size(64)
-fn key_pack(@builtin(global_invocation_id) id: vec3<u32>) {
+fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
-    if (id.x >= regions.x * regions.y) {
+    let r = group_index(wg) * 64u + li;
+    if (r >= regions.x * regions.y) {
         return;
     }
-    let region = vec2<u32>(id.x % regions.x, id.x / regions.x);
+    let region = vec2<u32>(r % regions.x, r / regions.x);
     let origin = region * REGION;
     let end = min(origin + vec2<u32>(REGION), job.size);
     var lo = 3.4e38;

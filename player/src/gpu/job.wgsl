@@ -8,5 +8,5 @@
 @group(0) @binding(2) var<storage, read> words: array<u32>;
 
 fn group_index(wg: vec3<u32>) -> u32 {
-    return wg.y * job.groups_x + wg.x;
+    return job.first_group + wg.y * job.groups_x + wg.x;
 }

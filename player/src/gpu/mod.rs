@@ -1,11 +1,13 @@
 //! The GPU side: what stays resident — the chain's head keyframe (R32Float, one layer
-//! per plane), the keyframe before it (16-bit steps of a range per 32² region, two to an
-//! R32Uint texel), one set of bubble planes (16-bit signed integers with a scale per
-//! plane, two to an R32Uint texel), the display texture the renderer samples and a held
-//! copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill
-//! them: the segment decode of `decode.wgsl` (parsing the coefficient streams,
+//! per plane), two slots of 16-bit keyframes (16-bit steps of a range per 32² region, two
+//! to an R32Uint texel), two sets of bubble planes (16-bit signed integers with a scale
+//! per plane, two to an R32Uint texel), the display texture the renderer samples and a
+//! held copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that
+//! fill them: the segment decode of `decode.wgsl` (parsing the coefficient streams,
 //! dequantisation, inverse DCT, predicted keyframes) and the per-frame reconstruction of
-//! `reconstruct.wgsl`. The decode parses each plane into a dense plane of i32
+//! `reconstruct.wgsl`. The segment on screen reads one slot (K_s), the head or the other
+//! slot (K_{s+1}) and one bubble set; the next segment decodes into the rest, a slice at
+//! a time, while it plays (`decode.rs`). The decode parses each plane into a dense plane of i32
 //! coefficients with a 64-bit mask per block (4 bytes per texel of one plane, reused
 //! plane after plane), which the passes after it read and put back to zero.
 //!
@@ -33,11 +35,12 @@ mod tests;
 
 #[cfg(feature = "bench")]
 pub use bench::GpuDecoder;
+pub(crate) use decode::{Op, Target};
 #[cfg(feature = "bench")]
 pub use device::timing_device;
 pub use device::{headless_device, headless_device_on, DeviceError, Headless};
 pub use plan::lightmap_descriptor;
-pub(crate) use plan::{min_array_layers, planned_texture_bytes, upload_bytes};
+pub(crate) use plan::{min_array_layers, planned_texture_bytes, BUBBLE_SETS, KEY_SLOTS};
 pub use reconstruct::OutputError;
 pub(crate) use reconstruct::Params;
 
@@ -77,7 +80,8 @@ pub(crate) struct Gpu {
     keys: wgpu::Texture,
     /// One view per plane of the head, for the decode passes.
     key_views: Vec<wgpu::TextureView>,
-    /// The previous keyframe K_s, 16-bit, and the range of each of its regions.
+    /// The 16-bit keyframes ([`KEY_SLOTS`] slots of `channels` layers: K_s of the segment
+    /// on screen, and K_{s+1} once the next decode packed it), and each region's range.
     previous: wgpu::Texture,
     previous_view: wgpu::TextureView,
     ranges: wgpu::Buffer,
@@ -100,10 +104,10 @@ pub(crate) struct Gpu {
     key_groups: Vec<wgpu::BindGroup>,
     bubble_group: Option<wgpu::BindGroup>,
     parse_group: Option<wgpu::BindGroup>,
-    /// Scratch for the jobs of one segment, and each plane's first job (kept: no
-    /// allocation per segment).
+    /// Scratch for the jobs of one segment (kept: no allocation per segment).
     job_bytes: Vec<u8>,
-    first_job: Vec<u64>,
+    /// Bubble layers of one set ([`BUBBLE_SETS`] sets, one after the other).
+    pub set_layers: u32,
     /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).
     #[cfg(feature = "bench")]
     marks: Option<crate::marks::Marks>,

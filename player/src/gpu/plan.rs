@@ -2,36 +2,8 @@
 //! of that size is created (so that a stream is refused first), and the layout of the
 //! dense plane and its masks.
 
-use super::job::JOB_STRIDE;
 use super::Gpu;
-use crate::decoder::SegmentData;
 use crate::slots::MAX_BUBBLE_PLANES;
-
-/// Bytes [`Gpu::decode`] uploads for `seg` on a GPU whose dense plane holds `part`
-/// blocks: its streams, entry points and member spans, and one job's parameters per part
-/// of each plane decoded (and the bubbles' zero pass).
-pub(crate) fn upload_bytes(seg: &SegmentData, bubbles: bool, part: u32) -> u64 {
-    seg.bytes() + job_bytes(seg, bubbles, part)
-}
-
-/// The planes [`Gpu::decode`] decodes: the keyframe steps', and the bubbles' when wanted.
-pub(super) fn decoded_planes(seg: &SegmentData, bubbles: bool) -> usize {
-    if bubbles {
-        seg.planes.len()
-    } else {
-        seg.bubbles
-    }
-}
-
-/// Bytes of the decode passes' parameters: one job per part of each plane, and one for
-/// the bubbles' zero pass.
-pub(super) fn job_bytes(seg: &SegmentData, bubbles: bool, part: u32) -> u64 {
-    let jobs: u64 = seg.planes[..decoded_planes(seg, bubbles)]
-        .iter()
-        .map(|p| parts(p.blocks, part) as u64)
-        .sum();
-    (jobs + 1) * JOB_STRIDE
-}
 
 /// Parts a plane of `blocks` blocks is decoded in, `part` blocks at most each (at least
 /// one, so that an empty plane still has its job).
@@ -88,11 +60,11 @@ pub(super) fn regions(plane: [u32; 2]) -> [u32; 2] {
     plane.map(|n| n.div_ceil(REGION))
 }
 
-/// Bytes of the previous keyframe's ranges: a (lowest value, step) pair of f32 per region
-/// and plane.
+/// Bytes of the 16-bit keyframes' ranges: a (lowest value, step) pair of f32 per region,
+/// plane and slot.
 pub(super) fn range_bytes(plane: [u32; 2], channels: u32) -> u64 {
     let [rx, ry] = regions(plane);
-    rx as u64 * ry as u64 * channels as u64 * 8
+    rx as u64 * ry as u64 * (KEY_SLOTS * channels) as u64 * 8
 }
 
 /// The fewest layers an array texture may have on `device`'s backend. wgpu's GL backend
@@ -148,11 +120,23 @@ pub fn lightmap_descriptor(
     )
 }
 
+/// Slots of 16-bit keyframes: K_s of the segment on screen, and the one the next
+/// segment's decode packs the head into (K_{s+1}, which the display reads from the head
+/// until then).
+pub(crate) const KEY_SLOTS: u32 = 2;
+/// Bubble sets: the segment on screen's, and the one the next segment decodes into.
+pub(crate) const BUBBLE_SETS: u32 = 2;
+
+/// Bubble layers of one set for terms up to `max_degree` (at least one).
+pub(crate) fn set_layers(max_degree: u32, channels: u32) -> u32 {
+    (max_degree.saturating_sub(1) * channels).max(1)
+}
+
 /// The textures [`Gpu::new`] creates for a stream of `width × height` texels coded on
 /// planes of `plane` texels with bubble terms up to `max_degree`: the head keyframe
-/// (f32), the previous keyframe and the bubble planes (16-bit pairs), the lightmap
-/// (Rgba16Float) and its held copy (RGB9E5 packed into R32Uint). Array textures have at
-/// least `min_layers` layers ([`min_array_layers`]).
+/// (f32), the 16-bit keyframes ([`KEY_SLOTS`] slots) and bubble planes ([`BUBBLE_SETS`]
+/// sets) in 16-bit pairs, the lightmap (Rgba16Float) and its held copy (RGB9E5 packed
+/// into R32Uint). Array textures have at least `min_layers` layers ([`min_array_layers`]).
 pub(super) fn texture_plans(
     (width, height): (u32, u32),
     plane: [u32; 2],
@@ -161,7 +145,8 @@ pub(super) fn texture_plans(
     min_layers: u32,
 ) -> [wgpu::TextureDescriptor<'static>; 5] {
     use wgpu::TextureUsages as U;
-    let bubble_layers = (max_degree.saturating_sub(1) * channels).max(min_layers);
+    let bubble_layers = BUBBLE_SETS * set_layers(max_degree, channels);
+    let packed_layers = KEY_SLOTS * channels;
     let channels = channels.max(min_layers);
     [
         texture_descriptor(
@@ -172,8 +157,8 @@ pub(super) fn texture_plans(
             U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
         ),
         texture_descriptor(
-            "vbim previous keyframe",
-            (plane[0] / 2, plane[1], channels),
+            "vbim 16-bit keyframes",
+            (plane[0] / 2, plane[1], packed_layers),
             wgpu::TextureFormat::R32Uint,
             U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
         ),
@@ -218,8 +203,8 @@ pub(crate) fn planned_texture_bytes(
         + BOUND_BYTES
 }
 
-/// Bytes of the bubble bounds: one u32 per bubble plane.
-pub(super) const BOUND_BYTES: u64 = MAX_BUBBLE_PLANES as u64 * 4;
+/// Bytes of the bubble bounds: one u32 per bubble plane of each set.
+pub(super) const BOUND_BYTES: u64 = BUBBLE_SETS as u64 * MAX_BUBBLE_PLANES as u64 * 4;
 
 /// Bytes a texture holds (one mip level, every layer).
 pub(super) fn texture_bytes(t: &wgpu::Texture) -> u64 {

@@ -17,12 +17,18 @@ pub(crate) struct Params {
     pub alpha: f32,
     pub channels: u32,
     pub blend: u32,
-    /// Regions of the previous keyframe's ranges, across and down.
+    /// Regions of the 16-bit keyframes' ranges, across and down.
     pub regions: [u32; 2],
-    pub _pad: [u32; 2],
+    /// The first layer of K_s and of K_{s+1} among the 16-bit keyframes.
+    pub keys: [u32; 2],
     /// Quantiser step of each bubble plane (its scale comes from its bound, which the
     /// decode computed on the GPU).
     pub steps: [f32; MAX_BUBBLE_PLANES],
+    /// The first layer of the segment's bubble set.
+    pub set_base: u32,
+    /// 1 while K_{s+1} is read from the f32 head (not packed yet).
+    pub head_f32: u32,
+    pub _pad: [u32; 2],
 }
 
 /// A texture given to [`Player::set_output`](crate::Player::set_output) that the player

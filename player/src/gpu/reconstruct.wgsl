@@ -15,25 +15,32 @@ struct Params {
     alpha: f32,
     channels: u32,
     blend: u32,
-    // Regions of the previous keyframe's ranges, across and down (decode.wgsl, key_pack).
+    // Regions of the 16-bit keyframes' ranges, across and down (decode.wgsl, key_pack).
     regions: vec2<u32>,
-    pad0: u32,
-    pad1: u32,
+    // The first layer of K_s and of K_{s+1} among the 16-bit keyframes (slot · channels).
+    keys: vec2<u32>,
     // Quantiser step of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
     steps: array<vec4<f32>, 6>,
+    // The first layer of the segment's bubble set (its bounds start there too).
+    set_base: u32,
+    // 1: K_{s+1} is read from the f32 head (it is not packed yet); 0: from `keys.y`.
+    head_f32: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-// The head keyframe K_{s+1} (`channels` R32Float layers) and the segment's bubble terms
-// (term k ≥ 2 at layers (k − 2)·channels …), 16-bit signed integers times the layer's
+// The head keyframe K_{s+1} (`channels` R32Float layers), read until the decode of the next
+// segment has packed it into 16 bits, and the bubble sets: the segment's terms (term k ≥ 2
+// at layers set_base + (k − 2)·channels …), 16-bit signed integers times the layer's
 // scale, two to an R32Uint texel.
 @group(0) @binding(1) var head: texture_2d_array<f32>;
 @group(0) @binding(2) var bubbles: texture_2d_array<u32>;
 @group(0) @binding(3) var held: texture_2d<u32>;
 @group(0) @binding(4) var out_tex: texture_storage_2d<rgba16float, write>;
-// The previous keyframe K_s: 16-bit steps of its region's range (lowest value, step), two
-// to an R32Uint texel, one layer per plane.
-@group(0) @binding(5) var previous: texture_2d_array<u32>;
+// The 16-bit keyframes, two slots: K_s, and K_{s+1} once packed: steps of their region's
+// range (lowest value, step), two to an R32Uint texel, one layer per slot and plane.
+@group(0) @binding(5) var packed: texture_2d_array<u32>;
 @group(0) @binding(6) var<storage, read> ranges: array<vec2<f32>>;
 // Each bubble layer's bound in units of its step (f32 bits), found by the decode
 // (decode.wgsl, bubble_bound).
@@ -41,7 +48,7 @@ struct Params {
 
 // A bubble layer's scale, as decode.wgsl's `bubble_write` computes it from the same bound.
 fn bubble_scale(layer: u32) -> f32 {
-    let bound = bitcast<f32>(bounds[layer]) * p.steps[layer / 4u][layer % 4u];
+    let bound = bitcast<f32>(bounds[p.set_base + layer]) * p.steps[layer / 4u][layer % 4u];
     if (bound > 0.0 && bound <= 3.4e38) {
         return bound * 1.001 / 32767.0;
     }
@@ -71,7 +78,29 @@ fn decode(c: f32) -> f32 {
     return p.v0 * (exp2(clamp(c, 0.0, 120.0)) - 1.0);
 }
 
-fn head_key(xy: vec2<i32>) -> vec3<f32> {
+fn packed_plane(xy: vec2<i32>, region: vec2<u32>, plane: u32) -> f32 {
+    let w = textureLoad(packed, vec2<i32>(xy.x >> 1u, xy.y), i32(plane), 0).x;
+    let q = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
+    let r = ranges[(plane * p.regions.y + region.y) * p.regions.x + region.x];
+    return r.x + f32(q) * r.y;
+}
+
+// The keyframe whose planes start at layer `base` of the 16-bit keyframes.
+fn packed_key(xy: vec2<i32>, region: vec2<u32>, base: u32) -> vec3<f32> {
+    if (p.channels == 3u) {
+        return vec3<f32>(
+            packed_plane(xy, region, base),
+            packed_plane(xy, region, base + 1u),
+            packed_plane(xy, region, base + 2u),
+        );
+    }
+    return vec3<f32>(packed_plane(xy, region, base), 0.0, 0.0);
+}
+
+fn next_key(xy: vec2<i32>, region: vec2<u32>) -> vec3<f32> {
+    if (p.head_f32 == 0u) {
+        return packed_key(xy, region, p.keys.y);
+    }
     if (p.channels == 3u) {
         return vec3<f32>(
             textureLoad(head, xy, 0, 0).x,
@@ -82,26 +111,8 @@ fn head_key(xy: vec2<i32>) -> vec3<f32> {
     return vec3<f32>(textureLoad(head, xy, 0, 0).x, 0.0, 0.0);
 }
 
-fn previous_plane(xy: vec2<i32>, region: vec2<u32>, plane: u32) -> f32 {
-    let w = textureLoad(previous, vec2<i32>(xy.x >> 1u, xy.y), i32(plane), 0).x;
-    let q = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
-    let r = ranges[(plane * p.regions.y + region.y) * p.regions.x + region.x];
-    return r.x + f32(q) * r.y;
-}
-
-fn previous_key(xy: vec2<i32>, region: vec2<u32>) -> vec3<f32> {
-    if (p.channels == 3u) {
-        return vec3<f32>(
-            previous_plane(xy, region, 0u),
-            previous_plane(xy, region, 1u),
-            previous_plane(xy, region, 2u),
-        );
-    }
-    return vec3<f32>(previous_plane(xy, region, 0u), 0.0, 0.0);
-}
-
 fn bubble_layer(xy: vec2<i32>, layer: u32) -> f32 {
-    let w = textureLoad(bubbles, vec2<i32>(xy.x >> 1u, xy.y), i32(layer), 0).x;
+    let w = textureLoad(bubbles, vec2<i32>(xy.x >> 1u, xy.y), i32(p.set_base + layer), 0).x;
     let half = (w >> (u32(xy.x & 1) * 16u)) & 0xFFFFu;
     let q = bitcast<i32>(half << 16u) >> 16u;
     return f32(q) * bubble_scale(layer);
@@ -134,7 +145,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_id) wg:
     }
     let xy = vec2<i32>(id.xy);
     // Same order as the reference decoder: w0·K0 + w1·K1, then each bubble.
-    var c = weight(0u) * previous_key(xy, wg.xy / REGION_GROUPS) + weight(1u) * head_key(xy);
+    let region = wg.xy / REGION_GROUPS;
+    var c = weight(0u) * packed_key(xy, region, p.keys.x) + weight(1u) * next_key(xy, region);
     for (var k = 2u; k < p.layers; k = k + 1u) {
         c = c + weight(k) * bubble(xy, k);
     }

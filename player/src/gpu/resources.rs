@@ -65,7 +65,7 @@ impl Gpu {
         let bubble_view = array_view(&bubbles);
         let previous_view = array_view(&previous);
         let ranges = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vbim previous keyframe ranges"),
+            label: Some("vbim 16-bit keyframe ranges"),
             size: range_bytes(plane, channels).max(8),
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
@@ -205,7 +205,7 @@ impl Gpu {
             bubble_group: None,
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
-            first_job: Vec::with_capacity(64),
+            set_layers: set_layers(max_degree, channels),
             #[cfg(feature = "bench")]
             marks: None,
             width,

@@ -1,0 +1,172 @@
+//! GPU timestamps around each displayed frame's work, and the reference it is measured
+//! against: a pass that blends two `Rgba16Float` frames into a lightmap of the same size
+//! (what a video texture costs the GPU), timed in the same submission.
+
+/// Timestamps around the player's passes and around the reference blend, each frame.
+pub(super) struct FrameTimer {
+    set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    blend: wgpu::ComputePipeline,
+    group: wgpu::BindGroup,
+    size: (u32, u32),
+    period: f64,
+}
+
+const BLEND_WGSL: &str = r#"
+@group(0) @binding(0) var a: texture_2d<f32>;
+@group(0) @binding(1) var b: texture_2d<f32>;
+@group(0) @binding(2) var out_tex: texture_storage_2d<rgba16float, write>;
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(out_tex);
+    if (id.x >= size.x || id.y >= size.y) {
+        return;
+    }
+    let xy = vec2<i32>(id.xy);
+    textureStore(out_tex, xy, mix(textureLoad(a, xy, 0), textureLoad(b, xy, 0), 0.4));
+}
+"#;
+
+impl FrameTimer {
+    /// A timer for `width × height` lightmaps, if `device` has timestamp queries.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, (w, h): (u32, u32)) -> Option<Self> {
+        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("frame timer"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 4,
+        });
+        let buffer = |usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("frame timer"),
+                size: 32,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as B;
+        let resolved = buffer(B::QUERY_RESOLVE | B::COPY_SRC);
+        let readback = buffer(B::MAP_READ | B::COPY_DST);
+        use wgpu::TextureUsages as U;
+        let texture = |usage| device.create_texture(&vbim_player::lightmap_descriptor(w, h, usage));
+        let (a, b) = (texture(U::TEXTURE_BINDING), texture(U::TEXTURE_BINDING));
+        let out = texture(U::STORAGE_BINDING);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("reference blend"),
+            source: wgpu::ShaderSource::Wgsl(BLEND_WGSL.into()),
+        });
+        let blend = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("reference blend"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let (va, vb, vo) = (view(&a), view(&b), view(&out));
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("reference blend"),
+            layout: &blend.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&va),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&vb),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&vo),
+                },
+            ],
+        });
+        Some(FrameTimer {
+            set,
+            resolved,
+            readback,
+            blend,
+            group,
+            size: (w, h),
+            period: queue.get_timestamp_period() as f64,
+        })
+    }
+
+    /// An empty pass that writes timestamp `i` (at its start) or `i` (at its end).
+    fn stamp(&self, enc: &mut wgpu::CommandEncoder, i: u32, at_start: bool) {
+        let (b, e) = if at_start {
+            (Some(i), None)
+        } else {
+            (None, Some(i))
+        };
+        enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: None,
+            timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                query_set: &self.set,
+                beginning_of_pass_write_index: b,
+                end_of_pass_write_index: e,
+            }),
+        });
+    }
+
+    /// Before the player records its frame.
+    pub fn begin(&self, enc: &mut wgpu::CommandEncoder) {
+        self.stamp(enc, 0, true);
+    }
+
+    /// After the player's frame: its end, then the reference blend, timed, and the
+    /// timestamps resolved for [`FrameTimer::read`].
+    pub fn end(&self, enc: &mut wgpu::CommandEncoder) {
+        self.stamp(enc, 1, false);
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("reference blend"),
+                timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                    query_set: &self.set,
+                    beginning_of_pass_write_index: Some(2),
+                    end_of_pass_write_index: Some(3),
+                }),
+            });
+            pass.set_pipeline(&self.blend);
+            pass.set_bind_group(0, &self.group, &[]);
+            pass.dispatch_workgroups(self.size.0.div_ceil(8), self.size.1.div_ceil(8), 1);
+        }
+        enc.resolve_query_set(&self.set, 0..4, &self.resolved, 0);
+        enc.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, 32);
+    }
+
+    /// The player's frame and the reference blend, ms, once the submission is done.
+    pub fn read(&self, device: &wgpu::Device) -> (f64, f64) {
+        let slice = self.readback.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let t: [u64; 4] = {
+            let data = slice.get_mapped_range();
+            let mut t = [0u64; 4];
+            for (i, v) in t.iter_mut().enumerate() {
+                *v = u64::from_le_bytes(data[i * 8..i * 8 + 8].try_into().unwrap_or([0; 8]));
+            }
+            t
+        };
+        self.readback.unmap();
+        let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * self.period * 1e-6;
+        (ms(t[0], t[1]), ms(t[2], t[3]))
+    }
+}
+
+/// Bytes per texel a displayed frame's reconstruction reads and writes at the stream's
+/// highest degree, with K_{s+1} in the f32 head (before the next decode packs it) and in
+/// 16 bits (after), and the reference blend's: two Rgba16Float reads and one write.
+pub(super) fn bytes_per_texel(h: &vbim_format::Header) -> (u64, u64, u64) {
+    let ch = h.channels as u64;
+    let bubbles = 2 * ch * (h.max_degree as u64).saturating_sub(1);
+    let write = 8;
+    let packed = 2 * ch + 2 * ch + bubbles + write;
+    let head = 2 * ch + 4 * ch + bubbles + write;
+    (head, packed, 16 + 8)
+}
