@@ -166,17 +166,18 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
             Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
         let mut player = unthrottled(device, queue, bytes);
         // The budget's figure, counted by hand: the head keyframe's ch R32Float layers,
-        // the previous keyframe's ch 16-bit layers and (degree − 1) × ch bubble layers of
-        // 16 bits, over the padded planes (48 × 32, whole 16-texel tiles), the lightmap
-        // (Rgba16Float) and its held copy (RGB9E5, 4 bytes); then the buffers: the previous keyframe's ranges
-        // (2 × 1 regions of 32² per plane, 8 bytes each), the 192-byte uniform of the
-        // reconstruction, the 512-byte DCT tables, and the decode jobs and coefficients,
-        // at least 16 and 64 KiB.
+        // two slots of ch 16-bit keyframe layers and two sets of (degree − 1) × ch
+        // bubble layers of 16 bits, over the padded planes (48 × 32, whole 16-texel
+        // tiles), the lightmap (Rgba16Float) and its held copy (RGB9E5, 4 bytes); then the
+        // buffers: the 16-bit keyframes' ranges (2 × 1 regions of 32² per plane and slot,
+        // 8 bytes each), the 208-byte uniform of the reconstruction, the 512-byte DCT
+        // tables, and the decode jobs and coefficients, at least 16 and 64 KiB.
         let (planes, d) = (48 * 32u64, player.header().max_degree as u64);
-        let textures = planes * (layers(ch as u64) * (4 + 2) + layers((d - 1) * ch as u64) * 2)
-            + 40 * 24 * (8 + 4);
-        let ranges = 2 * ch as u64 * 8;
-        let buffers = player.gpu_bytes() - textures - ranges - 192 - 512;
+        let set = (d - 1).max(1) * ch as u64;
+        let textures =
+            planes * (layers(ch as u64) * 4 + 2 * ch as u64 * 2 + 2 * set * 2) + 40 * 24 * (8 + 4);
+        let ranges = 2 * 2 * ch as u64 * 8;
+        let buffers = player.gpu_bytes() - textures - ranges - 208 - 512;
         assert!(
             ((16 << 10) + (64 << 10)..1 << 20).contains(&buffers),
             "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",

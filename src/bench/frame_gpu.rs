@@ -97,7 +97,7 @@ impl FrameTimer {
         })
     }
 
-    /// An empty pass that writes timestamp `i` (at its start) or `i` (at its end).
+    /// An empty pass that writes timestamp `i`, at its start or at its end.
     fn stamp(&self, enc: &mut wgpu::CommandEncoder, i: u32, at_start: bool) {
         let (b, e) = if at_start {
             (Some(i), None)

@@ -54,7 +54,7 @@ pub(crate) struct Op {
     pub cost: u64,
     /// Whether this op packs the head into a slot: once all of a pack's ops are
     /// recorded, the slot holds the head's keyframe.
-    pub packs: Option<u32>,
+    pub packs: bool,
 }
 
 impl Op {
@@ -133,7 +133,7 @@ impl Gpu {
                     (regions * 16, 1024),
                 );
                 for op in &mut ops[n..] {
-                    op.packs = Some(slot);
+                    op.packs = true;
                 }
             }
         };
@@ -254,8 +254,10 @@ impl Gpu {
                     enc.clear_buffer(&self.bounds, offset, Some(bytes))
                 }
                 _ => {
-                    // A run of dispatches: one compute pass.
+                    // A run of dispatches: one compute pass (the time since the last mark,
+                    // the clears and the pass change, goes to its first mark).
                     let mut pass = enc.begin_compute_pass(&Default::default());
+                    self.mark(&mut pass, "clears and pass changes");
                     while i < ops.len() && ops[i].dispatches() {
                         self.dispatch(&mut pass, &ops[i]);
                         i += 1;
@@ -292,11 +294,6 @@ impl Gpu {
         };
         let mut ops = Vec::new();
         self.plan_decode(seg, target, &mut ops);
-        #[cfg(feature = "bench")]
-        if self.marks.is_some() {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            self.mark(&mut pass, "clears and pass changes");
-        }
         self.record(enc, &ops, Some(seg));
     }
 
@@ -470,7 +467,7 @@ impl Op {
             groups,
             channel,
             cost,
-            packs: None,
+            packs: false,
         }
     }
 

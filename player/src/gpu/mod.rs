@@ -13,9 +13,9 @@
 //!
 //! The head stays f32: the next predicted keyframe is built on it, and a 16-bit head
 //! would add its rounding at every step of the chain (docs/FORMAT.md, "What the GPU
-//! decoder guarantees"). The previous keyframe is only displayed, and is packed afresh
-//! from the f32 head at every step, so it carries one rounding, like the bubble planes,
-//! which are rebuilt for every segment from their coefficients.
+//! decoder guarantees"). The 16-bit keyframes are only displayed, each packed once from
+//! the f32 head, so each carries one rounding, like the bubble planes, which are rebuilt
+//! for every segment from their coefficients.
 //!
 //! By concern: `device` (opening one headless), `plan` (what the state holds, in bytes, before
 //! it exists), `resources` (creating it), `job` (a decode pass's parameters, as the shader
@@ -82,8 +82,8 @@ pub(crate) struct Gpu {
     key_views: Vec<wgpu::TextureView>,
     /// The 16-bit keyframes ([`KEY_SLOTS`] slots of `channels` layers: K_s of the segment
     /// on screen, and K_{s+1} once the next decode packed it), and each region's range.
-    previous: wgpu::Texture,
-    previous_view: wgpu::TextureView,
+    packed: wgpu::Texture,
+    packed_view: wgpu::TextureView,
     ranges: wgpu::Buffer,
     regions: [u32; 2],
     bubbles: wgpu::Texture,

@@ -51,7 +51,7 @@ pub(super) fn grown(need: u64) -> u64 {
         .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
 }
 
-/// The side of a region of the previous keyframe with its own range (`REGION` in
+/// The side of a region of a 16-bit keyframe with its own range (`REGION` in
 /// decode.wgsl; `REGION_GROUPS` workgroups of 8 × 8 in reconstruct.wgsl).
 pub(super) const REGION: u32 = 32;
 
@@ -222,7 +222,7 @@ impl Gpu {
     pub fn bytes(&self) -> u64 {
         [
             &self.keys,
-            &self.previous,
+            &self.packed,
             &self.bubbles,
             &self.display,
             &self.held,

@@ -92,7 +92,7 @@ impl Gpu {
                 &self.bubble_view,
                 &self.held_view,
                 &view,
-                &self.previous_view,
+                &self.packed_view,
             ],
             [&self.ranges, &self.bounds],
             &self.params,

@@ -45,7 +45,7 @@ impl Gpu {
         channels: u32,
         tile_size: u32,
     ) -> Gpu {
-        let [keys, previous, bubbles, display, held] = texture_plans(
+        let [keys, packed, bubbles, display, held] = texture_plans(
             (width, height),
             plane,
             max_degree,
@@ -63,7 +63,7 @@ impl Gpu {
         };
         let keys_view = array_view(&keys);
         let bubble_view = array_view(&bubbles);
-        let previous_view = array_view(&previous);
+        let packed_view = array_view(&packed);
         let ranges = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vbim 16-bit keyframe ranges"),
             size: range_bytes(plane, channels).max(8),
@@ -149,7 +149,7 @@ impl Gpu {
                 &bubble_view,
                 &held_view,
                 &display_view,
-                &previous_view,
+                &packed_view,
             ],
             [&ranges, &bounds],
             &params,
@@ -187,8 +187,8 @@ impl Gpu {
             bounds,
             keys,
             key_views,
-            previous,
-            previous_view,
+            packed,
+            packed_view,
             ranges,
             regions: regions(plane),
             bubbles,
@@ -288,7 +288,7 @@ impl Gpu {
                     &[
                         tables.clone(),
                         view(3, v),
-                        view(4, &self.previous_view),
+                        view(4, &self.packed_view),
                         ranges,
                     ],
                 )
@@ -306,8 +306,8 @@ impl Gpu {
 }
 
 /// The reconstruction's bind group: its parameters, then the head keyframe, bubble
-/// planes, held image, output and previous keyframe views, the previous keyframe's
-/// ranges and the bubble planes' bounds.
+/// planes, held image, output and 16-bit keyframe views, the 16-bit keyframes' ranges
+/// and the bubble planes' bounds.
 pub(super) fn reconstruct_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,

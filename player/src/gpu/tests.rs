@@ -150,7 +150,7 @@ fn keyframe_passes_match_the_reference_kernel() {
         assert_head_matches(&gpu, &want, part);
         // The previous keyframe: 16-bit steps of each 32² region's range.
         let first = first.expect("two steps");
-        let raw = read_texture_layer(&device, &queue, &gpu.previous, 4, 0);
+        let raw = read_texture_layer(&device, &queue, &gpu.packed, 4, 0);
         let q: &[u16] = bytemuck::cast_slice(&raw);
         let (w, rs) = (pw as usize, REGION as usize);
         for ry in 0..(ph as usize).div_ceil(rs) {

@@ -25,6 +25,10 @@ pub(super) struct Decoding {
     /// there, once its ops are recorded.
     steps: Vec<crate::decoder::KeyStep>,
     packs: Option<(u32, usize)>,
+    /// The ops up to the last that packs (the pack is done once they are chosen).
+    pack_end: usize,
+    /// The cost of the ops not yet chosen, blocks.
+    left: u64,
     /// It arrived before it was due: a frame that finds it unfinished is the budget's.
     early: bool,
 }
@@ -127,8 +131,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         });
         let early =
             place(self.resident.as_ref(), range, pos, n, self.header.looping) == Placement::NotYet;
+        let pack_end = ops.iter().rposition(|o| o.packs).map_or(0, |i| i + 1);
+        let left = ops.iter().map(|o| o.cost).sum();
         self.decoding = Some(Decoding {
             early,
+            pack_end,
+            left,
             steps: key_steps,
             data: Some(b),
             ops,
@@ -165,7 +173,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             return 0;
         };
         let needed = place(self.resident.as_ref(), d.range, pos, n, looping) != Placement::NotYet;
-        let remaining: u64 = d.ops[d.next..].iter().map(|o| o.cost).sum();
+        let remaining = d.left;
         let allowance = match self.budget {
             Some(b) => b,
             None if needed => u64::MAX,
@@ -194,6 +202,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             work += cost;
             d.next += 1;
         }
+        d.left -= work;
         let chosen = &d.ops[start..d.next];
         self.frame_ops.extend_from_slice(chosen);
         if chosen.iter().any(|o| o.needs_box()) {
@@ -202,14 +211,15 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         // Once its last pack is recorded, the slot holds the keyframe (the display reads
         // it there from this frame on: the head changes after it).
         if let Some((slot, k)) = d.packs {
-            if !d.ops[d.next..].iter().any(|o| o.packs.is_some()) {
+            if d.next >= d.pack_end {
                 self.keys.packed(slot, k);
                 d.packs = None;
                 self.last_eval = None;
             }
         }
         let done = d.next == d.ops.len();
-        if done {
+        if done && start < d.next {
+            // Its last op is recorded this frame: the head is its last keyframe.
             self.keys.built(&d.steps);
         }
         if needed && done {
@@ -219,16 +229,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                     self.resident = Some(r);
                     self.totals.segments_uploaded += 1;
                 }
-                _ => {
-                    eprintln!(
-                        "DBG drop show={} pos={} range={:?} res={:?}",
-                        d.show.is_some(),
-                        pos >> 32,
-                        (d.range.0 >> 32, d.range.1 >> 32),
-                        self.resident.map(|r| (r.start >> 32, r.end >> 32))
-                    );
-                    self.totals.segments_dropped += 1
-                }
+                _ => self.totals.segments_dropped += 1,
             }
             self.last_eval = None;
             self.retire(d);
@@ -236,8 +237,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             self.totals.budget_late += 1;
             self.totals.last_error = Some(format!(
                 "a segment was due with {} blocks of its decode left under a budget of {} per frame: the budget is too small for this stream at this display rate",
-                remaining - work,
-                allowance
+                d.left, allowance
             ));
         }
         work
