@@ -72,6 +72,9 @@ pub struct PlayArgs {
     /// Added to the header's pre-roll, at most an hour: a reader stall this long while the ring first fills is survived (`500ms`).
     #[arg(long, default_value = "0s", value_parser = crate::units::parse_short_span)]
     pub preroll_margin: Span,
+    /// The most segment-decode work one displayed frame records, in blocks (8×8 texels of one plane through one pass); a segment due before its decode is done is held or waited for and reported [default: each decode spread over the first half of the frames before it is due].
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub decode_budget: Option<u64>,
     /// Run in real time with the reader and decoder on their own threads (default: simulated time, stepped deterministically, as fast as the machine goes).
     #[arg(long)]
     pub realtime: bool,

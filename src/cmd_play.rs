@@ -46,6 +46,12 @@ pub struct Outcome {
     pub shown_mean_psnr: Option<f64>,
     pub shown_worst_psnr: Option<f64>,
     pub damaged_chunks: u64,
+    /// The most segment-decode work one frame recorded, blocks.
+    pub decode_work_max: u64,
+    /// Frames that found a segment due before the decode budget let it finish.
+    pub budget_late: u64,
+    /// Frames over the budget because one step of a decode costs more than it.
+    pub over_budget: u64,
     pub last_error: Option<String>,
     #[serde(skip)]
     pub records: Vec<FrameRecord>,
@@ -182,6 +188,9 @@ fn finish(
         shown_mean_psnr: (!err.frames.is_empty()).then(|| err.mean_psnr()),
         shown_worst_psnr: (!err.frames.is_empty()).then(|| err.worst().1),
         damaged_chunks: totals.damaged,
+        decode_work_max: totals.decode_work_max,
+        budget_late: totals.budget_late,
+        over_budget: totals.over_budget,
         last_error: totals.last_error,
         records,
     })
@@ -212,6 +221,14 @@ pub fn print(o: &Outcome, s: &Session) {
         "uploaded    {:.2} MB/s; GPU memory {:.1} MB",
         o.bytes_uploaded_per_s / 1e6,
         o.gpu_bytes as f64 / 1e6
+    );
+    println!(
+        "decode      at most {} blocks in one frame (budget {}); {} frames late for the budget, {} over it (one step larger than the budget)",
+        o.decode_work_max,
+        s.decode_budget
+            .map_or("spread".to_string(), |b| b.to_string()),
+        o.budget_late,
+        o.over_budget
     );
     println!(
         "drift       mean {:.3}, p99 {:.3}, max {:.3} media frames; {} frames late by > 1; {} stalls",

@@ -25,6 +25,8 @@ pub struct Session {
     pub catch_up_ns: u64,
     pub ring: Option<usize>,
     pub preroll_margin_ns: u64,
+    /// `PlayerConfig::decode_budget`.
+    pub decode_budget: Option<u64>,
     pub realtime: bool,
     pub duration_ns: u64,
     pub display_hz: u32,
@@ -58,6 +60,7 @@ impl Session {
             catch_up_ns: a.catch_up.ns(),
             ring: a.ring.map(|r| r as usize),
             preroll_margin_ns: a.preroll_margin.ns(),
+            decode_budget: a.decode_budget,
             realtime: a.realtime,
             duration_ns: a.duration.ns(),
             display_hz: a.display_hz,
@@ -82,6 +85,7 @@ impl Session {
             throttle: self.throttle,
             ring_bytes: self.ring,
             preroll_margin_ns: self.preroll_margin_ns,
+            decode_budget: self.decode_budget,
             threaded,
             limits: self.limits,
             ..Default::default()

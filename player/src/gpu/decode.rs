@@ -153,13 +153,11 @@ impl Gpu {
                     let blocks = job.hi - job.lo.min(job.hi);
                     self.parse_ops(ops, job, blocks, p);
                     if k == 0 && st.intra {
-                        let at = self.push_job(Job {
+                        let zero = Job {
                             size: [pw, ph],
                             ..job
-                        });
-                        let zero = [pw.div_ceil(8), ph.div_ceil(8), 1];
-                        let texels = pw as u64 * ph as u64;
-                        ops.push(Op::new(Kind::KeyZero, at, zero, p, texels / 64));
+                        };
+                        self.rows_sliced(ops, Kind::KeyZero, zero, p);
                     }
                     // A predicted keyframe is added onto the head: the keyframe it follows.
                     let groups = blocks.div_ceil(GROUP_BLOCKS);
@@ -182,17 +180,13 @@ impl Gpu {
                 0,
             ));
             let layers = (seg.layers.saturating_sub(2) as u32 * ch).min(set_layers);
-            // One layer a dispatch, so that the zeroing spreads like the rest.
             for l in 0..layers {
-                let at = self.push_job(Job {
-                    layer: 1,
+                let zero = Job {
                     base: base + l,
                     size: [pw / 2, ph],
                     ..self.base_job()
-                });
-                let zero = [(pw / 2).div_ceil(8), ph.div_ceil(8), 1];
-                let cost = (pw / 2) as u64 * ph as u64 / 64;
-                ops.push(Op::new(Kind::BubbleZero, at, zero, 0, cost));
+                };
+                self.rows_sliced(ops, Kind::BubbleZero, zero, 0);
             }
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let layer = base + (i - seg.bubbles) as u32;
@@ -417,6 +411,31 @@ impl Gpu {
             });
             let cost = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
             ops.push(Op::new(kind, at, [n, 1, 1], channel, cost));
+            from += n;
+        }
+    }
+
+    /// A zero pass over `job.size` texels in 8 × 8 workgroups, in slices of
+    /// [`SLICE_GROUPS`] rows of workgroups (the shader starts `first_group` rows down), so
+    /// that it spreads like the rest; a block per 64 texels zeroed.
+    fn rows_sliced(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, channel: u32) {
+        let [w, h] = job.size;
+        let rows = h.div_ceil(8);
+        let mut from = 0;
+        while from < rows {
+            let n = (rows - from).min(SLICE_GROUPS);
+            let at = self.push_job(Job {
+                first_group: from,
+                ..job
+            });
+            let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64;
+            ops.push(Op::new(
+                kind,
+                at,
+                [w.div_ceil(8), n, 1],
+                channel,
+                texels / 64,
+            ));
             from += n;
         }
     }

@@ -190,12 +190,14 @@ fn key_add(
     }
 }
 
+// Zeros a keyframe plane, `job.first_group` rows of workgroups down (a slice of rows).
 @compute @workgroup_size(8, 8)
 fn key_zero(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= job.size.x || id.y >= job.size.y) {
+    let xy = vec2<u32>(id.x, id.y + job.first_group * 8u);
+    if (xy.x >= job.size.x || xy.y >= job.size.y) {
         return;
     }
-    textureStore(key_plane, id.xy, vec4<f32>(0.0));
+    textureStore(key_plane, xy, vec4<f32>(0.0));
 }
 
 // The scale of a bubble plane whose texels are at most `bound` in magnitude: 16-bit
@@ -295,14 +297,15 @@ fn bubble_write(
     }
 }
 
-// Zeros `job.layer` layers of the bubble planes from `job.base` on (`job.size` R32Uint
-// texels each).
+// Zeros layer `job.base` of the bubble planes (`job.size` R32Uint texels),
+// `job.first_group` rows of workgroups down (a slice of rows).
 @compute @workgroup_size(8, 8)
 fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= job.size.x || id.y >= job.size.y || id.z >= job.layer) {
+    let xy = vec2<u32>(id.x, id.y + job.first_group * 8u);
+    if (xy.x >= job.size.x || xy.y >= job.size.y) {
         return;
     }
-    textureStore(planes16, id.xy, job.base + id.z, vec4<u32>(0u));
+    textureStore(planes16, xy, job.base, vec4<u32>(0u));
 }
 
 // The side of a region of the previous keyframe with its own range. Small enough that a

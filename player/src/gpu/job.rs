@@ -28,8 +28,8 @@ macro_rules! job {
 job! {
     /// Quantiser step of the plane.
     step: f32 => "f32",
-    /// Keyframe passes: the plane's channel (the layer `key_pack` writes). Bubble passes:
-    /// the plane's layer. Zero passes: the number of layers.
+    /// Keyframe passes: the plane's channel; `key_pack`: the 16-bit layer it writes
+    /// (slot · channels + plane). Bubble passes: the plane's layer.
     layer: u32 => "u32",
     /// The stream's first word.
     stream: u32 => "u32",
@@ -55,12 +55,12 @@ job! {
     per: u32 => "u32",
     /// Tiles across the plane.
     tiles_x: u32 => "u32",
-    /// Texels of the plane (zero passes).
+    /// Texels of the plane (zero and pack passes).
     size: [u32; 2] => "vec2<u32>",
     /// The first workgroup of this dispatch: a pass goes in slices of workgroups, each a
     /// dispatch of its own that may land in a later frame than the one before it.
     first_group: u32 => "u32",
-    /// Zero pass: the first layer it zeros (the bubble set's).
+    /// Bubble zero pass: the layer it zeros.
     base: u32 => "u32",
 }
 
