@@ -5,6 +5,7 @@
 
 use super::job::{Job, JOB_STRIDE};
 use super::plan::*;
+use super::resources::slice_buffer;
 use super::Gpu;
 use crate::coded::Coded;
 use crate::decoder::SegmentData;
@@ -43,6 +44,9 @@ pub(crate) struct Op {
     kind: Kind,
     /// The job's offset in the jobs buffer.
     job: u32,
+    /// The slice's offset in the slices buffer (slice k at k · [`JOB_STRIDE`]: its first
+    /// workgroup, k · [`SLICE_GROUPS`]).
+    slice: u32,
     groups: [u32; 3],
     /// A keyframe pass's plane (which view of the head it binds).
     channel: u32,
@@ -218,6 +222,15 @@ impl Gpu {
                 }
             }
         }
+        let slices = ops
+            .iter()
+            .map(|o| o.slice as u64 + JOB_STRIDE)
+            .max()
+            .unwrap_or(0);
+        if slices > self.slices.size() {
+            self.slices = slice_buffer(&self.device, grown(slices) / JOB_STRIDE + 1);
+            self.bind_decode();
+        }
         let jobs = self.job_bytes.len() as u64;
         if jobs > self.jobs.size() {
             self.jobs = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -324,7 +337,7 @@ impl Gpu {
         };
         let group = group.expect("made at creation");
         pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, group, &[op.job]);
+        pass.set_bind_group(0, group, &[op.job, op.slice]);
         let [x, y, z] = op.groups;
         if x > 0 && y > 0 && z > 0 {
             pass.dispatch_workgroups(x, y, z);
@@ -390,8 +403,8 @@ impl Gpu {
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`], each a
-    /// job of its own that starts at its first workgroup. The pass costs `units` blocks
-    /// in all, `per_group` in each whole workgroup.
+    /// dispatch that binds its slice's first workgroup. The pass costs `units` blocks in
+    /// all, `per_group` in each whole workgroup.
     #[allow(clippy::too_many_arguments)]
     fn sliced(
         &mut self,
@@ -402,41 +415,27 @@ impl Gpu {
         channel: u32,
         (units, per_group): (u64, u64),
     ) {
-        let mut from = 0;
-        while from < groups {
+        let at = self.push_job(job);
+        for k in 0..groups.div_ceil(SLICE_GROUPS) {
+            let from = k * SLICE_GROUPS;
             let n = (groups - from).min(SLICE_GROUPS);
-            let at = self.push_job(Job {
-                first_group: from,
-                ..job
-            });
             let cost = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
-            ops.push(Op::new(kind, at, [n, 1, 1], channel, cost));
-            from += n;
+            ops.push(Op::new(kind, at, [n, 1, 1], channel, cost).in_slice(k));
         }
     }
 
     /// A zero pass over `job.size` texels in 8 × 8 workgroups, in slices of
-    /// [`SLICE_GROUPS`] rows of workgroups (the shader starts `first_group` rows down), so
+    /// [`SLICE_GROUPS`] rows of workgroups (the shader starts the slice's first rows down), so
     /// that it spreads like the rest; a block per 64 texels zeroed.
     fn rows_sliced(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, channel: u32) {
         let [w, h] = job.size;
         let rows = h.div_ceil(8);
-        let mut from = 0;
-        while from < rows {
+        let at = self.push_job(job);
+        for k in 0..rows.div_ceil(SLICE_GROUPS) {
+            let from = k * SLICE_GROUPS;
             let n = (rows - from).min(SLICE_GROUPS);
-            let at = self.push_job(Job {
-                first_group: from,
-                ..job
-            });
             let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64;
-            ops.push(Op::new(
-                kind,
-                at,
-                [w.div_ceil(8), n, 1],
-                channel,
-                texels / 64,
-            ));
-            from += n;
+            ops.push(Op::new(kind, at, [w.div_ceil(8), n, 1], channel, texels / 64).in_slice(k));
         }
     }
 
@@ -483,10 +482,19 @@ impl Op {
         Op {
             kind,
             job,
+            slice: 0,
             groups,
             channel,
             cost,
             packs: false,
+        }
+    }
+
+    /// The same op, in slice `k` of its pass.
+    fn in_slice(self, k: u32) -> Op {
+        Op {
+            slice: k * JOB_STRIDE as u32,
+            ..self
         }
     }
 

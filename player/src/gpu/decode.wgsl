@@ -190,10 +190,10 @@ fn key_add(
     }
 }
 
-// Zeros a keyframe plane, `job.first_group` rows of workgroups down (a slice of rows).
+// Zeros a keyframe plane, `slice.x` rows of workgroups down (a slice of rows).
 @compute @workgroup_size(8, 8)
 fn key_zero(@builtin(global_invocation_id) id: vec3<u32>) {
-    let xy = vec2<u32>(id.x, id.y + job.first_group * 8u);
+    let xy = vec2<u32>(id.x, id.y + slice.x * 8u);
     if (xy.x >= job.size.x || xy.y >= job.size.y) {
         return;
     }
@@ -298,10 +298,10 @@ fn bubble_write(
 }
 
 // Zeros layer `job.base` of the bubble planes (`job.size` R32Uint texels),
-// `job.first_group` rows of workgroups down (a slice of rows).
+// `slice.x` rows of workgroups down (a slice of rows).
 @compute @workgroup_size(8, 8)
 fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
-    let xy = vec2<u32>(id.x, id.y + job.first_group * 8u);
+    let xy = vec2<u32>(id.x, id.y + slice.x * 8u);
     if (xy.x >= job.size.x || xy.y >= job.size.y) {
         return;
     }

@@ -57,11 +57,10 @@ job! {
     tiles_x: u32 => "u32",
     /// Texels of the plane (zero and pack passes).
     size: [u32; 2] => "vec2<u32>",
-    /// The first workgroup of this dispatch: a pass goes in slices of workgroups, each a
-    /// dispatch of its own that may land in a later frame than the one before it.
-    first_group: u32 => "u32",
     /// Bubble zero pass: the layer it zeros.
     base: u32 => "u32",
+    /// Unused: keeps the struct a whole number of 8-byte words.
+    pad: u32 => "u32",
 }
 
 /// Bytes between two jobs in the jobs buffer: WebGPU's default

@@ -68,6 +68,8 @@ pub(crate) struct Gpu {
     jobs: wgpu::Buffer,
     /// A segment's streams, entry points and member spans; grows with the largest segment.
     words: wgpu::Buffer,
+    /// Each slice's first workgroup (`resources::slice_buffer`); grows with the longest pass.
+    slices: wgpu::Buffer,
     /// The dense plane: `part` blocks of 64 i32 coefficients; their masks, then per group
     /// of [`GROUP_BLOCKS`] blocks which have a coefficient ([`groups_offset`]). The masks
     /// and sets are cleared before each parse.

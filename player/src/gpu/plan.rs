@@ -235,6 +235,7 @@ impl Gpu {
             + self.tables.size()
             + self.jobs.size()
             + self.words.size()
+            + self.slices.size()
             + self.coefs.size()
             + self.masks.size()
             + self.bounds.size()

@@ -3,6 +3,7 @@
 
 use wgpu::util::DeviceExt;
 
+use super::decode::SLICE_GROUPS;
 use super::job::{decode_source, Job, JOB_STRIDE};
 use super::plan::*;
 use super::reconstruct::Params;
@@ -160,6 +161,8 @@ impl Gpu {
             B::UNIFORM | B::COPY_DST,
         );
         let words = buffer("vbim coefficients", grown(0), B::STORAGE | B::COPY_DST);
+        // Enough slices for a block pass over a whole part; grown if a pass needs more.
+        let slices = slice_buffer(device, (part / 64).div_ceil(SLICE_GROUPS).max(16) as u64);
         let mut gpu = Gpu {
             device: device.clone(),
             queue: queue.clone(),
@@ -181,6 +184,7 @@ impl Gpu {
             tables,
             jobs,
             words,
+            slices,
             coefs,
             masks,
             part,
@@ -238,6 +242,14 @@ impl Gpu {
                     resource: self.words.as_entire_binding(),
                 },
             ];
+            entries.push(wgpu::BindGroupEntry {
+                binding: 11,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &self.slices,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(16),
+                }),
+            });
             entries.extend_from_slice(more);
             entries.push(wgpu::BindGroupEntry {
                 binding: 6,
@@ -363,6 +375,22 @@ pub(super) fn hold_group(
     })
 }
 
+/// The first workgroup of each of `count` slices of a pass (slice k's, k ·
+/// [`SLICE_GROUPS`], at k · [`JOB_STRIDE`]), bound with a dynamic offset beside the job:
+/// written once, so that a pass in slices uploads one job, not one per slice.
+pub(super) fn slice_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
+    let stride = JOB_STRIDE as usize / 4;
+    let mut words = vec![0u32; count as usize * stride];
+    for (k, slot) in words.chunks_exact_mut(stride).enumerate() {
+        slot[0] = k as u32 * SLICE_GROUPS;
+    }
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("vbim decode slices"),
+        contents: bytemuck::cast_slice(&words),
+        usage: wgpu::BufferUsages::UNIFORM,
+    })
+}
+
 /// The DCT basis, the zig-zag order and each basis row's largest magnitude, from the
 /// reference decoder's own tables (`Tables` in decode.wgsl), in a uniform buffer.
 fn dct_tables(device: &wgpu::Device) -> wgpu::Buffer {
@@ -476,6 +504,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
         label: Some("vbim keyframe decode"),
         entries: &[
             entry(0, uniform(true)),
+            entry(11, uniform(true)),
             entry(1, uniform(false)),
             words_entry,
             entry(
@@ -497,6 +526,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
         label: Some("vbim bubble decode"),
         entries: &[
             entry(0, uniform(true)),
+            entry(11, uniform(true)),
             entry(1, uniform(false)),
             words_entry,
             planes16,
@@ -510,6 +540,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
         label: Some("vbim parse"),
         entries: &[
             entry(0, uniform(true)),
+            entry(11, uniform(true)),
             words_entry,
             entry(6, storage(false)),
             entry(7, storage(false)),
