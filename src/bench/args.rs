@@ -99,6 +99,9 @@ pub struct BenchRenderArgs {
     /// unset: the default, each segment spread over the frames before it is due.
     #[arg(long)]
     pub budget: Option<u64>,
+    /// Write the last run's frames (GPU time, blend, decode work, segment) to this CSV.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
 }
 
 #[derive(Args)]

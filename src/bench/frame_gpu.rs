@@ -119,10 +119,15 @@ impl FrameTimer {
         self.stamp(enc, 0, true);
     }
 
-    /// After the player's frame: its end, then the reference blend, timed, and the
-    /// timestamps resolved for [`FrameTimer::read`].
+    /// After the player's frame.
     pub fn end(&self, enc: &mut wgpu::CommandEncoder) {
         self.stamp(enc, 1, false);
+    }
+
+    /// The reference blend, timed, and the timestamps resolved for [`FrameTimer::read`]:
+    /// recorded into a submission of its own, after the player's, so that each can also be
+    /// timed by the wall clock from submission to completion.
+    pub fn blend(&self, enc: &mut wgpu::CommandEncoder) {
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("reference blend"),

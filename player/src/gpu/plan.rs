@@ -52,7 +52,7 @@ pub(super) fn grown(need: u64) -> u64 {
 }
 
 /// The side of a region of a 16-bit keyframe with its own range (`REGION` in
-/// decode.wgsl; `REGION_GROUPS` workgroups of 8 × 8 in reconstruct.wgsl).
+/// decode.wgsl; `REGION_GROUPS` workgroups of 16 × 16 texels in reconstruct.wgsl).
 pub(super) const REGION: u32 = 32;
 
 /// Regions of [`REGION`]² texels across and down a plane of `plane` texels.

@@ -136,7 +136,8 @@ impl Gpu {
         pass.set_pipeline(&self.pipeline);
         let group = self.output.as_ref().map_or(&self.bind_group, |(_, g, _)| g);
         pass.set_bind_group(0, group, &[]);
-        pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+        // A workgroup is 8 × 8 invocations of a 2 × 2 quad each (reconstruct.wgsl).
+        pass.dispatch_workgroups(self.width.div_ceil(16), self.height.div_ceil(16), 1);
     }
 
     /// Reads the texture the reconstruction writes back (RGBA, f32). For tests and error
