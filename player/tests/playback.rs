@@ -1234,9 +1234,11 @@ fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     };
     let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
     for _ in 0..300 {
+        let over = player.totals().over_budget;
         let r = player.advance(DISPLAY);
+        // More only where one step costs more than the budget: it runs alone, reported.
         assert!(
-            r.decode_work <= small,
+            r.decode_work <= small || player.totals().over_budget == over + 1,
             "frame {}: {}",
             r.index,
             r.decode_work

@@ -50,9 +50,10 @@ pub(crate) struct Op {
     groups: [u32; 3],
     /// A keyframe pass's plane (which view of the head it binds).
     channel: u32,
-    /// The work it records, in blocks: 8×8 texels of one plane through one pass (a parse
-    /// counts one per entry point, a zero pass one per 64 texels written, a pack 16 per
-    /// 32² region of a plane). What [`PlayerConfig::decode_budget`] counts.
+    /// The work it records, in blocks: the time of 8×8 texels of one plane through
+    /// `bubble_write`, the other passes' units weighted by their measured cost
+    /// ([`Kind::weight`]; a parse's unit is an entry point, a zero pass's 64 texels, a
+    /// pack's 1/16 of a 32² region). What [`PlayerConfig::decode_budget`] counts.
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
     pub cost: u64,
@@ -477,15 +478,35 @@ impl Gpu {
     }
 }
 
+impl Kind {
+    /// What one unit of the pass costs, in quarters of a block through `bubble_write`.
+    /// Measured on lavapipe from the frames of `vbim bench render --csv` (the extra time
+    /// of each frame against the work of each kind it recorded): a parse's entry point
+    /// reads 256 pairs in sequence, a keyframe block's inverse transform reads every
+    /// coefficient of a keyframe (dense, where a bubble term's are few), zeroing and
+    /// packing touch a texel once. On an H100 too the parse is the costliest per unit
+    /// (63–75% of a segment's GPU time).
+    fn weight(self) -> u64 {
+        match self {
+            Kind::Parse => 96,
+            Kind::KeyAdd => 12,
+            Kind::BubbleWrite => 4,
+            Kind::BubbleBound => 2,
+            Kind::KeyZero | Kind::BubbleZero | Kind::KeyPack => 1,
+            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } => 0,
+        }
+    }
+}
+
 impl Op {
-    fn new(kind: Kind, job: u32, groups: [u32; 3], channel: u32, cost: u64) -> Op {
+    fn new(kind: Kind, job: u32, groups: [u32; 3], channel: u32, units: u64) -> Op {
         Op {
             kind,
             job,
             slice: 0,
             groups,
             channel,
-            cost,
+            cost: (units * kind.weight()).div_ceil(4),
             packs: false,
         }
     }

@@ -177,10 +177,11 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let allowance = match self.budget {
             Some(b) => b,
             None if needed => u64::MAX,
-            // Spread over the first half of the frames left before it is due.
+            // Spread evenly over the frames left before it is due but the last, which is
+            // kept as a margin for the display's rate wandering.
             None => {
                 let frames = d.range.0.saturating_sub(pos) / per_frame.max(1);
-                remaining.div_ceil((frames / 2).max(1))
+                remaining.div_ceil(frames.saturating_sub(1).max(1))
             }
         };
         let (start, mut work) = (d.next, 0u64);
@@ -194,7 +195,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 if self.budget.is_some() {
                     self.totals.over_budget += 1;
                     self.totals.last_error = Some(format!(
-                        "segment {}: one step of its decode costs {cost} blocks, more than the budget of {allowance} per frame",
+                        "segment {}: one step of its decode costs {cost} blocks, more than the budget of {allowance} per frame: the budget is too small for this stream",
                         d.show.map_or(0, |r| r.index)
                     ));
                 }
