@@ -27,6 +27,8 @@ pub struct Session {
     pub preroll_margin_ns: u64,
     /// `PlayerConfig::decode_budget`.
     pub decode_budget: Option<u64>,
+    /// `PlayerConfig::reuse_share`.
+    pub reuse_share: f32,
     pub realtime: bool,
     pub duration_ns: u64,
     pub display_hz: u32,
@@ -61,6 +63,7 @@ impl Session {
             ring: a.ring.map(|r| r as usize),
             preroll_margin_ns: a.preroll_margin.ns(),
             decode_budget: a.decode_budget,
+            reuse_share: a.reuse_share,
             realtime: a.realtime,
             duration_ns: a.duration.ns(),
             display_hz: a.display_hz,
@@ -86,6 +89,7 @@ impl Session {
             ring_bytes: self.ring,
             preroll_margin_ns: self.preroll_margin_ns,
             decode_budget: self.decode_budget,
+            reuse_share: self.reuse_share,
             threaded,
             limits: self.limits,
             ..Default::default()

@@ -71,10 +71,11 @@ pub struct PlayerConfig {
     /// transition late. A margin as long as the stall to survive buys that back with
     /// start-up time (measured in BENCHMARKS.md).
     pub preroll_margin_ns: u64,
-    /// The most segment decode work one displayed frame records, in blocks (an 8×8
-    /// block of one plane through one pass; [`FrameRecord::decode_work`]). `None`: each
-    /// segment's decode is spread evenly over the first half of the frames before it is
-    /// shown, at the display rate the frames so far give, and a segment needed at once
+    /// The most segment decode work one displayed frame records, in blocks (the time of
+    /// an 8×8 block of one plane through the bubble write, the other passes weighted by
+    /// their measured cost; [`FrameRecord::decode_work`]). `None`: each segment's decode
+    /// is spread evenly over the frames before it is shown but the last, at the display
+    /// rate the frames so far give, and a segment needed at once
     /// (the first, or after a seek) is decoded at once. With a budget, a segment needed
     /// before its decode is done is late (the display holds or waits, as the policy says)
     /// and [`Totals::budget_late`] counts it: the budget is too small for the stream.
@@ -82,6 +83,17 @@ pub struct PlayerConfig {
     /// [`FrameRecord::decode_work`]: crate::FrameRecord::decode_work
     /// [`Totals::budget_late`]: crate::Totals::budget_late
     pub decode_budget: Option<u64>,
+    /// How far a part of the lightmap may lag the exact image before it is evaluated
+    /// again, as a share of the protocol's bound on the GPU against the reference decoder
+    /// (2^-10 relative for HDR, 0.5/255 for 8-bit). The reconstruction evaluates a tile
+    /// of 16² texels only when the time has moved enough to change it by more than that
+    /// (bounded from the weights it was last evaluated with and what its terms hold);
+    /// otherwise the lightmap keeps what it has there, and the tile costs one read of 80
+    /// bytes. Default 0.25: with the evaluation's own rounding (half a half-float step,
+    /// 0.5 of the bound) every texel stays within the bound. 0: every texel every frame;
+    /// larger shares trade accuracy for GPU time (BENCHMARKS.md). The output texture must
+    /// keep what the player wrote into it.
+    pub reuse_share: f32,
     /// The memory the stream may take, GPU and CPU together ([`Player::open`] refuses a
     /// stream that could need more, before creating anything for it).
     ///
@@ -101,6 +113,7 @@ impl Default for PlayerConfig {
             preroll_ns: None,
             preroll_margin_ns: 0,
             decode_budget: None,
+            reuse_share: 0.25,
             limits: Limits::default(),
         }
     }

@@ -44,6 +44,9 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     spare: (Vec<Op>, Vec<crate::decoder::KeyStep>),
     /// The per-frame decode budget, blocks, and the work this frame records.
     budget: Option<u64>,
+    /// The change (code domain, Σ over planes) a tile of the lightmap may lag by
+    /// (`PlayerConfig::reuse_share` of the protocol's bound).
+    reuse: f32,
     frame_work: u64,
     /// Which keyframes the GPU holds.
     keys: KeySlots,
@@ -189,6 +192,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let gpu = Gpu::for_stream(device, queue, &header);
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
+        let reuse = reuse_threshold(cfg.reuse_share, header.transfer);
         Ok(Player {
             header,
             layout,
@@ -201,6 +205,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             frame_box: None,
             spare: (Vec::new(), Vec::new()),
             budget: cfg.decode_budget,
+            reuse,
             frame_work: 0,
             keys: KeySlots::default(),
             resident: None,
@@ -356,7 +361,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             if same {
                 self.totals.frames_unchanged += 1;
             } else {
-                self.gpu.reconstruct(encoder, params, *hold_first);
+                let fresh = self.last_eval.is_none();
+                self.gpu.reconstruct(encoder, params, *hold_first, fresh);
                 self.last_eval = Some(*params);
             }
         }
@@ -458,6 +464,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             };
             params.transfer = tr;
             params.v0 = v0;
+            params.reuse = self.reuse;
             let ch = self.header.channels as u32;
             params.channels = ch;
             params.steps = r.steps;
@@ -582,5 +589,24 @@ const _: () = {
 impl<R: Read + Seek + Send + 'static> Drop for Player<R> {
     fn drop(&mut self) {
         let _ = self.stop(Duration::from_secs(10));
+    }
+}
+
+/// The change of Σ over planes of |c| (the code domain the reconstruction sums in) that
+/// keeps every displayed channel within `share` of the protocol's bound on the GPU
+/// against the reference: 0.5/255 of a code value for sRGB; for the log toe
+/// v = v0 (2^c − 1), whose slope is ln 2 · (v + v0), 2^-10 of v above 10^-3 and 10^-6
+/// below it (both at most 2^-10 · ln 2 · (10^-3 + v0) / 10^-3 per unit of c, the worst
+/// case at v = 10^-3). YCoCg → RGB adds the planes' changes at most. 0 (or NaN): every
+/// tile every frame; infinity: a tile only when the keyframes or the output change.
+pub(crate) fn reuse_threshold(share: f32, transfer: Transfer) -> f32 {
+    if share.is_nan() || share <= 0.0 {
+        return 0.0;
+    }
+    match transfer {
+        Transfer::Srgb => share * 0.5 / 255.0,
+        Transfer::LogToe { v0 } => {
+            share * (2f32.powi(-10) / (std::f32::consts::LN_2 * (1.0 + 1000.0 * v0.max(0.0))))
+        }
     }
 }

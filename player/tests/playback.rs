@@ -172,14 +172,14 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
         // bubble layers of 16 bits, over the padded planes (48 × 32, whole 16-texel
         // tiles), the lightmap (Rgba16Float) and its held copy (RGB9E5, 4 bytes); then the
         // buffers: the 16-bit keyframes' ranges (2 × 1 regions of 32² per plane and slot,
-        // 8 bytes each), the 208-byte uniform of the reconstruction, the 512-byte DCT
+        // 8 bytes each), the 224-byte uniform of the reconstruction, the 512-byte DCT
         // tables, and the decode jobs and coefficients, at least 16 and 64 KiB.
         let (planes, d) = (48 * 32u64, player.header().max_degree as u64);
         let set = (d - 1).max(1) * ch as u64;
         let textures = planes * (layers(ch as u64) * 4 + 2 * ch as u64 * 2 + 2 * set * 2)
             + (w * h) as u64 * (8 + 4);
         let ranges = 2 * 2 * ch as u64 * 8;
-        let buffers = player.gpu_bytes() - textures - ranges - 208 - 512;
+        let buffers = player.gpu_bytes() - textures - ranges - 224 - 512;
         assert!(
             ((16 << 10) + (64 << 10)..1 << 20).contains(&buffers),
             "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",
@@ -1248,4 +1248,59 @@ fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     assert!(t.budget_late > 0, "{t:?}");
     let said = t.last_error.clone().unwrap_or_default();
     assert!(said.contains("too small"), "{said}");
+}
+
+/// Reusing tiles that have not changed enough: at 1000 displayed frames a second (a slow
+/// day's pace against the display), every frame stays within (1 + share) times the
+/// protocol's bound of the reference at the time it shows, and an unbounded share leaves
+/// the lightmap lagging far outside it, so tiles really are kept between frames.
+#[test]
+fn reused_tiles_stay_within_their_share_of_the_bound_and_an_unbounded_share_lags() {
+    let (device, queue) = device();
+    let (w, h, n) = (64, 48, 48);
+    let bytes = encode_bytes(
+        &sequence(w, h, n, InputKind::Hdr),
+        &config(SegmentMode::Fixed(8)),
+    );
+    let mut reference = Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
+    let mut cpu = vec![0f32; w * h * 3];
+    let mut worst = Vec::new();
+    for share in [0.25f32, 4.0, f32::INFINITY] {
+        let cfg = PlayerConfig {
+            reuse_share: share,
+            ..inline(Policy::Interpolate, Throttle::UNLIMITED)
+        };
+        let mut player = Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg).unwrap();
+        let mut most = 0f32;
+        for k in 0..600 {
+            let r = player.advance(2_000_000);
+            if k % 4 != 0 || r.state != FrameState::Exact {
+                continue;
+            }
+            let gpu = player.read_display();
+            reference
+                .frame(r.shown % n as f64, Output::Linear, &mut cpu)
+                .unwrap();
+            for i in 0..w * h {
+                for c in 0..3 {
+                    let (g, want) = (gpu[i * 4 + c], cpu[i * 3 + c]);
+                    let bound = if want < 1e-3 {
+                        1e-6 + want * 2f32.powi(-10)
+                    } else {
+                        want * 2f32.powi(-10)
+                    };
+                    most = most.max((g - want).abs() / bound);
+                }
+            }
+        }
+        eprintln!("share {share}: worst error {most:.3} of the bound");
+        worst.push(most);
+    }
+    assert!(worst[0] <= 1.0, "share 0.25: {} of the bound", worst[0]);
+    assert!(worst[1] <= 5.0, "share 4: {} of the bound", worst[1]);
+    assert!(
+        worst[2] > 5.0,
+        "an unbounded share: {} of the bound",
+        worst[2]
+    );
 }

@@ -99,6 +99,19 @@ pub struct BenchRenderArgs {
     /// unset: the default, each segment spread over the frames before it is due.
     #[arg(long)]
     pub budget: Option<u64>,
+    /// `PlayerConfig::reuse_share`: how far a tile may lag before it is evaluated again,
+    /// as a share of the protocol's GPU bound (0: every texel every frame).
+    #[arg(long, default_value_t = 0.25, value_parser = crate::cli::parse_share)]
+    pub reuse_share: f32,
+    /// Play the file this many times slower than its own rate (a 240-frame day at 1/6 fps,
+    /// a 24-minute day, is `--slow 144` on a 24 fps file): media time per displayed frame
+    /// is what lets tiles be reused.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=100000))]
+    pub slow: u64,
+    /// Media frame to start at (the figures change over a day: a sunrise changes every
+    /// texel, a noon little).
+    #[arg(long, default_value_t = 0)]
+    pub start: u64,
     /// Write the last run's frames (GPU time, blend, decode work, segment) to this CSV.
     #[arg(long)]
     pub csv: Option<PathBuf>,

@@ -275,11 +275,17 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         let f = crate::sequence::open_input(&a.file)?;
         let cfg = PlayerConfig {
             decode_budget: a.budget,
+            reuse_share: a.reuse_share,
             ..PlayerConfig::default()
         };
         let mut player = Player::open(&device, &queue, std::io::BufReader::new(f), cfg)
             .map_err(|e| e.to_string())?;
         let header = player.header().clone();
+        if a.start > 0 {
+            player.set_time(
+                a.start * 1_000_000_000 * header.rate_den as u64 / header.rate_num as u64,
+            );
+        }
         let timer = FrameTimer::new(&device, &queue, (header.width, header.height));
         timed = timer.is_some();
         h = Some(header);
@@ -297,7 +303,8 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
                 std::thread::sleep(std::time::Duration::from_nanos(t - wall));
             }
             let (c0, t0) = (thread_cpu_ns(), Instant::now());
-            let frame = player.plan(t - prev);
+            // The display's pace; the media advances `slow` times slower.
+            let frame = player.plan((t - prev) / a.slow);
             let t1 = Instant::now();
             let mut enc = device.create_command_encoder(&Default::default());
             if let Some(timer) = &timer {
@@ -363,9 +370,12 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         );
     };
     println!(
-        "render benchmark: {name}, {}×{} at {}/{} fps, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}; median over runs (min–max)",
-        h.width, h.height, h.rate_num, h.rate_den, a.frames, runs.len(), info.name, info.backend,
-        a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame"))
+        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, reuse share {}; median over runs (min–max)",
+        h.width, h.height, h.rate_num, h.rate_den,
+        if a.slow > 1 { format!(" played {}× slower", a.slow) } else { String::new() },
+        a.frames, runs.len(), info.name, info.backend,
+        a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame")),
+        a.reuse_share
     );
     line(
         "render thread CPU time, advance = plan + record + submit",

@@ -48,6 +48,8 @@ pub(crate) struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
+    /// The reconstruction's first frame of a generation (`main_fresh`).
+    pipeline_fresh: wgpu::ComputePipeline,
     /// Packs what is on screen into `held` (from the display, or the caller's output).
     hold: wgpu::ComputePipeline,
     hold_layout: wgpu::BindGroupLayout,
@@ -78,6 +80,15 @@ pub(crate) struct Gpu {
     part: u32,
     /// Each bubble layer's bound (f32 bits), for the decode and the reconstruction.
     bounds: wgpu::Buffer,
+    /// Each reconstruction tile's generation and weights, in two copies, and its bounds
+    /// (reconstruct.wgsl).
+    tiles: wgpu::Buffer,
+    peaks: wgpu::Buffer,
+    /// The parameters' generation, and the last parameters recorded.
+    gen: u32,
+    last_params: Option<Params>,
+    /// Which copy of the tiles' state the next reconstruction writes.
+    parity: u32,
     /// The chain's head keyframe K_{s+1}, f32.
     keys: wgpu::Texture,
     /// One view per plane of the head, for the decode passes.

@@ -201,6 +201,19 @@ pub(crate) fn planned_texture_bytes(
         + part_blocks(plane) as u64 * 256
         + mask_bytes(part_blocks(plane))
         + BOUND_BYTES
+        + tile_bytes(size).0
+        + tile_bytes(size).1
+}
+
+/// Tiles of 16² texels the reconstruction decides for (a workgroup each).
+pub(super) fn tile_count((w, h): (u32, u32)) -> u64 {
+    w.div_ceil(16).max(1) as u64 * h.div_ceil(16).max(1) as u64
+}
+
+/// Bytes of the reconstruction's tile state, and of its tiles' bounds: two copies of 10
+/// words, and 9 words, per tile (reconstruct.wgsl, `STATE_WORDS`, `PEAK_WORDS`).
+pub(super) fn tile_bytes(size: (u32, u32)) -> (u64, u64) {
+    (tile_count(size) * 2 * 10 * 4, tile_count(size) * 9 * 4)
 }
 
 /// Bytes of the bubble bounds: one u32 per bubble plane of each set.
@@ -239,5 +252,7 @@ impl Gpu {
             + self.coefs.size()
             + self.masks.size()
             + self.bounds.size()
+            + self.tiles.size()
+            + self.peaks.size()
     }
 }

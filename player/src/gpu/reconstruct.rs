@@ -28,7 +28,15 @@ pub(crate) struct Params {
     pub set_base: u32,
     /// 1 while K_{s+1} is read from the f32 head (not packed yet).
     pub head_f32: u32,
-    pub _pad: [u32; 2],
+    /// The generation of everything but the weights (set by [`Gpu::reconstruct`]): a tile
+    /// evaluated under another is evaluated again.
+    pub gen: u32,
+    /// The largest change of Σ over planes of |c| (code domain) a tile of 16² texels may
+    /// lag by before it is evaluated again; 0: every tile every frame.
+    pub reuse: f32,
+    /// Which copy of the tiles' state the frame reads (set by [`Gpu::reconstruct`]).
+    pub parity: u32,
+    pub _pad: [u32; 3],
 }
 
 /// A texture given to [`Player::set_output`](crate::Player::set_output) that the player
@@ -94,7 +102,7 @@ impl Gpu {
                 &view,
                 &self.packed_view,
             ],
-            [&self.ranges, &self.bounds],
+            [&self.ranges, &self.bounds, &self.tiles, &self.peaks],
             &self.params,
         );
         let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
@@ -118,11 +126,42 @@ impl Gpu {
 
     /// Records the reconstruction of one frame into `enc`. The parameters go through
     /// `Queue::write_buffer`, which takes effect at the queue's next submission: the one
-    /// that carries `enc`.
-    pub fn reconstruct(&self, enc: &mut wgpu::CommandEncoder, params: &Params, hold_first: bool) {
-        let params = Params {
+    /// that carries `enc`. `fresh`: what the lightmap holds cannot be reused (a new output,
+    /// a seek), so every tile is evaluated.
+    pub fn reconstruct(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        params: &Params,
+        hold_first: bool,
+        fresh: bool,
+    ) {
+        let mut params = Params {
             regions: self.regions,
+            gen: self.gen,
             ..*params
+        };
+        // Anything but the weights changed: the tiles' bounds and images are another
+        // generation's. (The generation wraps after 2^32 changes; a tile last evaluated
+        // exactly 2^32 changes ago is not a worry.)
+        let same = self.last_params.as_ref().is_some_and(|last| {
+            let strip = |p: &Params| Params { w: [0.0; 12], ..*p };
+            bytemuck::bytes_of(&strip(last)) == bytemuck::bytes_of(&strip(&params))
+        });
+        if fresh || hold_first || !same {
+            self.gen = self.gen.wrapping_add(1).max(1);
+            params.gen = self.gen;
+        }
+        self.last_params = Some(params);
+        let first = fresh || hold_first || !same;
+        self.parity ^= 1;
+        params.parity = self.parity;
+        // The first frame of a generation evaluates every tile and finds the tiles'
+        // bounds (atomic maxima, cleared first); the others may keep tiles.
+        let pipeline = if first && params.reuse > 0.0 {
+            enc.clear_buffer(&self.peaks, 0, None);
+            &self.pipeline_fresh
+        } else {
+            &self.pipeline
         };
         self.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
@@ -133,10 +172,11 @@ impl Gpu {
             label: None,
             timestamp_writes: None,
         });
-        pass.set_pipeline(&self.pipeline);
+        pass.set_pipeline(pipeline);
         let group = self.output.as_ref().map_or(&self.bind_group, |(_, g, _)| g);
         pass.set_bind_group(0, group, &[]);
-        // A workgroup is 8 × 8 invocations of a 2 × 2 quad each (reconstruct.wgsl).
+        // A workgroup is 8 × 8 invocations of a 2 × 2 quad each, a tile of 16² texels
+        // (reconstruct.wgsl; `tile_bytes` counts its state).
         pass.dispatch_workgroups(self.width.div_ceil(16), self.height.div_ceil(16), 1);
     }
 

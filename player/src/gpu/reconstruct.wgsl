@@ -3,6 +3,13 @@
 // same weights the reference decoder uses), then YCoCg → RGB, clamp, inverse transfer.
 // While catching up after a stall, the result is blended with the image held on screen,
 // which `hold` keeps in 4 bytes a texel (RGB9E5, as the texture format of that name).
+//
+// A workgroup's tile of 16 × 16 texels is evaluated again only when the time has moved
+// enough to change it by more than `reuse` since it last was: the tile keeps the weights
+// it was evaluated with and bounds of what its terms hold, so the change is bounded
+// without reading them. Otherwise the lightmap keeps what it has there and the tile costs
+// its decision: about 80 bytes read and 40 written. No barrier and no workgroup memory
+// (whose zeroing is a barrier): lavapipe pays about as much for one as for the evaluation.
 
 struct Params {
     // Basis weights w0..w8 (hats, then bubbles), packed four to a vector.
@@ -25,8 +32,17 @@ struct Params {
     set_base: u32,
     // 1: K_{s+1} is read from the f32 head (it is not packed yet); 0: from `keys.y`.
     head_f32: u32,
+    // The parameters' generation: a tile evaluated under another (other keyframes, set,
+    // output or catch-up) is evaluated again.
+    gen: u32,
+    // The largest change of Σ over planes of |c| (the code domain) a tile may lag by; 0:
+    // every tile every frame.
+    reuse: f32,
+    // Which copy of the tiles' state this frame reads (the other it writes).
+    parity: u32,
     pad0: u32,
     pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -45,6 +61,16 @@ struct Params {
 // Each bubble layer's bound in units of its step (f32 bits), found by the decode
 // (decode.wgsl, bubble_bound).
 @group(0) @binding(9) var<storage, read> bounds: array<u32>;
+// Per tile (row-major, workgroups across), in two copies (a frame reads one and writes the
+// other, so that no invocation sees its own workgroup's update): the generation it was
+// evaluated under and the nine weights it was evaluated with.
+@group(0) @binding(10) var<storage, read_write> tiles: array<u32>;
+const STATE_WORDS: u32 = 10u;
+// Per tile, over it: the largest Σ_planes |K1 − K0|, Σ_planes |K0| and Σ_planes |C_k| for
+// each bubble term k = 2 … 8 (f32 bits: non-negative, so their order is the integers').
+// Cleared before the first frame of a generation, which finds them.
+@group(0) @binding(12) var<storage, read_write> peaks: array<atomic<u32>>;
+const PEAK_WORDS: u32 = 9u;
 
 // A bubble layer's scale, as decode.wgsl's `bubble_write` computes it from the same bound.
 fn bubble_scale(layer: u32) -> f32 {
@@ -112,14 +138,15 @@ fn next_plane(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec
     return head_plane(xy, plane);
 }
 
-// Each bubble layer's scale, found once per workgroup rather than once per invocation.
-var<workgroup> scales: array<f32, 24>;
-
 fn bubble_plane(w: vec2<i32>, layer: u32) -> vec4<f32> {
     let h = halves(bubbles, w, p.set_base + layer);
     // Sign-extend the 16-bit integers.
     let q = bitcast<vec4<i32>>(h << vec4<u32>(16u)) >> vec4<u32>(16u);
-    return vec4<f32>(q) * scales[layer];
+    return vec4<f32>(q) * bubble_scale(layer);
+}
+
+fn max4(v: vec4<f32>) -> f32 {
+    return max(max(v.x, v.y), max(v.z, v.w));
 }
 
 // Plane `plane` of the segment's polynomial at the quad, in the reference decoder's order:
@@ -131,6 +158,43 @@ fn plane_value(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> ve
         c = c + weight(k) * bubble_plane(w, (k - 2u) * p.channels + plane);
     }
     return c;
+}
+
+// The same, adding the quad's largest |K1 − K0|, |K0| and |C_k| in this plane to `peak`
+// (0, 1, k): what `main_fresh` finds in the first frame of a generation.
+fn plane_peaks(
+    xy: vec2<i32>,
+    w: vec2<i32>,
+    region: vec2<u32>,
+    plane: u32,
+    peak: ptr<function, array<f32, 9>>,
+) -> vec4<f32> {
+    let k0 = packed_plane(w, region, p.keys.x + plane);
+    let k1 = next_plane(xy, w, region, plane);
+    var c = weight(0u) * k0 + weight(1u) * k1;
+    (*peak)[0] += max4(abs(k1 - k0));
+    (*peak)[1] += max4(abs(k0));
+    for (var k = 2u; k < p.layers; k = k + 1u) {
+        let term = bubble_plane(w, (k - 2u) * p.channels + plane);
+        c = c + weight(k) * term;
+        (*peak)[k] += max4(abs(term));
+    }
+    return c;
+}
+
+// A bound on how much Σ_planes |c| can have changed anywhere in a tile since it was last
+// evaluated (its state at `s`, its peaks at `m`): the keyframes' part w0·K0 + w1·K1
+// changes by Δw1·(K1 − K0) + (Δw0 + Δw1)·K0, each bubble term by Δw_k·C_k.
+fn tile_change(s: u32, m: u32) -> f32 {
+    let d0 = weight(0u) - bitcast<f32>(tiles[s + 1u]);
+    let d1 = weight(1u) - bitcast<f32>(tiles[s + 2u]);
+    var change = abs(d1) * bitcast<f32>(atomicLoad(&peaks[m]))
+        + abs(d0 + d1) * bitcast<f32>(atomicLoad(&peaks[m + 1u]));
+    for (var k = 2u; k < p.layers; k = k + 1u) {
+        change = change + abs(weight(k) - bitcast<f32>(tiles[s + 1u + k]))
+            * bitcast<f32>(atomicLoad(&peaks[m + k]));
+    }
+    return change;
 }
 
 // The nearest half float, as an f32 that the Rgba16Float store converts exactly: how a
@@ -165,34 +229,96 @@ fn finish(xy: vec2<i32>, c: vec3<f32>) {
     textureStore(out_tex, xy, vec4<f32>(out, 1.0));
 }
 
+// Tile `tile`'s state: where a frame reads it and where it writes it.
+fn state_at(tile: u32, count: u32) -> vec2<u32> {
+    return vec2<u32>(
+        (p.parity * count + tile) * STATE_WORDS,
+        ((1u - p.parity) * count + tile) * STATE_WORDS,
+    );
+}
+
+// Records that the tile at `at` (read, write) was evaluated now (`go`) or kept.
+fn keep_state(at: vec2<u32>, go: bool) {
+    tiles[at.y] = p.gen;
+    for (var k = 0u; k < 9u; k = k + 1u) {
+        var w = tiles[at.x + 1u + k];
+        if (go) {
+            w = bitcast<u32>(weight(k));
+        }
+        tiles[at.y + 1u + k] = w;
+    }
+}
+
+fn store_quad(xy: vec2<i32>, y: vec4<f32>, co: vec4<f32>, cg: vec4<f32>) {
+    finish(xy, vec3<f32>(y.x, co.x, cg.x));
+    finish(xy + vec2<i32>(1, 0), vec3<f32>(y.y, co.y, cg.y));
+    finish(xy + vec2<i32>(0, 1), vec3<f32>(y.z, co.z, cg.z));
+    finish(xy + vec2<i32>(1, 1), vec3<f32>(y.w, co.w, cg.w));
+}
+
+// A frame: each tile evaluated unless its state says it changed by at most `reuse`.
 @compute @workgroup_size(8, 8)
 fn main(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_index) li: u32,
+    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    // Before any invocation returns: the barrier is for the whole workgroup.
-    if (li < 24u) {
-        scales[li] = bubble_scale(li);
+    var go = true;
+    if (p.reuse > 0.0) {
+        let tile = wg.y * groups.x + wg.x;
+        let at = state_at(tile, groups.x * groups.y);
+        // Every invocation decides alike: it reads what no invocation of this frame writes.
+        go = p.blend == 1u || tiles[at.x] != p.gen || tile_change(at.x, tile * PEAK_WORDS) > p.reuse;
+        if (li == 0u) {
+            keep_state(at, go);
+        }
     }
-    workgroupBarrier();
     let xy = vec2<i32>(id.xy * 2u);
-    if (u32(xy.x) >= p.size.x || u32(xy.y) >= p.size.y) {
-        return;
+    if (go && u32(xy.x) < p.size.x && u32(xy.y) < p.size.y) {
+        let w = vec2<i32>(i32(id.x), xy.y);
+        let region = wg.xy / REGION_GROUPS;
+        let y = plane_value(xy, w, region, 0u);
+        var co = vec4<f32>(0.0);
+        var cg = vec4<f32>(0.0);
+        if (p.channels == 3u) {
+            co = plane_value(xy, w, region, 1u);
+            cg = plane_value(xy, w, region, 2u);
+        }
+        store_quad(xy, y, co, cg);
     }
-    let w = vec2<i32>(i32(id.x), xy.y);
-    let region = wg.xy / REGION_GROUPS;
-    let y = plane_value(xy, w, region, 0u);
-    var co = vec4<f32>(0.0);
-    var cg = vec4<f32>(0.0);
-    if (p.channels == 3u) {
-        co = plane_value(xy, w, region, 1u);
-        cg = plane_value(xy, w, region, 2u);
+}
+
+// The first frame of a generation (with `reuse`): every tile evaluated, and its bounds
+// found (atomic maxima over the tile; cleared before).
+@compute @workgroup_size(8, 8)
+fn main_fresh(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let tile = wg.y * groups.x + wg.x;
+    if (li == 0u) {
+        keep_state(state_at(tile, groups.x * groups.y), true);
     }
-    finish(xy, vec3<f32>(y.x, co.x, cg.x));
-    finish(xy + vec2<i32>(1, 0), vec3<f32>(y.y, co.y, cg.y));
-    finish(xy + vec2<i32>(0, 1), vec3<f32>(y.z, co.z, cg.z));
-    finish(xy + vec2<i32>(1, 1), vec3<f32>(y.w, co.w, cg.w));
+    let xy = vec2<i32>(id.xy * 2u);
+    if (u32(xy.x) < p.size.x && u32(xy.y) < p.size.y) {
+        let w = vec2<i32>(i32(id.x), xy.y);
+        let region = wg.xy / REGION_GROUPS;
+        var peak: array<f32, 9>;
+        let y = plane_peaks(xy, w, region, 0u, &peak);
+        var co = vec4<f32>(0.0);
+        var cg = vec4<f32>(0.0);
+        if (p.channels == 3u) {
+            co = plane_peaks(xy, w, region, 1u, &peak);
+            cg = plane_peaks(xy, w, region, 2u, &peak);
+        }
+        store_quad(xy, y, co, cg);
+        for (var k = 0u; k < max(p.layers, 2u); k = k + 1u) {
+            atomicMax(&peaks[tile * PEAK_WORDS + k], bitcast<u32>(peak[k]));
+        }
+    }
 }
 
 // The held image: RGB with 9-bit mantissas and a shared 5-bit exponent (bias 15), the

@@ -104,6 +104,12 @@ impl Gpu {
             &bgl,
             "main",
         );
+        let pipeline_fresh = pipeline_for(
+            "vbim reconstruct, first of a generation",
+            include_str!("reconstruct.wgsl"),
+            &bgl,
+            "main_fresh",
+        );
         let hold = pipeline_for(
             "vbim hold",
             include_str!("reconstruct.wgsl"),
@@ -142,6 +148,17 @@ impl Gpu {
             BOUND_BYTES,
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
+        // Zeroed at creation: generation 0, which no frame has.
+        let tiles = buffer(
+            "vbim reconstruction tiles",
+            tile_bytes((width, height)).0,
+            B::STORAGE,
+        );
+        let peaks = buffer(
+            "vbim reconstruction tile bounds",
+            tile_bytes((width, height)).1,
+            B::STORAGE | B::COPY_DST,
+        );
         let bind_group = reconstruct_group(
             device,
             &bgl,
@@ -152,7 +169,7 @@ impl Gpu {
                 &display_view,
                 &packed_view,
             ],
-            [&ranges, &bounds],
+            [&ranges, &bounds, &tiles, &peaks],
             &params,
         );
         let jobs = buffer(
@@ -167,6 +184,7 @@ impl Gpu {
             device: device.clone(),
             queue: queue.clone(),
             pipeline,
+            pipeline_fresh,
             hold,
             hold_layout,
             hold_group,
@@ -189,6 +207,11 @@ impl Gpu {
             masks,
             part,
             bounds,
+            tiles,
+            peaks,
+            gen: 0,
+            last_params: None,
+            parity: 0,
             keys,
             key_views,
             packed,
@@ -318,13 +341,13 @@ impl Gpu {
 }
 
 /// The reconstruction's bind group: its parameters, then the head keyframe, bubble
-/// planes, held image, output and 16-bit keyframe views, the 16-bit keyframes' ranges
-/// and the bubble planes' bounds.
+/// planes, held image, output and 16-bit keyframe views, the 16-bit keyframes' ranges,
+/// the bubble planes' bounds and the tiles' state.
 pub(super) fn reconstruct_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     views: [&wgpu::TextureView; 5],
-    [ranges, bounds]: [&wgpu::Buffer; 2],
+    [ranges, bounds, tiles, peaks]: [&wgpu::Buffer; 4],
     params: &wgpu::Buffer,
 ) -> wgpu::BindGroup {
     let mut entries = vec![wgpu::BindGroupEntry {
@@ -344,6 +367,14 @@ pub(super) fn reconstruct_group(
     entries.push(wgpu::BindGroupEntry {
         binding: 9,
         resource: bounds.as_entire_binding(),
+    });
+    entries.push(wgpu::BindGroupEntry {
+        binding: 10,
+        resource: tiles.as_entire_binding(),
+    });
+    entries.push(wgpu::BindGroupEntry {
+        binding: 12,
+        resource: peaks.as_entire_binding(),
     });
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("vbim reconstruct"),
@@ -472,6 +503,8 @@ fn layouts(device: &wgpu::Device) -> Layouts {
             entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
             entry(6, storage(true)),
             entry(9, storage(true)),
+            entry(10, storage(false)),
+            entry(12, storage(false)),
         ],
     });
     let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

@@ -283,7 +283,7 @@ fn the_held_image_keeps_nine_bits_of_each_texels_largest_channel() {
     params.blend = 1;
     params.alpha = 0.0;
     let mut enc = device.create_command_encoder(&Default::default());
-    gpu.reconstruct(&mut enc, &params, true);
+    gpu.reconstruct(&mut enc, &params, true, true);
     queue.submit([enc.finish()]);
     let got = gpu.read_display();
     for i in 0..texels {

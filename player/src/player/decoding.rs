@@ -29,6 +29,10 @@ pub(super) struct Decoding {
     pack_end: usize,
     /// The cost of the ops not yet chosen, blocks.
     left: u64,
+    /// Work allowed but not yet spent, blocks: an op is chosen once the frames' shares
+    /// add up to its cost, so that a decode spread thinly (a slow day, many frames before
+    /// it is due) records an op every few frames, not one every frame.
+    credit: u64,
     /// It arrived before it was due: a frame that finds it unfinished is the budget's.
     early: bool,
 }
@@ -137,6 +141,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             early,
             pack_end,
             left,
+            credit: 0,
             steps: key_steps,
             data: Some(b),
             ops,
@@ -184,23 +189,31 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 remaining.div_ceil(frames.saturating_sub(1).max(1))
             }
         };
+        // With a budget, what a frame may record is the budget at most.
+        d.credit = d
+            .credit
+            .saturating_add(allowance)
+            .min(self.budget.unwrap_or(u64::MAX));
         let (start, mut work) = (d.next, 0u64);
         while d.next < d.ops.len() {
             let cost = d.ops[d.next].cost;
-            if work + cost > allowance {
-                if work > 0 {
+            if cost > d.credit {
+                // One step costs more than the budget: it runs alone in a frame whose
+                // credit is the whole budget, and is reported.
+                let alone = self
+                    .budget
+                    .is_some_and(|b| cost > b && d.credit == b && work == 0);
+                if !alone {
                     break;
                 }
-                // One step costs more than the budget: it runs alone, and is reported.
-                if self.budget.is_some() {
-                    self.totals.over_budget += 1;
-                    self.totals.last_error = Some(format!(
-                        "segment {}: one step of its decode costs {cost} blocks, more than the budget of {allowance} per frame: the budget is too small for this stream",
-                        d.show.map_or(0, |r| r.index)
-                    ));
-                }
+                self.totals.over_budget += 1;
+                self.totals.last_error = Some(format!(
+                    "segment {}: one step of its decode costs {cost} blocks, more than the budget of {allowance} per frame: the budget is too small for this stream",
+                    d.show.map_or(0, |r| r.index)
+                ));
             }
             work += cost;
+            d.credit = d.credit.saturating_sub(cost);
             d.next += 1;
         }
         d.left -= work;
