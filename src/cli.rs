@@ -54,6 +54,12 @@ pub struct PlayArgs {
     /// Display refresh rate in Hz (1 to 1000).
     #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub display_hz: u32,
+    /// Play the file this many times slower than its own rate (a 240-frame day at 1/6 fps, a 24-minute day, is `--slow 144` on a 24 fps file); the duration is the display's.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=100000))]
+    pub slow: u64,
+    /// Media frame to start at.
+    #[arg(long, default_value_t = 0)]
+    pub start: u64,
     /// Cap the reader: SI bytes per second (`2MB/s`, `500kB/s`) or a multiple of the stream's mean bit rate (`1.2x`) [default: unlimited].
     #[arg(long)]
     pub bandwidth: Option<Bandwidth>,

@@ -66,6 +66,9 @@ pub fn play(
     let name = s.file.display().to_string();
     let mut player = s.open_player(device, queue, s.realtime)?;
     let h = player.header().clone();
+    if s.start > 0 {
+        player.set_time(s.start * 1_000_000_000 * h.rate_den as u64 / h.rate_num as u64);
+    }
     let mut reference = s.reference()?;
     let metric = if s.check_every > 0 {
         Some(s.metric()?)
@@ -88,7 +91,7 @@ pub fn play(
                 std::thread::sleep(Duration::from_nanos(t - wall));
             }
         }
-        let r = player.advance(t - prev_t);
+        let r = player.advance((t - prev_t) / s.slow);
         prev_t = t;
         if let Some(m) = metric {
             if r.index % s.check_every == 0 && r.state != vbim_player::FrameState::Waiting {

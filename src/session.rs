@@ -32,6 +32,10 @@ pub struct Session {
     pub realtime: bool,
     pub duration_ns: u64,
     pub display_hz: u32,
+    /// The media advances this many times slower than the display's clock.
+    pub slow: u64,
+    /// Media frame to start at.
+    pub start: u64,
     pub check_every: u64,
     /// The memory the stream may take, in the player and in the reference decoder each.
     pub limits: Limits,
@@ -67,6 +71,8 @@ impl Session {
             realtime: a.realtime,
             duration_ns: a.duration.ns(),
             display_hz: a.display_hz,
+            slow: a.slow,
+            start: a.start,
             check_every: a.check_every,
             limits,
         })

@@ -24,6 +24,10 @@ pub enum BenchCommand {
     /// Draw a size CSV (size,detail,frames,bake_s,bake_peak_mb,encode_s,encode_peak_mb,…;
     /// scripts/size_bench.sh): the bake's and the encoder's peak memory against the size.
     PlotSize(BenchPlotArgs),
+    /// Draw a reuse CSV (pace,share,gpu_ms,…,mean_ratio,…,psnr_db,worst_db;
+    /// scripts/reuse_bench.sh): shown error against GPU time per displayed frame, one line
+    /// per pace, a point per `--reuse-share`.
+    PlotReuse(BenchPlotArgs),
     /// Sweep bandwidth caps from 0.25× to 2× the stream's mean rate under a stall pattern,
     /// for each policy; drift and shown error against bandwidth (CSV + PNG).
     Drift(BenchDriftArgs),
@@ -177,7 +181,7 @@ pub struct BenchLosslessArgs {
 
 #[derive(Args)]
 pub struct BenchPlotArgs {
-    /// The CSV written by scripts/rd_bench.sh (plot-rd), scripts/tolerance_bench.sh or scripts/size_bench.sh.
+    /// The CSV written by scripts/rd_bench.sh (plot-rd), scripts/tolerance_bench.sh, scripts/size_bench.sh or scripts/reuse_bench.sh.
     pub csv: PathBuf,
     /// Output PNG.
     #[arg(short, long)]

@@ -28,6 +28,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::PlotRd(a) => offline::plot_rd(a),
         BenchCommand::PlotTolerance(a) => offline::plot_tolerance(a),
         BenchCommand::PlotSize(a) => offline::plot_size(a),
+        BenchCommand::PlotReuse(a) => offline::plot_reuse(a),
         BenchCommand::Drift(a) => runtime::bench_drift(a),
         BenchCommand::Render(a) => runtime::bench_render(a),
         BenchCommand::Scale(a) => scale::run(a),

@@ -198,6 +198,48 @@ pub(super) fn plot_tolerance(a: BenchPlotArgs) -> Result<(), String> {
     Ok(())
 }
 
+pub(super) fn plot_reuse(a: BenchPlotArgs) -> Result<(), String> {
+    // Points in the order of the CSV (share by share), not sorted by time: the line then
+    // follows the knob.
+    let text = std::fs::read_to_string(&a.csv).map_err(|e| format!("{}: {e}", a.csv.display()))?;
+    let mut series: Vec<crate::plot::Series> = Vec::new();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() < 9 {
+            continue;
+        }
+        let num = |i: usize| -> Result<f64, String> {
+            f[i].parse()
+                .map_err(|_| format!("bad number in column {} of {line}", i + 1))
+        };
+        let name = match f[0] {
+            "1" => "the file's rate".to_string(),
+            n => format!("{n}× slower"),
+        };
+        let p = (num(5)?, num(7)?);
+        match series.iter_mut().find(|s| s.name == name) {
+            Some(s) => s.points.push(p),
+            None => series.push(crate::plot::Series {
+                name,
+                points: vec![p],
+            }),
+        }
+    }
+    if series.is_empty() {
+        return Err(format!("{}: no rows", a.csv.display()));
+    }
+    crate::plot::lines(
+        &a.out,
+        &a.title,
+        "GPU time per displayed frame ÷ the reference blend's (same run)",
+        "mean PSNR of the shown frames against the true state, dB",
+        &series,
+        false,
+    )?;
+    println!("wrote {}", a.out.display());
+    Ok(())
+}
+
 pub(super) fn plot_size(a: BenchPlotArgs) -> Result<(), String> {
     let mut series = Vec::new();
     for (column, what) in [(4, "bake"), (6, "encode")] {
