@@ -147,12 +147,12 @@ impl Gpu {
             let strip = |p: &Params| Params { w: [0.0; 12], ..*p };
             bytemuck::bytes_of(&strip(last)) == bytemuck::bytes_of(&strip(&params))
         });
-        if fresh || hold_first || !same {
+        let first = fresh || hold_first || !same;
+        if first {
             self.gen = self.gen.wrapping_add(1).max(1);
             params.gen = self.gen;
         }
         self.last_params = Some(params);
-        let first = fresh || hold_first || !same;
         self.parity ^= 1;
         params.parity = self.parity;
         // The first frame of a generation evaluates every tile and finds the tiles'

@@ -360,22 +360,12 @@ pub(super) fn reconstruct_group(
             resource: wgpu::BindingResource::TextureView(v),
         });
     }
-    entries.push(wgpu::BindGroupEntry {
-        binding: 6,
-        resource: ranges.as_entire_binding(),
-    });
-    entries.push(wgpu::BindGroupEntry {
-        binding: 9,
-        resource: bounds.as_entire_binding(),
-    });
-    entries.push(wgpu::BindGroupEntry {
-        binding: 10,
-        resource: tiles.as_entire_binding(),
-    });
-    entries.push(wgpu::BindGroupEntry {
-        binding: 12,
-        resource: peaks.as_entire_binding(),
-    });
+    for (binding, buffer) in [(6, ranges), (9, bounds), (10, tiles), (12, peaks)] {
+        entries.push(wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        });
+    }
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("vbim reconstruct"),
         layout,

@@ -198,11 +198,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         while d.next < d.ops.len() {
             let cost = d.ops[d.next].cost;
             if cost > d.credit {
-                // One step costs more than the budget: it runs alone in a frame whose
-                // credit is the whole budget, and is reported.
-                let alone = self
-                    .budget
-                    .is_some_and(|b| cost > b && d.credit == b && work == 0);
+                // One step costs more than the budget: it runs alone, first in a frame
+                // (whose credit is then the whole budget), and is reported.
+                let alone = self.budget.is_some_and(|b| cost > b && work == 0);
                 if !alone {
                     break;
                 }
