@@ -734,11 +734,13 @@ fn dropped_segments_leave_the_display_exact_where_it_says_so() {
             "{policy:?}: drops cascade: {t:?}"
         );
         assert!(exact >= 60, "{policy:?}: {exact} exact frames");
-        // Parsed coefficients go up, not decoded planes: a few times the bytes read.
+        // Coefficient streams go up, not decoded planes: a few times the bytes read (the
+        // stream after zstd plus entry points every 128 pairs, about 6% of it; decoded
+        // planes would be tens of times).
         let ratio = t.bytes_uploaded as f64 / t.bytes_read as f64;
         eprintln!("{policy:?}: uploaded {:.2}× the bytes read", ratio);
         assert!(
-            ratio < 4.0,
+            ratio < 4.5,
             "{policy:?}: uploaded {ratio:.2}× the bytes read: {t:?}"
         );
     }

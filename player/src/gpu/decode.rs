@@ -14,6 +14,12 @@ use crate::decoder::SegmentData;
 /// may land in different frames. (32 workgroups of 64 blocks: 131 072 texels of a plane.)
 pub(crate) const SLICE_GROUPS: u32 = 32;
 
+/// A parse slice is this many slices' workgroups: as many pairs per dispatch as when a
+/// piece was 256 pairs, so that shorter pieces shorten each dispatch's serial chain
+/// without making more dispatches.
+const PARSE_SPAN: u32 = (256 / vbim_format::chunk::ENTRY_PAIRS) as u32;
+const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
+
 /// What one step of a decode records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
@@ -393,14 +399,8 @@ impl Gpu {
         let bytes = groups_offset(self.part) + group_bytes(blocks);
         ops.push(Op::new(Kind::Clear { bytes }, 0, [0; 3], channel, 0));
         let units = (job.count as u64, 64);
-        self.sliced(
-            ops,
-            Kind::Parse,
-            job,
-            job.count.div_ceil(64),
-            channel,
-            units,
-        );
+        let groups = job.count.div_ceil(64);
+        self.sliced_by(ops, Kind::Parse, job, (groups, PARSE_SPAN), channel, units);
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`], each a
@@ -414,14 +414,29 @@ impl Gpu {
         job: Job,
         groups: u32,
         channel: u32,
+        units: (u64, u64),
+    ) {
+        self.sliced_by(ops, kind, job, (groups, 1), channel, units);
+    }
+
+    /// [`Gpu::sliced`] with slices of `span` · [`SLICE_GROUPS`] workgroups (slice k
+    /// binds the slices buffer's entry k · `span`).
+    fn sliced_by(
+        &mut self,
+        ops: &mut Vec<Op>,
+        kind: Kind,
+        job: Job,
+        (groups, span): (u32, u32),
+        channel: u32,
         (units, per_group): (u64, u64),
     ) {
         let at = self.push_job(job);
-        for k in 0..groups.div_ceil(SLICE_GROUPS) {
-            let from = k * SLICE_GROUPS;
-            let n = (groups - from).min(SLICE_GROUPS);
+        let size = span * SLICE_GROUPS;
+        for k in 0..groups.div_ceil(size) {
+            let from = k * size;
+            let n = (groups - from).min(size);
             let cost = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
-            ops.push(Op::new(kind, at, [n, 1, 1], channel, cost).in_slice(k));
+            ops.push(Op::new(kind, at, [n, 1, 1], channel, cost).in_slice(k * span));
         }
     }
 
@@ -482,13 +497,14 @@ impl Kind {
     /// What one unit of the pass costs, in quarters of a block through `bubble_write`.
     /// Measured on lavapipe from the frames of `vbim bench render --csv` (the extra time
     /// of each frame against the work of each kind it recorded): a parse's entry point
-    /// reads 256 pairs in sequence, a keyframe block's inverse transform reads every
+    /// reads 128 pairs in sequence (96 when it read 256; the parse alone took 0.57× as
+    /// long per entry point at 128 as at 256), a keyframe block's inverse transform reads every
     /// coefficient of a keyframe (dense, where a bubble term's are few), zeroing and
     /// packing touch a texel once. On an H100 too the parse is the costliest per unit
     /// (63–75% of a segment's GPU time).
     fn weight(self) -> u64 {
         match self {
-            Kind::Parse => 96,
+            Kind::Parse => 55,
             Kind::KeyAdd => 12,
             Kind::BubbleWrite => 4,
             Kind::BubbleBound => 2,

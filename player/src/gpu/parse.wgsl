@@ -11,8 +11,18 @@
 // only those.
 @group(0) @binding(10) var<storage, read_write> groups: array<atomic<u32>>;
 
+// The stream word that holds the bytes being read, and its index: one load per four
+// bytes, not one per byte (each load is a step of the invocation's serial chain).
+var<private> held_at: u32 = 0xFFFFFFFFu;
+var<private> held: u32;
+
 fn stream_byte(at: u32) -> u32 {
-    return (words[job.stream + (at >> 2u)] >> ((at & 3u) * 8u)) & 0xFFu;
+    let i = at >> 2u;
+    if (i != held_at) {
+        held_at = i;
+        held = words[job.stream + i];
+    }
+    return (held >> ((at & 3u) * 8u)) & 0xFFu;
 }
 
 // One LEB128 varint at `*at`, advancing it.
@@ -31,18 +41,35 @@ fn varint(at: ptr<function, u32>) -> u32 {
     return u;
 }
 
+// The bits of `groups[pending_at]` this invocation has yet to set: blocks come in
+// increasing order within a frequency, so most marks land in the same word and one
+// atomic sets them all.
+var<private> pending_at: u32 = 0xFFFFFFFFu;
+var<private> pending: u32 = 0u;
+
+fn flush_groups() {
+    if (pending != 0u) {
+        atomicOr(&groups[pending_at], pending);
+        pending = 0u;
+    }
+}
+
 // Coefficient f of block b, if the block is in this part and the value is not zero.
+// No atomic's result is waited for: on a GPU an atomic that returns a value stalls the
+// invocation for a round trip to memory, one that does not is sent and forgotten.
 fn put(b: u32, f: u32, v: i32) {
     if (v == 0 || b < job.lo || b >= job.hi) {
         return;
     }
     let d = b - job.lo;
     coefs[d * 64u + f] = v;
-    let before = atomicOr(&masks[d * 2u + f / 32u], 1u << (f % 32u));
-    // The first bit of a mask word marks the block (at most twice per block).
-    if (before == 0u) {
-        atomicOr(&groups[d / 32u], 1u << (d % 32u));
+    atomicOr(&masks[d * 2u + f / 32u], 1u << (f % 32u));
+    let w = d / 32u;
+    if (w != pending_at) {
+        flush_groups();
+        pending_at = w;
     }
+    pending = pending | (1u << (d % 32u));
 }
 
 // Parses the piece of the stream from one entry point: from its first position (`from`)
@@ -95,4 +122,5 @@ fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
             break;
         }
     }
+    flush_groups();
 }
