@@ -51,7 +51,9 @@ pub enum BenchCommand {
     /// What a context-adaptive entropy coder would make of the file's coefficient streams:
     /// the ideal code length of an adaptive binary model (which an arithmetic coder
     /// reaches within about 1%) against their bytes now (zstd of run/value pairs), by kind
-    /// of stream. Measures what a change of the format's entropy coding would buy.
+    /// of stream; then the same for static designs a GPU decodes in parallel (per-chunk
+    /// histograms, rANS lanes), by design and number of histograms. Measures what a change
+    /// of the format's entropy coding would buy.
     Entropy(BenchEntropyArgs),
 }
 

@@ -27,6 +27,7 @@ use vbim_format::chunk::{self, TileMap};
 use vbim_format::dct::N;
 use vbim_format::{plane, ChunkKind, Header, Reader};
 
+use super::static_coding::{PlaneStream, Study};
 use super::BenchEntropyArgs;
 use crate::progress::Stages;
 
@@ -240,6 +241,8 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
     let sub = a.substream;
     let mut tally = [Tally::default(); 4];
     let mut tiles: Option<TileMap> = None;
+    let mut study = Study::default();
+    let raster: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
     let stages = Stages::new();
     for (i, e) in entries.iter().enumerate() {
         stages.report("modelling chunks", i as u64, entries.len() as u64);
@@ -258,11 +261,20 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
                     sub,
                 };
                 let mut models = fresh();
+                study.start_chunk(kind, bytes.len() as u64, 4 + 4 * planes as u64);
                 for p in 0..planes {
                     let blocks = plane::read_coefficients(&raw, &mut pos, bw * bh)
                         .map_err(|e| format!("{name}: chunk {i}, plane {p}: {e}"))?;
                     let m = &mut models[(p > 0) as usize];
                     tally[kind].model_bits += grid.code(m, &blocks, bw * bh);
+                    study.plane(&PlaneStream {
+                        kind,
+                        chroma: p > 0,
+                        blocks: &blocks,
+                        order: &raster,
+                        grid: (bw, bh),
+                        tile: None,
+                    });
                 }
                 let t = &mut tally[kind];
                 t.chunks += 1;
@@ -289,6 +301,8 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
                 let ts = h.tile_size as usize / N;
                 let tx = h.tiles_x() as usize;
                 let mut models = fresh();
+                let other = 4 + 4 * (dmax.max(1) as u64 - 1) * planes as u64;
+                study.start_chunk(2, bytes.len() as u64, other);
                 for k in 2..=dmax {
                     for p in 0..planes {
                         // The member tiles' blocks: tiles in raster order, each tile's
@@ -305,12 +319,20 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
                             .map_err(|e| format!("{name}: chunk {i}, term {k}, plane {p}: {e}"))?;
                         let m = &mut models[(p > 0) as usize];
                         tally[2].model_bits += grid.code_at(m, &blocks, &order);
+                        study.plane(&PlaneStream {
+                            kind: 2,
+                            chroma: p > 0,
+                            blocks: &blocks,
+                            order: &order,
+                            grid: (bw, bh),
+                            tile: Some(ts),
+                        });
                     }
                 }
                 let t = &mut tally[2];
                 t.chunks += 1;
                 t.stored += bytes.len() as u64;
-                t.other += 4 + 4 * (dmax.max(1) as u64 - 1) * planes as u64;
+                t.other += other;
             }
             _ => {
                 tally[3].chunks += 1;
@@ -320,6 +342,9 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
     }
     stages.finish();
     report(&name, &h, &tally);
+    study.report(std::array::from_fn(|k| {
+        tally[k].model_bits / 8.0 + tally[k].other as f64
+    }));
     Ok(())
 }
 

@@ -17,6 +17,7 @@ mod frame_gpu;
 mod offline;
 mod runtime;
 mod scale;
+mod static_coding;
 
 pub use args::*;
 

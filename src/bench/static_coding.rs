@@ -1,0 +1,679 @@
+//! The design study for format 2's coefficient coding, printed by `vbim bench entropy`
+//! after the adaptive model: what a *static*, GPU-decodable coder would make of the same
+//! quantised integers.
+//!
+//! The adaptive model of `entropy.rs` learns every probability as it goes and takes its
+//! contexts from the blocks coded before: one long serial chain, which a GPU cannot
+//! share out. A coder a GPU decodes (rANS, as JPEG XL, GST and Recoil use it) wants
+//! instead:
+//! - **static probabilities**: one histogram per cluster of contexts, counted by the
+//!   encoder over the chunk and sent with it (12-bit probabilities);
+//! - **hybrid-uint tokens** (JPEG XL's 4-2-0): values below 16 are their own token, larger
+//!   ones a token for the exponent and the two bits below the leading one, then raw bits;
+//!   signed values folded (0, −1, 1, −2, … → 0, 1, 2, 3, …);
+//! - per block, in this order: the DC's residual against the planar prediction
+//!   (left + up − up-left, 0 outside the plane, or outside the tile for a bubble plane: a
+//!   linear predictor, so the GPU undoes it with a 2-D prefix sum), the number of non-zero
+//!   AC coefficients, then the coefficients in zig-zag order until that many were coded,
+//!   each in a context of how many are left and of its frequency band (JPEG XL's
+//!   zero-density contexts);
+//! - contexts that a lane decoding its own blocks knows when it needs them.
+//!
+//! Three designs differ only in what the DC and the count see:
+//! - **A, within the block**: the count in a context of the block's own DC residual size;
+//! - **B, checkerboard**: blocks with x + y even are coded as in A; the others then take
+//!   the mean count and residual size of their four neighbours (all even, so decoded in a
+//!   first pass): two passes, each fully parallel;
+//! - **C, serial neighbours**: the left and upper blocks' counts and residual sizes, as a
+//!   CPU coder would use them (the reference: what parallelism costs).
+//!
+//! The contexts of each stream family (intra keyframe, predicted keyframe, bubble term; ×
+//! luma, chroma) are clustered once per file (greedy merges of the pair whose merge costs
+//! least on the file's totals, JPEG XL's approach) into K histograms; each chunk then pays
+//! for its K histograms' symbols at the chunk's own quantised probabilities, plus the
+//! histograms themselves (estimated at 8 bits per symbol used, 8 per histogram). rANS
+//! codes within about 0.1% of that length. Parallel lanes each end on a 32-bit state:
+//! the report counts 4 bytes per lane at one lane per 256 and per 64 blocks of a plane.
+
+use vbim_format::dct::N;
+
+/// Tokens of the hybrid-uint code: 16 direct values, then 4 per exponent up to 31.
+const TOKENS: usize = 16 + 28 * 4;
+
+/// The token of `v` and the raw bits that follow it.
+fn hybrid_uint(v: u32) -> (usize, u32) {
+    if v < 16 {
+        return (v as usize, 0);
+    }
+    let n = 31 - v.leading_zeros();
+    let m = (v >> (n - 2)) & 3;
+    (16 + (n as usize - 4) * 4 + m as usize, n - 2)
+}
+
+/// 0, −1, 1, −2, 2, … → 0, 1, 2, 3, 4, …
+fn pack_signed(v: i32) -> u32 {
+    if v >= 0 {
+        2 * v as u32
+    } else {
+        2 * v.unsigned_abs() - 1
+    }
+}
+
+/// The size class of a DC residual: 0, 1–2, 3+.
+fn size_class(v: i32) -> usize {
+    match v.unsigned_abs() {
+        0 => 0,
+        1..=2 => 1,
+        _ => 2,
+    }
+}
+
+/// Buckets of a count of non-zero coefficients (or of a mean of them).
+fn count_bucket(n: usize) -> usize {
+    match n {
+        0..=2 => n,
+        3..=4 => 3,
+        5..=8 => 4,
+        9..=16 => 5,
+        17..=32 => 6,
+        _ => 7,
+    }
+}
+
+/// Buckets of the coefficients still to code in a block.
+fn left_bucket(n: usize) -> usize {
+    match n {
+        1..=4 => n - 1,
+        5..=6 => 4,
+        7..=8 => 5,
+        9..=12 => 6,
+        13..=16 => 7,
+        17..=24 => 8,
+        _ => 9,
+    }
+}
+
+/// The same frequency bands as the adaptive model's.
+fn band(i: usize) -> usize {
+    match i {
+        0..=5 => i,
+        6..=7 => 6,
+        8..=10 => 7,
+        11..=15 => 8,
+        16..=23 => 9,
+        24..=35 => 10,
+        _ => 11,
+    }
+}
+
+// Context numbers within a family: each design's DC and count contexts, then the AC
+// contexts all three share.
+const DC_A: usize = 0;
+const DC_B: usize = DC_A + 1; // even blocks, then 4 buckets of the neighbours' sizes
+const DC_C: usize = DC_B + 5; // 4: the left and upper residual sizes
+const NZ_A: usize = DC_C + 4; // 3: the block's own DC size
+const NZ_B: usize = NZ_A + 3; // even: 3 by DC size; odd: 8 by the neighbours' mean count
+const NZ_C: usize = NZ_B + 11; // 8 by the left and upper mean count, 3 without either
+const GROUP_D: usize = NZ_C + 11; // 6: even groups; odd by their empty neighbour groups
+const DC_D: usize = GROUP_D + 6; // as DC_B, blocks of groups with something only
+const NZ_D: usize = DC_D + 5; // as NZ_B, the same
+const AC: usize = NZ_D + 11; // 10 × 12: coefficients left × band
+const AC_EVEN: usize = AC + 120; // E: even blocks as AC
+const AC_ODD: usize = AC_EVEN + 120; // E: odd blocks, × 3 by the neighbours with a term there
+const CONTEXTS: usize = AC_ODD + 360;
+
+/// The contexts each design reads, besides the shared AC ones.
+const DESIGNS: [(&str, &[std::ops::Range<usize>]); 5] = [
+    (
+        "A, within the block",
+        &[DC_A..DC_A + 1, NZ_A..NZ_A + 3, AC..AC + 120],
+    ),
+    (
+        "B, checkerboard (2 passes)",
+        &[DC_B..DC_B + 5, NZ_B..NZ_B + 11, AC..AC + 120],
+    ),
+    (
+        "D, B after a flag per empty 4 × 4 blocks (4 passes)",
+        &[
+            GROUP_D..GROUP_D + 6,
+            DC_D..DC_D + 5,
+            NZ_D..NZ_D + 11,
+            AC..AC + 120,
+        ],
+    ),
+    (
+        "E, D with odd blocks' coefficients in a context of their neighbours'",
+        &[
+            GROUP_D..GROUP_D + 6,
+            DC_D..DC_D + 5,
+            NZ_D..NZ_D + 11,
+            AC_EVEN..AC_ODD + 360,
+        ],
+    ),
+    (
+        "C, serial neighbours",
+        &[DC_C..DC_C + 4, NZ_C..NZ_C + 11, AC..AC + 120],
+    ),
+];
+
+/// Stream families: (intra keyframe, predicted keyframe, bubble term) × (luma, chroma).
+const FAMILIES: usize = 6;
+
+/// One plane's stream as the study reads it.
+pub(super) struct PlaneStream<'a> {
+    /// Kind of chunk (0 intra keyframe, 1 predicted keyframe, 2 bubble term).
+    pub kind: usize,
+    pub chroma: bool,
+    /// The blocks in stream order and where each lies on the block grid.
+    pub blocks: &'a [[i32; N * N]],
+    pub order: &'a [(usize, usize)],
+    /// Blocks across and down the plane.
+    pub grid: (usize, usize),
+    /// Blocks across a tile, for a bubble plane: its DC prediction stays in the tile.
+    pub tile: Option<usize>,
+}
+
+/// The symbols of one chunk: a count per (family, context, token), and the raw bits.
+struct ChunkCounts {
+    kind: usize,
+    counts: Vec<u32>,
+    raw_bits: u64,
+    /// Blocks of each plane stream (for the lanes' states).
+    planes: Vec<usize>,
+    /// Bytes outside the coefficient streams, kept as they are.
+    other: u64,
+    stored: u64,
+}
+
+#[derive(Default)]
+pub(super) struct Study {
+    chunks: Vec<ChunkCounts>,
+}
+
+impl Study {
+    /// Starts a chunk of `kind` (0–2), `stored` bytes as the file has it, of which `other`
+    /// lie outside the coefficient streams.
+    pub fn start_chunk(&mut self, kind: usize, stored: u64, other: u64) {
+        self.chunks.push(ChunkCounts {
+            kind,
+            counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
+            raw_bits: 0,
+            planes: Vec::new(),
+            other,
+            stored,
+        });
+    }
+
+    /// Counts one plane's symbols into the chunk started last.
+    pub fn plane(&mut self, p: &PlaneStream) {
+        let c = self.chunks.last_mut().expect("a chunk started");
+        c.planes.push(p.blocks.len());
+        let family = p.kind * 2 + p.chroma as usize;
+        let base = family * CONTEXTS;
+        let (bw, bh) = p.grid;
+        let mut index = vec![u32::MAX; bw * bh];
+        for (b, &(x, y)) in p.order.iter().enumerate() {
+            index[y * bw + x] = b as u32;
+        }
+        let at = |x: isize, y: isize| -> Option<usize> {
+            if x < 0 || y < 0 || x >= bw as isize || y >= bh as isize {
+                return None;
+            }
+            let i = index[y as usize * bw + x as usize];
+            (i != u32::MAX).then_some(i as usize)
+        };
+        let nz: Vec<usize> = p
+            .blocks
+            .iter()
+            .map(|q| q[1..].iter().filter(|&&v| v != 0).count())
+            .collect();
+        // DC residuals against the planar prediction, in the prediction's domain.
+        let same_tile = |(x, y): (usize, usize), (u, v): (usize, usize)| {
+            p.tile.is_none_or(|t| x / t == u / t && y / t == v / t)
+        };
+        let residual: Vec<i32> = p
+            .order
+            .iter()
+            .enumerate()
+            .map(|(b, &(x, y))| {
+                let dc = |dx: isize, dy: isize| {
+                    at(x as isize + dx, y as isize + dy)
+                        .filter(|&j| same_tile((x, y), p.order[j]))
+                        .map_or(0, |j| p.blocks[j][0])
+                };
+                p.blocks[b][0]
+                    .wrapping_sub(dc(-1, 0))
+                    .wrapping_sub(dc(0, -1))
+                    .wrapping_add(dc(-1, -1))
+            })
+            .collect();
+        // (Each design codes the DC and the count once: their raw bits are counted with
+        // design A's symbol only.)
+        let mut put = |ctx: usize, v: u32, raw_too: bool| {
+            let (t, raw) = hybrid_uint(v);
+            c.counts[(base + ctx) * TOKENS + t] += 1;
+            if raw_too {
+                c.raw_bits += raw as u64;
+            }
+        };
+        // D: groups of 4 × 4 blocks, empty where no block has a DC residual or a
+        // coefficient; a flag per group (checkerboard of groups), then B's symbols for the
+        // blocks of the groups with something.
+        let (gw, gh) = (bw.div_ceil(4), bh.div_ceil(4));
+        let mut group_full = vec![None::<bool>; gw * gh];
+        for (b, &(x, y)) in p.order.iter().enumerate() {
+            let g = &mut group_full[(y / 4) * gw + x / 4];
+            *g = Some(g.unwrap_or(false) || residual[b] != 0 || nz[b] != 0);
+        }
+        for gy in 0..gh {
+            for gx in 0..gw {
+                let Some(full) = group_full[gy * gw + gx] else {
+                    continue;
+                };
+                let around: Vec<bool> = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+                    .iter()
+                    .filter_map(|&(dx, dy)| {
+                        let (u, v) = (gx as isize + dx, gy as isize + dy);
+                        if u < 0 || v < 0 || u >= gw as isize || v >= gh as isize {
+                            return None;
+                        }
+                        group_full[v as usize * gw + u as usize]
+                    })
+                    .collect();
+                let ctx = if (gx + gy) % 2 == 1 && !around.is_empty() {
+                    1 + around.iter().filter(|&&f| !f).count()
+                } else {
+                    0
+                };
+                put(GROUP_D + ctx, full as u32, true);
+            }
+        }
+        for (b, &(x, y)) in p.order.iter().enumerate() {
+            let (xi, yi) = (x as isize, y as isize);
+            let own = size_class(residual[b]);
+            // B: the four neighbours (even blocks, decoded in the first pass).
+            let odd = (x + y) % 2 == 1;
+            let four: Vec<usize> = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+                .iter()
+                .filter_map(|&(dx, dy)| at(xi + dx, yi + dy))
+                .collect();
+            let (dc_b, nz_b) = if odd && !four.is_empty() {
+                let sizes: usize = four.iter().map(|&j| size_class(residual[j])).sum();
+                let mean =
+                    (four.iter().map(|&j| nz[j]).sum::<usize>() + four.len() / 2) / four.len();
+                (1 + (2 * sizes / four.len()).min(3), 3 + count_bucket(mean))
+            } else {
+                (0, own)
+            };
+            // C: the left and upper blocks, coded before this one.
+            let lu: Vec<usize> = [(-1, 0), (0, -1)]
+                .iter()
+                .filter_map(|&(dx, dy)| at(xi + dx, yi + dy))
+                .collect();
+            let dc_c = lu
+                .iter()
+                .map(|&j| size_class(residual[j]))
+                .sum::<usize>()
+                .min(3);
+            let nz_c = if lu.is_empty() {
+                8 + own
+            } else {
+                count_bucket((lu.iter().map(|&j| nz[j]).sum::<usize>() + lu.len() / 2) / lu.len())
+            };
+            let r = pack_signed(residual[b]);
+            put(DC_A, r, true);
+            put(DC_B + dc_b, r, false);
+            put(DC_C + dc_c, r, false);
+            let n = nz[b] as u32;
+            put(NZ_A + own, n, true);
+            put(NZ_B + nz_b, n, false);
+            put(NZ_C + nz_c, n, false);
+            if group_full[(y / 4) * gw + x / 4] == Some(true) {
+                put(DC_D + dc_b, r, false);
+                put(NZ_D + nz_b, n, false);
+            }
+            let mut left = nz[b];
+            for (i, &v) in p.blocks[b].iter().enumerate().skip(1) {
+                if left == 0 {
+                    break;
+                }
+                let ctx = left_bucket(left) * 12 + band(i);
+                put(AC + ctx, pack_signed(v), true);
+                // E: an odd block knows its four neighbours' coefficients (all even).
+                if odd && !four.is_empty() {
+                    let hits = four.iter().filter(|&&j| p.blocks[j][i] != 0).count();
+                    let class = (2 * hits).div_ceil(four.len()).min(2);
+                    put(AC_ODD + class * 120 + ctx, pack_signed(v), false);
+                } else {
+                    put(AC_EVEN + ctx, pack_signed(v), false);
+                }
+                left -= (v != 0) as usize;
+            }
+        }
+    }
+
+    /// The report's rows: for each design and number of histograms per family, the bytes
+    /// of every coefficient chunk (symbols, raw bits, histograms, other bytes) and the
+    /// lanes' states, by kind of chunk.
+    pub fn report(&self, adaptive: [f64; 3]) {
+        let stored: [u64; 3] = std::array::from_fn(|k| {
+            self.chunks
+                .iter()
+                .filter(|c| c.kind == k)
+                .map(|c| c.stored)
+                .sum()
+        });
+        let total: u64 = stored.iter().sum();
+        if total == 0 {
+            return;
+        }
+        let lanes = |per: usize| -> u64 {
+            self.chunks
+                .iter()
+                .flat_map(|c| &c.planes)
+                .map(|&b| 4 * b.div_ceil(per) as u64)
+                .sum()
+        };
+        let (lanes256, lanes64) = (lanes(256), lanes(64));
+        println!();
+        println!(
+            "Static, GPU-decodable designs (src/bench/static_coding.rs): bytes of the keyframe and coefficient chunks ({total} B stored; the adaptive model's ideal {:.0} B, {:.3})",
+            adaptive.iter().sum::<f64>(),
+            adaptive.iter().sum::<f64>() / total as f64
+        );
+        println!("| design | histograms per family | intra keyframes | predicted keyframes | bubble terms | all | of which histograms | with lanes' states, a lane per 256 blocks | per 64 |");
+        println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for (name, own) in &DESIGNS {
+            let contexts: Vec<usize> = own.iter().cloned().flatten().collect();
+            let ks = [32, 16, 8, 4, 1];
+            // Per family, its clusters at each k.
+            let sets: Vec<Option<Vec<Vec<Vec<usize>>>>> = (0..FAMILIES)
+                .map(|family| {
+                    let chunks: Vec<&ChunkCounts> = self
+                        .chunks
+                        .iter()
+                        .filter(|c| c.kind == family / 2)
+                        .collect();
+                    (!chunks.is_empty()).then(|| cluster(&chunks, family, &contexts, &ks))
+                })
+                .collect();
+            for (ki, k) in ks.iter().enumerate().rev() {
+                let mut bytes = [0.0f64; 3];
+                let mut tables = 0.0;
+                for (family, set) in sets.iter().enumerate() {
+                    let Some(set) = set else { continue };
+                    let kind = family / 2;
+                    for c in self.chunks.iter().filter(|c| c.kind == kind) {
+                        let (bits, table) = chunk_bits(c, family, &set[ki]);
+                        bytes[kind] += (bits + table) / 8.0;
+                        tables += table / 8.0;
+                    }
+                }
+                for (kind, b) in bytes.iter_mut().enumerate() {
+                    for c in self.chunks.iter().filter(|c| c.kind == kind) {
+                        // Raw bits and other bytes once per chunk (not per family).
+                        *b += c.raw_bits as f64 / 8.0 + c.other as f64;
+                    }
+                }
+                let all: f64 = bytes.iter().sum();
+                let ratio = |b: f64, s: u64| {
+                    if s == 0 {
+                        "—".to_string()
+                    } else {
+                        format!("{:.3}", b / s as f64)
+                    }
+                };
+                println!(
+                    "| {name} | {k} | {} | {} | {} | {} ({all:.0} B) | {:.1}% | {} | {} |",
+                    ratio(bytes[0], stored[0]),
+                    ratio(bytes[1], stored[1]),
+                    ratio(bytes[2], stored[2]),
+                    ratio(all, total),
+                    100.0 * tables / all,
+                    ratio(all + lanes256 as f64, total),
+                    ratio(all + lanes64 as f64, total),
+                );
+            }
+        }
+        println!(
+            "(ratios against the stored bytes; a lane's state is 4 bytes: {lanes256} B in all at a lane per 256 blocks of a plane, {lanes64} B at one per 64)"
+        );
+        // Where design D's bytes go, each context with a histogram of its own.
+        let kinds = [
+            ("empty-group flags", GROUP_D..GROUP_D + 6),
+            ("DC residuals", DC_D..DC_D + 5),
+            ("counts of coefficients", NZ_D..NZ_D + 11),
+            ("coefficients", AC..AC + 120),
+        ];
+        let parts: Vec<String> = kinds
+            .iter()
+            .map(|(what, range)| {
+                let (mut bits, mut symbols) = (0.0, 0u64);
+                for family in 0..FAMILIES {
+                    for c in self.chunks.iter().filter(|c| c.kind == family / 2) {
+                        for ctx in range.clone() {
+                            bits += chunk_bits(c, family, &[vec![ctx]]).0;
+                            let at = (family * CONTEXTS + ctx) * TOKENS;
+                            symbols += c.counts[at..at + TOKENS]
+                                .iter()
+                                .map(|&n| n as u64)
+                                .sum::<u64>();
+                        }
+                    }
+                }
+                format!(
+                    "{what} {:.0} B ({:.2} bits × {symbols})",
+                    bits / 8.0,
+                    bits / symbols.max(1) as f64
+                )
+            })
+            .collect();
+        let raw: u64 = self.chunks.iter().map(|c| c.raw_bits).sum();
+        println!(
+            "Design D's symbols, each context its own histogram: {}; raw bits {} B",
+            parts.join(", "),
+            raw / 8
+        );
+    }
+}
+
+/// The file's totals of `family` per context.
+fn totals(chunks: &[&ChunkCounts], family: usize, ctx: usize) -> Vec<u64> {
+    let mut h = vec![0u64; TOKENS];
+    for c in chunks {
+        let at = (family * CONTEXTS + ctx) * TOKENS;
+        for (t, n) in h.iter_mut().zip(&c.counts[at..at + TOKENS]) {
+            *t += *n as u64;
+        }
+    }
+    h
+}
+
+/// Bits of a histogram at its own ideal probabilities.
+fn entropy_bits(h: &[u64]) -> f64 {
+    let n: u64 = h.iter().sum();
+    if n == 0 {
+        return 0.0;
+    }
+    h.iter()
+        .filter(|&&c| c > 0)
+        .map(|&c| c as f64 * (n as f64 / c as f64).log2())
+        .sum()
+}
+
+/// `contexts` of `family` merged greedily: each step merges the two clusters whose merge
+/// adds the fewest bits on the file's totals. Returns the clusters (each its contexts)
+/// when `ks` of them are left, in the order of `ks` (largest first).
+fn cluster(
+    chunks: &[&ChunkCounts],
+    family: usize,
+    contexts: &[usize],
+    ks: &[usize],
+) -> Vec<Vec<Vec<usize>>> {
+    let merged =
+        |a: &[u64], b: &[u64]| -> Vec<u64> { a.iter().zip(b).map(|(x, y)| x + y).collect() };
+    // Each cluster: contexts, totals, their bits.
+    let mut groups: Vec<(Vec<usize>, Vec<u64>, f64)> = contexts
+        .iter()
+        .map(|&c| {
+            let h = totals(chunks, family, c);
+            let e = entropy_bits(&h);
+            (vec![c], h, e)
+        })
+        .collect();
+    let cost = |a: &(Vec<usize>, Vec<u64>, f64), b: &(Vec<usize>, Vec<u64>, f64)| {
+        entropy_bits(&merged(&a.1, &b.1)) - a.2 - b.2
+    };
+    // The cost of merging i and j (i < j), kept up to date as clusters merge.
+    let n = groups.len();
+    let mut costs = vec![vec![f64::INFINITY; n]; n];
+    for i in 0..n {
+        for j in i + 1..n {
+            costs[i][j] = cost(&groups[i], &groups[j]);
+        }
+    }
+    let mut alive: Vec<bool> = vec![true; n];
+    let mut left = n;
+    let mut out = Vec::new();
+    for &k in ks {
+        while left > k.max(1) {
+            let mut best = (f64::INFINITY, 0, 0);
+            for i in (0..n).filter(|&i| alive[i]) {
+                for j in (i + 1..n).filter(|&j| alive[j]) {
+                    if costs[i][j] < best.0 {
+                        best = (costs[i][j], i, j);
+                    }
+                }
+            }
+            let (_, i, j) = best;
+            let (cj, hj) = (std::mem::take(&mut groups[j].0), groups[j].1.clone());
+            groups[i].0.extend(cj);
+            groups[i].1 = merged(&groups[i].1, &hj);
+            groups[i].2 = entropy_bits(&groups[i].1);
+            alive[j] = false;
+            left -= 1;
+            for o in (0..n).filter(|&o| alive[o] && o != i) {
+                let c = cost(&groups[i], &groups[o]);
+                let (a, b) = (i.min(o), i.max(o));
+                costs[a][b] = c;
+            }
+        }
+        out.push(
+            (0..n)
+                .filter(|&i| alive[i])
+                .map(|i| groups[i].0.clone())
+                .collect(),
+        );
+    }
+    out
+}
+
+/// A chunk's bits for `family` with `clusters`: its symbols at each cluster's quantised
+/// (12-bit) probabilities, and the estimated cost of sending those histograms.
+fn chunk_bits(c: &ChunkCounts, family: usize, clusters: &[Vec<usize>]) -> (f64, f64) {
+    let (mut bits, mut table) = (0.0, 0.0);
+    for members in clusters {
+        let mut h = vec![0u64; TOKENS];
+        for &ctx in members {
+            let at = (family * CONTEXTS + ctx) * TOKENS;
+            for (t, n) in h.iter_mut().zip(&c.counts[at..at + TOKENS]) {
+                *t += *n as u64;
+            }
+        }
+        let n: u64 = h.iter().sum();
+        if n == 0 {
+            continue;
+        }
+        let q = quantise(&h);
+        bits += h
+            .iter()
+            .zip(&q)
+            .filter(|(&c, _)| c > 0)
+            .map(|(&c, &p)| c as f64 * (4096.0 / p as f64).log2())
+            .sum::<f64>();
+        table += 8.0 + 8.0 * h.iter().filter(|&&c| c > 0).count() as f64;
+    }
+    (bits, table)
+}
+
+/// Counts as 12-bit probabilities summing to 4096, every used symbol at least 1.
+fn quantise(h: &[u64]) -> Vec<u32> {
+    let n: u64 = h.iter().sum();
+    let mut q: Vec<u32> = h
+        .iter()
+        .map(|&c| {
+            if c == 0 {
+                0
+            } else {
+                ((c as f64 * 4096.0 / n as f64).round() as u32).max(1)
+            }
+        })
+        .collect();
+    let sum: i64 = q.iter().map(|&x| x as i64).sum();
+    // The largest absorbs the rounding (it stays far above 1 for any histogram of a few
+    // symbols' worth of difference).
+    let big = (0..q.len()).max_by_key(|&i| q[i]).unwrap_or(0);
+    q[big] = (q[big] as i64 + 4096 - sum).max(1) as u32;
+    q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hybrid_uint_tokens_and_raw_bits_cover_every_value_once() {
+        assert_eq!(hybrid_uint(0), (0, 0));
+        assert_eq!(hybrid_uint(15), (15, 0));
+        // 16 = 0b10000: exponent 4, the two bits below the leading one 00, 2 raw bits.
+        assert_eq!(hybrid_uint(16), (16, 2));
+        assert_eq!(hybrid_uint(19), (16, 2));
+        assert_eq!(hybrid_uint(20), (17, 2));
+        assert_eq!(hybrid_uint(u32::MAX).0, TOKENS - 1);
+        // Each token's values are contiguous and as many as its raw bits allow.
+        let mut v = 16u64;
+        while v < 1 << 20 {
+            let (t, raw) = hybrid_uint(v as u32);
+            let next = v + (1u64 << raw);
+            assert_eq!(hybrid_uint((next - 1) as u32).0, t);
+            assert_ne!(hybrid_uint(next as u32).0, t);
+            v = next;
+        }
+        assert_eq!(
+            (-3..=3).map(pack_signed).collect::<Vec<_>>(),
+            [5, 3, 1, 0, 2, 4, 6]
+        );
+    }
+
+    #[test]
+    fn quantised_probabilities_sum_to_4096_and_keep_rare_symbols() {
+        let q = quantise(&[1_000_000, 1, 0, 3]);
+        assert_eq!(q.iter().sum::<u32>(), 4096);
+        assert_eq!((q[1], q[2]), (1, 0));
+    }
+
+    #[test]
+    fn clustering_merges_alike_contexts_first() {
+        // Contexts 0 and 1 hold the same distribution, 2 another: two clusters keep 2 apart.
+        let mut c = ChunkCounts {
+            kind: 0,
+            counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
+            raw_bits: 0,
+            planes: vec![],
+            other: 0,
+            stored: 0,
+        };
+        for (ctx, h) in [(0, [90, 10]), (1, [45, 5]), (2, [5, 95])] {
+            c.counts[ctx * TOKENS] = h[0];
+            c.counts[ctx * TOKENS + 1] = h[1];
+        }
+        let mut got = cluster(&[&c], 0, &[0, 1, 2], &[2]).remove(0);
+        got.iter_mut().for_each(|g| g.sort());
+        got.sort();
+        assert_eq!(got, vec![vec![0, 1], vec![2]]);
+        // One cluster of all three costs more than the two.
+        let (two, _) = chunk_bits(&c, 0, &got);
+        let (one, _) = chunk_bits(&c, 0, &[vec![0, 1, 2]]);
+        assert!(one > two * 1.2, "{one} against {two}");
+    }
+}
