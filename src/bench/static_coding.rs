@@ -19,11 +19,17 @@
 //!   zero-density contexts);
 //! - contexts that a lane decoding its own blocks knows when it needs them.
 //!
-//! Three designs differ only in what the DC and the count see:
+//! The designs differ in what the DC, the count and the coefficients see:
 //! - **A, within the block**: the count in a context of the block's own DC residual size;
 //! - **B, checkerboard**: blocks with x + y even are coded as in A; the others then take
 //!   the mean count and residual size of their four neighbours (all even, so decoded in a
 //!   first pass): two passes, each fully parallel;
+//! - **D**: B after a flag per group of 4 × 4 blocks saying whether any of them holds
+//!   anything (the groups in a checkerboard of their own);
+//! - **E**: D with an odd block's coefficients also in a context of how many of its
+//!   neighbours have a coefficient at the same frequency;
+//! - **F**: E with a keyframe's DC plane as an integer 5/3 wavelet pyramid instead of
+//!   planar residuals (a bubble plane's DC as in E);
 //! - **C, serial neighbours**: the left and upper blocks' counts and residual sizes, as a
 //!   CPU coder would use them (the reference: what parallelism costs).
 //!
@@ -120,10 +126,12 @@ const NZ_D: usize = DC_D + 5; // as NZ_B, the same
 const AC: usize = NZ_D + 11; // 10 × 12: coefficients left × band
 const AC_EVEN: usize = AC + 120; // E: even blocks as AC
 const AC_ODD: usize = AC_EVEN + 120; // E: odd blocks, × 3 by the neighbours with a term there
-const CONTEXTS: usize = AC_ODD + 360;
+const DC_F: usize = AC_ODD + 360; // F: keyframe DC pyramid, 1 + 6 levels × 2 × 4 activity
+const DC_FB: usize = DC_F + 49; // F: bubble planes' DC as DC_D
+const CONTEXTS: usize = DC_FB + 5;
 
 /// The contexts each design reads, besides the shared AC ones.
-const DESIGNS: [(&str, &[std::ops::Range<usize>]); 5] = [
+const DESIGNS: [(&str, &[std::ops::Range<usize>]); 6] = [
     (
         "A, within the block",
         &[DC_A..DC_A + 1, NZ_A..NZ_A + 3, AC..AC + 120],
@@ -146,6 +154,15 @@ const DESIGNS: [(&str, &[std::ops::Range<usize>]); 5] = [
         &[
             GROUP_D..GROUP_D + 6,
             DC_D..DC_D + 5,
+            NZ_D..NZ_D + 11,
+            AC_EVEN..AC_ODD + 360,
+        ],
+    ),
+    (
+        "F, E with a keyframe's DC plane as a 5/3 wavelet pyramid (parallel per level)",
+        &[
+            GROUP_D..GROUP_D + 6,
+            DC_F..DC_FB + 5,
             NZ_D..NZ_D + 11,
             AC_EVEN..AC_ODD + 360,
         ],
@@ -178,6 +195,8 @@ struct ChunkCounts {
     kind: usize,
     counts: Vec<u32>,
     raw_bits: u64,
+    /// Design F's raw bits less the others' (its keyframe DC symbols differ).
+    raw_f: i64,
     /// Blocks of each plane stream (for the lanes' states).
     planes: Vec<usize>,
     /// Bytes outside the coefficient streams, kept as they are.
@@ -198,6 +217,7 @@ impl Study {
             kind,
             counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
             raw_bits: 0,
+            raw_f: 0,
             planes: Vec::new(),
             other,
             stored,
@@ -247,6 +267,24 @@ impl Study {
                     .wrapping_add(dc(-1, -1))
             })
             .collect();
+        // F: a keyframe's DC plane through an integer 5/3 wavelet pyramid (JPEG 2000's
+        // reversible transform, rows then columns, level by level): the coarsest values, then each level's details
+        // in a context of their level, direction and the activity of the level's coarse
+        // values around them (decoded before them).
+        if p.tile.is_none() && p.blocks.len() == bw * bh {
+            let dc: Vec<i32> = p.blocks.iter().map(|q| q[0]).collect();
+            let mut raw_planar = 0i64;
+            for &r in &residual {
+                raw_planar += hybrid_uint(pack_signed(r)).1 as i64;
+            }
+            let mut raw_f = 0i64;
+            pyramid(dc, bw, bh, |ctx, v| {
+                let (t, raw) = hybrid_uint(v);
+                c.counts[(base + DC_F + ctx) * TOKENS + t] += 1;
+                raw_f += raw as i64;
+            });
+            c.raw_f += raw_f - raw_planar;
+        }
         // (Each design codes the DC and the count once: their raw bits are counted with
         // design A's symbol only.)
         let mut put = |ctx: usize, v: u32, raw_too: bool| {
@@ -331,6 +369,9 @@ impl Study {
             if group_full[(y / 4) * gw + x / 4] == Some(true) {
                 put(DC_D + dc_b, r, false);
                 put(NZ_D + nz_b, n, false);
+                if p.tile.is_some() {
+                    put(DC_FB + dc_b, r, false);
+                }
             }
             let mut left = nz[b];
             for (i, &v) in p.blocks[b].iter().enumerate().skip(1) {
@@ -412,7 +453,8 @@ impl Study {
                 for (kind, b) in bytes.iter_mut().enumerate() {
                     for c in self.chunks.iter().filter(|c| c.kind == kind) {
                         // Raw bits and other bytes once per chunk (not per family).
-                        *b += c.raw_bits as f64 / 8.0 + c.other as f64;
+                        let f = if name.starts_with("F,") { c.raw_f } else { 0 };
+                        *b += (c.raw_bits as i64 + f) as f64 / 8.0 + c.other as f64;
                     }
                 }
                 let all: f64 = bytes.iter().sum();
@@ -474,6 +516,86 @@ impl Study {
             parts.join(", "),
             raw / 8
         );
+    }
+}
+
+/// The integer 5/3 wavelet pyramid of a `w` × `h` plane: rows then columns at each level
+/// (an odd last value goes down as a low value), until one value is left. Calls `emit(context, token value)` for the
+/// coarsest value (context 0) and for every difference, coarsest level first: context
+/// 1 + (level · 2 + direction) · 4 + the activity class of the two coarse values around it.
+fn pyramid(mut v: Vec<i32>, mut w: usize, mut h: usize, mut emit: impl FnMut(usize, u32)) {
+    let mut details: Vec<(usize, usize, u32)> = Vec::new();
+    let mut level = 0;
+    while w > 1 || h > 1 {
+        for dir in 0..2 {
+            let (n, m) = if dir == 0 { (w, h) } else { (h, w) };
+            if n < 2 {
+                continue;
+            }
+            let half = n.div_ceil(2);
+            let mut next = vec![0i32; half * m];
+            let idx =
+                |i: usize, j: usize, len: usize| if dir == 0 { j * len + i } else { i * len + j };
+            for j in 0..m {
+                // LeGall 5/3 lifting, as JPEG 2000's reversible path: each odd value less
+                // the mean of its even neighbours, then each even value plus a quarter of
+                // the two differences beside it. A linear ramp leaves no difference.
+                let x = |i: usize| v[idx(i.min(n - 1), j, w)];
+                let even = |i: usize| {
+                    x(if i < n {
+                        i
+                    } else {
+                        n - 1 - (n % 2 == 0) as usize
+                    })
+                };
+                let diffs: Vec<i32> = (0..n / 2)
+                    .map(|k| {
+                        x(2 * k + 1)
+                            .wrapping_sub(even(2 * k).wrapping_add(even(2 * k + 2)).div_euclid(2))
+                    })
+                    .collect();
+                let d = |k: isize| -> i32 {
+                    if diffs.is_empty() {
+                        0
+                    } else {
+                        diffs[k.clamp(0, diffs.len() as isize - 1) as usize]
+                    }
+                };
+                let lows: Vec<i32> = (0..half)
+                    .map(|k| {
+                        let k = k as isize;
+                        x(2 * k as usize).wrapping_add((d(k - 1) + d(k) + 2).div_euclid(4))
+                    })
+                    .collect();
+                for (k, &diff) in diffs.iter().enumerate() {
+                    let around = |i: usize| lows[i.min(half - 1)];
+                    let act = (around(k + 1) - around(k.saturating_sub(1))).unsigned_abs();
+                    let class = match act {
+                        0 => 0,
+                        1..=2 => 1,
+                        3..=8 => 2,
+                        _ => 3,
+                    };
+                    let ctx = 1 + ((level.min(5) * 2 + dir) * 4 + class);
+                    details.push((level, ctx, pack_signed(diff)));
+                }
+                for (k, &l) in lows.iter().enumerate() {
+                    next[if dir == 0 { j * half + k } else { k * w + j }] = l;
+                }
+            }
+            v = next;
+            if dir == 0 {
+                w = half;
+            } else {
+                h = half;
+            }
+        }
+        level += 1;
+    }
+    emit(0, pack_signed(v[0]));
+    details.sort_by_key(|d| std::cmp::Reverse(d.0));
+    for (_, ctx, value) in details {
+        emit(ctx, value);
     }
 }
 
@@ -646,6 +768,23 @@ mod tests {
     }
 
     #[test]
+    fn the_pyramid_codes_each_value_once_and_a_ramp_in_few_differences() {
+        let (w, h) = (37, 21);
+        let ramp: Vec<i32> = (0..w * h)
+            .map(|i| 3 * (i % w) as i32 - 5 * (i / w) as i32)
+            .collect();
+        let (mut count, mut nonzero) = (0, 0);
+        pyramid(ramp, w, h, |_, v| {
+            count += 1;
+            nonzero += (v != 0) as usize;
+        });
+        assert_eq!(count, w * h);
+        // Only the differences at the plane's right and lower edges (where the symmetric
+        // extension breaks the ramp) and the coarse levels' rounding are left.
+        assert!(nonzero < (w + h) * 2, "{nonzero} of {count}");
+    }
+
+    #[test]
     fn quantised_probabilities_sum_to_4096_and_keep_rare_symbols() {
         let q = quantise(&[1_000_000, 1, 0, 3]);
         assert_eq!(q.iter().sum::<u32>(), 4096);
@@ -659,6 +798,7 @@ mod tests {
             kind: 0,
             counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
             raw_bits: 0,
+            raw_f: 0,
             planes: vec![],
             other: 0,
             stored: 0,
