@@ -14,6 +14,8 @@
 //!   buffer model ([`buffer_model`]), the format's bounds ([`limits`]), the error metrics
 //!   ([`metrics`]), and the CPU reference decoder ([`decode`]) that the GPU reconstruction
 //!   is tested against.
+//! - **Format 2's entropy coder**, not yet used by any chunk: [`ans`] (rANS with static
+//!   12-bit probabilities over 16-bit words, hybrid-uint tokens, histograms).
 //! - **Hostile input**: with the `fuzz` feature, [`fuzz`](crate#features) holds the fuzz
 //!   targets' bodies, which `cargo test` also replays on the saved corpus.
 //!
@@ -24,6 +26,7 @@
 //!   tests that replay their corpus.
 #![deny(missing_docs)]
 
+pub mod ans;
 pub mod basis;
 pub mod buffer_model;
 mod checksum;
