@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# The runtime's GPU figures on a hardware GPU, in one short run: for every stream in DIR,
+# the GPU time of a displayed frame against a reference blend (`vbim bench render`, a
+# 60 Hz display) and a segment's GPU decode by pass (`vbim bench decode --gpu`); then the
+# speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
+# OUT/device.log (the adapter's name first) and OUT/reuse.csv.
+#
+#   VBIM=BINARY scripts/device_bench.sh DIR OUT
+#
+# Made for a machine that only runs a prepared binary. Here, once:
+#   cargo build --release --features bench
+#   mkdir -p .dev && echo /.dev/ >> .git/info/exclude && strip -o .dev/vbim target/release/vbim
+#   cp out/demo/jacksboro.vbim .dev/a512.vbim       # and, say, `vbim bench scale --sizes 2048`'s
+#   cp DIR/2048.vbim .dev/b2048.vbim                # stream (the first in name order is the
+#                                                   # one the reuse trade is measured on)
+# plus the Vulkan loader's packages in .gl/ as the device tool's notes say. There, carrying
+# .dev and .gl: `for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig;
+# VBIM=.dev/vbim scripts/device_bench.sh .dev $OUT`. FRAMES, RUNS and REUSE=0 shorten it.
+set -euo pipefail
+dir=${1:?usage: scripts/device_bench.sh DIR OUT}
+out=${2:?usage: scripts/device_bench.sh DIR OUT}
+vbim=${VBIM:-target/release/vbim}
+frames=${FRAMES:-240}
+runs=${RUNS:-3}
+mkdir -p "$out"
+log="$out/device.log"
+: >"$log"
+streams=("$dir"/*.vbim)
+[ -e "${streams[0]}" ] || { echo "no .vbim file in $dir" >&2; exit 1; }
+for f in "${streams[@]}"; do
+    echo "== $f" | tee -a "$log"
+    "$vbim" inspect "$f" 2>&1 | head -4 | tee -a "$log"
+    "$vbim" bench render "$f" --frames "$frames" --runs "$runs" 2>&1 | tee -a "$log"
+    "$vbim" bench decode "$f" --gpu --runs "$runs" 2>&1 | tee -a "$log"
+done
+if [ "${REUSE:-1}" != 0 ]; then
+    VBIM="$vbim" scripts/reuse_bench.sh "${streams[0]}" "$out/reuse.csv" 2>&1 | tee -a "$log"
+fi
