@@ -14,8 +14,9 @@
 //!   buffer model ([`buffer_model`]), the format's bounds ([`limits`]), the error metrics
 //!   ([`metrics`]), and the CPU reference decoder ([`decode`]) that the GPU reconstruction
 //!   is tested against.
-//! - **Format 2's entropy coder**, not yet used by any chunk: [`ans`] (rANS with static
-//!   12-bit probabilities over 16-bit words, hybrid-uint tokens, histograms).
+//! - **Format 2's coefficient coding**, not yet used by any chunk: [`ans`] (rANS with
+//!   static 12-bit probabilities over 16-bit words, hybrid-uint tokens, histograms) and
+//!   [`plane2`] (a chunk's planes in rANS lanes and four passes a GPU can run).
 //! - **Hostile input**: with the `fuzz` feature, [`fuzz`](crate#features) holds the fuzz
 //!   targets' bodies, which `cargo test` also replays on the saved corpus.
 //!
@@ -44,6 +45,7 @@ pub mod limits;
 mod memory;
 pub mod metrics;
 pub mod plane;
+pub mod plane2;
 mod reader;
 mod scan;
 mod varint;

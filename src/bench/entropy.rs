@@ -25,7 +25,7 @@ use std::io::BufReader;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::dct::N;
-use vbim_format::{plane, ChunkKind, Header, Reader};
+use vbim_format::{plane, plane2, ChunkKind, Header, Reader};
 
 use super::static_coding::{PlaneStream, Study};
 use super::BenchEntropyArgs;
@@ -226,161 +226,220 @@ const KINDS: [&str; 4] = [
     "tile maps and metadata",
 ];
 
+/// One coefficient plane of a chunk, as read from today's stream.
+struct PlaneData {
+    chroma: bool,
+    blocks: Vec<[i32; N * N]>,
+    /// Each block's place on the block grid, in stream order.
+    order: Vec<(usize, usize)>,
+    /// Blocks across a tile, for a bubble plane.
+    tile: Option<usize>,
+}
+
+/// A keyframe or coefficient chunk's planes: (kind of stream, bytes outside the
+/// coefficient streams, planes); `None` for other chunks (a tile map is kept in `tiles`).
+fn chunk_planes(
+    h: &Header,
+    e: &vbim_format::IndexEntry,
+    bytes: &[u8],
+    tiles: &mut Option<TileMap>,
+) -> Result<Option<(usize, u64, Vec<PlaneData>)>, String> {
+    let planes = h.channels as usize;
+    let (w, ht) = chunk::padded_size(h);
+    let (bw, bh) = (w / N, ht / N);
+    match e.kind {
+        ChunkKind::Keyframe => {
+            let raw = chunk::decompress(bytes, LIMIT).map_err(|e| e.to_string())?;
+            let kind = if raw[0] == chunk::MODE_INTRA { 0 } else { 1 };
+            let mut pos = 4 + 4 * planes;
+            let raster: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+            let mut out = Vec::new();
+            for p in 0..planes {
+                let blocks = plane::read_coefficients(&raw, &mut pos, bw * bh)
+                    .map_err(|e| format!("plane {p}: {e}"))?;
+                out.push(PlaneData {
+                    chroma: p > 0,
+                    blocks,
+                    order: raster.clone(),
+                    tile: None,
+                });
+            }
+            Ok(Some((kind, 4 + 4 * planes as u64, out)))
+        }
+        ChunkKind::TileMap => {
+            let len = e.last_frame - e.first_frame;
+            *tiles = Some(chunk::read_tilemap(h, bytes, len).map_err(|e| e.to_string())?);
+            Ok(None)
+        }
+        ChunkKind::Coefficients => {
+            let t = tiles.as_ref().ok_or("coefficients before a tile map")?;
+            let raw = chunk::decompress(bytes, LIMIT).map_err(|e| e.to_string())?;
+            let dmax = raw[0];
+            let mut pos = 4 + 4 * (dmax.max(1) as usize - 1) * planes;
+            let ts = h.tile_size as usize / N;
+            let (tx, ty) = (h.tiles_x() as usize, h.tiles_y() as usize);
+            let mut out = Vec::new();
+            for k in 2..=dmax {
+                for p in 0..planes {
+                    // The member tiles' blocks: tiles in raster order, each tile's blocks
+                    // in raster order; their places on the block grid.
+                    let mut order = Vec::new();
+                    for tyi in 0..ty {
+                        for txi in 0..tx {
+                            if t.degree(p, tyi * tx + txi) < k {
+                                continue;
+                            }
+                            for y in tyi * ts..((tyi + 1) * ts).min(bh) {
+                                for x in txi * ts..(txi + 1) * ts {
+                                    order.push((x, y));
+                                }
+                            }
+                        }
+                    }
+                    let blocks = plane::read_coefficients(&raw, &mut pos, order.len())
+                        .map_err(|e| format!("term {k}, plane {p}: {e}"))?;
+                    out.push(PlaneData {
+                        chroma: p > 0,
+                        blocks,
+                        order,
+                        tile: Some(ts),
+                    });
+                }
+            }
+            Ok(Some((
+                2,
+                4 + 4 * (dmax.max(1) as u64 - 1) * planes as u64,
+                out,
+            )))
+        }
+        _ => Ok(None),
+    }
+}
+
 pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
     let f = crate::sequence::open_input(&a.file)?;
     let mut r = Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?;
     let h = r.header().clone();
     let entries = r.entries().to_vec();
-    let planes = h.channels as usize;
-    let (w, ht) = chunk::padded_size(&h);
-    let (bw, bh) = (w / N, ht / N);
-    // Each chunk's models (luma, chroma) start from scratch, so that a player can seek to
-    // the chunk.
-    let fresh = || -> [Model; 2] { Default::default() };
-    let sub = a.substream;
+    let (w, _) = chunk::padded_size(&h);
+    let bw = w / N;
     let mut tally = [Tally::default(); 4];
     let mut tiles: Option<TileMap> = None;
     let mut study = Study::default();
-    let raster: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
     let stages = Stages::new();
     for (i, e) in entries.iter().enumerate() {
         stages.report("modelling chunks", i as u64, entries.len() as u64);
         let bytes = r
             .read_chunk(i)
             .map_err(|e| format!("{name}: chunk {i}: {e}"))?;
-        match e.kind {
-            ChunkKind::Keyframe => {
-                let raw = chunk::decompress(&bytes, LIMIT)
-                    .map_err(|e| format!("{name}: chunk {i}: {e}"))?;
-                let kind = if raw[0] == chunk::MODE_INTRA { 0 } else { 1 };
-                let mut pos = 4 + 4 * planes;
-                let grid = Grid {
-                    bw,
-                    member: None,
-                    sub,
-                };
-                let mut models = fresh();
-                study.start_chunk(kind, bytes.len() as u64, 4 + 4 * planes as u64);
-                for p in 0..planes {
-                    let blocks = plane::read_coefficients(&raw, &mut pos, bw * bh)
-                        .map_err(|e| format!("{name}: chunk {i}, plane {p}: {e}"))?;
-                    let m = &mut models[(p > 0) as usize];
-                    tally[kind].model_bits += grid.code(m, &blocks, bw * bh);
-                    study.plane(&PlaneStream {
-                        kind,
-                        chroma: p > 0,
-                        blocks: &blocks,
-                        order: &raster,
-                        grid: (bw, bh),
-                        tile: None,
-                    });
-                }
-                let t = &mut tally[kind];
-                t.chunks += 1;
-                t.stored += bytes.len() as u64;
-                t.other += 4 + 4 * planes as u64;
-            }
-            ChunkKind::TileMap => {
-                let len = e.last_frame - e.first_frame;
-                tiles = Some(
-                    chunk::read_tilemap(&h, &bytes, len)
-                        .map_err(|e| format!("{name}: chunk {i}: {e}"))?,
-                );
-                tally[3].chunks += 1;
-                tally[3].stored += bytes.len() as u64;
-            }
-            ChunkKind::Coefficients => {
-                let t = tiles
-                    .as_ref()
-                    .ok_or_else(|| format!("{name}: chunk {i}: coefficients before a tile map"))?;
-                let raw = chunk::decompress(&bytes, LIMIT)
-                    .map_err(|e| format!("{name}: chunk {i}: {e}"))?;
-                let dmax = raw[0];
-                let mut pos = 4 + 4 * (dmax.max(1) as usize - 1) * planes;
-                let ts = h.tile_size as usize / N;
-                let tx = h.tiles_x() as usize;
-                let mut models = fresh();
-                let other = 4 + 4 * (dmax.max(1) as u64 - 1) * planes as u64;
-                study.start_chunk(2, bytes.len() as u64, other);
-                for k in 2..=dmax {
-                    for p in 0..planes {
-                        // The member tiles' blocks: tiles in raster order, each tile's
-                        // blocks in raster order; their places on the block grid.
-                        let member =
-                            |bx: usize, by: usize| t.degree(p, (by / ts) * tx + bx / ts) >= k;
-                        let grid = Grid {
-                            bw,
-                            member: Some(&member),
-                            sub,
-                        };
-                        let order = grid.order(bh, ts, tx, h.tiles_y() as usize);
-                        let blocks = plane::read_coefficients(&raw, &mut pos, order.len())
-                            .map_err(|e| format!("{name}: chunk {i}, term {k}, plane {p}: {e}"))?;
-                        let m = &mut models[(p > 0) as usize];
-                        tally[2].model_bits += grid.code_at(m, &blocks, &order);
-                        study.plane(&PlaneStream {
-                            kind: 2,
-                            chroma: p > 0,
-                            blocks: &blocks,
-                            order: &order,
-                            grid: (bw, bh),
-                            tile: Some(ts),
-                        });
-                    }
-                }
-                let t = &mut tally[2];
-                t.chunks += 1;
-                t.stored += bytes.len() as u64;
-                t.other += other;
-            }
-            _ => {
-                tally[3].chunks += 1;
-                tally[3].stored += bytes.len() as u64;
-            }
+        let Some((kind, other, planes)) = chunk_planes(&h, e, &bytes, &mut tiles)
+            .map_err(|e| format!("{name}: chunk {i}: {e}"))?
+        else {
+            tally[3].chunks += 1;
+            tally[3].stored += bytes.len() as u64;
+            continue;
+        };
+        // Each chunk's models (luma, chroma) start from scratch, so that a player can seek
+        // to the chunk.
+        let mut models: [Model; 2] = Default::default();
+        study.start_chunk(kind, bytes.len() as u64, other);
+        for p in &planes {
+            let grid = Grid {
+                bw,
+                sub: a.substream,
+            };
+            let m = &mut models[p.chroma as usize];
+            tally[kind].model_bits += grid.code_at(m, &p.blocks, &p.order);
+            study.plane(&PlaneStream {
+                kind,
+                chroma: p.chroma,
+                blocks: &p.blocks,
+                order: &p.order,
+                grid: (bw, chunk::padded_size(&h).1 / N),
+                tile: p.tile,
+            });
         }
+        let t = &mut tally[kind];
+        t.chunks += 1;
+        t.stored += bytes.len() as u64;
+        t.other += other;
     }
     stages.finish();
     report(&name, &h, &tally);
     study.report(std::array::from_fn(|k| {
         tally[k].model_bits / 8.0 + tally[k].other as f64
     }));
+    // Format 2's plane coding (`vbim_format::plane2`) with the maps the study learnt:
+    // every chunk coded, decoded back and checked.
+    let maps = study.maps(16);
+    let mut map_bits = vbim_format::ans::BitWriter::default();
+    maps.iter().for_each(|m| m.write(&mut map_bits));
+    let map_bytes = map_bits.finish().len() as u64;
+    let (mut coded, mut stored) = (map_bytes, 0u64);
+    let bh = chunk::padded_size(&h).1 / N;
+    for (i, e) in entries.iter().enumerate() {
+        stages.report("coding chunks with plane2", i as u64, entries.len() as u64);
+        let bytes = r
+            .read_chunk(i)
+            .map_err(|e| format!("{name}: chunk {i}: {e}"))?;
+        let Some((kind, other, planes)) = chunk_planes(&h, e, &bytes, &mut tiles)
+            .map_err(|e| format!("{name}: chunk {i}: {e}"))?
+        else {
+            continue;
+        };
+        let shapes: Vec<plane2::Plane> = planes
+            .iter()
+            .map(|p| plane2::Plane {
+                family: kind * 2 + p.chroma as usize,
+                geometry: plane2::Geometry {
+                    grid: (bw, bh),
+                    order: &p.order,
+                    tile: p.tile,
+                },
+            })
+            .collect();
+        let input: Vec<(plane2::Plane, &[[i32; N * N]])> = shapes
+            .iter()
+            .zip(&planes)
+            .map(|(s, p)| (*s, &p.blocks[..]))
+            .collect();
+        let section = plane2::encode(&input, &maps, LANE_BYTES)
+            .map_err(|e| format!("{name}: chunk {i}: plane2: {e}"))?;
+        let back = plane2::decode(&section, &shapes, &maps)
+            .map_err(|e| format!("{name}: chunk {i}: plane2 decode: {e}"))?;
+        for (p, got) in planes.iter().zip(&back) {
+            if p.blocks != *got {
+                return Err(format!("{name}: chunk {i}: plane2 did not round-trip"));
+            }
+        }
+        coded += section.len() as u64 + other;
+        stored += bytes.len() as u64;
+    }
+    stages.finish();
+    println!(
+        "Format 2's plane coding (vbim_format::plane2, design E, 16 histograms per family, lanes of {LANE_BYTES} B or more; every chunk decoded back and checked): {coded} B against {stored} B stored, {:.3} (the file's context maps {map_bytes} B)",
+        coded as f64 / stored.max(1) as f64
+    );
     Ok(())
 }
 
-/// The block grid of a plane, and which of its blocks a stream holds.
-struct Grid<'m> {
+/// The coded size at which `plane2` cuts a lane.
+const LANE_BYTES: usize = 4096;
+
+/// The block grid of a plane.
+struct Grid {
     bw: usize,
-    member: Option<&'m dyn Fn(usize, usize) -> bool>,
     /// Blocks per independently parsed substream (0: the whole stream is one).
     sub: usize,
 }
 
-impl Grid<'_> {
+impl Grid {
     /// Every block of the plane in raster order (a keyframe's stream).
+    #[cfg(test)]
     fn code(&self, m: &mut Model, blocks: &[[i32; N * N]], n: usize) -> f64 {
         let order: Vec<(usize, usize)> = (0..n).map(|b| (b % self.bw, b / self.bw)).collect();
         self.code_at(m, blocks, &order)
-    }
-
-    /// The member blocks in a coefficient chunk's order: member tiles in raster order,
-    /// each tile's blocks in raster order.
-    fn order(&self, bh: usize, ts: usize, tx: usize, ty: usize) -> Vec<(usize, usize)> {
-        let member = self.member.expect("a member test");
-        let mut out = Vec::new();
-        for tyi in 0..ty {
-            for txi in 0..tx {
-                if !member(txi * ts, tyi * ts) {
-                    continue;
-                }
-                for y in tyi * ts..((tyi + 1) * ts).min(bh) {
-                    for x in txi * ts..(txi + 1) * ts {
-                        out.push((x, y));
-                    }
-                }
-            }
-        }
-        out
     }
 
     /// `blocks[b]` sits at `order[b]`; its neighbours are whichever of the blocks to its
@@ -496,11 +555,7 @@ mod tests {
     fn zero_blocks_cost_nearly_nothing_and_neighbours_help() {
         let n = 4096;
         let zeros = vec![[0i32; N * N]; n];
-        let grid = Grid {
-            bw: 64,
-            member: None,
-            sub: 0,
-        };
+        let grid = Grid { bw: 64, sub: 0 };
         let bits = grid.code(&mut Model::default(), &zeros, n);
         assert!(bits / (n as f64) < 0.02, "{bits} bits for {n} empty blocks");
         // DC values that step up row by row: each is its left neighbour's, so the
@@ -533,11 +588,7 @@ mod tests {
             })
             .collect();
         let cost = |sub| {
-            let grid = Grid {
-                bw: 64,
-                member: None,
-                sub,
-            };
+            let grid = Grid { bw: 64, sub };
             grid.code(&mut Model::default(), &blocks, n)
         };
         let (whole, cut) = (cost(0), cost(64));

@@ -43,6 +43,7 @@
 
 use vbim_format::ans::{self, TOKENS};
 use vbim_format::dct::N;
+use vbim_format::plane2;
 
 /// The hybrid-uint token of `v` and its raw bits' count.
 fn hybrid_uint(v: u32) -> (usize, u32) {
@@ -191,8 +192,6 @@ struct ChunkCounts {
     raw_bits: u64,
     /// Design F's raw bits less the others' (its keyframe DC symbols differ).
     raw_f: i64,
-    /// Design E's symbols, for real coding: (lane, context, value).
-    symbols_e: Vec<(u32, u16, u32)>,
     /// Blocks of each plane stream (for the lanes' states).
     planes: Vec<usize>,
     /// Bytes outside the coefficient streams, kept as they are.
@@ -214,7 +213,6 @@ impl Study {
             counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
             raw_bits: 0,
             raw_f: 0,
-            symbols_e: Vec::new(),
             planes: Vec::new(),
             other,
             stored,
@@ -284,18 +282,11 @@ impl Study {
         }
         // (Each design codes the DC and the count once: their raw bits are counted with
         // design A's symbol only.)
-        // Design E's symbols also go into its lanes: one per 16 × 16 blocks of the plane.
-        let plane_no = c.planes.len() as u32 - 1;
-        let lane =
-            |x: usize, y: usize| (plane_no << 20) | ((y / 16) * bw.div_ceil(16) + x / 16) as u32;
-        let mut put = |ctx: usize, v: u32, raw_too: bool, lane: Option<u32>| {
+        let mut put = |ctx: usize, v: u32, raw_too: bool| {
             let (t, raw) = hybrid_uint(v);
             c.counts[(base + ctx) * TOKENS + t] += 1;
             if raw_too {
                 c.raw_bits += raw as u64;
-            }
-            if let Some(l) = lane {
-                c.symbols_e.push((l, (base + ctx) as u16, v));
             }
         };
         // D: groups of 4 × 4 blocks, empty where no block has a DC residual or a
@@ -327,7 +318,7 @@ impl Study {
                 } else {
                     0
                 };
-                put(GROUP_D + ctx, full as u32, true, Some(lane(gx * 4, gy * 4)));
+                put(GROUP_D + ctx, full as u32, true);
             }
         }
         for (b, &(x, y)) in p.order.iter().enumerate() {
@@ -363,18 +354,18 @@ impl Study {
                 count_bucket((lu.iter().map(|&j| nz[j]).sum::<usize>() + lu.len() / 2) / lu.len())
             };
             let r = pack_signed(residual[b]);
-            put(DC_A, r, true, None);
-            put(DC_B + dc_b, r, false, None);
-            put(DC_C + dc_c, r, false, None);
+            put(DC_A, r, true);
+            put(DC_B + dc_b, r, false);
+            put(DC_C + dc_c, r, false);
             let n = nz[b] as u32;
-            put(NZ_A + own, n, true, None);
-            put(NZ_B + nz_b, n, false, None);
-            put(NZ_C + nz_c, n, false, None);
+            put(NZ_A + own, n, true);
+            put(NZ_B + nz_b, n, false);
+            put(NZ_C + nz_c, n, false);
             if group_full[(y / 4) * gw + x / 4] == Some(true) {
-                put(DC_D + dc_b, r, false, Some(lane(x, y)));
-                put(NZ_D + nz_b, n, false, Some(lane(x, y)));
+                put(DC_D + dc_b, r, false);
+                put(NZ_D + nz_b, n, false);
                 if p.tile.is_some() {
-                    put(DC_FB + dc_b, r, false, None);
+                    put(DC_FB + dc_b, r, false);
                 }
             }
             let mut left = nz[b];
@@ -383,19 +374,14 @@ impl Study {
                     break;
                 }
                 let ctx = left_bucket(left) * 12 + band(i);
-                put(AC + ctx, pack_signed(v), true, None);
+                put(AC + ctx, pack_signed(v), true);
                 // E: an odd block knows its four neighbours' coefficients (all even).
                 if odd && !four.is_empty() {
                     let hits = four.iter().filter(|&&j| p.blocks[j][i] != 0).count();
                     let class = (2 * hits).div_ceil(four.len()).min(2);
-                    put(
-                        AC_ODD + class * 120 + ctx,
-                        pack_signed(v),
-                        false,
-                        Some(lane(x, y)),
-                    );
+                    put(AC_ODD + class * 120 + ctx, pack_signed(v), false);
                 } else {
-                    put(AC_EVEN + ctx, pack_signed(v), false, Some(lane(x, y)));
+                    put(AC_EVEN + ctx, pack_signed(v), false);
                 }
                 left -= (v != 0) as usize;
             }
@@ -490,7 +476,6 @@ impl Study {
             "(ratios against the stored bytes; a lane's state is 4 bytes: {lanes256} B in all at a lane per 256 blocks of a plane, {lanes64} B at one per 64)"
         );
         self.report_fixed_map(total);
-        self.report_real_coding(total);
         // Where design D's bytes go, each context with a histogram of its own.
         let kinds = [
             ("empty-group flags", GROUP_D..GROUP_D + 6),
@@ -611,135 +596,37 @@ fn pyramid(mut v: Vec<i32>, mut w: usize, mut h: usize, mut emit: impl FnMut(usi
 }
 
 impl Study {
-    /// Design E with 16 histograms per family, really coded: the chunks' histograms
-    /// written with [`ans::Histogram::write`], lanes coded with [`ans::encode`] and decoded
-    /// back to check them. Lanes are either one per 16 × 16 blocks of a plane or those
-    /// regions joined in order until a lane holds at least [`BY_SIZE`] bytes.
-    fn report_real_coding(&self, total: u64) {
-        let (name, own) = DESIGNS[3];
+    /// Design E's contexts clustered into at most `k` histograms per family, as
+    /// `vbim_format::plane2` numbers them (families without chunks: one histogram).
+    pub fn maps(&self, k: usize) -> Vec<plane2::ContextMap> {
+        let (_, own) = DESIGNS[3];
         let contexts: Vec<usize> = own.iter().cloned().flatten().collect();
-        // The histogram of each (family, context): family · 16 + its cluster.
-        let mut cluster_of = vec![usize::MAX; FAMILIES * CONTEXTS];
-        for family in 0..FAMILIES {
-            let chunks: Vec<&ChunkCounts> = self
-                .chunks
-                .iter()
-                .filter(|c| c.kind == family / 2)
-                .collect();
-            if chunks.is_empty() {
-                continue;
-            }
-            for (k, members) in cluster(&chunks, family, &contexts, &[16])[0]
-                .iter()
-                .enumerate()
-            {
-                for &ctx in members {
-                    cluster_of[family * CONTEXTS + ctx] = family * 16 + k;
-                }
-            }
-        }
-        // [a lane per 16 × 16 blocks, lanes of at least BY_SIZE bytes]
-        let (mut words, mut lanes) = ([0u64; 2], [0u64; 2]);
-        let (mut tables, mut other) = (0u64, 0u64);
-        for c in &self.chunks {
-            // The chunk's histograms: one per (family, cluster) it uses.
-            let mut counts = vec![vec![0u64; TOKENS]; FAMILIES * 16];
-            for (g, &k) in cluster_of.iter().enumerate() {
-                if k == usize::MAX {
-                    continue;
-                }
-                for (t, n) in counts[k]
-                    .iter_mut()
-                    .zip(&c.counts[g * TOKENS..(g + 1) * TOKENS])
-                {
-                    *t += *n as u64;
-                }
-            }
-            let hists: Vec<Option<ans::Histogram>> = counts
-                .iter()
-                .map(|h| ans::Histogram::from_counts(h))
-                .collect();
-            let mut bits = ans::BitWriter::default();
-            hists.iter().flatten().for_each(|h| h.write(&mut bits));
-            tables += bits.finish().len() as u64;
-            let index: Vec<u16> = hists
-                .iter()
-                .scan(0u16, |n, h| {
-                    let i = *n;
-                    *n += h.is_some() as u16;
-                    Some(i)
-                })
-                .collect();
-            let used: Vec<ans::Histogram> = hists.into_iter().flatten().collect();
-            let code = |region: &[(u32, u16, u32)]| -> Vec<ans::Symbol> {
-                region
+        debug_assert_eq!(contexts.len(), plane2::CONTEXTS);
+        (0..FAMILIES)
+            .map(|family| {
+                let chunks: Vec<&ChunkCounts> = self
+                    .chunks
                     .iter()
-                    .flat_map(|&(_, ctx, v)| {
-                        let (t, n, raw) = ans::hybrid_uint(v);
-                        let h = index[cluster_of[ctx as usize]];
-                        [
-                            Some(ans::Symbol::Token {
-                                histogram: h,
-                                token: t as u16,
-                            }),
-                            (n > 0).then_some(ans::Symbol::Raw {
-                                value: raw,
-                                bits: n as u8,
-                            }),
-                        ]
-                    })
-                    .flatten()
-                    .collect()
-            };
-            let bits_of = |coded: &[ans::Symbol]| -> f64 {
-                coded
-                    .iter()
-                    .map(|s| match *s {
-                        ans::Symbol::Token { histogram, token } => {
-                            used[histogram as usize].cost(token as usize)
-                        }
-                        ans::Symbol::Raw { bits, .. } => bits as f64,
-                    })
-                    .sum()
-            };
-            let mut symbols = c.symbols_e.clone();
-            symbols.sort_by_key(|s| s.0);
-            let mut joined: Vec<ans::Symbol> = Vec::new();
-            let mut plane = None;
-            for region in symbols.chunk_by(|a, b| a.0 == b.0) {
-                let coded = code(region);
-                words[0] += check(&coded, &used);
-                lanes[0] += 1;
-                if plane != Some(region[0].0 >> 20) && !joined.is_empty() {
-                    words[1] += check(&std::mem::take(&mut joined), &used);
-                    lanes[1] += 1;
+                    .filter(|c| c.kind == family / 2)
+                    .collect();
+                if chunks.is_empty() {
+                    return plane2::ContextMap::single();
                 }
-                plane = Some(region[0].0 >> 20);
-                joined.extend(coded);
-                if bits_of(&joined) >= 8.0 * BY_SIZE as f64 {
-                    words[1] += check(&std::mem::take(&mut joined), &used);
-                    lanes[1] += 1;
+                let clusters = cluster(&chunks, family, &contexts, &[k]).remove(0);
+                let mut of = vec![0u8; plane2::CONTEXTS];
+                for (ci, members) in clusters.iter().enumerate() {
+                    for &ctx in members {
+                        // The study's context → its place in E's list = plane2's number.
+                        let at = contexts.iter().position(|&c| c == ctx).expect("E's own");
+                        of[at] = ci as u8;
+                    }
                 }
-            }
-            if !joined.is_empty() {
-                words[1] += check(&joined, &used);
-                lanes[1] += 1;
-            }
-            other += c.other;
-        }
-        for (i, what) in ["a lane per 16 × 16 blocks", "lanes of 4 KiB or more"]
-            .iter()
-            .enumerate()
-        {
-            let all = 2 * words[i] + tables + other + 4 * lanes[i];
-            println!(
-                "{name}, 16 histograms per family, really coded (rANS, {what}, each decoded back): {all} B, {:.3} of the stored bytes: {} B of lanes (their final states {} B), {tables} B of histograms, {} B of lane offsets, {other} B of other fields",
-                all as f64 / total as f64,
-                2 * words[i],
-                4 * lanes[i],
-                4 * lanes[i]
-            );
-        }
+                plane2::ContextMap {
+                    clusters: clusters.len() as u8,
+                    of,
+                }
+            })
+            .collect()
     }
 }
 
@@ -797,27 +684,6 @@ impl Study {
             bytes / total as f64
         );
     }
-}
-
-/// The smallest lane [`Study::report_real_coding`] makes when it joins regions by size
-/// (but a plane's last).
-const BY_SIZE: usize = 4096;
-
-/// Codes a lane, decodes it back and checks every symbol; returns its words.
-fn check(coded: &[ans::Symbol], used: &[ans::Histogram]) -> u64 {
-    let w = ans::encode(coded, used);
-    let mut d = ans::Decoder::new(&w).expect("a lane of its own coding");
-    for s in coded {
-        let ok = match *s {
-            ans::Symbol::Token { histogram, token } => {
-                d.token(&used[histogram as usize]).ok() == Some(token as usize)
-            }
-            ans::Symbol::Raw { value, bits } => d.raw(bits as u32).ok() == Some(value),
-        };
-        assert!(ok, "rANS round trip");
-    }
-    d.finish().expect("the lane read to its end");
-    w.len() as u64
 }
 
 /// The file's totals of `family` per context.
@@ -1004,7 +870,6 @@ mod tests {
             counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
             raw_bits: 0,
             raw_f: 0,
-            symbols_e: vec![],
             planes: vec![],
             other: 0,
             stored: 0,

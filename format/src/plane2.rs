@@ -1,0 +1,879 @@
+//! Format 2's coding of a chunk's coefficient planes, designed for a GPU decoder
+//! ("design E" of BENCHMARKS.md, "A static coder a GPU can decode"). No chunk of version 1
+//! uses it; it is the specification the encoder and the GPU decoder of format 2 follow.
+//!
+//! A plane is a grid of 8×8 blocks (each 64 quantised coefficients in zig-zag order),
+//! whole for a keyframe, the member tiles' blocks for a bubble plane. Its symbols are
+//! hybrid-uint tokens ([`ans`](crate::ans)) coded by rANS lanes, in four passes, each of
+//! which a GPU runs with one invocation per lane, every lane independent of the others
+//! within a pass:
+//! 1. **even groups**: per group of 4 × 4 blocks with a member (x + y even on the group
+//!    grid), whether any of its blocks holds anything (a DC residual or a coefficient);
+//! 2. **odd groups**: the same, in a context of how many of the four neighbouring groups
+//!    (decoded in pass 1) are empty;
+//! 3. **even blocks** of the groups that hold something: the DC's residual against the
+//!    planar prediction, the count of non-zero coefficients (in a context of the residual's
+//!    size), then the coefficients in zig-zag order until that many were coded (in a
+//!    context of how many are left and of the frequency band);
+//! 4. **odd blocks**: the same, in contexts of their four neighbours (all even, so decoded
+//!    in pass 3): the mean size of their residuals, the mean of their counts, and for each
+//!    coefficient how many of them have one at that frequency.
+//!
+//! The DC is then the 2-D prefix sum of the residuals (planar prediction: left + up −
+//! up-left, 0 outside the plane, or outside the tile for a bubble plane), a pass of scans.
+//!
+//! **Lanes** are runs of regions of 16 × 16 blocks in raster order, cut by the encoder
+//! where a lane's coded size reaches a target; a lane holds its regions' symbols pass by
+//! pass. **Histograms** are sent per chunk, one per cluster of contexts that the chunk
+//! uses; which cluster a context belongs to is the file's [`ContextMap`], per family (a
+//! kind of chunk × luma or chroma).
+//!
+//! A chunk's coefficient section: for each family it uses, in increasing order, for each
+//! of its map's clusters a bit saying whether a histogram follows, then the histogram
+//! ([`Histogram::write`]); zero bits to the byte. Then per plane: its lane count, and per
+//! lane the regions it covers and its words (LEB128 varints). Then every lane's words
+//! (16-bit, little-endian), plane after plane.
+
+use crate::ans::{self, BitReader, BitWriter, Histogram, Symbol, TOKENS};
+use crate::dct::N;
+use crate::{varint, FormatError, Result};
+
+/// Blocks across a region, the unit lanes are made of.
+pub const REGION: usize = 16;
+/// Blocks across a group, the unit of the empty flags.
+pub const GROUP: usize = 4;
+
+// Contexts, per family.
+const FLAG: usize = 0; // 6: even groups; odd groups by their empty neighbours (1 + 0–4)
+const DC: usize = FLAG + 6; // 5: even blocks; odd blocks by the neighbours' residual sizes
+const COUNT: usize = DC + 5; // 11: even by the residual's size (3); odd by the mean count (8)
+const AC_EVEN: usize = COUNT + 11; // 10 × 12: coefficients left × band
+const AC_ODD: usize = AC_EVEN + 120; // 3 × 10 × 12: × how many neighbours have one there
+/// Contexts of one family.
+pub const CONTEXTS: usize = AC_ODD + 360;
+
+/// Where a plane's blocks lie.
+#[derive(Clone, Copy, Debug)]
+pub struct Geometry<'a> {
+    /// Blocks across and down the plane.
+    pub grid: (usize, usize),
+    /// Each block's place on the grid, in the order the planes list them.
+    pub order: &'a [(usize, usize)],
+    /// Blocks across a tile, for a bubble plane (its DC prediction stays in the tile).
+    pub tile: Option<usize>,
+}
+
+/// One plane of a chunk: its family (kind of chunk × luma or chroma: an index into the
+/// maps) and where its blocks lie.
+#[derive(Clone, Copy, Debug)]
+pub struct Plane<'a> {
+    /// Which [`ContextMap`] codes it.
+    pub family: usize,
+    /// Its blocks' places.
+    pub geometry: Geometry<'a>,
+}
+
+/// Which histogram (cluster) of a chunk codes each context of a family.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ContextMap {
+    /// Histograms, 1 to 255.
+    pub clusters: u8,
+    /// The cluster of each of the [`CONTEXTS`] contexts.
+    pub of: Vec<u8>,
+}
+
+impl ContextMap {
+    /// Every context in one histogram.
+    pub fn single() -> ContextMap {
+        ContextMap {
+            clusters: 1,
+            of: vec![0; CONTEXTS],
+        }
+    }
+
+    /// Appends the map: the cluster count (8 bits), then each context's cluster in as few
+    /// bits as the count needs.
+    pub fn write(&self, out: &mut BitWriter) {
+        out.put(self.clusters as u32, 8);
+        let bits = bits_for(self.clusters);
+        for &k in &self.of {
+            out.put(k as u32, bits);
+        }
+    }
+
+    /// Reads a map [`ContextMap::write`] wrote.
+    pub fn read(r: &mut BitReader) -> Result<ContextMap> {
+        let clusters = r.get(8)? as u8;
+        if clusters == 0 {
+            return Err(FormatError::Invalid("context map of no cluster".into()));
+        }
+        let bits = bits_for(clusters);
+        let of = (0..CONTEXTS)
+            .map(|_| {
+                let k = r.get(bits)?;
+                if k >= clusters as u32 {
+                    return Err(FormatError::Invalid(format!(
+                        "context map: cluster {k} of {clusters}"
+                    )));
+                }
+                Ok(k as u8)
+            })
+            .collect::<Result<_>>()?;
+        Ok(ContextMap { clusters, of })
+    }
+}
+
+fn bits_for(clusters: u8) -> u32 {
+    32 - (clusters.max(1) as u32 - 1).leading_zeros()
+}
+
+/// What a walk over a plane's symbols does with each: the encoder records the value it is
+/// given, the decoder ignores it and returns the one it decodes.
+trait Coder {
+    fn code(&mut self, lane: usize, ctx: usize, value: u32) -> Result<u32>;
+}
+
+/// 0, −1, 1, −2, … → 0, 1, 2, 3, …
+fn pack(v: i32) -> u32 {
+    if v >= 0 {
+        2 * v as u32
+    } else {
+        2 * v.unsigned_abs() - 1
+    }
+}
+
+fn unpack(u: u32) -> i32 {
+    ((u >> 1) as i32) ^ -((u & 1) as i32)
+}
+
+fn size_class(v: i32) -> usize {
+    match v.unsigned_abs() {
+        0 => 0,
+        1..=2 => 1,
+        _ => 2,
+    }
+}
+
+fn count_bucket(n: usize) -> usize {
+    match n {
+        0..=2 => n,
+        3..=4 => 3,
+        5..=8 => 4,
+        9..=16 => 5,
+        17..=32 => 6,
+        _ => 7,
+    }
+}
+
+fn left_bucket(n: usize) -> usize {
+    match n {
+        1..=4 => n - 1,
+        5..=6 => 4,
+        7..=8 => 5,
+        9..=12 => 6,
+        13..=16 => 7,
+        17..=24 => 8,
+        _ => 9,
+    }
+}
+
+fn band(i: usize) -> usize {
+    match i {
+        0..=5 => i,
+        6..=7 => 6,
+        8..=10 => 7,
+        11..=15 => 8,
+        16..=23 => 9,
+        24..=35 => 10,
+        _ => 11,
+    }
+}
+
+/// The planar residuals of `dc` (one per block, in the planes' order) in `geo`'s domains.
+fn residuals(geo: &Geometry, index: &[u32], dc: &[i32]) -> Vec<i32> {
+    let at = |x: isize, y: isize, home: (usize, usize)| -> i32 {
+        if x < 0 || y < 0 {
+            return 0;
+        }
+        let (x, y) = (x as usize, y as usize);
+        if let Some(t) = geo.tile {
+            if x / t != home.0 / t || y / t != home.1 / t {
+                return 0;
+            }
+        }
+        match index[y * geo.grid.0 + x] {
+            u32::MAX => 0,
+            j => dc[j as usize],
+        }
+    };
+    geo.order
+        .iter()
+        .enumerate()
+        .map(|(b, &(x, y))| {
+            let (xi, yi) = (x as isize, y as isize);
+            dc[b]
+                .wrapping_sub(at(xi - 1, yi, (x, y)))
+                .wrapping_sub(at(xi, yi - 1, (x, y)))
+                .wrapping_add(at(xi - 1, yi - 1, (x, y)))
+        })
+        .collect()
+}
+
+/// Each grid cell's block (`u32::MAX` where none), checking the places.
+fn grid_index(geo: &Geometry) -> Result<Vec<u32>> {
+    let (bw, bh) = geo.grid;
+    let cells = bw
+        .checked_mul(bh)
+        .filter(|&c| c <= u32::MAX as usize)
+        .ok_or_else(|| FormatError::Invalid("plane grid too large".into()))?;
+    let mut index = vec![u32::MAX; cells];
+    for (b, &(x, y)) in geo.order.iter().enumerate() {
+        if x >= bw || y >= bh || index[y * bw + x] != u32::MAX {
+            return Err(FormatError::Invalid(format!(
+                "block {b} at ({x}, {y}) outside the {bw}×{bh} grid or twice"
+            )));
+        }
+        index[y * bw + x] = b as u32;
+    }
+    Ok(index)
+}
+
+/// Walks a plane's four passes, coding every symbol through `coder`; `source` gives the
+/// blocks to code (the encoder), or nothing (the decoder). `lane_of` gives each region's
+/// lane. Returns the blocks, their DC restored.
+fn walk(
+    geo: &Geometry,
+    source: Option<&[[i32; N * N]]>,
+    lane_of: &dyn Fn(usize) -> usize,
+    coder: &mut dyn Coder,
+) -> Result<Vec<[i32; N * N]>> {
+    let (bw, bh) = geo.grid;
+    let index = grid_index(geo)?;
+    let n = geo.order.len();
+    let src_residual = source.map(|s| {
+        let dc: Vec<i32> = s.iter().map(|q| q[0]).collect();
+        residuals(geo, &index, &dc)
+    });
+    let mut blocks = vec![[0i32; N * N]; n];
+    let mut residual = vec![0i32; n];
+    let mut count = vec![0usize; n];
+    let rw = bw.div_ceil(REGION);
+    let region_of = |x: usize, y: usize| (y / REGION) * rw + x / REGION;
+    let at = |x: isize, y: isize| -> Option<usize> {
+        if x < 0 || y < 0 || x >= bw as isize || y >= bh as isize {
+            return None;
+        }
+        match index[y as usize * bw + x as usize] {
+            u32::MAX => None,
+            j => Some(j as usize),
+        }
+    };
+    const FOUR: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
+    // Passes 1 and 2: the groups' flags.
+    let (gw, gh) = (bw.div_ceil(GROUP), bh.div_ceil(GROUP));
+    let mut exists = vec![false; gw * gh];
+    let mut full = vec![false; gw * gh];
+    for (b, &(x, y)) in geo.order.iter().enumerate() {
+        let g = (y / GROUP) * gw + x / GROUP;
+        exists[g] = true;
+        if let Some(s) = source {
+            let r = src_residual.as_ref().map_or(0, |r| r[b]);
+            full[g] |= r != 0 || s[b][1..].iter().any(|&v| v != 0);
+        }
+    }
+    // Regions in raster order, and within each its cells in raster order: `cells(k, side)`
+    // lists the cells of side `side` (in blocks) that region k covers.
+    let regions = rw * bh.div_ceil(REGION);
+    let per = REGION / GROUP;
+    for parity in 0..2 {
+        for region in 0..regions {
+            let (rx, ry) = ((region % rw) * per, (region / rw) * per);
+            for gy in ry..(ry + per).min(gh) {
+                for gx in rx..(rx + per).min(gw) {
+                    let g = gy * gw + gx;
+                    if !exists[g] || (gx + gy) % 2 != parity {
+                        continue;
+                    }
+                    let around: Vec<bool> = FOUR
+                        .iter()
+                        .filter_map(|&(dx, dy)| {
+                            let (u, v) = (gx as isize + dx, gy as isize + dy);
+                            (u >= 0 && v >= 0 && u < gw as isize && v < gh as isize)
+                                .then_some((u as usize, v as usize))
+                        })
+                        .filter(|&(u, v)| exists[v * gw + u])
+                        .map(|(u, v)| full[v * gw + u])
+                        .collect();
+                    let ctx = if parity == 1 && !around.is_empty() {
+                        1 + around.iter().filter(|&&f| !f).count()
+                    } else {
+                        0
+                    };
+                    let v = coder.code(lane_of(region), FLAG + ctx, full[g] as u32)?;
+                    if v > 1 {
+                        return Err(FormatError::Invalid(format!("group flag {v}")));
+                    }
+                    full[g] = v == 1;
+                }
+            }
+        }
+    }
+    // Passes 3 and 4: the blocks of the groups with something.
+    for parity in 0..2 {
+        for region in 0..regions {
+            let (rx, ry) = ((region % rw) * REGION, (region / rw) * REGION);
+            for y in ry..(ry + REGION).min(bh) {
+                for x in rx..(rx + REGION).min(bw) {
+                    let Some(b) = at(x as isize, y as isize) else {
+                        continue;
+                    };
+                    if (x + y) % 2 != parity || !full[(y / GROUP) * gw + x / GROUP] {
+                        continue;
+                    }
+                    debug_assert_eq!(region_of(x, y), region);
+                    let lane = lane_of(region);
+                    let four: Vec<usize> = FOUR
+                        .iter()
+                        .filter_map(|&(dx, dy)| at(x as isize + dx, y as isize + dy))
+                        .collect();
+                    let odd = parity == 1 && !four.is_empty();
+                    let (dc_ctx, count_ctx) = if odd {
+                        let sizes: usize = four.iter().map(|&j| size_class(residual[j])).sum();
+                        let mean = (four.iter().map(|&j| count[j]).sum::<usize>() + four.len() / 2)
+                            / four.len();
+                        (1 + (2 * sizes / four.len()).min(3), 3 + count_bucket(mean))
+                    } else {
+                        (0, usize::MAX)
+                    };
+                    let want = source.map(|s| &s[b]);
+                    let r = unpack(coder.code(
+                        lane,
+                        DC + dc_ctx,
+                        src_residual.as_ref().map_or(0, |r| pack(r[b])),
+                    )?);
+                    residual[b] = r;
+                    let count_ctx = if odd { count_ctx } else { size_class(r) };
+                    let nz = want.map_or(0, |q| q[1..].iter().filter(|&&v| v != 0).count());
+                    let nz = coder.code(lane, COUNT + count_ctx, nz as u32)? as usize;
+                    if nz >= N * N {
+                        return Err(FormatError::Invalid(format!(
+                            "block ({x}, {y}): {nz} coefficients"
+                        )));
+                    }
+                    count[b] = nz;
+                    let mut left = nz;
+                    let mut i = 1;
+                    while left > 0 {
+                        if i == N * N {
+                            return Err(FormatError::Invalid(format!(
+                                "block ({x}, {y}): {left} coefficients past the last position"
+                            )));
+                        }
+                        let ctx = left_bucket(left) * 12 + band(i);
+                        let ctx = if odd {
+                            let hits = four.iter().filter(|&&j| blocks[j][i] != 0).count();
+                            AC_ODD + (2 * hits).div_ceil(four.len()).min(2) * 120 + ctx
+                        } else {
+                            AC_EVEN + ctx
+                        };
+                        let v = unpack(coder.code(lane, ctx, want.map_or(0, |q| pack(q[i])))?);
+                        blocks[b][i] = v;
+                        left -= (v != 0) as usize;
+                        i += 1;
+                    }
+                }
+            }
+        }
+    }
+    // The DC: the planar residuals' 2-D prefix sum, in raster order of the grid.
+    for y in 0..bh {
+        for x in 0..bw {
+            let Some(b) = at(x as isize, y as isize) else {
+                continue;
+            };
+            let dc = |dx: isize, dy: isize| -> i32 {
+                let (u, v) = (x as isize + dx, y as isize + dy);
+                if let (Some(t), true) = (geo.tile, u >= 0 && v >= 0) {
+                    if u as usize / t != x / t || v as usize / t != y / t {
+                        return 0;
+                    }
+                }
+                at(u, v).map_or(0, |j| blocks[j][0])
+            };
+            blocks[b][0] = residual[b]
+                .wrapping_add(dc(-1, 0))
+                .wrapping_add(dc(0, -1))
+                .wrapping_sub(dc(-1, -1));
+        }
+    }
+    Ok(blocks)
+}
+
+/// The encoder's record: each symbol's lane, context and value, in walking order.
+struct Record(Vec<(usize, usize, u32)>);
+
+impl Coder for Record {
+    fn code(&mut self, lane: usize, ctx: usize, value: u32) -> Result<u32> {
+        self.0.push((lane, ctx, value));
+        Ok(value)
+    }
+}
+
+/// Counts of each context's tokens over `planes` of `blocks`, per family: what an encoder
+/// learns a [`ContextMap`] from (`counts[family][ctx · TOKENS + token]`).
+pub fn context_counts(
+    planes: &[(Plane, &[[i32; N * N]])],
+    families: usize,
+) -> Result<Vec<Vec<u64>>> {
+    let mut counts = vec![vec![0u64; CONTEXTS * TOKENS]; families];
+    for (p, blocks) in planes {
+        if p.family >= families || blocks.len() != p.geometry.order.len() {
+            return Err(FormatError::Invalid(
+                "a plane of no family or of other blocks".into(),
+            ));
+        }
+        let mut rec = Record(Vec::new());
+        walk(&p.geometry, Some(blocks), &|_| 0, &mut rec)?;
+        for (_, ctx, v) in rec.0 {
+            counts[p.family][ctx * TOKENS + ans::hybrid_uint(v).0] += 1;
+        }
+    }
+    Ok(counts)
+}
+
+/// Codes a chunk's `planes` of `blocks` with `maps` (one per family), cutting lanes where
+/// their coded size reaches `lane_bytes`. Returns the coefficient section.
+pub fn encode(
+    planes: &[(Plane, &[[i32; N * N]])],
+    maps: &[ContextMap],
+    lane_bytes: usize,
+) -> Result<Vec<u8>> {
+    // Every symbol, by plane, each with its region for now.
+    let mut records = Vec::with_capacity(planes.len());
+    for (p, blocks) in planes {
+        if blocks.len() != p.geometry.order.len() {
+            return Err(FormatError::Invalid(
+                "blocks and places differ in number".into(),
+            ));
+        }
+        let mut rec = Record(Vec::new());
+        walk(&p.geometry, Some(blocks), &|region| region, &mut rec)?;
+        records.push(rec.0);
+    }
+    // The chunk's histograms: per family used, per cluster.
+    let used = used_families(planes.iter().map(|(p, _)| p), maps.len())?;
+    let mut counts: Vec<Vec<Vec<u64>>> = maps
+        .iter()
+        .map(|m| vec![vec![0u64; TOKENS]; m.clusters as usize])
+        .collect();
+    for ((p, _), rec) in planes.iter().zip(&records) {
+        let map = &maps[p.family];
+        for &(_, ctx, v) in rec {
+            counts[p.family][map.of[ctx] as usize][ans::hybrid_uint(v).0] += 1;
+        }
+    }
+    let hists: Vec<Vec<Option<Histogram>>> = counts
+        .iter()
+        .map(|f| f.iter().map(|h| Histogram::from_counts(h)).collect())
+        .collect();
+    let mut bits = BitWriter::default();
+    // Each histogram's place in the list the lanes are coded with.
+    let mut place = vec![Vec::new(); maps.len()];
+    let mut list = Vec::new();
+    for &f in &used {
+        for h in &hists[f] {
+            bits.put(h.is_some() as u32, 1);
+            place[f].push(list.len() as u16);
+            if let Some(h) = h {
+                h.write(&mut bits);
+                list.push(h.clone());
+            }
+        }
+    }
+    let mut out = bits.finish();
+    // Lanes: runs of regions cut by size.
+    let mut words = Vec::new();
+    for ((p, _), rec) in planes.iter().zip(&records) {
+        let map = &maps[p.family];
+        let symbols = |(_, ctx, v): (usize, usize, u32)| {
+            let (t, n, raw) = ans::hybrid_uint(v);
+            let histogram = place[p.family][map.of[ctx] as usize];
+            [
+                Some(Symbol::Token {
+                    histogram,
+                    token: t as u16,
+                }),
+                (n > 0).then_some(Symbol::Raw {
+                    value: raw,
+                    bits: n as u8,
+                }),
+            ]
+        };
+        let (bw, bh) = p.geometry.grid;
+        let regions = bw.div_ceil(REGION) * bh.div_ceil(REGION);
+        let mut cost = vec![0.0f64; regions];
+        for &(region, ctx, v) in rec {
+            for s in symbols((region, ctx, v)).into_iter().flatten() {
+                cost[region] += match s {
+                    Symbol::Token { histogram, token } => {
+                        list[histogram as usize].cost(token as usize)
+                    }
+                    Symbol::Raw { bits, .. } => bits as f64,
+                };
+            }
+        }
+        let mut lanes: Vec<usize> = Vec::new(); // regions per lane
+        let (mut run, mut bits) = (0usize, 0.0f64);
+        for c in &cost {
+            run += 1;
+            bits += c;
+            if bits >= 8.0 * lane_bytes as f64 {
+                lanes.push(run);
+                (run, bits) = (0, 0.0);
+            }
+        }
+        if run > 0 || lanes.is_empty() {
+            lanes.push(run);
+        }
+        let mut lane_of = vec![0usize; regions];
+        let mut r = 0;
+        for (l, &n) in lanes.iter().enumerate() {
+            lane_of[r..r + n].fill(l);
+            r += n;
+        }
+        varint::put_u32(&mut out, lanes.len() as u32);
+        for (l, &n) in lanes.iter().enumerate() {
+            let coded: Vec<Symbol> = rec
+                .iter()
+                .filter(|s| lane_of[s.0] == l)
+                .flat_map(|&s| symbols(s).into_iter().flatten())
+                .collect();
+            let w = ans::encode(&coded, &list);
+            varint::put_u32(&mut out, n as u32);
+            varint::put_u32(&mut out, w.len() as u32);
+            words.push(w);
+        }
+    }
+    for w in words.iter().flatten() {
+        out.extend_from_slice(&w.to_le_bytes());
+    }
+    Ok(out)
+}
+
+/// The families `planes` use, in increasing order, checked against the maps.
+fn used_families<'a>(
+    planes: impl Iterator<Item = &'a Plane<'a>>,
+    maps: usize,
+) -> Result<Vec<usize>> {
+    let mut used: Vec<usize> = planes.map(|p| p.family).collect();
+    used.sort_unstable();
+    used.dedup();
+    if used.last().is_some_and(|&f| f >= maps) {
+        return Err(FormatError::Invalid(
+            "a plane of a family without a map".into(),
+        ));
+    }
+    Ok(used)
+}
+
+/// The decoder's lanes, one per lane of the plane being decoded.
+struct Lanes<'a, 'h> {
+    decoders: Vec<ans::Decoder<'a>>,
+    list: &'h [Histogram],
+    /// The histogram of each context (`u16::MAX`: none sent).
+    of: Vec<u16>,
+}
+
+impl Coder for Lanes<'_, '_> {
+    fn code(&mut self, lane: usize, ctx: usize, _: u32) -> Result<u32> {
+        let h = match self.of[ctx] {
+            u16::MAX => {
+                return Err(FormatError::Invalid(format!(
+                    "context {ctx} coded without a histogram"
+                )))
+            }
+            h => &self.list[h as usize],
+        };
+        let d = &mut self.decoders[lane];
+        let t = d.token(h)?;
+        let raw = d.raw(ans::raw_bits_of(t))?;
+        Ok(ans::hybrid_value(t, raw))
+    }
+}
+
+/// Decodes a coefficient section [`encode`] wrote for `planes`, with the file's `maps`.
+/// Returns each plane's blocks in its places' order.
+pub fn decode(
+    bytes: &[u8],
+    planes: &[Plane],
+    maps: &[ContextMap],
+) -> Result<Vec<Vec<[i32; N * N]>>> {
+    let used = used_families(planes.iter(), maps.len())?;
+    let mut r = BitReader::new(bytes);
+    let mut place = vec![Vec::new(); maps.len()];
+    let mut list = Vec::new();
+    for &f in &used {
+        for _ in 0..maps[f].clusters {
+            if r.get(1)? == 1 {
+                place[f].push(list.len() as u16);
+                list.push(Histogram::read(&mut r)?);
+            } else {
+                place[f].push(u16::MAX);
+            }
+        }
+    }
+    let mut at = r.position().div_ceil(8);
+    // Every plane's lanes: (regions, words) each.
+    let mut layout = Vec::with_capacity(planes.len());
+    let mut total_words = 0usize;
+    for p in planes {
+        let (bw, bh) = p.geometry.grid;
+        let regions = bw.div_ceil(REGION) * bh.div_ceil(REGION);
+        let lanes = varint::get_u32(bytes, &mut at)? as usize;
+        if lanes == 0 || lanes > regions.max(1) {
+            return Err(FormatError::Invalid(format!(
+                "{lanes} lanes for {regions} regions"
+            )));
+        }
+        let mut spans = Vec::with_capacity(lanes);
+        let mut covered = 0usize;
+        for _ in 0..lanes {
+            let n = varint::get_u32(bytes, &mut at)? as usize;
+            let w = varint::get_u32(bytes, &mut at)? as usize;
+            covered = covered.saturating_add(n);
+            total_words = total_words.saturating_add(w);
+            spans.push((n, w));
+        }
+        if covered != regions {
+            return Err(FormatError::Invalid(format!(
+                "lanes cover {covered} regions of {regions}"
+            )));
+        }
+        layout.push(spans);
+    }
+    if bytes.len() - at != 2 * total_words {
+        return Err(FormatError::Invalid(format!(
+            "{} bytes of lanes for {total_words} words",
+            bytes.len() - at
+        )));
+    }
+    let words: Vec<u16> = bytes[at..]
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
+    let mut from = 0usize;
+    let mut out = Vec::with_capacity(planes.len());
+    for (p, spans) in planes.iter().zip(&layout) {
+        let mut decoders = Vec::with_capacity(spans.len());
+        let mut lane_of = Vec::new();
+        for (l, &(n, w)) in spans.iter().enumerate() {
+            decoders.push(ans::Decoder::new(&words[from..from + w])?);
+            from += w;
+            lane_of.extend(std::iter::repeat_n(l, n));
+        }
+        let map = &maps[p.family];
+        let mut lanes = Lanes {
+            decoders,
+            list: &list,
+            of: map
+                .of
+                .iter()
+                .map(|&k| place[p.family][k as usize])
+                .collect(),
+        };
+        let blocks = walk(&p.geometry, None, &|region| lane_of[region], &mut lanes)?;
+        for d in &lanes.decoders {
+            d.finish()?;
+        }
+        out.push(blocks);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fixed pseudo-random sequence (no dependency, the same on every machine).
+    fn lcg(seed: &mut u64) -> u32 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 33) as u32
+    }
+
+    /// Blocks of a smooth plane with sparse detail: DCs on a ramp with noise, a few
+    /// coefficients in some blocks, empty regions.
+    fn blocks(n: usize, seed: u64, order: &[(usize, usize)]) -> Vec<[i32; N * N]> {
+        let mut s = seed;
+        (0..n)
+            .map(|b| {
+                let (x, y) = order[b];
+                let mut q = [0i32; N * N];
+                q[0] = if (x / 8 + y / 8) % 3 == 0 {
+                    0
+                } else {
+                    (3 * x + 2 * y) as i32 + (lcg(&mut s) % 5) as i32 - 2
+                };
+                if lcg(&mut s).is_multiple_of(4) {
+                    for _ in 0..lcg(&mut s) % 12 {
+                        let i = 1 + (lcg(&mut s) % 40) as usize;
+                        q[i] = (lcg(&mut s) % 41) as i32 - 20;
+                    }
+                }
+                if lcg(&mut s).is_multiple_of(97) {
+                    q[63] = -70_000;
+                    q[0] = i32::MAX - (lcg(&mut s) % 3) as i32;
+                }
+                q
+            })
+            .collect()
+    }
+
+    fn round_trip(
+        planes: &[(Plane, &[[i32; N * N]])],
+        maps: &[ContextMap],
+        lane_bytes: usize,
+    ) -> usize {
+        let bytes = encode(planes, maps, lane_bytes).unwrap();
+        let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
+        let got = decode(&bytes, &shapes, maps).unwrap();
+        for ((_, want), got) in planes.iter().zip(&got) {
+            assert_eq!(*want, &got[..]);
+        }
+        bytes.len()
+    }
+
+    #[test]
+    fn keyframe_and_bubble_planes_round_trip_with_any_lanes_and_maps() {
+        // A keyframe plane of 37 × 29 blocks (regions and groups cut at its edges).
+        let (bw, bh) = (37, 29);
+        let key_order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+        let key = blocks(key_order.len(), 1, &key_order);
+        // A bubble plane: the member tiles (4 × 4 blocks) of a checker of tiles, each
+        // tile's blocks in raster order.
+        let mut bubble_order = Vec::new();
+        for ty in 0..bh.div_ceil(4) {
+            for tx in 0..bw.div_ceil(4) {
+                if (tx * 7 + ty * 3) % 5 < 2 {
+                    continue;
+                }
+                for y in ty * 4..(ty * 4 + 4).min(bh) {
+                    for x in tx * 4..(tx * 4 + 4).min(bw) {
+                        bubble_order.push((x, y));
+                    }
+                }
+            }
+        }
+        let bubble = blocks(bubble_order.len(), 2, &bubble_order);
+        let planes = [
+            (
+                Plane {
+                    family: 0,
+                    geometry: Geometry {
+                        grid: (bw, bh),
+                        order: &key_order,
+                        tile: None,
+                    },
+                },
+                &key[..],
+            ),
+            (
+                Plane {
+                    family: 1,
+                    geometry: Geometry {
+                        grid: (bw, bh),
+                        order: &bubble_order,
+                        tile: Some(4),
+                    },
+                },
+                &bubble[..],
+            ),
+        ];
+        let mut seed = 3;
+        let spread = ContextMap {
+            clusters: 7,
+            of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 7) as u8).collect(),
+        };
+        for maps in [
+            vec![ContextMap::single(), ContextMap::single()],
+            vec![spread.clone(), ContextMap::single()],
+        ] {
+            let one = round_trip(&planes, &maps, usize::MAX);
+            let many = round_trip(&planes, &maps, 64);
+            // Lanes cost their states and lengths, a few bytes each.
+            assert!(many > one && many < one + one / 4, "{many} against {one}");
+        }
+        // An empty plane, and a plane whose blocks are all zero.
+        let zeros = vec![[0i32; N * N]; key.len()];
+        let none: Vec<(usize, usize)> = Vec::new();
+        let planes = [
+            (
+                Plane {
+                    family: 0,
+                    geometry: Geometry {
+                        grid: (bw, bh),
+                        order: &key_order,
+                        tile: None,
+                    },
+                },
+                &zeros[..],
+            ),
+            (
+                Plane {
+                    family: 0,
+                    geometry: Geometry {
+                        grid: (bw, bh),
+                        order: &none,
+                        tile: Some(4),
+                    },
+                },
+                &[][..],
+            ),
+        ];
+        let bytes = round_trip(&planes, &[ContextMap::single()], 4096);
+        // All zero: a flag per group at a near-certain probability.
+        assert!(bytes < 40, "{bytes} bytes for nothing");
+    }
+
+    #[test]
+    fn context_maps_round_trip_and_damage_is_refused() {
+        let mut seed = 11;
+        let map = ContextMap {
+            clusters: 13,
+            of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 13) as u8).collect(),
+        };
+        let mut w = BitWriter::default();
+        map.write(&mut w);
+        let bytes = w.finish();
+        assert_eq!(ContextMap::read(&mut BitReader::new(&bytes)).unwrap(), map);
+        assert!(ContextMap::read(&mut BitReader::new(&bytes[..bytes.len() - 1])).is_err());
+
+        let order: Vec<(usize, usize)> = (0..400).map(|b| (b % 20, b / 20)).collect();
+        let q = blocks(order.len(), 5, &order);
+        let plane = Plane {
+            family: 0,
+            geometry: Geometry {
+                grid: (20, 20),
+                order: &order,
+                tile: None,
+            },
+        };
+        let maps = [ContextMap::single()];
+        let good = encode(&[(plane, &q[..])], &maps, 256).unwrap();
+        // Any single byte changed or cut: an error or other blocks, never a panic.
+        for i in 0..good.len() {
+            for flip in [1u8, 0x80] {
+                let mut bad = good.clone();
+                bad[i] ^= flip;
+                if let Ok(got) = decode(&bad, &[plane], &maps) {
+                    assert_eq!(got[0].len(), q.len());
+                }
+            }
+            assert!(decode(&good[..i], &[plane], &maps).is_err());
+        }
+        // A plane of a family without a map.
+        let other = Plane { family: 1, ..plane };
+        assert!(encode(&[(other, &q[..])], &maps, 256).is_err());
+    }
+}
