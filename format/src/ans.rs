@@ -130,6 +130,11 @@ impl Histogram {
         self.freq.get(token).map_or(0, |&f| f as u32)
     }
 
+    /// Where `token`'s slots start among the 4096 (the sum of the frequencies before it).
+    pub fn cumulative(&self, token: usize) -> u32 {
+        self.cum.get(token).map_or(SCALE, |&c| c as u32)
+    }
+
     /// Bits to code `token` with this histogram.
     pub fn cost(&self, token: usize) -> f64 {
         (SCALE as f64 / self.frequency(token) as f64).log2()

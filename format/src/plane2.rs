@@ -23,8 +23,8 @@
 //! up-left, 0 outside the plane, or outside the tile for a bubble plane), a pass of scans.
 //!
 //! **Lanes** are runs of regions of 16 × 16 blocks in raster order, cut by the encoder
-//! where a lane's coded size reaches a target; a lane holds its regions' symbols pass by
-//! pass. **Histograms** are sent per chunk, one per cluster of contexts that the chunk
+//! where a lane's coded size reaches a target (or it holds [`MAX_LANE_SYMBOLS`] symbols
+//! or [`MAX_LANE_REGIONS`] regions); a lane holds its regions' symbols pass by pass. **Histograms** are sent per chunk, one per cluster of contexts that the chunk
 //! uses; which cluster a context belongs to is the file's [`ContextMap`], per family (a
 //! kind of chunk × luma or chroma).
 //!
@@ -42,6 +42,13 @@ use crate::{varint, FormatError, Result};
 pub const REGION: usize = 16;
 /// Blocks across a group, the unit of the empty flags.
 pub const GROUP: usize = 4;
+/// The encoder ends a lane once it holds this many symbols, or [`MAX_LANE_REGIONS`]
+/// regions, whatever its size: llvmpipe (lavapipe) ends every loop of a GPU invocation
+/// once its loops have run 65,535 iterations in all, and a GPU decoder spends about one
+/// per symbol and one per group of a region. (A region holds at most 16,656 symbols.)
+pub const MAX_LANE_SYMBOLS: usize = 16_384;
+/// See [`MAX_LANE_SYMBOLS`].
+pub const MAX_LANE_REGIONS: usize = 1024;
 
 // Contexts, per family.
 const FLAG: usize = 0; // 6: even groups; odd groups by their empty neighbours (1 + 0–4)
@@ -135,11 +142,7 @@ trait Coder {
 
 /// 0, −1, 1, −2, … → 0, 1, 2, 3, …
 fn pack(v: i32) -> u32 {
-    if v >= 0 {
-        2 * v as u32
-    } else {
-        2 * v.unsigned_abs() - 1
-    }
+    ((v << 1) ^ (v >> 31)) as u32
 }
 
 fn unpack(u: u32) -> i32 {
@@ -512,7 +515,9 @@ pub fn encode(
         let (bw, bh) = p.geometry.grid;
         let regions = bw.div_ceil(REGION) * bh.div_ceil(REGION);
         let mut cost = vec![0.0f64; regions];
+        let mut count = vec![0usize; regions];
         for &(region, ctx, v) in rec {
+            count[region] += 1;
             for s in symbols((region, ctx, v)).into_iter().flatten() {
                 cost[region] += match s {
                     Symbol::Token { histogram, token } => {
@@ -523,13 +528,17 @@ pub fn encode(
             }
         }
         let mut lanes: Vec<usize> = Vec::new(); // regions per lane
-        let (mut run, mut bits) = (0usize, 0.0f64);
-        for c in &cost {
+        let (mut run, mut bits, mut symbols_in) = (0usize, 0.0f64, 0usize);
+        for (c, n) in cost.iter().zip(&count) {
             run += 1;
             bits += c;
-            if bits >= 8.0 * lane_bytes as f64 {
+            symbols_in += n;
+            if bits >= 8.0 * lane_bytes as f64
+                || symbols_in >= MAX_LANE_SYMBOLS
+                || run == MAX_LANE_REGIONS
+            {
                 lanes.push(run);
-                (run, bits) = (0, 0.0);
+                (run, bits, symbols_in) = (0, 0.0, 0);
             }
         }
         if run > 0 || lanes.is_empty() {
@@ -601,6 +610,100 @@ impl Coder for Lanes<'_, '_> {
     }
 }
 
+/// A coefficient section's parts, parsed and checked: what a GPU decoder uploads.
+#[derive(Clone, Debug)]
+pub struct Section {
+    /// The chunk's histograms.
+    pub histograms: Vec<Histogram>,
+    /// Per plane: each lane's regions (a run from the plane's first, in raster order of
+    /// regions) and words ([first, end) in `words`), and the histogram of each context
+    /// (an index into `histograms`, `u16::MAX` where the chunk sent none).
+    pub planes: Vec<SectionPlane>,
+    /// Every lane's words, plane after plane; a lane's first two are its state.
+    pub words: Vec<u16>,
+}
+
+/// One plane of a [`Section`].
+#[derive(Clone, Debug)]
+pub struct SectionPlane {
+    /// Each lane's (first region, end region, first word, end word).
+    pub lanes: Vec<(usize, usize, usize, usize)>,
+    /// The histogram of each of the [`CONTEXTS`] contexts.
+    pub histogram_of: Vec<u16>,
+}
+
+impl Section {
+    /// Parses a coefficient section [`encode`] wrote for `planes` with the file's `maps`.
+    pub fn parse(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Section> {
+        let used = used_families(planes.iter(), maps.len())?;
+        let mut r = BitReader::new(bytes);
+        let mut place = vec![Vec::new(); maps.len()];
+        let mut histograms = Vec::new();
+        for &f in &used {
+            for _ in 0..maps[f].clusters {
+                if r.get(1)? == 1 {
+                    place[f].push(histograms.len() as u16);
+                    histograms.push(Histogram::read(&mut r)?);
+                } else {
+                    place[f].push(u16::MAX);
+                }
+            }
+        }
+        let mut at = r.position().div_ceil(8);
+        let mut out = Vec::with_capacity(planes.len());
+        let mut total_words = 0usize;
+        for p in planes {
+            let (bw, bh) = p.geometry.grid;
+            let regions = bw.div_ceil(REGION) * bh.div_ceil(REGION);
+            let count = varint::get_u32(bytes, &mut at)? as usize;
+            if count == 0 || count > regions.max(1) {
+                return Err(FormatError::Invalid(format!(
+                    "{count} lanes for {regions} regions"
+                )));
+            }
+            let mut lanes = Vec::with_capacity(count);
+            let mut covered = 0usize;
+            for _ in 0..count {
+                let n = varint::get_u32(bytes, &mut at)? as usize;
+                let w = varint::get_u32(bytes, &mut at)? as usize;
+                let end = covered.saturating_add(n);
+                let words_end = total_words.saturating_add(w);
+                lanes.push((covered, end, total_words, words_end));
+                (covered, total_words) = (end, words_end);
+            }
+            if covered != regions {
+                return Err(FormatError::Invalid(format!(
+                    "lanes cover {covered} regions of {regions}"
+                )));
+            }
+            let map = &maps[p.family];
+            out.push(SectionPlane {
+                lanes,
+                histogram_of: map
+                    .of
+                    .iter()
+                    .map(|&k| place[p.family][k as usize])
+                    .collect(),
+            });
+        }
+        if bytes.len() - at != 2 * total_words {
+            return Err(FormatError::Invalid(format!(
+                "{} bytes of lanes for {total_words} words",
+                bytes.len() - at
+            )));
+        }
+        let words = bytes[at..]
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            .collect();
+        Ok(Section {
+            histograms,
+            planes: out,
+            words,
+        })
+    }
+}
+
 /// Decodes a coefficient section [`encode`] wrote for `planes`, with the file's `maps`.
 /// Returns each plane's blocks in its places' order.
 pub fn decode(
@@ -608,78 +711,19 @@ pub fn decode(
     planes: &[Plane],
     maps: &[ContextMap],
 ) -> Result<Vec<Vec<[i32; N * N]>>> {
-    let used = used_families(planes.iter(), maps.len())?;
-    let mut r = BitReader::new(bytes);
-    let mut place = vec![Vec::new(); maps.len()];
-    let mut list = Vec::new();
-    for &f in &used {
-        for _ in 0..maps[f].clusters {
-            if r.get(1)? == 1 {
-                place[f].push(list.len() as u16);
-                list.push(Histogram::read(&mut r)?);
-            } else {
-                place[f].push(u16::MAX);
-            }
-        }
-    }
-    let mut at = r.position().div_ceil(8);
-    // Every plane's lanes: (regions, words) each.
-    let mut layout = Vec::with_capacity(planes.len());
-    let mut total_words = 0usize;
-    for p in planes {
-        let (bw, bh) = p.geometry.grid;
-        let regions = bw.div_ceil(REGION) * bh.div_ceil(REGION);
-        let lanes = varint::get_u32(bytes, &mut at)? as usize;
-        if lanes == 0 || lanes > regions.max(1) {
-            return Err(FormatError::Invalid(format!(
-                "{lanes} lanes for {regions} regions"
-            )));
-        }
-        let mut spans = Vec::with_capacity(lanes);
-        let mut covered = 0usize;
-        for _ in 0..lanes {
-            let n = varint::get_u32(bytes, &mut at)? as usize;
-            let w = varint::get_u32(bytes, &mut at)? as usize;
-            covered = covered.saturating_add(n);
-            total_words = total_words.saturating_add(w);
-            spans.push((n, w));
-        }
-        if covered != regions {
-            return Err(FormatError::Invalid(format!(
-                "lanes cover {covered} regions of {regions}"
-            )));
-        }
-        layout.push(spans);
-    }
-    if bytes.len() - at != 2 * total_words {
-        return Err(FormatError::Invalid(format!(
-            "{} bytes of lanes for {total_words} words",
-            bytes.len() - at
-        )));
-    }
-    let words: Vec<u16> = bytes[at..]
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect();
-    let mut from = 0usize;
+    let section = Section::parse(bytes, planes, maps)?;
     let mut out = Vec::with_capacity(planes.len());
-    for (p, spans) in planes.iter().zip(&layout) {
-        let mut decoders = Vec::with_capacity(spans.len());
+    for (p, sp) in planes.iter().zip(&section.planes) {
+        let mut decoders = Vec::with_capacity(sp.lanes.len());
         let mut lane_of = Vec::new();
-        for (l, &(n, w)) in spans.iter().enumerate() {
-            decoders.push(ans::Decoder::new(&words[from..from + w])?);
-            from += w;
-            lane_of.extend(std::iter::repeat_n(l, n));
+        for (l, &(r0, r1, w0, w1)) in sp.lanes.iter().enumerate() {
+            decoders.push(ans::Decoder::new(&section.words[w0..w1])?);
+            lane_of.extend(std::iter::repeat_n(l, r1 - r0));
         }
-        let map = &maps[p.family];
         let mut lanes = Lanes {
             decoders,
-            list: &list,
-            of: map
-                .of
-                .iter()
-                .map(|&k| place[p.family][k as usize])
-                .collect(),
+            list: &section.histograms,
+            of: sp.histogram_of.clone(),
         };
         let blocks = walk(&p.geometry, None, &|region| lane_of[region], &mut lanes)?;
         for d in &lanes.decoders {

@@ -53,11 +53,7 @@ fn hybrid_uint(v: u32) -> (usize, u32) {
 
 /// 0, −1, 1, −2, 2, … → 0, 1, 2, 3, 4, …
 fn pack_signed(v: i32) -> u32 {
-    if v >= 0 {
-        2 * v as u32
-    } else {
-        2 * v.unsigned_abs() - 1
-    }
+    ((v << 1) ^ (v >> 31)) as u32
 }
 
 /// The size class of a DC residual: 0, 1–2, 3+.

@@ -28,6 +28,8 @@ mod decode;
 mod device;
 mod job;
 mod plan;
+#[cfg(test)]
+mod plane2;
 mod reconstruct;
 mod resources;
 #[cfg(test)]

@@ -580,7 +580,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
 }
 
 /// A compute pipeline running `entry` of the WGSL `source` over bind group 0 of `layout`.
-fn compute_pipeline(
+pub(super) fn compute_pipeline(
     device: &wgpu::Device,
     label: &str,
     source: &str,

@@ -1,0 +1,367 @@
+//! Format 2's coefficient coding decoded on the GPU (`plane2.wgsl`): a prototype that
+//! decodes one plane of a coded section into blocks, tested against the specification
+//! (`vbim_format::plane2`) on a real adapter. Not yet part of the player's decode, which
+//! reads format 1; it is what format 2's decode will build on. Buffers are made per call.
+
+use vbim_format::dct::N;
+use vbim_format::plane2::{Geometry, Section, GROUP, REGION};
+use wgpu::util::DeviceExt;
+
+use crate::readback::read_buffer;
+
+/// The prototype's pipelines.
+pub(crate) struct Plane2Gpu {
+    layout: wgpu::BindGroupLayout,
+    flags: wgpu::ComputePipeline,
+    blocks: wgpu::ComputePipeline,
+    dc: wgpu::ComputePipeline,
+}
+
+const BINDINGS: u32 = 8;
+
+impl Plane2Gpu {
+    pub fn new(device: &wgpu::Device) -> Plane2Gpu {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..BINDINGS)
+            .map(|binding| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match binding {
+                        0 => wgpu::BufferBindingType::Uniform,
+                        1 | 3 | 4 => wgpu::BufferBindingType::Storage { read_only: true },
+                        _ => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vbim plane2"),
+            entries: &entries,
+        });
+        let source = include_str!("plane2.wgsl");
+        let pipeline = |entry| {
+            super::resources::compute_pipeline(device, "vbim plane2", source, &layout, entry)
+        };
+        Plane2Gpu {
+            flags: pipeline("flags"),
+            blocks: pipeline("blocks"),
+            dc: pipeline("dc"),
+            layout,
+        }
+    }
+
+    /// Decodes plane `plane` of `section` (whose blocks lie as `geo` says) and returns its
+    /// blocks, or what was wrong: a lane that read past its words or did not end on the
+    /// state it started from, or a symbol that made no sense.
+    pub fn decode(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        section: &Section,
+        plane: usize,
+        geo: &Geometry,
+    ) -> Result<Vec<[i32; N * N]>, String> {
+        let sp = section.planes.get(plane).ok_or("no such plane")?;
+        let (bw, bh) = geo.grid;
+        let (gw, gh) = (bw.div_ceil(GROUP), bh.div_ceil(GROUP));
+        let n = geo.order.len();
+        // The grid's blocks and the groups that have one.
+        let mut grid = vec![u32::MAX; bw * bh];
+        let mut groups = vec![0u32; (gw * gh).max(1)];
+        for (b, &(x, y)) in geo.order.iter().enumerate() {
+            grid[y * bw + x] = b as u32;
+            groups[(y / GROUP) * gw + x / GROUP] = 1;
+        }
+        let w = &section.words;
+        let mut lanes = Vec::with_capacity(2 * sp.lanes.len());
+        for &(r0, r1, w0, w1) in &sp.lanes {
+            if w1 < w0 + 2 {
+                return Err("a lane shorter than its state".into());
+            }
+            let x = (w[w0] as u32) << 16 | w[w0 + 1] as u32;
+            lanes.push([x, (w0 + 2) as u32, w1 as u32, 0]);
+            lanes.push([r0 as u32, r1 as u32, 0, 0]);
+        }
+        let lane_count = sp.lanes.len();
+        let words: Vec<u32> = w
+            .chunks(2)
+            .map(|p| p[0] as u32 | (*p.get(1).unwrap_or(&0) as u32) << 16)
+            .chain([0])
+            .collect();
+        // Contexts' histograms, each histogram's frequencies, then its slot table.
+        let hs = &section.histograms;
+        let mut tables: Vec<u32> = sp.histogram_of.iter().map(|&h| h as u32).collect();
+        tables.extend(
+            hs.iter()
+                .flat_map(|h| (0..128).map(move |t| h.frequency(t) | h.cumulative(t) << 16)),
+        );
+        let slots = tables.len() as u32;
+        for h in hs {
+            let mut slot = vec![0u8; 4096];
+            for t in 0..128 {
+                let (c, f) = (h.cumulative(t) as usize, h.frequency(t) as usize);
+                slot[c.min(4096)..(c + f).min(4096)].fill(t as u8);
+            }
+            tables.extend(
+                slot.chunks(4)
+                    .map(|q| u32::from_le_bytes([q[0], q[1], q[2], q[3]])),
+            );
+        }
+        let storage = |data: &[u8], label| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: data,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            })
+        };
+        let zeros = |bytes: usize, label| storage(&vec![0u8; bytes.max(8)], label);
+        let buffers = [
+            storage(bytemuck::cast_slice(&words), "plane2 words"),
+            storage(bytemuck::cast_slice(&lanes), "plane2 lanes"),
+            storage(bytemuck::cast_slice(&tables), "plane2 tables"),
+            storage(
+                bytemuck::cast_slice(&grid.iter().copied().chain([0]).collect::<Vec<u32>>()),
+                "plane2 grid",
+            ),
+            storage(bytemuck::cast_slice(&groups), "plane2 groups"),
+            zeros(n * 8, "plane2 info"),
+            zeros(n * N * N * 4, "plane2 coefs"),
+        ];
+        let params = |parity: u32| {
+            let p: [u32; 12] = [
+                bw as u32,
+                bh as u32,
+                gw as u32,
+                gh as u32,
+                bw.div_ceil(REGION) as u32,
+                geo.tile.unwrap_or(0) as u32,
+                lane_count as u32,
+                parity,
+                slots,
+                0,
+                0,
+                0,
+            ];
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("plane2 params"),
+                contents: bytemuck::cast_slice(&p),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let params = [params(0), params(1)];
+        let groups_of = |parity: usize| {
+            let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(&params[parity])
+                .chain(&buffers)
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vbim plane2"),
+                layout: &self.layout,
+                entries: &entries,
+            })
+        };
+        let bind = [groups_of(0), groups_of(1)];
+        let mut enc = device.create_command_encoder(&Default::default());
+        let workgroups = (lane_count as u32).div_ceil(64);
+        for (pipeline, parity) in [
+            (&self.flags, 0),
+            (&self.flags, 1),
+            (&self.blocks, 0),
+            (&self.blocks, 1),
+            (&self.dc, 0),
+        ] {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind[parity], &[]);
+            let groups = if std::ptr::eq(pipeline, &self.dc) {
+                1
+            } else {
+                workgroups
+            };
+            pass.dispatch_workgroups(groups, 1, 1);
+        }
+        queue.submit([enc.finish()]);
+        let ends: Vec<[u32; 4]> =
+            bytemuck::cast_slice(&read_buffer(device, queue, &buffers[1])).to_vec();
+        for (l, e) in ends.iter().step_by(2).enumerate() {
+            if e[3] != 0 {
+                return Err(format!(
+                    "lane {l} read past its words or decoded a symbol out of range"
+                ));
+            }
+            if e[0] != 1 << 16 || e[1] != e[2] {
+                return Err(format!(
+                    "lane {l} ended on state {} at word {} of {}",
+                    e[0], e[1], e[2]
+                ));
+            }
+        }
+        let raw = read_buffer(device, queue, &buffers[6]);
+        let coefs: &[i32] = bytemuck::cast_slice(&raw);
+        Ok((0..n)
+            .map(|b| {
+                let mut q = [0i32; N * N];
+                q.copy_from_slice(&coefs[b * N * N..(b + 1) * N * N]);
+                q
+            })
+            .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::headless_device;
+    use vbim_format::plane2::{self, ContextMap, Plane, CONTEXTS};
+
+    fn lcg(seed: &mut u64) -> u32 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 33) as u32
+    }
+
+    /// Smooth DCs with noise, sparse detail, empty stretches and a few extreme values.
+    fn blocks(order: &[(usize, usize)], seed: u64) -> Vec<[i32; N * N]> {
+        let mut s = seed;
+        order
+            .iter()
+            .map(|&(x, y)| {
+                let mut q = [0i32; N * N];
+                if (x / 8 + y / 8) % 3 != 0 {
+                    q[0] = (3 * x + 2 * y) as i32 + (lcg(&mut s) % 5) as i32 - 2;
+                }
+                if lcg(&mut s).is_multiple_of(3) {
+                    for _ in 0..lcg(&mut s) % 20 {
+                        let i = 1 + (lcg(&mut s) % 63) as usize;
+                        q[i] = (lcg(&mut s) % 81) as i32 - 40;
+                    }
+                }
+                if lcg(&mut s).is_multiple_of(89) {
+                    q[0] = i32::MIN + (lcg(&mut s) % 3) as i32;
+                    q[5] = 1 << 30;
+                }
+                q
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_plane_too_large_for_one_lavapipe_invocation_is_cut_into_lanes_it_can_run() {
+        // 96 × 96 dense blocks: about 90,000 symbols, beyond the 65,535 loop iterations
+        // llvmpipe allows one invocation; however large a lane the caller asks for, the
+        // encoder's caps cut it.
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let gpu = Plane2Gpu::new(&device);
+        let (bw, bh) = (96, 96);
+        let order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+        let mut s = 9;
+        let q: Vec<[i32; N * N]> = order
+            .iter()
+            .map(|_| {
+                let mut q = [0i32; N * N];
+                for v in q.iter_mut().take(12) {
+                    *v = (lcg(&mut s) % 9) as i32 - 4;
+                }
+                q
+            })
+            .collect();
+        let shape = Plane {
+            family: 0,
+            geometry: Geometry {
+                grid: (bw, bh),
+                order: &order,
+                tile: None,
+            },
+        };
+        let maps = [ContextMap::single()];
+        let bytes = plane2::encode(&[(shape, &q[..])], &maps, usize::MAX).unwrap();
+        let section = Section::parse(&bytes, &[shape], &maps).unwrap();
+        assert!(
+            section.planes[0].lanes.len() >= 6,
+            "{:?}",
+            section.planes[0].lanes
+        );
+        let got = gpu
+            .decode(&device, &queue, &section, 0, &shape.geometry)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(got == q, "the GPU's blocks differ");
+    }
+
+    #[test]
+    fn the_gpu_decodes_what_the_specification_decodes() {
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let gpu = Plane2Gpu::new(&device);
+        let (bw, bh) = (45, 35);
+        let key_order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+        let mut bubble_order = Vec::new();
+        for ty in 0..bh.div_ceil(4) {
+            for tx in 0..bw.div_ceil(4) {
+                if (tx * 5 + ty * 3) % 4 == 0 {
+                    continue;
+                }
+                for y in ty * 4..(ty * 4 + 4).min(bh) {
+                    for x in tx * 4..(tx * 4 + 4).min(bw) {
+                        bubble_order.push((x, y));
+                    }
+                }
+            }
+        }
+        let key = blocks(&key_order, 1);
+        let bubble = blocks(&bubble_order, 2);
+        let shapes = [
+            Plane {
+                family: 0,
+                geometry: Geometry {
+                    grid: (bw, bh),
+                    order: &key_order,
+                    tile: None,
+                },
+            },
+            Plane {
+                family: 1,
+                geometry: Geometry {
+                    grid: (bw, bh),
+                    order: &bubble_order,
+                    tile: Some(4),
+                },
+            },
+        ];
+        let mut seed = 7;
+        let maps = [
+            ContextMap {
+                clusters: 9,
+                of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 9) as u8).collect(),
+            },
+            ContextMap::single(),
+        ];
+        for lane_bytes in [usize::MAX, 200, 16] {
+            let input = [(shapes[0], &key[..]), (shapes[1], &bubble[..])];
+            let bytes = plane2::encode(&input, &maps, lane_bytes).unwrap();
+            let section = Section::parse(&bytes, &shapes, &maps).unwrap();
+            let want = plane2::decode(&bytes, &shapes, &maps).unwrap();
+            for (p, want) in want.iter().enumerate() {
+                let got = gpu
+                    .decode(&device, &queue, &section, p, &shapes[p].geometry)
+                    .unwrap_or_else(|e| panic!("plane {p}, lanes of {lane_bytes} B: {e}"));
+                assert_eq!(got.len(), want.len());
+                for (b, (g, w)) in got.iter().zip(want).enumerate() {
+                    assert_eq!(g, w, "plane {p}, lanes of {lane_bytes} B, block {b}");
+                }
+            }
+            // Damaged words: an error or other blocks, never a hang.
+            let mut bad = section.clone();
+            for w in bad.words.iter_mut().skip(7).step_by(13) {
+                *w ^= 0x5A5A;
+            }
+            let _ = gpu.decode(&device, &queue, &bad, 0, &shapes[0].geometry);
+        }
+    }
+}
