@@ -11,6 +11,7 @@ use crate::decode::{Decoder, Output};
 use crate::header::{Header, HEADER_SIZE};
 use crate::index::ENTRY_SIZE;
 use crate::plane::Plane;
+use crate::plane2;
 use crate::{ColorEncoding, Limits, Reader, Transfer};
 
 /// What the targets let a file make the decoder hold: small, so that the fuzzer runs many
@@ -186,6 +187,80 @@ fn small_header(a: u8, b: u8, c: u8, d: u8) -> Header {
         index_checksum: 0,
         largest_payload: None,
     }
+}
+
+/// Arbitrary bytes as a format 2 coefficient section ([`crate::plane2`]). The first four
+/// bytes pick a plane of at most 40 × 40 blocks (a keyframe's, or a bubble plane's member
+/// tiles of 4 × 4 blocks) and a context map of 1 to 8 histograms; the rest is the section.
+/// What decodes must code again to the same blocks.
+pub fn plane2(data: &[u8]) {
+    let Some((&[a, b, c, d], section)) = data.split_first_chunk::<4>() else {
+        return;
+    };
+    let (order, geometry, map) = plane2_shape(a, b, c, d);
+    let plane = plane2::Plane {
+        family: 0,
+        geometry: plane2::Geometry {
+            order: &order,
+            ..geometry
+        },
+    };
+    let maps = [map];
+    if let Ok(blocks) = plane2::decode(section, &[plane], &maps) {
+        let again = plane2::encode(&[(plane, &blocks[0][..])], &maps, 64)
+            .expect("decoded blocks code again");
+        let back = plane2::decode(&again, &[plane], &maps).expect("and decode");
+        assert!(
+            back == blocks,
+            "a section's blocks did not survive coding again"
+        );
+    }
+}
+
+/// The plane and map [`plane2`] decodes with, from its first four bytes: its blocks'
+/// places, its geometry (places left empty) and the map.
+pub fn plane2_shape(
+    a: u8,
+    b: u8,
+    c: u8,
+    d: u8,
+) -> (
+    Vec<(usize, usize)>,
+    plane2::Geometry<'static>,
+    plane2::ContextMap,
+) {
+    let (w, h) = (1 + a as usize % 40, 1 + b as usize % 40);
+    let bubble = c & 1 == 1;
+    let clusters = 1 + (c >> 1) % 8;
+    let mut order = Vec::new();
+    if bubble {
+        for ty in 0..h.div_ceil(4) {
+            for tx in 0..w.div_ceil(4) {
+                if (tx + 7 * ty + d as usize).is_multiple_of(3) {
+                    continue;
+                }
+                for y in ty * 4..(ty * 4 + 4).min(h) {
+                    for x in tx * 4..(tx * 4 + 4).min(w) {
+                        order.push((x, y));
+                    }
+                }
+            }
+        }
+    } else {
+        order = (0..w * h).map(|i| (i % w, i / w)).collect();
+    }
+    let map = plane2::ContextMap {
+        clusters,
+        of: (0..plane2::CONTEXTS)
+            .map(|i| ((i * 7 + d as usize) % clusters as usize) as u8)
+            .collect(),
+    };
+    let geometry = plane2::Geometry {
+        grid: (w, h),
+        order: &[],
+        tile: bubble.then_some(4),
+    };
+    (order, geometry, map)
 }
 
 #[cfg(test)]

@@ -27,4 +27,5 @@ fn every_kept_input_is_handled() {
     assert!(replay("container", vbim_format::fuzz::container) > 0);
     assert!(replay("decode", vbim_format::fuzz::decode) > 0);
     assert!(replay("chunks", vbim_format::fuzz::chunks) > 0);
+    assert!(replay("plane2", vbim_format::fuzz::plane2) > 0);
 }
