@@ -140,8 +140,8 @@ trait Coder {
     fn code(&mut self, lane: usize, ctx: usize, value: u32) -> Result<u32>;
 }
 
-/// 0, −1, 1, −2, … → 0, 1, 2, 3, …
-fn pack(v: i32) -> u32 {
+/// 0, −1, 1, −2, … → 0, 1, 2, 3, … (zig-zag, without overflow at `i32::MIN`).
+pub fn pack(v: i32) -> u32 {
     ((v << 1) ^ (v >> 31)) as u32
 }
 
@@ -149,7 +149,8 @@ fn unpack(u: u32) -> i32 {
     ((u >> 1) as i32) ^ -((u & 1) as i32)
 }
 
-fn size_class(v: i32) -> usize {
+/// The size class of a DC residual: 0, 1–2, 3+.
+pub fn size_class(v: i32) -> usize {
     match v.unsigned_abs() {
         0 => 0,
         1..=2 => 1,
@@ -157,7 +158,8 @@ fn size_class(v: i32) -> usize {
     }
 }
 
-fn count_bucket(n: usize) -> usize {
+/// Buckets of a count of non-zero coefficients (or of a mean of them): 0–7.
+pub fn count_bucket(n: usize) -> usize {
     match n {
         0..=2 => n,
         3..=4 => 3,
@@ -168,7 +170,8 @@ fn count_bucket(n: usize) -> usize {
     }
 }
 
-fn left_bucket(n: usize) -> usize {
+/// Buckets of the coefficients still to code in a block (at least 1): 0–9.
+pub fn left_bucket(n: usize) -> usize {
     match n {
         1..=4 => n - 1,
         5..=6 => 4,
@@ -180,7 +183,8 @@ fn left_bucket(n: usize) -> usize {
     }
 }
 
-fn band(i: usize) -> usize {
+/// Zig-zag positions in bands of growing width (the lowest frequencies one each): 0–11.
+pub fn band(i: usize) -> usize {
     match i {
         0..=5 => i,
         6..=7 => 6,

@@ -25,6 +25,7 @@ use std::io::BufReader;
 
 use vbim_format::chunk::{self, TileMap};
 use vbim_format::dct::N;
+use vbim_format::plane2::{band, size_class};
 use vbim_format::{plane, plane2, ChunkKind, Header, Reader};
 
 use super::static_coding::{PlaneStream, Study};
@@ -63,18 +64,7 @@ impl Bit {
     }
 }
 
-/// Positions 1–63 in bands of growing width (low frequencies get one each).
-fn band(i: usize) -> usize {
-    match i {
-        0..=5 => i,
-        6..=7 => 6,
-        8..=10 => 7,
-        11..=15 => 8,
-        16..=23 => 9,
-        24..=35 => 10,
-        _ => 11,
-    }
-}
+/// The bands of `plane2::band`.
 const BANDS: usize = 12;
 /// Unary prefix bins of an Exp-Golomb code that get their own adaptive probability.
 const PREFIX: usize = 12;
@@ -117,15 +107,6 @@ fn exp_golomb(v: u32, prefix: &mut [Bit; PREFIX]) -> f64 {
         bits += prefix[i.min(PREFIX - 1)].code(i < len);
     }
     bits + len as f64
-}
-
-/// The size class of a magnitude, for contexts: 0, 1–2, 3+ (and 3 for "no neighbour").
-fn size_class(v: i32) -> usize {
-    match v.unsigned_abs() {
-        0 => 0,
-        1..=2 => 1,
-        _ => 2,
-    }
 }
 
 impl Model {

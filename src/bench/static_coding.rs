@@ -43,64 +43,12 @@
 
 use vbim_format::ans::{self, TOKENS};
 use vbim_format::dct::N;
-use vbim_format::plane2;
+use vbim_format::plane2::{self, band, count_bucket, left_bucket, pack as pack_signed, size_class};
 
 /// The hybrid-uint token of `v` and its raw bits' count.
 fn hybrid_uint(v: u32) -> (usize, u32) {
     let (t, n, _) = ans::hybrid_uint(v);
     (t, n)
-}
-
-/// 0, −1, 1, −2, 2, … → 0, 1, 2, 3, 4, …
-fn pack_signed(v: i32) -> u32 {
-    ((v << 1) ^ (v >> 31)) as u32
-}
-
-/// The size class of a DC residual: 0, 1–2, 3+.
-fn size_class(v: i32) -> usize {
-    match v.unsigned_abs() {
-        0 => 0,
-        1..=2 => 1,
-        _ => 2,
-    }
-}
-
-/// Buckets of a count of non-zero coefficients (or of a mean of them).
-fn count_bucket(n: usize) -> usize {
-    match n {
-        0..=2 => n,
-        3..=4 => 3,
-        5..=8 => 4,
-        9..=16 => 5,
-        17..=32 => 6,
-        _ => 7,
-    }
-}
-
-/// Buckets of the coefficients still to code in a block.
-fn left_bucket(n: usize) -> usize {
-    match n {
-        1..=4 => n - 1,
-        5..=6 => 4,
-        7..=8 => 5,
-        9..=12 => 6,
-        13..=16 => 7,
-        17..=24 => 8,
-        _ => 9,
-    }
-}
-
-/// The same frequency bands as the adaptive model's.
-fn band(i: usize) -> usize {
-    match i {
-        0..=5 => i,
-        6..=7 => 6,
-        8..=10 => 7,
-        11..=15 => 8,
-        16..=23 => 9,
-        24..=35 => 10,
-        _ => 11,
-    }
 }
 
 // Context numbers within a family: each design's DC and count contexts, then the AC
