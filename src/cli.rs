@@ -176,9 +176,12 @@ pub struct EncodeArgs {
     /// Segment length: `auto` (adaptive, up to the preset's maximum), `auto:N` (adaptive up to N frames) or N frames.
     #[arg(long, value_parser = crate::units::parse_segment)]
     pub segment: Option<crate::units::SegmentSpec>,
-    /// zstd level, 1–22 [default: preset's, 9].
+    /// zstd level of the tile maps, and in format 1 of the keyframes and coefficients, 1–22 [default: preset's, 9].
     #[arg(long)]
     pub zstd_level: Option<i32>,
+    /// Format version to write: 1 (zero-run pairs through zstd) or 2 (rANS lanes: 0.69–0.77× the bytes, but the player's decoder thread spends 10–20× version 1's CPU time on it until the GPU decodes it).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=2))]
+    pub format_version: u16,
     /// Worker threads; 0 = one per core. The output is identical for any value.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -225,6 +228,21 @@ pub struct EncodeArgs {
     /// Write a PNG map of the polynomial degree of every tile in every segment.
     #[arg(long)]
     pub degree_map: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub struct ConvertArgs {
+    /// The .vbim file to read.
+    pub file: PathBuf,
+    /// The .vbim file to write (written under a temporary name, then renamed).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Format version to write: 2 (rANS lanes) or 1 (zero-run pairs through zstd, for players built before format 2).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=2))]
+    pub format_version: u16,
+    /// zstd level of format 1's keyframes and coefficients, 1–22.
+    #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(i32).range(1..=22))]
+    pub zstd_level: i32,
 }
 
 #[derive(Args)]

@@ -61,6 +61,10 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Some(z) = a.zstd_level {
         cfg.zstd_level = z;
     }
+    cfg.format = match a.format_version {
+        1 => vbim_encoder::FormatVersion::V1,
+        _ => vbim_encoder::FormatVersion::V2,
+    };
     if let Some(i) = a.intra_interval {
         cfg.intra_interval_s = i;
     }

@@ -23,6 +23,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
     let mut chroma_hist = vec![0u64; h.max_degree as usize + 1];
     let (mut lrgb, mut curved) = (0u64, 0u64);
     let mut damaged = 0;
+    let mut tiles: Option<TileMap> = None;
     for (i, e) in entries.iter().enumerate() {
         let st = if !a.verify {
             "unchecked".to_string()
@@ -31,8 +32,9 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                 Ok(bytes) => {
                     if e.kind == ChunkKind::TileMap {
                         match chunk::read_tilemap(&h, &bytes, e.last_frame - e.first_frame) {
-                            Ok(TileMap { luma, chroma }) => {
-                                for (l, c) in luma.iter().zip(&chroma) {
+                            Ok(t) => {
+                                let TileMap { luma, chroma } = tiles.insert(t);
+                                for (l, c) in luma.iter().zip(chroma.iter()) {
                                     hist[*l as usize] += 1;
                                     chroma_hist[*c as usize] += 1;
                                     if *l > 1 {
@@ -50,7 +52,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                             }
                         }
                     } else {
-                        match payload_status(&mut r, i, e.kind, &bytes) {
+                        match payload_status(&mut r, i, e.kind, &bytes, tiles.as_ref()) {
                             Ok(()) => "ok".into(),
                             Err(err) => {
                                 damaged += 1;
@@ -107,7 +109,9 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
         let v = json!({
             "file": name,
             "header": {
-                "version": format!("{}.{}", vbim_format::VERSION_MAJOR, h.version_minor),
+                "version": format!("{}.{}", h.version_major(), h.version_minor),
+                "coding": coding_name(&h),
+                "histograms_per_family": h.context_maps().map(|m| m.iter().map(|m| m.clusters).collect::<Vec<_>>()),
                 "width": h.width, "height": h.height, "channels": h.channels, "color": color,
                 "frames": h.frame_count, "rate": format!("{}/{}", h.rate_num, h.rate_den),
                 "duration_s": duration, "looping": h.looping, "tile_size": h.tile_size,
@@ -131,10 +135,21 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
     } else {
         println!(
             "{name}: .vbim {}.{}, {} bytes",
-            vbim_format::VERSION_MAJOR,
+            h.version_major(),
             h.version_minor,
             h.file_size
         );
+        match h.context_maps() {
+            Some(maps) => println!(
+                "  coding      {}, histograms per family {}",
+                coding_name(&h),
+                maps.iter()
+                    .map(|m| m.clusters.to_string())
+                    .collect::<Vec<_>>()
+                    .join("/")
+            ),
+            None => println!("  coding      {}", coding_name(&h)),
+        }
         println!(
             "  size        {}×{}, {} channel(s), {color}",
             h.width, h.height, h.channels
@@ -241,9 +256,26 @@ fn payload_status(
     i: usize,
     kind: ChunkKind,
     bytes: &[u8],
+    tiles: Option<&TileMap>,
 ) -> Result<(), String> {
+    let h = r.header().clone();
+    let limit = h
+        .largest_payload
+        .unwrap_or(vbim_format::limits::MAX_CHUNK_DECODED) as usize;
     match kind {
         ChunkKind::Metadata => r.metadata().map(|_| ()).map_err(|e| e.to_string()),
+        // Version 2: decoded (a section's damage shows only there).
+        ChunkKind::Keyframe if h.context_maps().is_some() => {
+            chunk::payload(&h, chunk::Payload::Keyframe, bytes, limit)
+                .map(|_| ())
+                .map_err(|e| format!("chunk {i}: {e}"))
+        }
+        ChunkKind::Coefficients if h.context_maps().is_some() => {
+            let t = tiles.ok_or(format!("chunk {i}: coefficients before a tile map"))?;
+            chunk::payload(&h, chunk::Payload::Coefficients(t), bytes, limit)
+                .map(|_| ())
+                .map_err(|e| format!("chunk {i}: {e}"))
+        }
         ChunkKind::Keyframe | ChunkKind::Coefficients => {
             match zstd::zstd_safe::get_frame_content_size(bytes) {
                 Err(_) => Err(format!("chunk {i}: not a zstd frame")),
@@ -255,5 +287,13 @@ fn payload_status(
             }
         }
         _ => Ok(()),
+    }
+}
+
+/// How the file codes its keyframes and coefficients (its major version).
+fn coding_name(h: &vbim_format::Header) -> &'static str {
+    match h.coding {
+        vbim_format::Coding::Pairs => "zero-run pairs through zstd",
+        vbim_format::Coding::Lanes(_) => "rANS lanes (context maps in the header)",
     }
 }

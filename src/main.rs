@@ -6,6 +6,7 @@ mod bench;
 mod cli;
 mod cmd_bake;
 mod cmd_compare;
+mod cmd_convert;
 mod cmd_decode;
 mod cmd_demo;
 mod cmd_encode;
@@ -43,6 +44,8 @@ pub enum Command {
     Encode(cli::EncodeArgs),
     /// Print a .vbim file's header, chunk index and model summary.
     Inspect(cli::InspectArgs),
+    /// Rewrite a .vbim file in another format version without coding it again (it decodes to the same frames, bit for bit).
+    Convert(cli::ConvertArgs),
     /// Decode every frame of a .vbim file with the CPU reference decoder.
     Decode(cli::DecodeArgs),
     /// Compare two sequences (directories, patterns or .vbim files) with the protocol's metrics.
@@ -86,6 +89,7 @@ fn main() -> ExitCode {
         Command::Bake(a) => cmd_bake::run(a),
         Command::Encode(a) => cmd_encode::run(a),
         Command::Inspect(a) => cmd_inspect::run(a),
+        Command::Convert(a) => cmd_convert::run(a),
         Command::Decode(a) => cmd_decode::run(a),
         Command::Compare(a) => cmd_compare::run(a),
         Command::Play(a) => cmd_play::run(a),

@@ -2,6 +2,8 @@
 
 use vbim_format::limits::MAX_DEGREE;
 
+pub use crate::payloads::FormatVersion;
+
 /// How segment boundaries are chosen.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SegmentMode {
@@ -44,7 +46,11 @@ pub struct EncoderConfig {
     pub max_degree: usize,
     /// How segment boundaries are chosen.
     pub segment: SegmentMode,
-    /// zstd level of the chunk payloads (1 to 22).
+    /// The format version written: version 1 (the default, every player reads it) or
+    /// version 2 (0.69–0.77× the bytes; its decode is heavier until the GPU does it).
+    pub format: FormatVersion,
+    /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
+    /// payloads (1 to 22).
     pub zstd_level: i32,
     /// Worker threads (0 = one per core). The output does not depend on it.
     pub threads: usize,
@@ -90,6 +96,10 @@ impl EncoderConfig {
             max_degree: 4,
             // Longer segments fit the budget but cost more than they save (measured).
             segment: SegmentMode::Auto { max: 32 },
+            // Version 2 becomes the default once the player decodes its sections on the
+            // GPU: until then its decoder thread decodes them on the CPU, 10–20× the work
+            // of version 1's zstd (BENCHMARKS.md, "Format 2").
+            format: FormatVersion::V1,
             zstd_level: 9,
             threads: 0,
             intra_interval_s: 4.0,

@@ -118,7 +118,6 @@ pub(crate) fn code_sequence(
         budget: KEY_SHARE * eps,
         chroma_step_factor: cfg.chroma_step_factor,
         deadzone: cfg.deadzone,
-        zstd_level: cfg.zstd_level,
     };
     let started = Instant::now();
 
@@ -137,6 +136,7 @@ pub(crate) fn code_sequence(
             number: 0,
             frames: (0, 0),
             bytes: pack_metadata(m, cfg.zstd_level)?,
+            raw: false,
         });
     }
     // The header keyframes are decoded against (their shape and curve only).
@@ -216,6 +216,7 @@ pub(crate) fn code_sequence(
                 flags: 0,
                 number: s,
                 frames: (b, e),
+                raw: kind == ChunkKind::Coefficients,
                 bytes,
             });
         }
@@ -229,7 +230,7 @@ pub(crate) fn code_sequence(
     }
     let segments = boundaries.len() as u32 - 1;
     let keyframes = if looping { segments } else { segments + 1 };
-    let header = header_for(
+    let mut header = header_for(
         &info,
         cfg,
         (color, transfer),
@@ -237,6 +238,14 @@ pub(crate) fn code_sequence(
         keyframes,
         chunks.len() as u32,
     );
+    crate::payloads::code(
+        &mut header,
+        &mut chunks,
+        &tilemaps,
+        cfg.format,
+        cfg.zstd_level,
+        progress,
+    )?;
     Ok(Coded {
         header,
         chunks,
@@ -327,6 +336,7 @@ fn keyframe_chunk(k: keyframe::CodedKeyframe, number: u32, frame: u32) -> Pendin
         number,
         frames: (frame, frame),
         bytes: k.bytes,
+        raw: true,
     }
 }
 

@@ -14,7 +14,7 @@ use crate::EncodeError;
 
 /// A keyframe as stored, and as every decoder will see it.
 pub(crate) struct CodedKeyframe {
-    /// The chunk's payload (zstd).
+    /// The chunk's payload, before its coding for the file's version (`payloads`).
     pub bytes: Vec<u8>,
     /// The planes a decoder reconstructs from it.
     pub decoded: Arc<Vec<Plane>>,
@@ -28,7 +28,6 @@ pub(crate) struct KeyParams {
     pub budget: f64,
     pub chroma_step_factor: f32,
     pub deadzone: f32,
-    pub zstd_level: i32,
 }
 
 /// Codes `frame` as a keyframe of the stream described by `header`. `prev`: the decoded
@@ -62,7 +61,7 @@ pub(crate) fn code(
     let reference = if predicted { prev } else { None };
     let decoded = Arc::new(chunk::read_keyframe_raw(header, &raw, reference)?);
     Ok(CodedKeyframe {
-        bytes: model::compress(&raw, p.zstd_level),
+        bytes: raw,
         decoded,
         intra: !predicted,
     })

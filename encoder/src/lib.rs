@@ -6,26 +6,31 @@
 //! by knob), [`encode`] into any `Write + Seek` or [`encode_file`] to a path (atomically),
 //! the [`EncodeReport`] they return, and [`EncodeReport::verify`] to measure the stream
 //! against its input. [`encode_to_tolerance`] holds the tolerance by measuring.
+//! [`convert`] rewrites a stream in another format version without coding it again.
 //!
 //! Inside, in the order a frame meets them: `input` (reading and validating frames),
 //! `domain` (the coded domain), `encode` (the pass over the sequence), `segment` (segment
-//! lengths), `keyframe` (keyframe coding), `model` (a segment's per-tile model), `output`
-//! (the header and writing), `report` (what an encode did), `aim` (the internal budget
-//! that delivers the tolerance, found on a sample before coding), `calibrate` (`--exact`)
-//! and `secant` (the search both of those share); `run` holds the entry points themselves
-//! (the worker pool, the aim, the coding and the writing of one encode).
+//! lengths), `keyframe` (keyframe coding), `model` (a segment's per-tile model),
+//! `payloads` (every payload coded for the file's version once all are known: version 2's
+//! context maps are learnt from all of them), `output` (the header and writing), `report`
+//! (what an encode did), `aim` (the internal budget that delivers the tolerance, found on a
+//! sample before coding), `calibrate` (`--exact`) and `secant` (the search both of those
+//! share); `run` holds the entry points themselves (the worker pool, the aim, the coding
+//! and the writing of one encode).
 
 #![deny(missing_docs)]
 
 mod aim;
 mod calibrate;
 mod config;
+mod convert;
 mod domain;
 mod encode;
 mod input;
 mod keyframe;
 mod model;
 mod output;
+mod payloads;
 mod plan;
 mod report;
 mod run;
@@ -37,12 +42,21 @@ use std::path::PathBuf;
 
 pub use aim::{Aim, SamplePass};
 pub use calibrate::{encode_to_tolerance, BAND_DB};
-pub use config::{ConfigError, EncoderConfig, Preset, SegmentMode, DEFAULT_MEMORY_LIMIT};
+pub use config::{
+    ConfigError, EncoderConfig, FormatVersion, Preset, SegmentMode, DEFAULT_MEMORY_LIMIT,
+};
+pub use convert::convert;
 pub use input::{Frame, FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
 pub use report::{lossless_baseline, EncodeReport, Measured};
 pub use run::{encode, encode_file};
 /// Progress callback: (stage, done, total) — the bake's, so one bar serves both.
 pub use vbim_files::Progress;
+
+/// What `vbim bench` measures of the encoder's internals (the `bench` feature).
+#[cfg(feature = "bench")]
+pub mod bench {
+    pub use crate::payloads::{cluster, HISTOGRAMS, LANE_BYTES};
+}
 
 /// Why an encode failed.
 #[derive(Debug, thiserror::Error)]

@@ -167,7 +167,8 @@ pub fn fit_error(
 /// 1.25² is the RMS bound the segment length keeps to, `choose_length`).
 const WORST_FRAME_SHARE: f64 = 1.25 * 1.25;
 
-/// One coded segment: its tile map and compressed chunk payloads.
+/// One coded segment: its tile map, the tile map's chunk payload (zstd) and the
+/// coefficients' payload before its coding for the file's version (`payloads`).
 pub struct SegmentCode {
     pub tiles: TileMap,
     pub tilemap_bytes: Vec<u8>,
@@ -375,7 +376,7 @@ where
             sp.zstd_level,
         )
         .expect("zstd"),
-        coeff_bytes: zstd::bulk::compress(&raw, sp.zstd_level).expect("zstd"),
+        coeff_bytes: raw,
         tiles,
     })
 }
@@ -471,9 +472,4 @@ pub fn code_keyframe(
         chunk::MODE_INTRA
     };
     chunk::write_keyframe(mode, &steps, &blocks)
-}
-
-/// A keyframe payload as stored: one zstd frame.
-pub fn compress(raw: &[u8], zstd_level: i32) -> Vec<u8> {
-    zstd::bulk::compress(raw, zstd_level).expect("zstd")
 }

@@ -19,6 +19,9 @@ pub(crate) struct PendingChunk {
     pub number: u32,
     pub frames: (u32, u32),
     pub bytes: Vec<u8>,
+    /// `bytes` is a keyframe or coefficient payload as version 1 has it before zstd, to be
+    /// coded for the file's version once every payload is known (`payloads::code`).
+    pub raw: bool,
 }
 
 /// The metadata chunk's payload: the JSON made compact (when it parses) and zstd'd. A
@@ -50,6 +53,8 @@ pub(crate) fn header_for(
 ) -> Header {
     Header {
         version_minor: vbim_format::VERSION_MINOR,
+        // Set with the payloads' coding (`payloads::code`).
+        coding: vbim_format::Coding::Pairs,
         width: info.width as u32,
         height: info.height as u32,
         channels: info.channels as u8,

@@ -292,6 +292,7 @@ impl<'a> Decoder<'a> {
         Ok(Decoder { x, words, at: 2 })
     }
 
+    #[inline(always)]
     fn step(&mut self, f: u32, c: u32) -> Result<()> {
         let slot = self.x & (SCALE - 1);
         self.x = f * (self.x >> PROB_BITS) + slot - c;
@@ -307,6 +308,7 @@ impl<'a> Decoder<'a> {
     }
 
     /// The next token, coded with `h`.
+    #[inline]
     pub fn token(&mut self, h: &Histogram) -> Result<usize> {
         let t = h.slot[(self.x & (SCALE - 1)) as usize] as usize;
         self.step(h.freq[t] as u32, h.cum[t] as u32)?;
@@ -314,6 +316,7 @@ impl<'a> Decoder<'a> {
     }
 
     /// The next `bits` raw bits (at most 32).
+    #[inline]
     pub fn raw(&mut self, bits: u32) -> Result<u32> {
         let mut v = 0u32;
         let mut left = bits;
@@ -375,6 +378,11 @@ impl BitWriter {
         for i in (0..=n).rev() {
             self.put((v >> i) & 1, 1);
         }
+    }
+
+    /// Bits written so far.
+    pub fn len_bits(&self) -> u64 {
+        self.bytes.len() as u64 * 8 + self.n as u64
     }
 
     /// The bytes, the last one padded with zeros.

@@ -3,8 +3,10 @@
 //! decompressed size is bounded by what the header allows before anything is allocated.
 
 use crate::dct::N;
-use crate::header::Header;
+use crate::header::{Coding, Header};
 use crate::limits::payload_bound;
+use crate::payload2;
+pub use crate::payload2::Payload;
 use crate::plane::{self, Onto, Plane};
 use crate::scan;
 pub use crate::scan::{scan, EntryPoint, ENTRY_PAIRS, FILL_BLOCKS};
@@ -88,6 +90,16 @@ pub fn payload_limit(h: &Header, blocks: usize, steps: usize, stored: usize) -> 
     h.largest_payload.map_or(bound, |p| {
         bound.min(usize::try_from(p).unwrap_or(usize::MAX))
     })
+}
+
+/// A keyframe or coefficient chunk's payload as version 1 has it before zstd, refusing
+/// one larger than `limit` bytes: decompressed (version 1), or its coefficient section
+/// decoded and written as pairs (version 2, [`payload2::to_pairs`]).
+pub fn payload(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
+    match h.coding {
+        Coding::Pairs => decompress(bytes, limit),
+        Coding::Lanes(_) => payload2::to_pairs(h, what, bytes, limit),
+    }
 }
 
 /// Decompresses a zstd frame, refusing output larger than `limit` bytes.
@@ -198,7 +210,9 @@ pub fn read_keyframe_from(
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
-    let raw = decompress(
+    let raw = payload(
+        h,
+        Payload::Keyframe,
         bytes,
         payload_limit(h, nblocks * planes, planes, bytes.len()),
     )?;
@@ -270,7 +284,9 @@ pub fn keyframe_streams(
     let (w, ht) = padded_size(h);
     let planes = h.channels as usize;
     let nblocks = (w / N) * (ht / N);
-    let raw = decompress(
+    let raw = payload(
+        h,
+        Payload::Keyframe,
         bytes,
         payload_limit(h, nblocks * planes, planes, bytes.len()),
     )?;
@@ -534,7 +550,9 @@ impl<'t> CoeffReader<'t> {
             })
             .sum();
         let dmax = tiles.max_degree();
-        let raw = decompress(
+        let raw = payload(
+            h,
+            Payload::Coefficients(tiles),
             bytes,
             payload_limit(h, total_blocks, planes * h.max_degree as usize, bytes.len()),
         )?;

@@ -158,6 +158,7 @@ fn small_header(a: u8, b: u8, c: u8, d: u8) -> Header {
     let srgb = c & 2 != 0;
     Header {
         version_minor: 0,
+        coding: crate::Coding::Pairs,
         width: 1 + (a % 72) as u32,
         height: 1 + (b % 72) as u32,
         channels: if c & 1 != 0 { 3 } else { 1 },
@@ -249,10 +250,16 @@ pub fn plane2_shape(
     } else {
         order = (0..w * h).map(|i| (i % w, i / w)).collect();
     }
+    // Every other cluster with a file-wide table of the small tokens (a chunk that needs
+    // another token sends its own).
+    let table = crate::ans::Histogram::from_counts(&[40, 20, 10, 5, 3, 2, 1, 1]);
     let map = plane2::ContextMap {
         clusters,
         of: (0..plane2::CONTEXTS)
             .map(|i| ((i * 7 + d as usize) % clusters as usize) as u8)
+            .collect(),
+        tables: (0..clusters)
+            .map(|k| table.clone().filter(|_| k % 2 == 1))
             .collect(),
     };
     let geometry = plane2::Geometry {

@@ -1,9 +1,11 @@
 //! The fixed-size file header (`docs/FORMAT.md`, section "Header").
 
+use crate::ans::{BitReader, BitWriter};
 use crate::checksum::xxh3;
 use crate::limits::{
     MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FPS, MAX_FRAMES, MAX_LOG_TOE, MIN_FPS,
 };
+use crate::plane2::{ContextMap, FAMILIES};
 use crate::{FormatError, Result};
 
 /// Bytes of one index entry (the index, which follows the header, is `chunk_count` of them).
@@ -12,16 +14,23 @@ pub const ENTRY_SIZE: usize = 40;
 /// `«VBIM»\r\n`: a non-ASCII first byte catches 7-bit transfers, CR LF catches newline
 /// conversion (the same trick as PNG and KTX2).
 pub const MAGIC: [u8; 8] = [0xAB, b'V', b'B', b'I', b'M', 0xBB, 0x0D, 0x0A];
-/// The major version this crate reads and writes: a reader refuses any other.
-pub const VERSION_MAJOR: u16 = 1;
-/// The minor version this crate writes: a reader accepts any (they only append header
-/// fields and add optional chunks). 1.1 appends [`Header::largest_payload`].
-pub const VERSION_MINOR: u16 = 1;
+/// The newest major version this crate reads and writes. It reads versions 1 and 2 and
+/// refuses any other; they differ in how keyframe and coefficient chunks are coded
+/// ([`Coding`]).
+pub const VERSION_MAJOR: u16 = 2;
+/// The minor version this crate writes with major version 2: a reader accepts any (they
+/// only append header fields and add optional chunks). Version 1 files are written as 1.1,
+/// which appended [`Header::largest_payload`] to 1.0.
+pub const VERSION_MINOR: u16 = 0;
 /// Bytes of a version 1.0 header: the shortest a reader accepts. Later minor versions
 /// append fields before the header's checksum; readers skip what they do not know.
 pub const HEADER_SIZE: usize = 192;
-/// Bytes of a version 1.1 header, the one this crate writes.
+/// Bytes of a version 1.1 header; a version 2.0 header appends its context maps.
 pub const HEADER_SIZE_1_1: usize = 200;
+/// The most bytes of context maps a header may hold: six families of 502 contexts take at
+/// most 2.3 kB, and each cluster's file-wide histogram at most 200 bytes (the encoder's 16
+/// clusters a family: 19 kB at most, about 1.5 kB in practice).
+const MAX_MAPS_BYTES: usize = 60 << 10;
 /// Number of (read rate, read-ahead) points of the buffer model.
 pub const READ_AHEAD_POINTS: usize = 4;
 
@@ -60,12 +69,25 @@ pub struct ReadAhead {
     /// Buffering needed before the first frame at that rate, ns.
     pub preroll_ns: u64,
 }
+/// How a file codes its keyframe and coefficient chunks: what its major version means.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Coding {
+    /// Version 1: each plane's blocks as (zero run, value) pairs, the payload compressed
+    /// by zstd ([`crate::plane`]).
+    Pairs,
+    /// Version 2: each payload's planes in rANS lanes ([`crate::plane2`]), coded with the
+    /// file's context maps (one per family, [`FAMILIES`]), which the header carries.
+    Lanes(Vec<ContextMap>),
+}
+
 /// The file header: what the stream is (size, channels, frame rate, model) and where its parts are. `docs/FORMAT.md` gives the byte layout.
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Header {
     /// Minor version of the writer.
     pub version_minor: u16,
+    /// How keyframes and coefficients are coded: the major version (1 or 2).
+    pub coding: Coding,
     /// Lightmap width, texels.
     pub width: u32,
     /// Lightmap height, texels.
@@ -144,13 +166,29 @@ impl Header {
             .copied()
     }
 
-    /// Bytes of this header as stored: 1.1's when it states the largest payload, else
-    /// 1.0's.
+    /// The major version: 1 for zero-run pairs through zstd, 2 for rANS lanes.
+    pub fn version_major(&self) -> u16 {
+        match self.coding {
+            Coding::Pairs => 1,
+            Coding::Lanes(_) => 2,
+        }
+    }
+
+    /// The file's context maps (version 2), one per family.
+    pub fn context_maps(&self) -> Option<&[ContextMap]> {
+        match &self.coding {
+            Coding::Pairs => None,
+            Coding::Lanes(maps) => Some(maps),
+        }
+    }
+
+    /// Bytes of this header as stored: 2.0's with its context maps; for version 1, 1.1's
+    /// when it states the largest payload, else 1.0's.
     pub fn header_size(&self) -> usize {
-        if self.largest_payload.is_some() {
-            HEADER_SIZE_1_1
-        } else {
-            HEADER_SIZE
+        match &self.coding {
+            Coding::Lanes(maps) => HEADER_SIZE_1_1 + 4 + maps_bytes(maps).len(),
+            Coding::Pairs if self.largest_payload.is_some() => HEADER_SIZE_1_1,
+            Coding::Pairs => HEADER_SIZE,
         }
     }
 
@@ -163,7 +201,7 @@ impl Header {
             pos: 0,
         };
         w.put(&MAGIC);
-        w.put(&VERSION_MAJOR.to_le_bytes());
+        w.put(&self.version_major().to_le_bytes());
         w.put(&self.version_minor.to_le_bytes());
         w.put(&(size as u32).to_le_bytes());
         w.put(&self.width.to_le_bytes());
@@ -195,6 +233,14 @@ impl Header {
         w.put(&self.index_checksum.to_le_bytes());
         if let Some(p) = self.largest_payload {
             w.put(&p.to_le_bytes());
+        } else if self.version_major() > 1 {
+            // Version 2 states it always (a header without it is refused on reading).
+            w.put(&0u64.to_le_bytes());
+        }
+        if let Coding::Lanes(maps) = &self.coding {
+            let m = maps_bytes(maps);
+            w.put(&(m.len() as u32).to_le_bytes());
+            w.put(&m);
         }
         debug_assert_eq!(w.pos, size - 8);
         let sum = xxh3(&b[..size - 8]);
@@ -215,7 +261,7 @@ impl Header {
             return Err(FormatError::BadMagic);
         }
         let major = u16::from_le_bytes([bytes[8], bytes[9]]);
-        if major != VERSION_MAJOR {
+        if !(1..=VERSION_MAJOR).contains(&major) {
             return Err(FormatError::UnsupportedVersion {
                 found: major,
                 known: VERSION_MAJOR,
@@ -285,18 +331,38 @@ impl Header {
             p.preroll_ns = r.u64();
         }
         let index_checksum = r.u64();
-        // 1.1 appends the largest payload. A 1.1 header too short to hold it is damaged.
-        let largest_payload = match (version_minor, header_size) {
-            (0, _) => None,
-            (_, n) if n >= HEADER_SIZE_1_1 => Some(r.u64()),
-            (m, n) => {
+        // 1.1 appends the largest payload, 2.0 always has it. A header too short to hold it
+        // is damaged.
+        let largest_payload = match (major, version_minor, header_size) {
+            (1, 0, _) => None,
+            (_, _, n) if n >= HEADER_SIZE_1_1 => Some(r.u64()),
+            (v, m, n) => {
                 return Err(FormatError::InvalidHeader(format!(
-                    "a version 1.{m} header of {n} bytes (1.1 and later hold at least {HEADER_SIZE_1_1})"
+                    "a version {v}.{m} header of {n} bytes (1.1 and later hold at least {HEADER_SIZE_1_1})"
                 )))
+            }
+        };
+        let coding = match major {
+            1 => Coding::Pairs,
+            _ => {
+                // 2.0 appends the context maps: their length, then the maps.
+                let room = header_size - 8 - r.pos;
+                let len = if room >= 4 {
+                    r.u32() as usize
+                } else {
+                    usize::MAX
+                };
+                if len > room.saturating_sub(4) || len > MAX_MAPS_BYTES {
+                    return Err(FormatError::InvalidHeader(format!(
+                        "context maps of {len} bytes in a {header_size}-byte header"
+                    )));
+                }
+                Coding::Lanes(read_maps(r.take(len))?)
             }
         };
         let h = Header {
             version_minor,
+            coding,
             width,
             height,
             channels,
@@ -436,6 +502,35 @@ impl Header {
         }
         Ok(())
     }
+}
+
+/// The context maps as a header stores them: the number of families (8 bits), then each
+/// map ([`ContextMap::write`]), zero bits to the byte.
+fn maps_bytes(maps: &[ContextMap]) -> Vec<u8> {
+    let mut w = BitWriter::default();
+    w.put(maps.len() as u32, 8);
+    maps.iter().for_each(|m| m.write(&mut w));
+    w.finish()
+}
+
+/// Reads what [`maps_bytes`] wrote: exactly [`FAMILIES`] maps, and nothing after them.
+fn read_maps(bytes: &[u8]) -> Result<Vec<ContextMap>> {
+    let bad = |m: String| FormatError::InvalidHeader(format!("context maps: {m}"));
+    let mut r = BitReader::new(bytes);
+    let n = r.get(8).map_err(|e| bad(e.to_string()))? as usize;
+    if n != FAMILIES {
+        return Err(bad(format!("{n} families (the format has {FAMILIES})")));
+    }
+    let maps = (0..n)
+        .map(|_| ContextMap::read(&mut r).map_err(|e| bad(e.to_string())))
+        .collect::<Result<Vec<_>>>()?;
+    if r.position().div_ceil(8) != bytes.len() {
+        return Err(bad(format!(
+            "{} bytes after the maps",
+            bytes.len() - r.position().div_ceil(8)
+        )));
+    }
+    Ok(maps)
 }
 
 struct Cursor<'a> {

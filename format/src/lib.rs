@@ -44,6 +44,7 @@ pub mod index;
 pub mod limits;
 mod memory;
 pub mod metrics;
+pub mod payload2;
 pub mod plane;
 pub mod plane2;
 mod reader;
@@ -54,7 +55,7 @@ mod writer;
 pub use checksum::xxh3;
 pub use error::{FormatError, Result};
 pub use header::{
-    ColorEncoding, Header, ReadAhead, Transfer, HEADER_SIZE, MAGIC, READ_AHEAD_POINTS,
+    Coding, ColorEncoding, Header, ReadAhead, Transfer, HEADER_SIZE, MAGIC, READ_AHEAD_POINTS,
     VERSION_MAJOR, VERSION_MINOR,
 };
 pub use index::{ChunkKind, IndexEntry};

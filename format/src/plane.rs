@@ -102,10 +102,36 @@ pub fn write_coefficients(blocks: &[[i32; N * N]], out: &mut Vec<u8>) {
         w.value(b[0].wrapping_sub(prev_dc));
         prev_dc = b[0];
     }
-    for f in 1..N * N {
-        for b in blocks {
-            w.value(b[f]);
+    // The AC terms gathered per frequency in one pass over the blocks: reading frequency
+    // by frequency across the blocks would stream the whole plane 63 times (a 2048²
+    // plane is 16 MB), which took 70% of a format 2 decode.
+    let mut count = [0u32; N * N + 1];
+    for b in blocks {
+        for (f, &v) in b.iter().enumerate().skip(1) {
+            count[f + 1] += (v != 0) as u32;
         }
+    }
+    for f in 1..N * N {
+        count[f + 1] += count[f];
+    }
+    let mut terms = vec![(0u32, 0i32); count[N * N] as usize];
+    let mut at = count;
+    for (i, b) in blocks.iter().enumerate() {
+        for (f, &v) in b.iter().enumerate().skip(1) {
+            if v != 0 {
+                terms[at[f] as usize] = (i as u32, v);
+                at[f] += 1;
+            }
+        }
+    }
+    for f in 1..N * N {
+        let mut next = 0u32;
+        for &(i, v) in &terms[count[f] as usize..count[f + 1] as usize] {
+            w.zeros(i - next);
+            w.value(v);
+            next = i + 1;
+        }
+        w.zeros(blocks.len() as u32 - next);
     }
     w.finish();
 }

@@ -1,6 +1,6 @@
 //! Format 2's coding of a chunk's coefficient planes, designed for a GPU decoder
-//! ("design E" of BENCHMARKS.md, "A static coder a GPU can decode"). No chunk of version 1
-//! uses it; it is the specification the encoder and the GPU decoder of format 2 follow.
+//! ("design E" of BENCHMARKS.md, "A static coder a GPU can decode"): the sections of
+//! version 2's keyframe and coefficient chunks ([`payload2`](crate::payload2)).
 //!
 //! A plane is a grid of 8×8 blocks (each 64 quantised coefficients in zig-zag order),
 //! whole for a keyframe, the member tiles' blocks for a bubble plane. Its symbols are
@@ -23,16 +23,20 @@
 //! up-left, 0 outside the plane, or outside the tile for a bubble plane), a pass of scans.
 //!
 //! **Lanes** are runs of regions of 16 × 16 blocks in raster order, cut by the encoder
-//! where a lane's coded size reaches a target (or it holds [`MAX_LANE_SYMBOLS`] symbols
-//! or [`MAX_LANE_REGIONS`] regions); a lane holds its regions' symbols pass by pass. **Histograms** are sent per chunk, one per cluster of contexts that the chunk
-//! uses; which cluster a context belongs to is the file's [`ContextMap`], per family (a
-//! kind of chunk × luma or chroma).
+//! where a lane's coded size reaches a target (or it holds [`MAX_LANE_SYMBOLS`] symbols or
+//! [`MAX_LANE_REGIONS`] regions); a lane holds its regions' symbols pass by pass.
+//! **Histograms**: which cluster of histograms codes each context is the file's
+//! [`ContextMap`], per family (a kind of chunk × luma or chroma), which also holds each
+//! cluster's histogram over the whole file. A chunk codes each cluster it uses with its
+//! own histogram or with the file's, whichever costs fewer bits: a small chunk's own
+//! tables can cost more than its symbols.
 //!
 //! A chunk's coefficient section: for each family it uses, in increasing order, for each
-//! of its map's clusters a bit saying whether a histogram follows, then the histogram
-//! ([`Histogram::write`]); zero bits to the byte. Then per plane: its lane count, and per
-//! lane the regions it covers and its words (LEB128 varints). Then every lane's words
-//! (16-bit, little-endian), plane after plane.
+//! of its map's clusters a bit saying whether the chunk uses it, and if it does a bit
+//! saying whether its own histogram follows ([`Histogram::write`]; 0: the file's); zero
+//! bits to the byte. Then per plane: its lane count, and per lane the regions it covers
+//! and its words (LEB128 varints). Then every lane's words (16-bit, little-endian), plane
+//! after plane.
 
 use crate::ans::{self, BitReader, BitWriter, Histogram, Symbol, TOKENS};
 use crate::dct::N;
@@ -59,6 +63,22 @@ const AC_ODD: usize = AC_EVEN + 120; // 3 × 10 × 12: × how many neighbours ha
 /// Contexts of one family.
 pub const CONTEXTS: usize = AC_ODD + 360;
 
+/// Families of planes, each coded with its own [`ContextMap`]: intra keyframes, predicted
+/// keyframes and bubble terms, each luma then chroma ([`family`]).
+pub const FAMILIES: usize = 6;
+/// Kinds of plane, in the order of [`family`]'s `kind`.
+pub const INTRA_KEY: usize = 0;
+/// See [`INTRA_KEY`].
+pub const PREDICTED_KEY: usize = 1;
+/// See [`INTRA_KEY`].
+pub const BUBBLE: usize = 2;
+
+/// The family of a plane of `kind` ([`INTRA_KEY`], [`PREDICTED_KEY`] or [`BUBBLE`]), luma
+/// or chroma.
+pub fn family(kind: usize, chroma: bool) -> usize {
+    kind * 2 + chroma as usize
+}
+
 /// Where a plane's blocks lie.
 #[derive(Clone, Copy, Debug)]
 pub struct Geometry<'a> {
@@ -80,31 +100,43 @@ pub struct Plane<'a> {
     pub geometry: Geometry<'a>,
 }
 
-/// Which histogram (cluster) of a chunk codes each context of a family.
+/// Which histogram (cluster) of a chunk codes each context of a family, and each
+/// cluster's histogram over the whole file, which a chunk may use instead of sending its
+/// own (a small chunk's own tables can cost more than its symbols).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ContextMap {
     /// Histograms, 1 to 255.
     pub clusters: u8,
     /// The cluster of each of the [`CONTEXTS`] contexts.
     pub of: Vec<u8>,
+    /// Each cluster's file-wide histogram (`None`: chunks send their own).
+    pub tables: Vec<Option<Histogram>>,
 }
 
 impl ContextMap {
-    /// Every context in one histogram.
+    /// Every context in one histogram, with no file-wide table.
     pub fn single() -> ContextMap {
         ContextMap {
             clusters: 1,
             of: vec![0; CONTEXTS],
+            tables: vec![None],
         }
     }
 
-    /// Appends the map: the cluster count (8 bits), then each context's cluster in as few
-    /// bits as the count needs.
+    /// Appends the map: the cluster count (8 bits), each context's cluster in as few bits
+    /// as the count needs, then per cluster a bit saying whether a file-wide histogram
+    /// follows, and the histogram.
     pub fn write(&self, out: &mut BitWriter) {
         out.put(self.clusters as u32, 8);
         let bits = bits_for(self.clusters);
         for &k in &self.of {
             out.put(k as u32, bits);
+        }
+        for t in &self.tables {
+            out.put(t.is_some() as u32, 1);
+            if let Some(h) = t {
+                h.write(out);
+            }
         }
     }
 
@@ -126,7 +158,17 @@ impl ContextMap {
                 Ok(k as u8)
             })
             .collect::<Result<_>>()?;
-        Ok(ContextMap { clusters, of })
+        let tables = (0..clusters)
+            .map(|_| match r.get(1)? {
+                1 => Histogram::read(r).map(Some),
+                _ => Ok(None),
+            })
+            .collect::<Result<_>>()?;
+        Ok(ContextMap {
+            clusters,
+            of,
+            tables,
+        })
     }
 }
 
@@ -247,13 +289,13 @@ fn grid_index(geo: &Geometry) -> Result<Vec<u32>> {
 
 /// Walks a plane's four passes, coding every symbol through `coder`; `source` gives the
 /// blocks to code (the encoder), or nothing (the decoder). `lane_of` gives each region's
-/// lane. Returns the blocks, their DC restored.
+/// lane. Returns the blocks, their DC restored, sparse.
 fn walk(
     geo: &Geometry,
     source: Option<&[[i32; N * N]]>,
-    lane_of: &dyn Fn(usize) -> usize,
-    coder: &mut dyn Coder,
-) -> Result<Vec<[i32; N * N]>> {
+    lane_of: &impl Fn(usize) -> usize,
+    coder: &mut impl Coder,
+) -> Result<Decoded> {
     let (bw, bh) = geo.grid;
     let index = grid_index(geo)?;
     let n = geo.order.len();
@@ -261,9 +303,17 @@ fn walk(
         let dc: Vec<i32> = s.iter().map(|q| q[0]).collect();
         residuals(geo, &index, &dc)
     });
-    let mut blocks = vec![[0i32; N * N]; n];
+    // Sparse: a plane of a day's light is mostly empty blocks, and touching 256 bytes of
+    // every block was most of a decode. Each block's non-zero positions as a mask (what
+    // the odd blocks' contexts read), its terms where `first` says.
+    let mut out = Decoded {
+        dc: vec![0i32; n],
+        first: vec![0u32; n],
+        count: vec![0u8; n],
+        terms: Vec::new(),
+    };
+    let mut mask = vec![0u64; n];
     let mut residual = vec![0i32; n];
-    let mut count = vec![0usize; n];
     let rw = bw.div_ceil(REGION);
     let region_of = |x: usize, y: usize| (y / REGION) * rw + x / REGION;
     let at = |x: isize, y: isize| -> Option<usize> {
@@ -301,18 +351,20 @@ fn walk(
                     if !exists[g] || (gx + gy) % 2 != parity {
                         continue;
                     }
-                    let around: Vec<bool> = FOUR
-                        .iter()
-                        .filter_map(|&(dx, dy)| {
-                            let (u, v) = (gx as isize + dx, gy as isize + dy);
-                            (u >= 0 && v >= 0 && u < gw as isize && v < gh as isize)
-                                .then_some((u as usize, v as usize))
-                        })
-                        .filter(|&(u, v)| exists[v * gw + u])
-                        .map(|(u, v)| full[v * gw + u])
-                        .collect();
-                    let ctx = if parity == 1 && !around.is_empty() {
-                        1 + around.iter().filter(|&&f| !f).count()
+                    // The neighbouring groups that exist, and how many of them are empty.
+                    let (mut around, mut empty) = (0, 0);
+                    for &(dx, dy) in &FOUR {
+                        let (u, v) = (gx as isize + dx, gy as isize + dy);
+                        if u >= 0 && v >= 0 && u < gw as isize && v < gh as isize {
+                            let n = v as usize * gw + u as usize;
+                            if exists[n] {
+                                around += 1;
+                                empty += !full[n] as usize;
+                            }
+                        }
+                    }
+                    let ctx = if parity == 1 && around > 0 {
+                        1 + empty
                     } else {
                         0
                     };
@@ -339,14 +391,20 @@ fn walk(
                     }
                     debug_assert_eq!(region_of(x, y), region);
                     let lane = lane_of(region);
-                    let four: Vec<usize> = FOUR
-                        .iter()
-                        .filter_map(|&(dx, dy)| at(x as isize + dx, y as isize + dy))
-                        .collect();
+                    let mut four_at = [0usize; 4];
+                    let mut len = 0;
+                    for &(dx, dy) in &FOUR {
+                        if let Some(j) = at(x as isize + dx, y as isize + dy) {
+                            four_at[len] = j;
+                            len += 1;
+                        }
+                    }
+                    let four = &four_at[..len];
                     let odd = parity == 1 && !four.is_empty();
                     let (dc_ctx, count_ctx) = if odd {
                         let sizes: usize = four.iter().map(|&j| size_class(residual[j])).sum();
-                        let mean = (four.iter().map(|&j| count[j]).sum::<usize>() + four.len() / 2)
+                        let mean = (four.iter().map(|&j| out.count[j] as usize).sum::<usize>()
+                            + four.len() / 2)
                             / four.len();
                         (1 + (2 * sizes / four.len()).min(3), 3 + count_bucket(mean))
                     } else {
@@ -367,7 +425,8 @@ fn walk(
                             "block ({x}, {y}): {nz} coefficients"
                         )));
                     }
-                    count[b] = nz;
+                    out.count[b] = nz as u8;
+                    out.first[b] = out.terms.len() as u32;
                     let mut left = nz;
                     let mut i = 1;
                     while left > 0 {
@@ -378,14 +437,17 @@ fn walk(
                         }
                         let ctx = left_bucket(left) * 12 + band(i);
                         let ctx = if odd {
-                            let hits = four.iter().filter(|&&j| blocks[j][i] != 0).count();
+                            let hits = four.iter().filter(|&&j| mask[j] >> i & 1 != 0).count();
                             AC_ODD + (2 * hits).div_ceil(four.len()).min(2) * 120 + ctx
                         } else {
                             AC_EVEN + ctx
                         };
                         let v = unpack(coder.code(lane, ctx, want.map_or(0, |q| pack(q[i])))?);
-                        blocks[b][i] = v;
-                        left -= (v != 0) as usize;
+                        if v != 0 {
+                            mask[b] |= 1 << i;
+                            out.terms.push((i as u8, v));
+                            left -= 1;
+                        }
                         i += 1;
                     }
                 }
@@ -405,15 +467,51 @@ fn walk(
                         return 0;
                     }
                 }
-                at(u, v).map_or(0, |j| blocks[j][0])
+                at(u, v).map_or(0, |j| out.dc[j])
             };
-            blocks[b][0] = residual[b]
+            out.dc[b] = residual[b]
                 .wrapping_add(dc(-1, 0))
                 .wrapping_add(dc(0, -1))
                 .wrapping_sub(dc(-1, -1));
         }
     }
-    Ok(blocks)
+    Ok(out)
+}
+
+/// A plane's blocks as decoded, sparse: each block's DC, and its non-zero AC terms.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Decoded {
+    /// Each block's DC.
+    pub dc: Vec<i32>,
+    /// Block b's terms are `terms[first[b]..first[b] + count[b]]`.
+    pub first: Vec<u32>,
+    /// Each block's number of non-zero AC terms.
+    pub count: Vec<u8>,
+    /// (zig-zag index, value) of the non-zero AC terms, block by block, each block's in
+    /// increasing index.
+    pub terms: Vec<(u8, i32)>,
+}
+
+impl Decoded {
+    /// Block b's non-zero AC terms.
+    pub fn terms_of(&self, b: usize) -> &[(u8, i32)] {
+        let f = self.first[b] as usize;
+        &self.terms[f..f + self.count[b] as usize]
+    }
+
+    /// Every block dense, 64 integers in zig-zag order.
+    pub fn dense(&self) -> Vec<[i32; N * N]> {
+        (0..self.dc.len())
+            .map(|b| {
+                let mut q = [0i32; N * N];
+                q[0] = self.dc[b];
+                for &(i, v) in self.terms_of(b) {
+                    q[i as usize] = v;
+                }
+                q
+            })
+            .collect()
+    }
 }
 
 /// The encoder's record: each symbol's lane, context and value, in walking order.
@@ -479,21 +577,44 @@ pub fn encode(
             counts[p.family][map.of[ctx] as usize][ans::hybrid_uint(v).0] += 1;
         }
     }
-    let hists: Vec<Vec<Option<Histogram>>> = counts
-        .iter()
-        .map(|f| f.iter().map(|h| Histogram::from_counts(h)).collect())
-        .collect();
     let mut bits = BitWriter::default();
     // Each histogram's place in the list the lanes are coded with.
     let mut place = vec![Vec::new(); maps.len()];
     let mut list = Vec::new();
     for &f in &used {
-        for h in &hists[f] {
-            bits.put(h.is_some() as u32, 1);
+        for (k, c) in counts[f].iter().enumerate() {
             place[f].push(list.len() as u16);
-            if let Some(h) = h {
-                h.write(&mut bits);
-                list.push(h.clone());
+            let Some(own) = Histogram::from_counts(c) else {
+                bits.put(0, 1);
+                continue;
+            };
+            bits.put(1, 1);
+            // The file's table where it costs fewer bits than this chunk's own table
+            // and symbols at its own probabilities.
+            let symbols = |h: &Histogram| -> f64 {
+                (c.iter().enumerate())
+                    .filter(|&(_, &n)| n > 0)
+                    .map(|(t, &n)| n as f64 * h.cost(t))
+                    .sum()
+            };
+            let mut table = BitWriter::default();
+            own.write(&mut table);
+            let own_bits = table.len_bits() as f64 + symbols(&own);
+            let file = maps[f]
+                .tables
+                .get(k)
+                .and_then(Option::as_ref)
+                .filter(|h| (c.iter().enumerate()).all(|(t, &n)| n == 0 || h.frequency(t) > 0));
+            match file {
+                Some(h) if symbols(h) <= own_bits => {
+                    bits.put(0, 1);
+                    list.push(h.clone());
+                }
+                _ => {
+                    bits.put(1, 1);
+                    own.write(&mut bits);
+                    list.push(own);
+                }
             }
         }
     }
@@ -598,6 +719,7 @@ struct Lanes<'a, 'h> {
 }
 
 impl Coder for Lanes<'_, '_> {
+    #[inline(always)]
     fn code(&mut self, lane: usize, ctx: usize, _: u32) -> Result<u32> {
         let h = match self.of[ctx] {
             u16::MAX => {
@@ -644,12 +766,21 @@ impl Section {
         let mut place = vec![Vec::new(); maps.len()];
         let mut histograms = Vec::new();
         for &f in &used {
-            for _ in 0..maps[f].clusters {
+            for k in 0..maps[f].clusters as usize {
+                if r.get(1)? == 0 {
+                    place[f].push(u16::MAX);
+                    continue;
+                }
+                place[f].push(histograms.len() as u16);
                 if r.get(1)? == 1 {
-                    place[f].push(histograms.len() as u16);
                     histograms.push(Histogram::read(&mut r)?);
                 } else {
-                    place[f].push(u16::MAX);
+                    let file = maps[f].tables.get(k).and_then(Option::as_ref);
+                    histograms.push(file.cloned().ok_or_else(|| {
+                        FormatError::Invalid(format!(
+                            "family {f}, cluster {k}: the file's histogram, which it has not"
+                        ))
+                    })?);
                 }
             }
         }
@@ -715,9 +846,24 @@ pub fn decode(
     planes: &[Plane],
     maps: &[ContextMap],
 ) -> Result<Vec<Vec<[i32; N * N]>>> {
-    let section = Section::parse(bytes, planes, maps)?;
     let mut out = Vec::with_capacity(planes.len());
-    for (p, sp) in planes.iter().zip(&section.planes) {
+    decode_each(bytes, planes, maps, |_, blocks| {
+        out.push(blocks.dense());
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// [`decode`], handing each plane's blocks, sparse, to `each(plane, blocks)` as soon as
+/// they are decoded, so that one plane's blocks are held at a time.
+pub fn decode_each(
+    bytes: &[u8],
+    planes: &[Plane],
+    maps: &[ContextMap],
+    mut each: impl FnMut(usize, &Decoded) -> Result<()>,
+) -> Result<()> {
+    let section = Section::parse(bytes, planes, maps)?;
+    for (i, (p, sp)) in planes.iter().zip(&section.planes).enumerate() {
         let mut decoders = Vec::with_capacity(sp.lanes.len());
         let mut lane_of = Vec::new();
         for (l, &(r0, r1, w0, w1)) in sp.lanes.iter().enumerate() {
@@ -733,9 +879,9 @@ pub fn decode(
         for d in &lanes.decoders {
             d.finish()?;
         }
-        out.push(blocks);
+        each(i, &blocks)?;
     }
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -839,9 +985,20 @@ mod tests {
             ),
         ];
         let mut seed = 3;
+        // Clusters 1, 3 and 5 with file-wide tables: one that covers the small tokens only
+        // (chunks that need others send their own), one of everything.
+        let small = Histogram::from_counts(&[50, 30, 10, 5, 3, 1]);
+        let all = Histogram::from_counts(&[1; crate::ans::TOKENS]);
         let spread = ContextMap {
             clusters: 7,
             of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 7) as u8).collect(),
+            tables: (0..7)
+                .map(|k| match k {
+                    1 | 5 => small.clone(),
+                    3 => all.clone(),
+                    _ => None,
+                })
+                .collect(),
         };
         for maps in [
             vec![ContextMap::single(), ContextMap::single()],
@@ -890,6 +1047,9 @@ mod tests {
         let map = ContextMap {
             clusters: 13,
             of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 13) as u8).collect(),
+            tables: (0..13)
+                .map(|k| Histogram::from_counts(&[k + 1, 5, 0, 2]).filter(|_| k % 3 == 0))
+                .collect(),
         };
         let mut w = BitWriter::default();
         map.write(&mut w);

@@ -5,7 +5,8 @@
 use std::io::{Seek, SeekFrom, Write};
 
 use crate::checksum::xxh3;
-use crate::header::{Header, HEADER_SIZE_1_1, VERSION_MINOR};
+use crate::chunk::{self, Payload, TileMap};
+use crate::header::{Coding, Header, HEADER_SIZE_1_1, VERSION_MINOR};
 use crate::index::{self, ChunkKind, IndexEntry, ENTRY_SIZE};
 use crate::{buffer_model, FormatError, Result};
 
@@ -17,6 +18,16 @@ pub struct Writer<W> {
     pos: u64,
     /// The largest decompressed size of a keyframe or coefficient payload so far.
     largest_payload: u64,
+    /// The last tile map written (a version 2 coefficient payload is measured with it).
+    tiles: Option<TileMap>,
+}
+
+/// Bytes of the header a [`Writer`] stores: 1.1's for version 1, 2.0's with its maps.
+fn written_size(h: &Header) -> usize {
+    match h.coding {
+        Coding::Pairs => HEADER_SIZE_1_1,
+        Coding::Lanes(_) => h.header_size(),
+    }
 }
 
 impl<W: Write + Seek> Writer<W> {
@@ -26,8 +37,8 @@ impl<W: Write + Seek> Writer<W> {
         if n == 0 || n > crate::limits::MAX_CHUNKS as usize {
             return Err(FormatError::Invalid(format!("cannot write {n} chunks")));
         }
-        // The header this crate writes is 1.1's (it states the largest payload).
-        let reserved = HEADER_SIZE_1_1 + n * ENTRY_SIZE;
+        // The header this crate writes states the largest payload (1.1 or 2.0).
+        let reserved = written_size(&header) + n * ENTRY_SIZE;
         out.write_all(&vec![0u8; reserved])?;
         Ok(Writer {
             out,
@@ -35,6 +46,7 @@ impl<W: Write + Seek> Writer<W> {
             entries: Vec::with_capacity(n),
             pos: reserved as u64,
             largest_payload: 0,
+            tiles: None,
         })
     }
 
@@ -52,8 +64,34 @@ impl<W: Write + Seek> Writer<W> {
                 "more chunks than the header announced".into(),
             ));
         }
-        if matches!(kind, ChunkKind::Keyframe | ChunkKind::Coefficients) {
-            self.largest_payload = self.largest_payload.max(decompressed_size(bytes)?);
+        let size = match (&self.header.coding, kind) {
+            (Coding::Pairs, ChunkKind::Keyframe | ChunkKind::Coefficients) => {
+                Some(decompressed_size(bytes)?)
+            }
+            (Coding::Lanes(_), ChunkKind::TileMap) => {
+                let len = frames.1.saturating_sub(frames.0);
+                self.tiles = Some(chunk::read_tilemap(&self.header, bytes, len)?);
+                None
+            }
+            // Version 2's payloads are measured as a reader will decode them, which also
+            // checks that they do.
+            (Coding::Lanes(_), ChunkKind::Keyframe) => {
+                Some(decoded_size(&self.header, Payload::Keyframe, bytes)?)
+            }
+            (Coding::Lanes(_), ChunkKind::Coefficients) => {
+                let tiles = self.tiles.as_ref().ok_or_else(|| {
+                    FormatError::Invalid("coefficients before their tile map".into())
+                })?;
+                Some(decoded_size(
+                    &self.header,
+                    Payload::Coefficients(tiles),
+                    bytes,
+                )?)
+            }
+            _ => None,
+        };
+        if let Some(n) = size {
+            self.largest_payload = self.largest_payload.max(n);
         }
         self.out.write_all(bytes)?;
         self.entries.push(IndexEntry {
@@ -85,7 +123,10 @@ impl<W: Write + Seek> Writer<W> {
             e.write(&mut raw);
         }
         let h = &mut self.header;
-        h.version_minor = VERSION_MINOR;
+        h.version_minor = match h.coding {
+            Coding::Pairs => 1,
+            Coding::Lanes(_) => VERSION_MINOR,
+        };
         h.largest_payload = Some(self.largest_payload.max(1));
         let size = h.header_size() as u64;
         h.index_offset = size;
@@ -132,6 +173,12 @@ pub fn rewrite(
     }
     bytes[..head.len()].copy_from_slice(&head);
     Ok(h)
+}
+
+/// The size of a version 2 payload as version 1's before zstd (what a reader decodes it to).
+fn decoded_size(h: &Header, what: Payload, bytes: &[u8]) -> Result<u64> {
+    let limit = crate::limits::MAX_CHUNK_DECODED as usize;
+    Ok(crate::payload2::to_pairs(h, what, bytes, limit)?.len() as u64)
 }
 
 /// The decompressed size of a zstd frame: what its header states (every frame this

@@ -3,16 +3,22 @@
 
 use std::io::Cursor;
 
+use vbim_format::chunk::Payload;
 use vbim_format::chunk::{self, TileMap, MODE_INTRA, MODE_PREDICTED};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::index::{FLAG_INTRA, FLAG_OPTIONAL};
+use vbim_format::payload2;
 use vbim_format::plane::{self, Plane};
-use vbim_format::{ChunkKind, ColorEncoding, FormatError, Header, Reader, Transfer, Writer};
+use vbim_format::plane2::{self, ContextMap};
+use vbim_format::{
+    ChunkKind, Coding, ColorEncoding, FormatError, Header, Reader, Transfer, Writer,
+};
 use vbim_format::{ReadAhead, HEADER_SIZE, READ_AHEAD_POINTS};
 
 fn header(frames: u32, segments: u32, looping: bool) -> Header {
     Header {
         version_minor: 0,
+        coding: vbim_format::Coding::Pairs,
         width: 20,
         height: 12,
         channels: 3,
@@ -361,12 +367,120 @@ fn hostile_index_entries_are_refused() {
     }
 }
 
+/// `v1` (a version 1 stream) with its keyframes and coefficients coded as version 2's
+/// sections, with `maps`; every other chunk as it was.
+fn as_version_2(v1: &[u8], maps: Vec<ContextMap>) -> Vec<u8> {
+    let mut r = Reader::open(Cursor::new(v1)).unwrap();
+    let mut h = r.header().clone();
+    h.coding = Coding::Lanes(maps.clone());
+    let old = r.header().clone();
+    let entries = r.entries().to_vec();
+    let mut w = Writer::new(Cursor::new(Vec::new()), h.clone()).unwrap();
+    let mut tiles = None;
+    for (i, e) in entries.iter().enumerate() {
+        let bytes = r.read_chunk(i).unwrap();
+        let what = match e.kind {
+            ChunkKind::Keyframe => Some(Payload::Keyframe),
+            ChunkKind::Coefficients => Some(Payload::Coefficients(tiles.as_ref().unwrap())),
+            ChunkKind::TileMap => {
+                let len = e.last_frame - e.first_frame;
+                tiles = Some(chunk::read_tilemap(&old, &bytes, len).unwrap());
+                None
+            }
+            _ => None,
+        };
+        let bytes = match what {
+            Some(what) => {
+                let raw = chunk::payload(&old, what, &bytes, usize::MAX / 4).unwrap();
+                payload2::encode(&h, what, &raw, &maps, 64).unwrap()
+            }
+            None => bytes,
+        };
+        let frames = (e.first_frame, e.last_frame);
+        w.write_chunk(e.kind, e.flags, e.number, frames, &bytes)
+            .unwrap();
+    }
+    w.finish().unwrap().1.into_inner()
+}
+
+/// Maps of two histograms each: the DC and count contexts in one, the rest in the other.
+fn two_cluster_maps() -> Vec<ContextMap> {
+    (0..plane2::FAMILIES)
+        .map(|f| ContextMap {
+            clusters: 2,
+            of: (0..plane2::CONTEXTS)
+                .map(|c| u8::from(c >= 22 + f % 2))
+                .collect(),
+            // The coefficients' cluster has a file-wide table of the small tokens.
+            tables: vec![
+                None,
+                vbim_format::ans::Histogram::from_counts(&[200, 40, 10, 4, 2, 1]),
+            ],
+        })
+        .collect()
+}
+
+#[test]
+fn version_2_decodes_to_the_same_frames_as_version_1() {
+    let v1 = sample_file();
+    for maps in [
+        vec![ContextMap::single(); plane2::FAMILIES],
+        two_cluster_maps(),
+    ] {
+        let v2 = as_version_2(&v1, maps.clone());
+        let r = Reader::open(Cursor::new(&v2)).unwrap();
+        let h = r.header();
+        assert_eq!((h.version_major(), h.version_minor), (2, 0));
+        assert_eq!(h.context_maps(), Some(&maps[..]));
+        assert_eq!(h.header_size() as u64, h.index_offset);
+        // The largest payload is what the pairs of version 1 took before zstd.
+        let h1 = Reader::open(Cursor::new(&v1)).unwrap().header().clone();
+        assert_eq!(h.largest_payload, h1.largest_payload);
+        assert_eq!(decode_all(&v2).unwrap(), decode_all(&v1).unwrap());
+    }
+}
+
+#[test]
+fn version_2_damage_is_refused_with_the_chunk_named() {
+    let v2 = as_version_2(&sample_file(), two_cluster_maps());
+    let r = Reader::open(Cursor::new(&v2)).unwrap();
+    let h = r.header().clone();
+    // Each keyframe and coefficient payload, cut short or with a flipped bit (checksums
+    // redone): an error, never a panic; a cut one always an error.
+    for e in r.entries() {
+        if !matches!(e.kind, ChunkKind::Keyframe) {
+            continue;
+        }
+        let at = e.offset as usize;
+        let len = e.length as usize;
+        let payload = &v2[at..at + len];
+        for cut in 0..len {
+            assert!(
+                chunk::payload(&h, Payload::Keyframe, &payload[..cut], 1 << 20).is_err(),
+                "cut at {cut} of {len}"
+            );
+        }
+        for bit in 0..len * 8 {
+            let mut bad = payload.to_vec();
+            bad[bit / 8] ^= 1 << (bit % 8);
+            let _ = chunk::payload(&h, Payload::Keyframe, &bad, 1 << 20);
+        }
+    }
+    // Damaged maps in the header: refused, the maps named.
+    let mut bad = v2.clone();
+    let at = 197; // the first map's cluster count (after the 1.1 fields, the length, the family count)
+    bad[at] = 0;
+    let bad = vbim_format::fuzz::with_checksums(&bad);
+    let e = Reader::open(Cursor::new(&bad)).unwrap_err().to_string();
+    assert!(e.contains("context map"), "{e}");
+}
+
 #[test]
 fn unknown_major_version_and_bad_magic() {
     let mut bytes = sample_file();
-    bytes[8] = 2;
+    bytes[8] = 3;
     match Reader::open(Cursor::new(&bytes)) {
-        Err(FormatError::UnsupportedVersion { found: 2, .. }) => {}
+        Err(FormatError::UnsupportedVersion { found: 3, .. }) => {}
         other => panic!("{other:?}"),
     }
     bytes[0] = b'X';
@@ -430,6 +544,7 @@ fn version_1_1_states_the_largest_payload_and_1_0_files_read_as_before() {
     let mut old = bytes.clone();
     let h10 = Header {
         version_minor: 0,
+        coding: vbim_format::Coding::Pairs,
         largest_payload: None,
         ..h.clone()
     };

@@ -5,7 +5,9 @@ use std::io::Cursor;
 use std::sync::Arc;
 use std::time::Duration;
 
-use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
+use vbim_encoder::{
+    encode, EncoderConfig, FormatVersion, InputKind, MemorySource, Preset, SegmentMode,
+};
 use vbim_format::curve::linear_to_srgb;
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::Reader;
@@ -148,13 +150,15 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
         wgpu::Backend::Gl => n.max(2),
         _ => n,
     };
-    // RGB (YCoCg planes) in both domains, and a one-channel HDR sequence (Y alone). Odd
-    // sizes: the reconstruction's last 2 × 2 quads and workgroups are partly outside.
+    // RGB (YCoCg planes) in both domains, and a one-channel HDR sequence (Y alone), in
+    // format 1; RGB HDR in format 2 too. Odd sizes: the reconstruction's last 2 × 2 quads
+    // and workgroups are partly outside.
     let (w, h) = (41, 23);
-    for (kind, ch) in [
-        (InputKind::Hdr, 3),
-        (InputKind::Srgb8, 3),
-        (InputKind::Hdr, 1),
+    for (kind, ch, format) in [
+        (InputKind::Hdr, 3, FormatVersion::V1),
+        (InputKind::Srgb8, 3, FormatVersion::V1),
+        (InputKind::Hdr, 1, FormatVersion::V1),
+        (InputKind::Hdr, 3, FormatVersion::V2),
     ] {
         let mut src = sequence(w, h, 30, kind);
         if ch == 1 {
@@ -163,7 +167,13 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
             }
             src.info.channels = 1;
         }
-        let bytes = encode_bytes(&src, &config(SegmentMode::Auto { max: 12 }));
+        let cfg = EncoderConfig {
+            format,
+            ..config(SegmentMode::Auto { max: 12 })
+        };
+        let bytes = encode_bytes(&src, &cfg);
+        let major = if format == FormatVersion::V1 { 1 } else { 2 };
+        assert_eq!(header_of(&bytes).version_major(), major);
         let mut reference =
             Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
         let mut player = unthrottled(device, queue, bytes);

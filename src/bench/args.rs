@@ -11,7 +11,7 @@ use crate::units::{Span, StallSpec};
 pub enum BenchCommand {
     /// Time the baker: precomputation, per-frame lighting and file writing, apart.
     Bake(BenchBakeArgs),
-    /// Time the player's decoder on a file: zstd alone, and the decoder's whole work (checks,
+    /// Time the player's decoder on a file: the entropy decoding alone (zstd, or format 2's rANS to pairs), and the decoder's whole work (checks,
     /// zstd, the scan for the GPU's entry points), as a share of one core at the file's frame rate.
     Decode(BenchDecodeArgs),
     /// Bytes of the protocol's lossless baseline: every frame's half-float RGB through zstd.

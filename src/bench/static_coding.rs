@@ -568,6 +568,7 @@ impl Study {
                 plane2::ContextMap {
                     clusters: clusters.len() as u8,
                     of,
+                    tables: vec![None; clusters.len()],
                 }
             })
             .collect()
@@ -642,83 +643,28 @@ fn totals(chunks: &[&ChunkCounts], family: usize, ctx: usize) -> Vec<u64> {
     h
 }
 
-/// Bits of a histogram at its own ideal probabilities.
-fn entropy_bits(h: &[u64]) -> f64 {
-    let n: u64 = h.iter().sum();
-    if n == 0 {
-        return 0.0;
-    }
-    h.iter()
-        .filter(|&&c| c > 0)
-        .map(|&c| c as f64 * (n as f64 / c as f64).log2())
-        .sum()
-}
-
-/// `contexts` of `family` merged greedily: each step merges the two clusters whose merge
-/// adds the fewest bits on the file's totals. Returns the clusters (each its contexts)
-/// when `ks` of them are left, in the order of `ks` (largest first).
+/// `contexts` of `family` merged greedily on the file's totals, as the encoder merges
+/// them (`vbim_encoder::bench::cluster`). Returns the clusters (each its contexts) when
+/// `ks` of them are left, in the order of `ks` (largest first).
 fn cluster(
     chunks: &[&ChunkCounts],
     family: usize,
     contexts: &[usize],
     ks: &[usize],
 ) -> Vec<Vec<Vec<usize>>> {
-    let merged =
-        |a: &[u64], b: &[u64]| -> Vec<u64> { a.iter().zip(b).map(|(x, y)| x + y).collect() };
-    // Each cluster: contexts, totals, their bits.
-    let mut groups: Vec<(Vec<usize>, Vec<u64>, f64)> = contexts
+    let totals: Vec<Vec<u64>> = contexts
         .iter()
-        .map(|&c| {
-            let h = totals(chunks, family, c);
-            let e = entropy_bits(&h);
-            (vec![c], h, e)
-        })
+        .map(|&c| totals(chunks, family, c))
         .collect();
-    let cost = |a: &(Vec<usize>, Vec<u64>, f64), b: &(Vec<usize>, Vec<u64>, f64)| {
-        entropy_bits(&merged(&a.1, &b.1)) - a.2 - b.2
-    };
-    // The cost of merging i and j (i < j), kept up to date as clusters merge.
-    let n = groups.len();
-    let mut costs = vec![vec![f64::INFINITY; n]; n];
-    for i in 0..n {
-        for j in i + 1..n {
-            costs[i][j] = cost(&groups[i], &groups[j]);
-        }
-    }
-    let mut alive: Vec<bool> = vec![true; n];
-    let mut left = n;
-    let mut out = Vec::new();
-    for &k in ks {
-        while left > k.max(1) {
-            let mut best = (f64::INFINITY, 0, 0);
-            for i in (0..n).filter(|&i| alive[i]) {
-                for j in (i + 1..n).filter(|&j| alive[j]) {
-                    if costs[i][j] < best.0 {
-                        best = (costs[i][j], i, j);
-                    }
-                }
-            }
-            let (_, i, j) = best;
-            let (cj, hj) = (std::mem::take(&mut groups[j].0), groups[j].1.clone());
-            groups[i].0.extend(cj);
-            groups[i].1 = merged(&groups[i].1, &hj);
-            groups[i].2 = entropy_bits(&groups[i].1);
-            alive[j] = false;
-            left -= 1;
-            for o in (0..n).filter(|&o| alive[o] && o != i) {
-                let c = cost(&groups[i], &groups[o]);
-                let (a, b) = (i.min(o), i.max(o));
-                costs[a][b] = c;
-            }
-        }
-        out.push(
-            (0..n)
-                .filter(|&i| alive[i])
-                .map(|i| groups[i].0.clone())
-                .collect(),
-        );
-    }
-    out
+    let refs: Vec<&[u64]> = totals.iter().map(|t| &t[..]).collect();
+    vbim_encoder::bench::cluster(&refs, ks)
+        .into_iter()
+        .map(|set| {
+            set.into_iter()
+                .map(|members| members.into_iter().map(|i| contexts[i]).collect())
+                .collect()
+        })
+        .collect()
 }
 
 /// A chunk's bits for `family` with `clusters`: its symbols at each cluster's quantised

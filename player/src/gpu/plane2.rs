@@ -339,6 +339,7 @@ mod tests {
             ContextMap {
                 clusters: 9,
                 of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 9) as u8).collect(),
+                tables: vec![None; 9],
             },
             ContextMap::single(),
         ];

@@ -1,0 +1,103 @@
+//! Format versions: an encode in version 2 decodes to the same frames as in version 1,
+//! in fewer bytes, and `convert` turns either into the other byte for byte.
+
+use std::io::Cursor;
+
+use vbim_encoder::{convert, encode, EncoderConfig, FormatVersion, InputKind, MemorySource};
+use vbim_encoder::{Preset, SegmentMode};
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::{ChunkKind, Reader};
+
+const W: usize = 128;
+const H: usize = 96;
+const FRAMES: usize = 30;
+
+/// A smooth day with a moving shadow edge and some fine, periodic texture.
+fn source() -> MemorySource {
+    let frames = (0..FRAMES)
+        .map(|t| {
+            let s = t as f32 / FRAMES as f32;
+            (0..W * H)
+                .flat_map(|i| {
+                    let (x, y) = ((i % W) as f32, (i / W) as f32);
+                    let sun = (3.0 * s).sin().max(0.05);
+                    let edge = if x + 0.5 * y > 10.0 + 30.0 * s {
+                        1.0
+                    } else {
+                        0.3
+                    };
+                    let grain = 0.02 * ((x * 7.3 + y * 3.1).sin());
+                    let v = sun * edge * (0.6 + 0.004 * x) + grain + 0.05;
+                    [v, v * 0.9, v * 0.7 + 0.01 * y / H as f32]
+                })
+                .collect()
+        })
+        .collect();
+    MemorySource::new("versions", W, H, 3, InputKind::Hdr, frames)
+}
+
+fn encoded(format: FormatVersion) -> Vec<u8> {
+    let cfg = EncoderConfig {
+        format,
+        segment: SegmentMode::Auto { max: 8 },
+        aim: false,
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    let mut bytes = Vec::new();
+    encode(&source(), &cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
+    bytes
+}
+
+fn frames(bytes: &[u8]) -> Vec<Vec<f32>> {
+    let mut d = Decoder::new(Reader::open(Cursor::new(bytes.to_vec())).unwrap()).unwrap();
+    (0..FRAMES)
+        .map(|f| {
+            let mut out = vec![0f32; W * H * 3];
+            d.frame(f as f64, Output::Linear, &mut out).unwrap();
+            out
+        })
+        .collect()
+}
+
+/// Bytes of the keyframe and coefficient chunks.
+fn payload_bytes(bytes: &[u8]) -> u64 {
+    let r = Reader::open(Cursor::new(bytes)).unwrap();
+    r.entries()
+        .iter()
+        .filter(|e| matches!(e.kind, ChunkKind::Keyframe | ChunkKind::Coefficients))
+        .map(|e| e.length)
+        .sum()
+}
+
+fn converted(bytes: &[u8], to: FormatVersion) -> Vec<u8> {
+    let mut out = Vec::new();
+    convert(
+        "test",
+        Cursor::new(bytes),
+        Cursor::new(&mut out),
+        to,
+        EncoderConfig::preset(Preset::Default).zstd_level,
+        &|_, _, _| {},
+    )
+    .unwrap();
+    out
+}
+
+#[test]
+fn version_2_decodes_as_version_1_in_fewer_bytes_and_converts_both_ways() {
+    let v1 = encoded(FormatVersion::V1);
+    let v2 = encoded(FormatVersion::V2);
+    let major = |b: &[u8]| {
+        Reader::open(Cursor::new(b))
+            .unwrap()
+            .header()
+            .version_major()
+    };
+    assert_eq!((major(&v1), major(&v2)), (1, 2));
+    assert_eq!(frames(&v1), frames(&v2), "the same planes, bit for bit");
+    let (p1, p2) = (payload_bytes(&v1), payload_bytes(&v2));
+    assert!(p2 < p1, "version 2's payloads {p2} B, version 1's {p1} B");
+    // The same payloads learn the same maps: converting is encoding in the other version.
+    assert_eq!(converted(&v1, FormatVersion::V2), v2);
+    assert_eq!(converted(&v2, FormatVersion::V1), v1);
+}

@@ -1,0 +1,281 @@
+//! Format 2's keyframe and coefficient payloads (`docs/FORMAT.md`, "Version 2"): the same
+//! head as version 1's payload before zstd (mode or degree, plane count, quantiser steps),
+//! then every plane's blocks in one coefficient section ([`plane2`]) instead of zero-run
+//! pairs through zstd.
+//!
+//! Readers turn a version 2 payload into version 1's form before zstd ([`to_pairs`]) and
+//! decode that as before, so that both versions of a stream decode to the same planes bit
+//! for bit; the encoder goes the other way ([`encode`]). The GPU player will read sections
+//! itself (`plane2.wgsl`) and skip the pairs.
+
+use crate::chunk::{padded_size, TileMap, MODE_INTRA, MODE_PREDICTED};
+use crate::dct::N;
+use crate::header::Header;
+use crate::plane2::{self, ContextMap, Geometry, BUBBLE, INTRA_KEY, PREDICTED_KEY};
+use crate::{plane, FormatError, Result};
+
+/// What a payload holds.
+#[derive(Clone, Copy, Debug)]
+pub enum Payload<'a> {
+    /// A keyframe: every plane whole.
+    Keyframe,
+    /// A segment's bubble terms: the tiles `TileMap` gives a degree of k or more, for
+    /// each term k ≥ 2 and plane.
+    Coefficients(&'a TileMap),
+}
+
+/// Where one plane of a payload lies and which maps code it.
+#[derive(Clone, Debug)]
+pub struct Shape {
+    /// Its family ([`plane2::family`]).
+    pub family: usize,
+    /// Its blocks' places on the padded block grid, in the order the payload lists them:
+    /// raster order for a keyframe; member tiles in raster order, each tile's blocks in
+    /// raster order, for a bubble plane.
+    pub order: Vec<(usize, usize)>,
+    /// Blocks across a tile, for a bubble plane.
+    pub tile: Option<usize>,
+}
+
+/// A payload's head and the shapes of its planes: the head is format 1's (its length in
+/// bytes comes first).
+pub fn shapes(h: &Header, what: Payload, bytes: &[u8]) -> Result<(usize, Vec<Shape>)> {
+    let planes = h.channels as usize;
+    let (w, ht) = padded_size(h);
+    let (bw, bh) = (w / N, ht / N);
+    let head = bytes
+        .get(..4)
+        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
+    match what {
+        Payload::Keyframe => {
+            let kind = match head[0] {
+                MODE_INTRA => INTRA_KEY,
+                MODE_PREDICTED => PREDICTED_KEY,
+                m => return Err(FormatError::Invalid(format!("unknown keyframe mode {m}"))),
+            };
+            if head[1] as usize != planes {
+                return Err(FormatError::Invalid(format!(
+                    "{} planes, expected {planes}",
+                    head[1]
+                )));
+            }
+            let raster: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+            let shapes = (0..planes)
+                .map(|p| Shape {
+                    family: plane2::family(kind, p > 0),
+                    order: raster.clone(),
+                    tile: None,
+                })
+                .collect();
+            Ok((4 + 4 * planes, shapes))
+        }
+        Payload::Coefficients(tiles) => {
+            let dmax = tiles.max_degree();
+            if head[0] != dmax || (dmax > 1 && head[1] as usize != planes) {
+                return Err(FormatError::Invalid(format!(
+                    "coefficients for degree {} × {} planes, tile map needs {dmax} × {planes}",
+                    head[0], head[1]
+                )));
+            }
+            let ts = h.tile_size as usize;
+            let tx = h.tiles_x() as usize;
+            let mut shapes = Vec::new();
+            for k in 2..=dmax {
+                for p in 0..planes {
+                    let order = (0..h.tile_count())
+                        .filter(|&t| tiles.degree(p, t) >= k)
+                        .flat_map(|t| plane::tile_blocks(t, tx, ts))
+                        .collect();
+                    shapes.push(Shape {
+                        family: plane2::family(BUBBLE, p > 0),
+                        order,
+                        tile: Some(ts / N),
+                    });
+                }
+            }
+            Ok((4 + 4 * (dmax.max(1) as usize - 1) * planes, shapes))
+        }
+    }
+}
+
+/// A plane's shape and its blocks (64 integers each, zig-zag order).
+pub type PlaneBlocks = (Shape, Vec<[i32; N * N]>);
+
+/// The planes of a version 1 payload before zstd (what `chunk::write_keyframe` and
+/// `chunk::write_coeffs` return): its head's length, and each plane's shape and blocks.
+pub fn planes(
+    h: &Header,
+    what: Payload,
+    raw: &[u8],
+) -> Result<(usize, Vec<PlaneBlocks>)> {
+    let (head, shapes) = shapes(h, what, raw)?;
+    let mut pos = head;
+    let planes = shapes
+        .into_iter()
+        .map(|s| {
+            let blocks = plane::read_coefficients(raw, &mut pos, s.order.len())?;
+            Ok((s, blocks))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    if pos != raw.len() {
+        return Err(FormatError::Invalid(format!(
+            "{} stray bytes after the planes",
+            raw.len() - pos
+        )));
+    }
+    Ok((head, planes))
+}
+
+fn geometry<'a>(h: &Header, s: &'a Shape) -> plane2::Plane<'a> {
+    let (w, ht) = padded_size(h);
+    plane2::Plane {
+        family: s.family,
+        geometry: Geometry {
+            grid: (w / N, ht / N),
+            order: &s.order,
+            tile: s.tile,
+        },
+    }
+}
+
+/// The counts of each family's contexts' tokens in a version 1 payload before zstd: what
+/// an encoder learns a file's context maps from (`plane2::context_counts`).
+pub fn context_counts(h: &Header, what: Payload, raw: &[u8]) -> Result<Vec<Vec<u64>>> {
+    let (_, planes) = planes(h, what, raw)?;
+    let input: Vec<(plane2::Plane, &[[i32; N * N]])> = planes
+        .iter()
+        .map(|(s, b)| (geometry(h, s), &b[..]))
+        .collect();
+    plane2::context_counts(&input, plane2::FAMILIES)
+}
+
+/// Codes a version 1 payload before zstd as a version 2 payload with `maps`, cutting lanes
+/// where their coded size reaches `lane_bytes`.
+pub fn encode(
+    h: &Header,
+    what: Payload,
+    raw: &[u8],
+    maps: &[ContextMap],
+    lane_bytes: usize,
+) -> Result<Vec<u8>> {
+    let (head, planes) = planes(h, what, raw)?;
+    let input: Vec<(plane2::Plane, &[[i32; N * N]])> = planes
+        .iter()
+        .map(|(s, b)| (geometry(h, s), &b[..]))
+        .collect();
+    let section = plane2::encode(&input, maps, lane_bytes)?;
+    let mut out = Vec::with_capacity(head + section.len());
+    out.extend_from_slice(&raw[..head]);
+    out.extend_from_slice(&section);
+    Ok(out)
+}
+
+/// A version 2 payload (`h` holds its file's context maps) as version 1's payload before
+/// zstd: the same head, then each plane's blocks as zero-run pairs. Refuses a payload
+/// whose pairs would pass `limit` bytes.
+pub fn to_pairs(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
+    let maps = h.context_maps().ok_or_else(|| {
+        FormatError::Invalid("a version 1 file has no coefficient sections".into())
+    })?;
+    let (head, shapes) = shapes(h, what, bytes)?;
+    let head_bytes = bytes
+        .get(..head)
+        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
+    let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
+    let mut out = head_bytes.to_vec();
+    let mut terms = Vec::new();
+    plane2::decode_each(&bytes[head..], &geometries, maps, |_, blocks| {
+        write_pairs(blocks, &mut terms, &mut out);
+        if out.len() > limit {
+            return Err(FormatError::Invalid(format!(
+                "payload decodes to more than {limit} bytes (the format's bound or the header's largest payload)"
+            )));
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Writes sparse blocks as `plane::write_coefficients` writes dense ones (the DC as
+/// differences, then each AC position across the blocks as zero runs and values), in time
+/// proportional to the terms: gathered per frequency in one pass over the blocks
+/// (`scratch` keeps the storage from plane to plane).
+fn write_pairs(d: &plane2::Decoded, scratch: &mut Vec<(u32, i32)>, out: &mut Vec<u8>) {
+    let mut w = plane::RunWriter::new(out);
+    let mut prev = 0i32;
+    for &dc in &d.dc {
+        w.value(dc.wrapping_sub(prev));
+        prev = dc;
+    }
+    let mut start = [0u32; N * N + 1];
+    for &(i, _) in &d.terms {
+        start[i as usize + 1] += 1;
+    }
+    for f in 1..N * N {
+        start[f + 1] += start[f];
+    }
+    scratch.clear();
+    scratch.resize(d.terms.len(), (0, 0));
+    let mut at = start;
+    for b in 0..d.dc.len() {
+        for &(i, v) in d.terms_of(b) {
+            scratch[at[i as usize] as usize] = (b as u32, v);
+            at[i as usize] += 1;
+        }
+    }
+    let n = d.dc.len() as u32;
+    for f in 1..N * N {
+        let mut next = 0u32;
+        for &(b, v) in &scratch[start[f] as usize..start[f + 1] as usize] {
+            w.zeros(b - next);
+            w.value(v);
+            next = b + 1;
+        }
+        w.zeros(n - next);
+    }
+    w.finish();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sparse_blocks_are_written_as_the_dense_ones_are() {
+        let mut s = 1u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) as u32
+        };
+        let blocks: Vec<[i32; N * N]> = (0..300)
+            .map(|b| {
+                let mut q = [0i32; N * N];
+                q[0] = (next() % 9) as i32 - 4 + b / 50;
+                if b % 3 != 0 {
+                    for _ in 0..next() % 6 {
+                        q[1 + (next() % 63) as usize] = (next() % 7) as i32 - 3;
+                    }
+                }
+                q
+            })
+            .collect();
+        let mut sparse = plane2::Decoded::default();
+        for q in &blocks {
+            sparse.dc.push(q[0]);
+            sparse.first.push(sparse.terms.len() as u32);
+            let t: Vec<(u8, i32)> = (1..N * N)
+                .filter(|&i| q[i] != 0)
+                .map(|i| (i as u8, q[i]))
+                .collect();
+            sparse.count.push(t.len() as u8);
+            sparse.terms.extend(t);
+        }
+        assert_eq!(sparse.dense(), blocks);
+        let (mut a, mut b) = (vec![7u8], vec![7u8]);
+        plane::write_coefficients(&blocks, &mut a);
+        write_pairs(&sparse, &mut Vec::new(), &mut b);
+        assert_eq!(a, b);
+    }
+}
