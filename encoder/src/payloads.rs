@@ -168,7 +168,13 @@ pub fn cluster(totals: &[&[u64]], ks: &[usize]) -> Vec<Vec<Vec<usize>>> {
     let mut costs: Vec<Vec<f64>> = (0..n)
         .map(|i| {
             (0..n)
-                .map(|j| if j > i { cost(&groups, i, j) } else { f64::INFINITY })
+                .map(|j| {
+                    if j > i {
+                        cost(&groups, i, j)
+                    } else {
+                        f64::INFINITY
+                    }
+                })
                 .collect()
         })
         .collect();

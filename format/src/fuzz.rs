@@ -95,18 +95,48 @@ pub fn decode(data: &[u8]) {
 }
 
 /// Arbitrary bytes as chunk payloads. The first four bytes pick a small header (size,
-/// channels, degree, colour); the rest, compressed here so that the fuzzer mutates the
-/// payload itself rather than a zstd frame, is read as a keyframe (intra and predicted,
-/// parsed to planes and to blocks), as a tile map, and as the coefficients of a tile map
-/// the header bytes pick.
+/// channels, degree, colour); the rest is read as a keyframe (intra and predicted, parsed
+/// to planes and to blocks), as a tile map, and as the coefficients of a tile map the
+/// header bytes pick: in version 1, compressed here so that the fuzzer mutates the payload
+/// itself rather than a zstd frame, and as it is in version 2 (with context maps the
+/// header bytes pick).
 pub fn chunks(data: &[u8]) {
     let Some((&[a, b, c, d], payload)) = data.split_first_chunk::<4>() else {
         return;
     };
     let h = small_header(a, b, c, d);
-    let Ok(z) = zstd::bulk::compress(payload, 1) else {
-        return;
-    };
+    if let Ok(z) = zstd::bulk::compress(payload, 1) {
+        payloads(&h, &z, d);
+    }
+    payloads(&small_header_2(a, b, c, d), payload, d);
+}
+
+/// [`chunks`]' version 2 header: [`small_header`]'s, with context maps of 1 to 3 clusters
+/// a family that `d` picks, the even clusters with a file-wide table of small tokens.
+pub fn small_header_2(a: u8, b: u8, c: u8, d: u8) -> Header {
+    let table = crate::ans::Histogram::from_counts(&[30, 20, 10, 5, 2, 1]);
+    let maps = (0..plane2::FAMILIES)
+        .map(|f| {
+            let clusters = 1 + ((d as usize >> f) % 3) as u8;
+            plane2::ContextMap {
+                clusters,
+                of: (0..plane2::CONTEXTS)
+                    .map(|i| ((i + f) % clusters as usize) as u8)
+                    .collect(),
+                tables: (0..clusters)
+                    .map(|k| table.clone().filter(|_| k % 2 == 0))
+                    .collect(),
+            }
+        })
+        .collect();
+    Header {
+        coding: crate::Coding::Lanes(maps),
+        ..small_header(a, b, c, d)
+    }
+}
+
+/// [`chunks`]' reads of `z` under header `h`.
+fn payloads(h: &Header, z: &[u8], d: u8) {
     let _ = chunk::read_keyframe(&h, &z, None);
     let (w, ht) = chunk::padded_size(&h);
     let zeros: Vec<Plane> = (0..h.channels).map(|_| Plane::zeros(w, ht)).collect();

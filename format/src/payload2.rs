@@ -103,11 +103,7 @@ pub type PlaneBlocks = (Shape, Vec<[i32; N * N]>);
 
 /// The planes of a version 1 payload before zstd (what `chunk::write_keyframe` and
 /// `chunk::write_coeffs` return): its head's length, and each plane's shape and blocks.
-pub fn planes(
-    h: &Header,
-    what: Payload,
-    raw: &[u8],
-) -> Result<(usize, Vec<PlaneBlocks>)> {
+pub fn planes(h: &Header, what: Payload, raw: &[u8]) -> Result<(usize, Vec<PlaneBlocks>)> {
     let (head, shapes) = shapes(h, what, raw)?;
     let mut pos = head;
     let planes = shapes
