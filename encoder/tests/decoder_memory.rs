@@ -7,7 +7,9 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::io::Cursor;
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 
-use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
+use vbim_encoder::{
+    encode, EncoderConfig, FormatVersion, InputKind, MemorySource, Preset, SegmentMode,
+};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::{Limits, Reader};
 
@@ -50,9 +52,19 @@ fn day(w: usize, h: usize, n: usize) -> MemorySource {
 
 #[test]
 fn the_decoder_holds_no_more_than_its_limit_check_counts() {
+    holds_no_more_than_counted(FormatVersion::V1);
+}
+
+#[test]
+fn the_decoder_of_version_2_holds_no_more_than_its_limit_check_counts() {
+    holds_no_more_than_counted(FormatVersion::V2);
+}
+
+fn holds_no_more_than_counted(format: FormatVersion) {
     let src = day(200, 136, 48);
     let cfg = EncoderConfig {
         segment: SegmentMode::Auto { max: 12 },
+        format,
         ..EncoderConfig::preset(Preset::Default)
     };
     let mut bytes = Vec::new();

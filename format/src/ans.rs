@@ -1,6 +1,6 @@
 //! rANS with static 12-bit probabilities over 16-bit words: the entropy coder that format
 //! 2's coefficient coding is designed around (BENCHMARKS.md, "A static coder a GPU can
-//! decode"). No chunk of version 1 uses it.
+//! decode"): version 2's keyframe and coefficient sections ([`plane2`](crate::plane2)).
 //!
 //! Why this shape, for a decoder in WGSL:
 //! - **a 32-bit state renormalised by 16-bit words**: the state stays in [2¹⁶, 2³²), so a
@@ -70,8 +70,9 @@ pub struct Histogram {
     /// The token whose frequency is what the others leave (not written).
     implied: u8,
     cum: Vec<u16>,
-    /// The token of each of the 4096 slots.
-    slot: Vec<u8>,
+    /// The token of each of the 4096 slots: shared by clones (a file's 96 histograms in its
+    /// header are cloned with the header and into every chunk that uses them).
+    slot: std::sync::Arc<[u8]>,
 }
 
 impl Histogram {
@@ -121,7 +122,7 @@ impl Histogram {
             freq,
             implied: implied as u8,
             cum,
-            slot,
+            slot: slot.into(),
         }
     }
 

@@ -59,6 +59,6 @@ pub use header::{
     VERSION_MAJOR, VERSION_MINOR,
 };
 pub use index::{ChunkKind, IndexEntry};
-pub use memory::{decoder_memory, largest_payload, Limits};
+pub use memory::{decoder_memory, largest_payload, section_memory, Limits};
 pub use reader::{verify_chunk, Reader};
 pub use writer::{rewrite, Writer};

@@ -79,7 +79,8 @@ pub fn largest_payload(h: &Header, entries: &[IndexEntry]) -> u64 {
 /// Bytes the CPU reference decoder may hold for a stream, at most: its f32 planes (four
 /// keyframes — keyframe 0, the opening and closing ones, one being built — and one
 /// segment's bubble planes) plus the largest payload, decompressed, and its parse (20 bytes
-/// a term, at most one term per texel of a plane or per two bytes of payload).
+/// a term, at most one term per texel of a plane or per two bytes of payload), and in
+/// version 2 what decoding a section holds ([`section_memory`]).
 pub fn decoder_memory(h: &Header, entries: &[IndexEntry]) -> u64 {
     let (w, ht) = chunk::padded_size(h);
     let texels = w as u64 * ht as u64;
@@ -87,5 +88,29 @@ pub fn decoder_memory(h: &Header, entries: &[IndexEntry]) -> u64 {
     let planes = texels * ch * 4 * (4 + h.max_degree.saturating_sub(1) as u64);
     let payload = largest_payload(h, entries);
     let terms = (payload / 2).min(texels);
-    planes + payload + 20 * terms
+    planes + payload + 20 * terms + section_memory(h, entries)
+}
+
+/// Bytes a version 2 payload's decode to pairs holds besides the pairs themselves
+/// (`payload2::to_pairs`): one plane's sparse blocks at a time (its DCs, residuals, term
+/// places and counts, non-zero masks and grid index: 25 bytes a block, and 8 a term: at
+/// most one a texel, and one per two bytes of the pairs it decodes to, which the largest
+/// payload bounds), the section's words (its stored size), and the decode tables of the
+/// file's histograms and of a chunk's own (4.7 kB each, at most one of each per cluster).
+/// 0 for version 1.
+pub fn section_memory(h: &Header, entries: &[IndexEntry]) -> u64 {
+    let Some(maps) = h.context_maps() else {
+        return 0;
+    };
+    let clusters: u64 = maps.iter().map(|m| m.clusters as u64).sum();
+    let (w, ht) = chunk::padded_size(h);
+    let texels = w as u64 * ht as u64;
+    let stored = entries
+        .iter()
+        .filter(|e| matches!(e.kind, ChunkKind::Keyframe | ChunkKind::Coefficients))
+        .map(|e| e.length)
+        .max()
+        .unwrap_or(0);
+    let terms = (largest_payload(h, entries) / 2).min(texels);
+    25 * (texels / 64) + 8 * terms + stored + clusters * 2 * 4700
 }

@@ -116,7 +116,8 @@ fn preroll_ns(h: &Header, cfg: &PlayerConfig) -> u64 {
 /// What a stream can make the player hold, checked before any of it exists: the textures,
 /// exactly (the dense plane the parse fills among them); the ring; and the decoder's
 /// payloads, boxes, scanned keyframes and the stream buffer, each at most a few times the
-/// largest payload (which the file's own chunk sizes bound: `limits::MAX_EXPANSION`).
+/// largest payload (which the file's own chunk sizes bound: `limits::MAX_EXPANSION`), and
+/// in version 2 what decoding a section holds.
 /// Array textures have at least `min_layers` layers.
 pub(crate) fn memory_needed(
     header: &Header,
@@ -142,7 +143,9 @@ pub(crate) fn memory_needed(
         * header.max_degree.max(1) as u64
         * (blocks / vbim_format::chunk::FILL_BLOCKS + 1)
         * 16;
-    textures + ring_bytes as u64 + 8 * payload + fill_entries
+    // A version 2 file's sections are decoded to pairs on the decoder thread.
+    let sections = vbim_format::section_memory(header, entries);
+    textures + ring_bytes as u64 + 8 * payload + fill_entries + sections
 }
 
 impl<R: Read + Seek + Send + 'static> Player<R> {
