@@ -137,12 +137,12 @@ pub fn small_header_2(a: u8, b: u8, c: u8, d: u8) -> Header {
 
 /// [`chunks`]' reads of `z` under header `h`.
 fn payloads(h: &Header, z: &[u8], d: u8) {
-    let _ = chunk::read_keyframe(&h, &z, None);
-    let (w, ht) = chunk::padded_size(&h);
+    let _ = chunk::read_keyframe(h, z, None);
+    let (w, ht) = chunk::padded_size(h);
     let zeros: Vec<Plane> = (0..h.channels).map(|_| Plane::zeros(w, ht)).collect();
-    let _ = chunk::read_keyframe(&h, &z, Some(&zeros));
-    let _ = chunk::keyframe_streams(&h, &z, |_, _, s| agrees(s));
-    let _ = chunk::read_tilemap(&h, &z, 4);
+    let _ = chunk::read_keyframe(h, z, Some(&zeros));
+    let _ = chunk::keyframe_streams(h, z, |_, _, s| agrees(s));
+    let _ = chunk::read_tilemap(h, z, 4);
     // A tile map of the header's degree, with a pattern of lower degrees.
     let n = h.tile_count();
     let degree = |t: usize| 1 + ((t + d as usize) % h.max_degree as usize) as u8;
@@ -154,8 +154,8 @@ fn payloads(h: &Header, z: &[u8], d: u8) {
             Vec::new()
         },
     };
-    let _ = chunk::read_coeffs(&h, &z, &tiles);
-    if let Ok(mut r) = CoeffReader::open(&h, &z, &tiles) {
+    let _ = chunk::read_coeffs(h, z, &tiles);
+    if let Ok(mut r) = CoeffReader::open(h, z, &tiles) {
         for k in 2..=r.max_degree() {
             for p in 0..h.channels as usize {
                 if r.scan_plane(k, p, |_, s| agrees(s)).is_err() {
@@ -167,7 +167,6 @@ fn payloads(h: &Header, z: &[u8], d: u8) {
     }
 }
 
-/// A valid header of at most 72×72 texels picked by four bytes.
 /// A stream the scan accepted must parse whole (the GPU parser relies on the scan alone),
 /// and its entry points must lie inside it, in order.
 fn agrees(s: chunk::Scanned<'_>) {
@@ -184,6 +183,7 @@ fn agrees(s: chunk::Scanned<'_>) {
     assert!(s.entries.iter().all(|e| (e.byte as usize) < s.stream.len()));
 }
 
+/// A valid header of at most 72×72 texels picked by four bytes.
 fn small_header(a: u8, b: u8, c: u8, d: u8) -> Header {
     let srgb = c & 2 != 0;
     Header {
