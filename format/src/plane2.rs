@@ -383,12 +383,13 @@ fn walk(
             let (rx, ry) = ((region % rw) * REGION, (region / rw) * REGION);
             for y in ry..(ry + REGION).min(bh) {
                 for x in rx..(rx + REGION).min(bw) {
-                    let Some(b) = at(x as isize, y as isize) else {
-                        continue;
-                    };
+                    // Most groups of a day's planes are empty: their test comes first.
                     if (x + y) % 2 != parity || !full[(y / GROUP) * gw + x / GROUP] {
                         continue;
                     }
+                    let Some(b) = at(x as isize, y as isize) else {
+                        continue;
+                    };
                     debug_assert_eq!(region_of(x, y), region);
                     let lane = lane_of(region);
                     let mut four_at = [0usize; 4];
@@ -454,26 +455,29 @@ fn walk(
             }
         }
     }
-    // The DC: the planar residuals' 2-D prefix sum, in raster order of the grid.
+    // The DC: the planar residuals' 2-D prefix sum, in raster order of the grid, on a grid
+    // of every cell (0 where the plane has no block; predictions stay in a bubble
+    // plane's tile).
+    let mut grid = vec![0i32; bw * bh];
+    for (b, &(x, y)) in geo.order.iter().enumerate() {
+        grid[y * bw + x] = residual[b];
+    }
+    let t = geo.tile.unwrap_or(usize::MAX);
     for y in 0..bh {
         for x in 0..bw {
-            let Some(b) = at(x as isize, y as isize) else {
+            let i = y * bw + x;
+            if index[i] == u32::MAX {
                 continue;
-            };
-            let dc = |dx: isize, dy: isize| -> i32 {
-                let (u, v) = (x as isize + dx, y as isize + dy);
-                if let (Some(t), true) = (geo.tile, u >= 0 && v >= 0) {
-                    if u as usize / t != x / t || v as usize / t != y / t {
-                        return 0;
-                    }
-                }
-                at(u, v).map_or(0, |j| out.dc[j])
-            };
-            out.dc[b] = residual[b]
-                .wrapping_add(dc(-1, 0))
-                .wrapping_add(dc(0, -1))
-                .wrapping_sub(dc(-1, -1));
+            }
+            let (left, up) = (x % t != 0, y % t != 0);
+            let pred = if left { grid[i - 1] } else { 0 }
+                .wrapping_add(if up { grid[i - bw] } else { 0 })
+                .wrapping_sub(if left && up { grid[i - bw - 1] } else { 0 });
+            grid[i] = grid[i].wrapping_add(pred);
         }
+    }
+    for (b, &(x, y)) in geo.order.iter().enumerate() {
+        out.dc[b] = grid[y * bw + x];
     }
     Ok(out)
 }
