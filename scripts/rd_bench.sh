@@ -12,7 +12,8 @@
 # cpu-used 6) at CRF 14…44 on the 8-bit PNG export, all scored by `vbim compare` against
 # the HDR frames: mean and worst-frame PSNR, the largest error and the 99.9th percentile
 # in 8-bit levels. summary.md puts each vbim point beside the anchors at the same mean
-# PSNR (scripts/rd_summary.py). Installs Debian's ffmpeg when missing.
+# PSNR (scripts/rd_summary.py). VBIM_FLAGS adds flags to every vbim encode (e.g.
+# `--format-version 2`). Installs Debian's ffmpeg when missing.
 set -euo pipefail
 seq=${1:-clear}
 out=${2:-out/rd}
@@ -20,6 +21,7 @@ sample=${SAMPLE:-jacksboro}
 frames=${FRAMES:-240}
 anchors=${ANCHORS-x265 x264 av1}
 vbim=${VBIM:-target/release/vbim}
+read -r -a vbim_flags <<<"${VBIM_FLAGS:-}"
 [ -n "${VBIM:-}" ] || cargo build --release --features bench  # the bench commands
 if ! command -v ffmpeg >/dev/null; then
     export DEBIAN_FRONTEND=noninteractive
@@ -54,7 +56,7 @@ run_vbim() { # $1 = method, $2 = setting, rest = encoder flags
     shift 2
     local t0 t1
     t0=$(now)
-    "$vbim" encode "$dir/exr" -o "$dir/v.vbim" --fps 24/1 --no-verify "$@" >/dev/null
+    "$vbim" encode "$dir/exr" -o "$dir/v.vbim" --fps 24/1 --no-verify "$@" "${vbim_flags[@]}" >/dev/null
     t1=$(now)
     local bytes
     bytes=$(stat -c %s "$dir/v.vbim")
