@@ -840,3 +840,55 @@ fn a_stream_that_shows_nothing_is_an_error() {
         "{err}"
     );
 }
+
+#[test]
+fn convert_rewrites_a_stream_in_either_version_with_the_same_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let (frames, file) = small_stream(dir.path());
+    let v2 = dir.path().join("b.vbim");
+    let back = dir.path().join("c.vbim");
+    let said = ok(&["convert", s(&file), "-o", s(&v2), "--format-version", "2"]);
+    assert!(said.contains(".vbim 2.0"), "{said}");
+    ok(&["convert", s(&v2), "-o", s(&back), "--format-version", "1"]);
+    // Back in 1.1, byte for byte (the encoder's zstd level is convert's default).
+    assert_eq!(std::fs::read(&back).unwrap(), std::fs::read(&file).unwrap());
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", s(&v2), "--json"])).unwrap();
+    assert_eq!(json["header"]["version"], "2.0");
+    assert_eq!(
+        json["header"]["histograms_per_family"]
+            .as_array()
+            .unwrap()
+            .len(),
+        6
+    );
+    assert!(json["chunks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|c| c["status"] == "ok"));
+    // The same frames as the 1.1 file decodes to.
+    let cmp = ok(&["compare", s(&file), s(&v2)]);
+    assert!(cmp.contains("max error   0.00000"), "{cmp}");
+    // Encoding in 2.0 directly writes what converting writes.
+    let direct = dir.path().join("d.vbim");
+    ok(&[
+        "encode",
+        s(&frames),
+        "-o",
+        s(&direct),
+        "--no-verify",
+        "--format-version",
+        "2",
+    ]);
+    assert_eq!(std::fs::read(&direct).unwrap(), std::fs::read(&v2).unwrap());
+    // A section zeroed under valid checksums: inspect names the chunk.
+    let mut bytes = std::fs::read(&v2).unwrap();
+    let c = fill_chunks(&mut bytes, vbim_format::ChunkKind::Keyframe, false, 0)[0];
+    let bad = dir.path().join("zeroed.vbim");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = vbim(&["inspect", s(&bad)]);
+    assert_eq!(o.status.code(), Some(1));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains(&format!("chunk {c}: ")), "{out}");
+}
