@@ -717,21 +717,17 @@ fn used_families<'a>(
 /// The decoder's lanes, one per lane of the plane being decoded.
 struct Lanes<'a, 'h> {
     decoders: Vec<ans::Decoder<'a>>,
-    list: &'h [Histogram],
-    /// The histogram of each context (`u16::MAX`: none sent).
-    of: Vec<u16>,
+    /// The histogram of each context (`None`: the chunk sent none).
+    of: Vec<Option<&'h Histogram>>,
 }
 
 impl Coder for Lanes<'_, '_> {
     #[inline(always)]
     fn code(&mut self, lane: usize, ctx: usize, _: u32) -> Result<u32> {
-        let h = match self.of[ctx] {
-            u16::MAX => {
-                return Err(FormatError::Invalid(format!(
-                    "context {ctx} coded without a histogram"
-                )))
-            }
-            h => &self.list[h as usize],
+        let Some(h) = self.of[ctx] else {
+            return Err(FormatError::Invalid(format!(
+                "context {ctx} coded without a histogram"
+            )));
         };
         let d = &mut self.decoders[lane];
         let t = d.token(h)?;
@@ -876,8 +872,9 @@ pub fn decode_each(
         }
         let mut lanes = Lanes {
             decoders,
-            list: &section.histograms,
-            of: sp.histogram_of.clone(),
+            of: (sp.histogram_of.iter())
+                .map(|&h| section.histograms.get(h as usize))
+                .collect(),
         };
         let blocks = walk(&p.geometry, None, &|region| lane_of[region], &mut lanes)?;
         for d in &lanes.decoders {
