@@ -3,6 +3,7 @@
 //! decompressed size is bounded by what the header allows before anything is allocated.
 
 use crate::dct::N;
+pub use crate::head::{padded_size, TileMap, MODE_INTRA, MODE_PREDICTED};
 use crate::header::{Coding, Header};
 use crate::limits::payload_bound;
 use crate::payload2;
@@ -11,11 +12,6 @@ use crate::plane::{self, Onto, Plane};
 use crate::scan;
 pub use crate::scan::{scan, EntryPoint, ENTRY_PAIRS, FILL_BLOCKS};
 use crate::{FormatError, Result};
-
-/// Keyframe mode byte: coded on its own.
-pub const MODE_INTRA: u8 = 0;
-/// Keyframe mode byte: coded as the difference from the previous keyframe.
-pub const MODE_PREDICTED: u8 = 1;
 
 thread_local! {
     /// Block storage reused by every coefficient stream this thread decodes.
@@ -74,12 +70,6 @@ fn keyframe_plane(
         }
         Ok(out)
     })
-}
-
-/// Padded plane size: whole tiles.
-pub fn padded_size(h: &Header) -> (usize, usize) {
-    let t = h.tile_size as usize;
-    (h.tiles_x() as usize * t, h.tiles_y() as usize * t)
 }
 
 /// The most a keyframe or coefficient payload of `blocks` coded blocks and `steps`
@@ -343,39 +333,6 @@ fn scanned(raw: &[u8], pos: &mut usize, n: usize, each: impl FnOnce(Scanned<'_>)
         });
         Ok(())
     })
-}
-
-/// The per-tile polynomial degrees of one segment: luma (plane 0) and chroma (planes 1–2).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct TileMap {
-    /// Degree of each luma tile, row-major.
-    pub luma: Vec<u8>,
-    /// Degree of each chroma tile, row-major (empty for one channel).
-    pub chroma: Vec<u8>,
-}
-
-impl TileMap {
-    /// The degrees of every tile for `plane`: luma for plane 0, chroma for the others.
-    pub fn degrees(&self, plane: usize) -> &[u8] {
-        if plane == 0 {
-            &self.luma
-        } else {
-            &self.chroma
-        }
-    }
-    /// Degree of `tile` in `plane` (0 luma, 1–2 chroma).
-    pub fn degree(&self, plane: usize, tile: usize) -> u8 {
-        self.degrees(plane)[tile]
-    }
-    /// The largest degree of any tile in any plane.
-    pub fn max_degree(&self) -> u8 {
-        self.luma
-            .iter()
-            .chain(&self.chroma)
-            .copied()
-            .max()
-            .unwrap_or(1)
-    }
 }
 
 /// Raw tile-map payload: luma degrees, then chroma degrees when there are 3 channels.

@@ -39,6 +39,7 @@ pub mod decode;
 mod error;
 #[cfg(feature = "fuzz")]
 pub mod fuzz;
+mod head;
 mod header;
 pub mod index;
 pub mod limits;

@@ -8,8 +8,8 @@
 //! for bit; the encoder goes the other way ([`encode`]). The GPU player will read sections
 //! itself (`plane2.wgsl`) and skip the pairs.
 
-use crate::chunk::{padded_size, TileMap, MODE_INTRA, MODE_PREDICTED};
 use crate::dct::N;
+use crate::head::{padded_size, TileMap, MODE_INTRA, MODE_PREDICTED};
 use crate::header::Header;
 use crate::plane2::{self, ContextMap, Geometry, BUBBLE, INTRA_KEY, PREDICTED_KEY};
 use crate::{plane, FormatError, Result};
