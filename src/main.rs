@@ -69,6 +69,9 @@ pub enum Command {
     },
 }
 
+/// Set by the Ctrl-C / SIGTERM handler before it removes the files being written.
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 fn main() -> ExitCode {
     // Die quietly when the reader of our output goes away (`vbim inspect F | head`), as
     // Unix tools do, instead of panicking on a failed print.
@@ -81,6 +84,7 @@ fn main() -> ExitCode {
     // Ctrl-C or SIGTERM: remove the files being written (a frame's or a stream's temporary,
     // the passes of `--exact`), then exit as a shell expects of an interrupted command.
     let _ = ctrlc::set_handler(|| {
+        INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
         vbim_files::remove_temporaries();
         std::process::exit(130);
     });
@@ -101,6 +105,13 @@ fn main() -> ExitCode {
              `cargo build --release --features bench` (BENCHMARKS.md)"
             .into()),
     };
+    // A command that failed because the handler removed its files under it (an --exact
+    // pass being verified) must not exit 1 first: the handler exits 130 in a moment.
+    if res.is_err() && INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
+        loop {
+            std::thread::park();
+        }
+    }
     match res {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
