@@ -5,7 +5,6 @@
 //! and the non-zero AC terms, a stream takes about what its entropy-coded form does.
 
 use vbim_format::dct::N;
-use vbim_format::plane::RunWriter;
 
 /// One coefficient stream's quantised blocks (zig-zag order), in stream order.
 #[derive(Default, Clone)]
@@ -29,39 +28,7 @@ impl SparseBlocks {
 
     /// Writes the stream exactly as `write_coefficients` writes the same blocks dense.
     pub fn write(&self, out: &mut Vec<u8>) {
-        let n = self.dc.len() as u32;
-        let mut w = RunWriter::new(out);
-        let mut prev_dc = 0i32;
-        for &d in &self.dc {
-            w.value(d.wrapping_sub(prev_dc));
-            prev_dc = d;
-        }
-        // The AC terms by frequency, each frequency's in block order (a stable counting
-        // sort of terms already in block order).
-        let mut start = [0usize; N * N + 1];
-        for &(_, f, _) in &self.ac {
-            start[f as usize + 1] += 1;
-        }
-        for f in 1..=N * N {
-            start[f] += start[f - 1];
-        }
-        let mut at = start;
-        let mut by_f = vec![(0u32, 0i32); self.ac.len()];
-        for &(b, f, v) in &self.ac {
-            by_f[at[f as usize]] = (b, v);
-            at[f as usize] += 1;
-        }
-        for f in 1..N * N {
-            // Zeros before each term of this frequency, then after its last one.
-            let mut next = 0u32;
-            for &(b, v) in &by_f[start[f]..start[f + 1]] {
-                w.zeros(b - next);
-                w.value(v);
-                next = b + 1;
-            }
-            w.zeros(n - next);
-        }
-        w.finish();
+        vbim_format::plane::write_sparse(&self.dc, self.ac.iter().copied(), out);
     }
 }
 

@@ -179,9 +179,8 @@ pub fn to_pairs(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result
         .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
     let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
     let mut out = head_bytes.to_vec();
-    let mut terms = Vec::new();
     plane2::decode_each(&bytes[head..], &geometries, maps, |_, blocks| {
-        write_pairs(blocks, &mut terms, &mut out);
+        write_pairs(blocks, &mut out);
         if out.len() > limit {
             return Err(FormatError::Invalid(format!(
                 "payload decodes to more than {limit} bytes (the format's bound or the header's largest payload)"
@@ -192,44 +191,12 @@ pub fn to_pairs(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result
     Ok(out)
 }
 
-/// Writes sparse blocks as `plane::write_coefficients` writes dense ones (the DC as
-/// differences, then each AC position across the blocks as zero runs and values), in time
-/// proportional to the terms: gathered per frequency in one pass over the blocks
-/// (`scratch` keeps the storage from plane to plane).
-fn write_pairs(d: &plane2::Decoded, scratch: &mut Vec<(u32, i32)>, out: &mut Vec<u8>) {
-    let mut w = plane::RunWriter::new(out);
-    let mut prev = 0i32;
-    for &dc in &d.dc {
-        w.value(dc.wrapping_sub(prev));
-        prev = dc;
-    }
-    let mut start = [0u32; N * N + 1];
-    for &(i, _) in &d.terms {
-        start[i as usize + 1] += 1;
-    }
-    for f in 1..N * N {
-        start[f + 1] += start[f];
-    }
-    scratch.clear();
-    scratch.resize(d.terms.len(), (0, 0));
-    let mut at = start;
-    for b in 0..d.dc.len() {
-        for &(i, v) in d.terms_of(b) {
-            scratch[at[i as usize] as usize] = (b as u32, v);
-            at[i as usize] += 1;
-        }
-    }
-    let n = d.dc.len() as u32;
-    for f in 1..N * N {
-        let mut next = 0u32;
-        for &(b, v) in &scratch[start[f] as usize..start[f + 1] as usize] {
-            w.zeros(b - next);
-            w.value(v);
-            next = b + 1;
-        }
-        w.zeros(n - next);
-    }
-    w.finish();
+/// Writes decoded sparse blocks as `plane::write_coefficients` writes dense ones
+/// (`plane::write_sparse`).
+fn write_pairs(d: &plane2::Decoded, out: &mut Vec<u8>) {
+    let terms =
+        (0..d.dc.len()).flat_map(|b| d.terms_of(b).iter().map(move |&(i, v)| (b as u32, i, v)));
+    plane::write_sparse(&d.dc, terms, out);
 }
 
 #[cfg(test)]
@@ -271,7 +238,7 @@ mod tests {
         assert_eq!(sparse.dense(), blocks);
         let (mut a, mut b) = (vec![7u8], vec![7u8]);
         plane::write_coefficients(&blocks, &mut a);
-        write_pairs(&sparse, &mut Vec::new(), &mut b);
+        write_pairs(&sparse, &mut b);
         assert_eq!(a, b);
     }
 }
