@@ -3,7 +3,8 @@
 # the GPU time of a displayed frame against a reference blend (`vbim bench render`, a
 # 60 Hz display) and a segment's GPU decode by pass (`vbim bench decode --gpu`); then the
 # speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
-# OUT/device.log (the adapter's name first) and OUT/reuse.csv.
+# OUT/device.log (the adapter's name first), OUT/reuse.csv and each stream's frames
+# (the last run of `bench render --csv`) in OUT/render-NAME.csv.
 #
 #   VBIM=BINARY scripts/device_bench.sh DIR OUT
 #
@@ -29,10 +30,11 @@ streams=("$dir"/*.vbim)
 [ -e "${streams[0]}" ] || { echo "no .vbim file in $dir" >&2; exit 1; }
 for f in "${streams[@]}"; do
     echo "== $f" | tee -a "$log"
-    "$vbim" inspect "$f" 2>&1 | head -4 | tee -a "$log"
-    "$vbim" bench render "$f" --frames "$frames" --runs "$runs" 2>&1 | tee -a "$log"
+    "$vbim" inspect "$f" 2>&1 | sed -n 1,4p | tee -a "$log"
+    "$vbim" bench render "$f" --frames "$frames" --runs "$runs" \
+        --csv "$out/render-$(basename "$f" .vbim).csv" 2>&1 | tee -a "$log"
     "$vbim" bench decode "$f" --gpu --runs "$runs" 2>&1 | tee -a "$log"
 done
 if [ "${REUSE:-1}" != 0 ]; then
-    VBIM="$vbim" scripts/reuse_bench.sh "${streams[0]}" "$out/reuse.csv" 2>&1 | tee -a "$log"
+    CLOCK=timestamps VBIM="$vbim" scripts/reuse_bench.sh "${streams[0]}" "$out/reuse.csv" 2>&1 | tee -a "$log"
 fi

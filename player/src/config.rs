@@ -83,6 +83,13 @@ pub struct PlayerConfig {
     /// [`FrameRecord::decode_work`]: crate::FrameRecord::decode_work
     /// [`Totals::budget_late`]: crate::Totals::budget_late
     pub decode_budget: Option<u64>,
+    /// How many workgroups (of 64 blocks) one dispatch of a decode pass covers: the grain
+    /// at which a segment's decode is recorded over frames. `None`: 32 on a CPU adapter
+    /// (lavapipe), where a dispatch's time is in proportion to its work and small slices
+    /// spread a decode evenly; 2048 on a GPU, where a dispatch of 32 workgroups fills a
+    /// small part of the chip and costs mostly its latency (BENCHMARKS.md, "On a hardware
+    /// GPU"). Rounded up to a multiple of 32, at most 16 384.
+    pub decode_slice: Option<u32>,
     /// How far a part of the lightmap may lag the exact image before it is evaluated
     /// again, as a share of the protocol's bound on the GPU against the reference decoder
     /// (2^-10 relative for HDR, 0.5/255 for 8-bit). The reconstruction evaluates a tile
@@ -113,6 +120,7 @@ impl Default for PlayerConfig {
             preroll_ns: None,
             preroll_margin_ns: 0,
             decode_budget: None,
+            decode_slice: None,
             reuse_share: 0.25,
             limits: Limits::default(),
         }

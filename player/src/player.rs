@@ -192,7 +192,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             ),
             memory_needed(&header, &entries, ring_bytes, min_array_layers(device)),
         )?;
-        let gpu = Gpu::for_stream(device, queue, &header);
+        let mut gpu = Gpu::for_stream(device, queue, &header);
+        gpu.set_decode_slice(cfg.decode_slice);
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         let reuse = reuse_threshold(cfg.reuse_share, header.transfer);
@@ -263,6 +264,25 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Blocks until the GPU has finished what was submitted (to time the GPU's share).
     pub fn wait_for_gpu(&self) {
         self.gpu.wait();
+    }
+
+    /// Puts GPU timestamps between the passes of every frame from now on, where the
+    /// device has them inside passes ([`bench::timing_device`]); returns whether it does.
+    /// Each frame's are read with [`Player::pass_times`] once it is done. For `vbim bench
+    /// render --passes`; the marks cost a little GPU time themselves.
+    ///
+    /// [`bench::timing_device`]: crate::bench::timing_device
+    #[cfg(feature = "bench")]
+    pub fn time_passes(&mut self) -> bool {
+        self.gpu.time_passes()
+    }
+
+    /// The GPU time of each pass of the frames recorded since the last call (ns, in the
+    /// order recorded: the decode's by kind, then `reconstruct`), once they are done
+    /// ([`Player::wait_for_gpu`]); empty unless [`Player::time_passes`].
+    #[cfg(feature = "bench")]
+    pub fn pass_times(&self) -> Vec<(&'static str, f64)> {
+        self.gpu.read_marks()
     }
 
     /// Running totals since the player was opened.
@@ -345,6 +365,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
 
     /// Records the GPU work of a planned frame into `encoder` (see [`Player::advance_into`]).
     pub fn render_into(&mut self, frame: &Frame, encoder: &mut wgpu::CommandEncoder) {
+        #[cfg(feature = "bench")]
+        self.gpu.mark_start(encoder);
         if !self.frame_ops.is_empty() {
             self.gpu
                 .record(encoder, &self.frame_ops, self.frame_box.as_deref());

@@ -105,6 +105,10 @@ pub struct BenchRenderArgs {
     /// unset: the default, each segment spread over the frames before it is due.
     #[arg(long)]
     pub budget: Option<u64>,
+    /// Workgroups per dispatch of a decode pass (`PlayerConfig::decode_slice`); unset:
+    /// the adapter's default (32 on a CPU adapter, 2048 on a GPU).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    pub slice: Option<u32>,
     /// `PlayerConfig::reuse_share`: how far a tile may lag before it is evaluated again,
     /// as a share of the protocol's GPU bound (0: every texel every frame).
     #[arg(long, default_value_t = 0.25, value_parser = crate::cli::parse_share)]
@@ -118,9 +122,15 @@ pub struct BenchRenderArgs {
     /// texel, a noon little).
     #[arg(long, default_value_t = 0)]
     pub start: u64,
-    /// Write the last run's frames (GPU time, blend, decode work, segment) to this CSV.
+    /// Write the last run's frames (GPU time, blend, decode work, segment; with
+    /// `--passes`, the decode's and the reconstruction's GPU time) to this CSV.
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Also time each pass of every frame (GPU timestamps between the passes, where the
+    /// adapter has them inside passes; they cost a little GPU time themselves), and print
+    /// where the frames' GPU time goes: each decode kind and the reconstruction.
+    #[arg(long)]
+    pub passes: bool,
 }
 
 #[derive(Args)]
@@ -238,6 +248,10 @@ pub struct BenchDecodeArgs {
     /// GPU time per frame only includes.
     #[arg(long)]
     pub gpu: bool,
+    /// Workgroups per dispatch of a decode pass (`PlayerConfig::decode_slice`); unset:
+    /// the adapter's default (32 on a CPU adapter, 2048 on a GPU).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    pub slice: Option<u32>,
 }
 
 #[derive(Args)]

@@ -66,7 +66,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     }
     let gpu = a
         .gpu
-        .then(|| gpu_decode(&h, &layout, &entries, &chunks, a.runs))
+        .then(|| gpu_decode(&h, &layout, &entries, &chunks, a.runs, a.slice))
         .transpose()?;
     let (zm, z0, z1) = stats(&mut zstd_t);
     let (fm, f0, f1) = stats(&mut full_t);
@@ -124,11 +124,12 @@ fn gpu_decode(
     entries: &[vbim_format::IndexEntry],
     chunks: &[&[u8]],
     runs: usize,
+    slice: Option<u32>,
 ) -> Result<GpuTimes, String> {
     use vbim_player::bench::{timing_device, DecoderCore, Event, GpuDecoder, SegmentData};
     let (device, queue, info) = timing_device().map_err(|e| e.to_string())?;
     let adapter = format!("{} ({:?})", info.name, info.backend);
-    let mut gpu = GpuDecoder::new(&device, &queue, h);
+    let mut gpu = GpuDecoder::new(&device, &queue, h, slice);
     let (mut times, mut boxes) = (Vec::new(), 0);
     let mut passes: Vec<(&'static str, f64)> = Vec::new();
     for _ in 0..runs.max(1) {
@@ -292,16 +293,21 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     // from submission to completion: [mean, p99, max] each.
     let mut runs: Vec<[[f64; 3]; 7]> = Vec::new();
     let (mut h, mut timed, mut work) = (None, false, (0u64, 0u64));
+    let (mut passes_timed, mut passes) = (false, Vec::<(&'static str, f64, f64)>::new());
     for _ in 0..a.runs.max(1) {
         let f = crate::sequence::open_input(&a.file)?;
         let cfg = PlayerConfig {
             decode_budget: a.budget,
+            decode_slice: a.slice,
             reuse_share: a.reuse_share,
             ..PlayerConfig::default()
         };
         let mut player = Player::open(&device, &queue, std::io::BufReader::new(f), cfg)
             .map_err(|e| e.to_string())?;
         let header = player.header().clone();
+        passes_timed = a.passes && player.time_passes();
+        // Each pass's GPU time over the run: label, sum, largest in one frame (ns).
+        passes.clear();
         if a.start > 0 {
             player.set_time(
                 a.start * 1_000_000_000 * header.rate_den as u64 / header.rate_num as u64,
@@ -312,7 +318,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         h = Some(header);
         let mut series: [Vec<f64>; 7] = Default::default();
         let mut rows = String::from(
-            "frame,gpu_ms,blend_ms,gpu_wall_ms,blend_wall_ms,decode_work,segment,u,state\n",
+            "frame,gpu_ms,blend_ms,gpu_wall_ms,blend_wall_ms,decode_work,segment,u,state,decode_ms,reconstruct_ms\n",
         );
         let start = Instant::now();
         let mut prev = 0u64;
@@ -341,6 +347,30 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             player.wait_for_gpu();
             let t3 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            // This frame's passes, by label (the decode's kinds, then the reconstruction).
+            let mut split = (0.0, 0.0);
+            if passes_timed {
+                let mut frame_passes: Vec<(&'static str, f64)> = Vec::new();
+                for (label, ns) in player.pass_times() {
+                    match frame_passes.iter_mut().find(|p| p.0 == label) {
+                        Some(p) => p.1 += ns,
+                        None => frame_passes.push((label, ns)),
+                    }
+                    if label == "reconstruct" {
+                        split.1 += ns * 1e-6;
+                    } else {
+                        split.0 += ns * 1e-6;
+                    }
+                }
+                if k > warm {
+                    for (label, ns) in frame_passes {
+                        match passes.iter_mut().find(|p| p.0 == label) {
+                            Some(p) => (p.1, p.2) = (p.1 + ns, p.2.max(ns)),
+                            None => passes.push((label, ns, ns)),
+                        }
+                    }
+                }
+            }
             // The reference blend in a submission of its own, timed the same two ways.
             let (mut gpu, mut blend, mut blend_wall) = (0.0, 0.0, 0.0);
             if let Some(timer) = &timer {
@@ -364,8 +394,8 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
                 series[6].push(blend_wall);
                 let r = &frame.record;
                 rows += &format!(
-                    "{k},{gpu:.4},{blend:.4},{gpu_wall:.4},{blend_wall:.4},{},{},{:.4},{:?}\n",
-                    r.decode_work, r.segment, r.u, r.state
+                    "{k},{gpu:.4},{blend:.4},{gpu_wall:.4},{blend_wall:.4},{},{},{:.4},{:?},{:.4},{:.4}\n",
+                    r.decode_work, r.segment, r.u, r.state, split.0, split.1
                 );
             }
         }
@@ -389,11 +419,12 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         );
     };
     println!(
-        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, reuse share {}; median over runs (min–max)",
+        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode slice {} workgroups, reuse share {}; median over runs (min–max)",
         h.width, h.height, h.rate_num, h.rate_den,
         if a.slow > 1 { format!(" played {}× slower", a.slow) } else { String::new() },
         a.frames, runs.len(), info.name, info.backend,
         a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame")),
+        a.slice.map_or("the adapter's".to_string(), |s| s.to_string()),
         a.reuse_share
     );
     line(
@@ -446,5 +477,22 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         "decode work: at most {} blocks in one frame; frames late for the budget: {}",
         work.0, work.1
     );
+    if a.passes && !passes_timed {
+        println!("GPU time by pass: not measured (the adapter has no timestamps inside passes)");
+    } else if passes_timed {
+        let total: f64 = passes.iter().map(|p| p.1).sum();
+        println!(
+            "GPU time by pass per displayed frame (timestamps between passes, last run): {:.3} ms in all",
+            total / a.frames as f64 / 1e6
+        );
+        for (label, sum, max) in &passes {
+            println!(
+                "  {label:<24} mean {:>7.3} ms  {:>5.1}%  largest in one frame {:>7.3} ms",
+                sum / a.frames as f64 / 1e6,
+                100.0 * sum / total.max(1.0),
+                max / 1e6
+            );
+        }
+    }
     Ok(())
 }

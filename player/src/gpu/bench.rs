@@ -3,14 +3,48 @@
 use super::Gpu;
 use crate::decoder::SegmentData;
 
+impl Gpu {
+    /// Puts timestamps between the passes of every frame from now on (`vbim bench render
+    /// --passes`), where the device has them; returns whether it does.
+    pub fn time_passes(&mut self) -> bool {
+        self.marks = crate::marks::Marks::new(&self.device);
+        self.marks.is_some()
+    }
+
+    /// A frame's first mark (no time is counted to it), where passes are timed.
+    pub fn mark_start(&self, enc: &mut wgpu::CommandEncoder) {
+        if self.marks.is_some() {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.mark(&mut pass, crate::marks::START);
+        }
+    }
+
+    /// The GPU time between the marks written since the last call, each to the pass it
+    /// ends (ns), once the work is done.
+    pub fn read_marks(&self) -> Vec<(&'static str, f64)> {
+        self.marks
+            .as_ref()
+            .map_or_else(Vec::new, |m| m.read(&self.device, &self.queue))
+    }
+}
+
 /// The GPU decode alone, for `vbim bench decode --gpu`: boxes filled by a decoder without
 /// a device, decoded one after another on a GPU of the stream's size.
 pub struct GpuDecoder(Gpu);
 
 impl GpuDecoder {
-    /// GPU state for the stream `h` describes.
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Self {
+    /// GPU state for the stream `h` describes, decoding in dispatches of `slice`
+    /// workgroups ([`PlayerConfig::decode_slice`]).
+    ///
+    /// [`PlayerConfig::decode_slice`]: crate::PlayerConfig::decode_slice
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        h: &vbim_format::Header,
+        slice: Option<u32>,
+    ) -> Self {
         let mut gpu = Gpu::for_stream(device, queue, h);
+        gpu.set_decode_slice(slice);
         gpu.marks = crate::marks::Marks::new(device);
         GpuDecoder(gpu)
     }
@@ -19,10 +53,7 @@ impl GpuDecoder {
     /// empty unless the device has timestamps inside passes: [`timing_device`]). Call it
     /// after each [`GpuDecoder::decode`]: the query set holds one decode's marks.
     pub fn pass_times(&mut self) -> Vec<(&'static str, f64)> {
-        let g = &self.0;
-        g.marks
-            .as_ref()
-            .map_or_else(Vec::new, |m| m.read(&g.device, &g.queue))
+        self.0.read_marks()
     }
 
     /// Decodes `seg` (its keyframes and bubble planes), waits for the GPU and returns the
@@ -30,11 +61,8 @@ impl GpuDecoder {
     pub fn decode(&mut self, seg: &SegmentData) -> std::time::Duration {
         let t = std::time::Instant::now();
         let mut enc = self.0.device.create_command_encoder(&Default::default());
-        if self.0.marks.is_some() {
-            // A first mark, so that the time before the decode is not counted.
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            self.0.mark(&mut pass, crate::marks::START);
-        }
+        // A first mark, so that the time before the decode is not counted.
+        self.0.mark_start(&mut enc);
         self.0.decode(&mut enc, seg, true);
         self.0.queue.submit([enc.finish()]);
         self.0.wait();

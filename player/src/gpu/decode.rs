@@ -14,6 +14,30 @@ use crate::decoder::SegmentData;
 /// may land in different frames. (32 workgroups of 64 blocks: 131 072 texels of a plane.)
 pub(crate) const SLICE_GROUPS: u32 = 32;
 
+/// Workgroups of a slice on a GPU ([`default_slice_groups`]): 2048 workgroups of 64
+/// blocks, 8.4 M texels of a plane.
+const GPU_SLICE_GROUPS: u32 = 2048;
+
+/// The most workgroups a decode dispatch may cover ([`Gpu::set_decode_slice`]): a parse
+/// slice ([`PARSE_SPAN`] of them) stays within WebGPU's 65 535 workgroups per dimension.
+pub(crate) const MAX_SLICE_GROUPS: u32 = 16_384;
+
+/// Workgroups of a decode dispatch when the caller names none
+/// ([`PlayerConfig::decode_slice`]): [`SLICE_GROUPS`] on a CPU adapter, where a dispatch
+/// takes time in proportion to its work, so that small slices spread a decode evenly over
+/// frames; [`GPU_SLICE_GROUPS`] elsewhere, where a dispatch of 32 workgroups fills a
+/// fraction of the GPU and its time is mostly latency (on an H100 a 4096² segment took
+/// 82 ms in 32-workgroup slices, BENCHMARKS.md).
+///
+/// [`PlayerConfig::decode_slice`]: crate::PlayerConfig::decode_slice
+pub(crate) fn default_slice_groups(device: &wgpu::Device) -> u32 {
+    if device.adapter_info().device_type == wgpu::DeviceType::Cpu {
+        SLICE_GROUPS
+    } else {
+        GPU_SLICE_GROUPS
+    }
+}
+
 /// A parse slice is this many slices' workgroups: as many pairs per dispatch as when a
 /// piece was 256 pairs, so that shorter pieces shorten each dispatch's serial chain
 /// without making more dispatches.
@@ -88,6 +112,14 @@ pub(crate) struct Target {
 }
 
 impl Gpu {
+    /// Sets how many workgroups one dispatch of a decode pass covers (rounded up to a
+    /// multiple of [`SLICE_GROUPS`], at most [`MAX_SLICE_GROUPS`]); `None`: the adapter's
+    /// default ([`default_slice_groups`]). Applies to the decodes planned from then on.
+    pub fn set_decode_slice(&mut self, groups: Option<u32>) {
+        let groups = groups.unwrap_or_else(|| default_slice_groups(&self.device));
+        self.slice_span = groups.clamp(1, MAX_SLICE_GROUPS).div_ceil(SLICE_GROUPS);
+    }
+
     /// Whether a segment's coefficients fit one storage binding of this device.
     pub fn fits(&self, seg: &SegmentData) -> Result<(), String> {
         let limit = self.device.limits().max_storage_buffer_binding_size;
@@ -403,8 +435,9 @@ impl Gpu {
         self.sliced_by(ops, Kind::Parse, job, (groups, PARSE_SPAN), channel, units);
     }
 
-    /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`], each a
-    /// dispatch that binds its slice's first workgroup. The pass costs `units` blocks in
+    /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the
+    /// slice span ([`Gpu::set_decode_slice`]), each a dispatch that binds its slice's
+    /// first workgroup. The pass costs `units` blocks in
     /// all, `per_group` in each whole workgroup.
     #[allow(clippy::too_many_arguments)]
     fn sliced(
@@ -419,8 +452,8 @@ impl Gpu {
         self.sliced_by(ops, kind, job, (groups, 1), channel, units);
     }
 
-    /// [`Gpu::sliced`] with slices of `span` · [`SLICE_GROUPS`] workgroups (slice k
-    /// binds the slices buffer's entry k · `span`).
+    /// [`Gpu::sliced`] with slices `span` times as long (slice k binds the slices
+    /// buffer's entry k · `span` · the slice span).
     fn sliced_by(
         &mut self,
         ops: &mut Vec<Op>,
@@ -431,6 +464,7 @@ impl Gpu {
         (units, per_group): (u64, u64),
     ) {
         let at = self.push_job(job);
+        let span = span * self.slice_span;
         let size = span * SLICE_GROUPS;
         for k in 0..groups.div_ceil(size) {
             let from = k * size;
@@ -441,17 +475,19 @@ impl Gpu {
     }
 
     /// A zero pass over `job.size` texels in 8 × 8 workgroups, in slices of
-    /// [`SLICE_GROUPS`] rows of workgroups (the shader starts the slice's first rows down), so
+    /// [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader starts the slice's first rows down), so
     /// that it spreads like the rest; a block per 64 texels zeroed.
     fn rows_sliced(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, channel: u32) {
         let [w, h] = job.size;
         let rows = h.div_ceil(8);
         let at = self.push_job(job);
-        for k in 0..rows.div_ceil(SLICE_GROUPS) {
-            let from = k * SLICE_GROUPS;
-            let n = (rows - from).min(SLICE_GROUPS);
+        let size = SLICE_GROUPS * self.slice_span;
+        for k in 0..rows.div_ceil(size) {
+            let from = k * size;
+            let n = (rows - from).min(size);
             let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64;
-            ops.push(Op::new(kind, at, [w.div_ceil(8), n, 1], channel, texels / 64).in_slice(k));
+            let op = Op::new(kind, at, [w.div_ceil(8), n, 1], channel, texels / 64);
+            ops.push(op.in_slice(k * self.slice_span));
         }
     }
 

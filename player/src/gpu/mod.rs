@@ -121,6 +121,11 @@ pub(crate) struct Gpu {
     parse_group: Option<wgpu::BindGroup>,
     /// Scratch for the jobs of one segment (kept: no allocation per segment).
     job_bytes: Vec<u8>,
+    /// A decode pass's dispatch covers this many [`SLICE_GROUPS`] of workgroups
+    /// ([`Gpu::set_decode_slice`]).
+    ///
+    /// [`SLICE_GROUPS`]: decode::SLICE_GROUPS
+    slice_span: u32,
     /// Bubble layers of one set ([`BUBBLE_SETS`] sets, one after the other).
     pub set_layers: u32,
     /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).

@@ -178,6 +178,7 @@ impl Gpu {
         // A workgroup is 8 × 8 invocations of a 2 × 2 quad each, a tile of 16² texels
         // (reconstruct.wgsl; `tile_bytes` counts its state).
         pass.dispatch_workgroups(self.width.div_ceil(16), self.height.div_ceil(16), 1);
+        self.mark(&mut pass, "reconstruct");
     }
 
     /// Reads the texture the reconstruction writes back (RGBA, f32). For tests and error

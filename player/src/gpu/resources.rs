@@ -3,7 +3,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::decode::SLICE_GROUPS;
+use super::decode::{default_slice_groups, SLICE_GROUPS};
 use super::job::{decode_source, Job, JOB_STRIDE};
 use super::plan::*;
 use super::reconstruct::Params;
@@ -232,6 +232,7 @@ impl Gpu {
             bubble_group: None,
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
+            slice_span: default_slice_groups(device) / SLICE_GROUPS,
             set_layers: set_layers(max_degree, channels),
             #[cfg(feature = "bench")]
             marks: None,
