@@ -57,6 +57,7 @@ enum Kind {
     Parse,
     KeyZero,
     KeyAdd,
+    KeyRange,
     KeyPack,
     /// A bubble set's bounds cleared.
     Bounds {
@@ -165,16 +166,23 @@ impl Gpu {
                     ..gpu.base_job()
                 };
                 let n = ops.len();
-                // 16 blocks per region, 64 regions per workgroup.
-                let regions = (rx * ry) as u64;
-                gpu.sliced(
-                    ops,
-                    Kind::KeyPack,
-                    job,
-                    (rx * ry).div_ceil(64),
-                    p,
-                    (regions * 16, 1024),
-                );
+                // The regions' extents cleared, found, then the texels packed: an
+                // invocation per row of a region, 64 per workgroup; a pass costs 8 units
+                // (1/16 of a region each) per region.
+                let regions = rx * ry;
+                let extents = Kind::Bounds {
+                    offset: BOUND_BYTES,
+                    bytes: regions as u64 * 8,
+                };
+                ops.push(Op::new(extents, 0, [0; 3], p, 0));
+                let job = Job {
+                    base: (BOUND_BYTES / 4) as u32,
+                    ..job
+                };
+                let groups = (regions * REGION).div_ceil(64);
+                let units = (regions as u64 * 8, 16);
+                gpu.sliced(ops, Kind::KeyRange, job, groups, p, units);
+                gpu.sliced(ops, Kind::KeyPack, job, groups, p, units);
                 for op in &mut ops[n..] {
                     op.packs = true;
                 }
@@ -355,6 +363,11 @@ impl Gpu {
                 &self.key_add,
                 self.key_groups.get(op.channel as usize),
                 "key_add",
+            ),
+            Kind::KeyRange => (
+                &self.key_range,
+                self.key_groups.get(op.channel as usize),
+                "key_range",
             ),
             Kind::KeyPack => (
                 &self.key_pack,
@@ -544,7 +557,7 @@ impl Kind {
             Kind::KeyAdd => 12,
             Kind::BubbleWrite => 4,
             Kind::BubbleBound => 2,
-            Kind::KeyZero | Kind::BubbleZero | Kind::KeyPack => 1,
+            Kind::KeyZero | Kind::BubbleZero | Kind::KeyRange | Kind::KeyPack => 1,
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } => 0,
         }
     }

@@ -313,46 +313,95 @@ fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
 // enough that the ranges cost nothing (8 bytes per 1024 texels and plane).
 const REGION: u32 = 32u;
 
-// Packs a plane of the head keyframe into layer `job.layer` of the 16-bit keyframes
-// (slot · channels + plane):
-// one invocation per region reads the region twice, first for its range, then to round
-// each pair of texels to 16-bit steps of it. (No workgroup memory or barriers: a reduction
-// in workgroup memory cost lavapipe, which runs a workgroup's invocations in turns
-// between barriers, more than the reads it saved.) The head is only read: the next
-// keyframe is added onto it afterwards.
+// A plane of the head keyframe packed into layer `job.layer` of the 16-bit keyframes
+// (slot · channels + plane) in two passes, one invocation per row of a region each, so
+// that a plane is spread over 32 invocations per region (one invocation per region
+// reading it whole, twice, left an H100 waiting on 2048 loads in a row). `key_range`
+// finds each region's range: a row's lowest and highest value, merged by `atomicMax`
+// into the region's extent, words `job.base` + 2 · region (the bounds buffer, cleared
+// before: an extent of zeros is empty). `key_pack` then rounds each pair of texels of
+// the row to 16-bit steps of the range, and the row 0 invocation writes the region's
+// (lowest value, step). The head is only read: the next keyframe is added onto it
+// afterwards.
+
+// f32 bits in an order that `atomicMax` on u32 keeps: larger values larger, and (for
+// the lowest value, stored complemented) smaller values larger.
+fn ordered(v: f32) -> u32 {
+    let b = bitcast<u32>(v);
+    if ((b & 0x80000000u) != 0u) {
+        return ~b;
+    }
+    return b | 0x80000000u;
+}
+
+fn unordered(o: u32) -> f32 {
+    if ((o & 0x80000000u) != 0u) {
+        return bitcast<f32>(o & 0x7fffffffu);
+    }
+    return bitcast<f32>(~o);
+}
+
+// The region and row of the invocation: 64 per workgroup, 32 rows of a region, regions in
+// row order. `r` is past the last region when the invocation has none.
+fn region_row(wg: vec3<u32>, li: u32) -> vec2<u32> {
+    let i = group_index(wg) * 64u + li;
+    return vec2<u32>(i / REGION, i % REGION);
+}
+
+@compute @workgroup_size(64)
+fn key_range(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
+    let rr = region_row(wg, li);
+    if (rr.x >= regions.x * regions.y) {
+        return;
+    }
+    let origin = vec2<u32>(rr.x % regions.x, rr.x / regions.x) * REGION;
+    let y = origin.y + rr.y;
+    if (y >= job.size.y) {
+        return;
+    }
+    let end = min(origin.x + REGION, job.size.x);
+    var lo = 3.4e38;
+    var hi = -3.4e38;
+    for (var x = origin.x; x < end; x = x + 1u) {
+        let v = textureLoad(key_plane, vec2<u32>(x, y)).x;
+        lo = min(lo, v);
+        hi = max(hi, v);
+    }
+    atomicMax(&bounds[job.base + 2u * rr.x], ~ordered(lo));
+    atomicMax(&bounds[job.base + 2u * rr.x + 1u], ordered(hi));
+}
+
 @compute @workgroup_size(64)
 fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
-    let r = group_index(wg) * 64u + li;
-    if (r >= regions.x * regions.y) {
+    let rr = region_row(wg, li);
+    if (rr.x >= regions.x * regions.y) {
         return;
     }
-    let region = vec2<u32>(r % regions.x, r / regions.x);
+    let region = vec2<u32>(rr.x % regions.x, rr.x / regions.x);
     let origin = region * REGION;
-    let end = min(origin + vec2<u32>(REGION), job.size);
-    var lo = 3.4e38;
-    var hi = -3.4e38;
-    for (var y = origin.y; y < end.y; y = y + 1u) {
-        for (var x = origin.x; x < end.x; x = x + 1u) {
-            let v = textureLoad(key_plane, vec2<u32>(x, y)).x;
-            lo = min(lo, v);
-            hi = max(hi, v);
-        }
+    let y = origin.y + rr.y;
+    if (y >= job.size.y) {
+        return;
     }
+    let lo = unordered(~atomicLoad(&bounds[job.base + 2u * rr.x]));
+    let hi = unordered(atomicLoad(&bounds[job.base + 2u * rr.x + 1u]));
     let step = (hi - lo) / 65535.0;
     var inv = 0.0;
     if (step > 0.0) {
         inv = 1.0 / step;
     }
-    ranges[(job.layer * regions.y + region.y) * regions.x + region.x] = vec2<f32>(lo, step);
+    if (rr.y == 0u) {
+        ranges[(job.layer * regions.y + region.y) * regions.x + region.x] = vec2<f32>(lo, step);
+    }
     // Planes are whole tiles, so a region's width is even: texels go in pairs.
-    for (var y = origin.y; y < end.y; y = y + 1u) {
-        for (var x = origin.x; x < end.x; x = x + 2u) {
-            let a = textureLoad(key_plane, vec2<u32>(x, y)).x;
-            let b = textureLoad(key_plane, vec2<u32>(x + 1u, y)).x;
-            let qa = u32(clamp(round((a - lo) * inv), 0.0, 65535.0));
-            let qb = u32(clamp(round((b - lo) * inv), 0.0, 65535.0));
-            textureStore(planes16, vec2<u32>(x / 2u, y), job.layer, vec4<u32>(qa | (qb << 16u), 0u, 0u, 0u));
-        }
+    let end = min(origin.x + REGION, job.size.x);
+    for (var x = origin.x; x < end; x = x + 2u) {
+        let a = textureLoad(key_plane, vec2<u32>(x, y)).x;
+        let b = textureLoad(key_plane, vec2<u32>(x + 1u, y)).x;
+        let qa = u32(clamp(round((a - lo) * inv), 0.0, 65535.0));
+        let qb = u32(clamp(round((b - lo) * inv), 0.0, 65535.0));
+        textureStore(planes16, vec2<u32>(x / 2u, y), job.layer, vec4<u32>(qa | (qb << 16u), 0u, 0u, 0u));
     }
 }

@@ -59,6 +59,7 @@ pub(crate) struct Gpu {
     parse: wgpu::ComputePipeline,
     key_add: wgpu::ComputePipeline,
     key_zero: wgpu::ComputePipeline,
+    key_range: wgpu::ComputePipeline,
     key_pack: wgpu::ComputePipeline,
     bubble_bound: wgpu::ComputePipeline,
     bubble_write: wgpu::ComputePipeline,

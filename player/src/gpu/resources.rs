@@ -120,6 +120,7 @@ impl Gpu {
         let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
+        let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
         let bubble_bound =
             pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
@@ -144,8 +145,8 @@ impl Gpu {
         );
         // (COPY_SRC: tests read it back.)
         let bounds = buffer(
-            "vbim bubble bounds",
-            BOUND_BYTES,
+            "vbim bubble bounds and region extents",
+            bound_bytes(plane),
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
         // Zeroed at creation: generation 0, which no frame has.
@@ -191,6 +192,7 @@ impl Gpu {
             parse,
             key_add,
             key_zero,
+            key_range,
             key_pack,
             bubble_bound,
             bubble_write,
@@ -311,6 +313,10 @@ impl Gpu {
             resource: self.tables.as_entire_binding(),
         };
         self.parse_group = Some(group(&self.parse_layout, &[]));
+        let bounds = wgpu::BindGroupEntry {
+            binding: 8,
+            resource: self.bounds.as_entire_binding(),
+        };
         self.key_groups = self
             .key_views
             .iter()
@@ -326,14 +332,11 @@ impl Gpu {
                         view(3, v),
                         view(4, &self.packed_view),
                         ranges,
+                        bounds.clone(),
                     ],
                 )
             })
             .collect();
-        let bounds = wgpu::BindGroupEntry {
-            binding: 8,
-            resource: self.bounds.as_entire_binding(),
-        };
         self.bubble_group = Some(group(
             &self.bubble_layout,
             &[tables.clone(), view(4, &self.bubble_view), bounds],
@@ -543,6 +546,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
             entry(5, storage(false)),
             entry(6, storage(true)),
             entry(7, storage(true)),
+            entry(8, storage(false)),
             entry(10, storage(true)),
         ],
     });
