@@ -88,7 +88,13 @@ pub struct PlayerConfig {
     /// (lavapipe), where a dispatch's time is in proportion to its work and small slices
     /// spread a decode evenly; 2048 on a GPU, where a dispatch of 32 workgroups fills a
     /// small part of the chip and costs mostly its latency (BENCHMARKS.md, "On a hardware
-    /// GPU"). Rounded up to a multiple of 32, at most 16 384.
+    /// GPU"). Rounded up to a multiple of 32, at most 16 384. A slice is the smallest
+    /// piece of work a frame records: with a [`decode_budget`](Self::decode_budget)
+    /// smaller than one slice's cost (2048 workgroups of a bubble pass are 131 072
+    /// blocks), each frame records one slice and [`Totals::over_budget`] counts it; a
+    /// small budget wants a small slice.
+    ///
+    /// [`Totals::over_budget`]: crate::Totals::over_budget
     pub decode_slice: Option<u32>,
     /// How far a part of the lightmap may lag the exact image before it is evaluated
     /// again, as a share of the protocol's bound on the GPU against the reference decoder

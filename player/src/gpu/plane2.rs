@@ -14,7 +14,8 @@ pub(crate) struct Plane2Gpu {
     layout: wgpu::BindGroupLayout,
     flags: wgpu::ComputePipeline,
     blocks: wgpu::ComputePipeline,
-    dc: wgpu::ComputePipeline,
+    dc_rows: wgpu::ComputePipeline,
+    dc_cols: wgpu::ComputePipeline,
 }
 
 const BINDINGS: u32 = 8;
@@ -48,7 +49,8 @@ impl Plane2Gpu {
         Plane2Gpu {
             flags: pipeline("flags"),
             blocks: pipeline("blocks"),
-            dc: pipeline("dc"),
+            dc_rows: pipeline("dc_rows"),
+            dc_cols: pipeline("dc_cols"),
             layout,
         }
     }
@@ -169,22 +171,18 @@ impl Plane2Gpu {
         };
         let bind = [groups_of(0), groups_of(1)];
         let mut enc = device.create_command_encoder(&Default::default());
-        let workgroups = (lane_count as u32).div_ceil(64);
-        for (pipeline, parity) in [
-            (&self.flags, 0),
-            (&self.flags, 1),
-            (&self.blocks, 0),
-            (&self.blocks, 1),
-            (&self.dc, 0),
+        let lane_groups = (lane_count as u32).div_ceil(64);
+        for (pipeline, parity, groups) in [
+            (&self.flags, 0, lane_groups),
+            (&self.flags, 1, lane_groups),
+            (&self.blocks, 0, lane_groups),
+            (&self.blocks, 1, lane_groups),
+            (&self.dc_rows, 0, (bh as u32).div_ceil(64)),
+            (&self.dc_cols, 0, (bw as u32).div_ceil(64)),
         ] {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind[parity], &[]);
-            let groups = if std::ptr::eq(pipeline, &self.dc) {
-                1
-            } else {
-                workgroups
-            };
             pass.dispatch_workgroups(groups, 1, 1);
         }
         queue.submit([enc.finish()]);
@@ -364,5 +362,45 @@ mod tests {
             }
             let _ = gpu.decode(&device, &queue, &bad, 0, &shapes[0].geometry);
         }
+    }
+
+    /// A 2048² keyframe plane: 65,536 cells, more than llvmpipe lets one invocation loop
+    /// over, so the DC's prefix sum must be shared out (rows, then columns) to be right.
+    #[test]
+    fn the_dc_of_a_plane_of_more_cells_than_one_invocation_may_visit_is_exact() {
+        let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+        let gpu = Plane2Gpu::new(&device);
+        let (bw, bh) = (256, 256);
+        let order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+        // Smooth DCs (small residuals) with a few jumps, nothing else: a night keyframe.
+        let mut s = 11;
+        let q: Vec<[i32; N * N]> = order
+            .iter()
+            .map(|&(x, y)| {
+                let mut b = [0i32; N * N];
+                b[0] = (x * 3 + y * 5) as i32
+                    + if lcg(&mut s).is_multiple_of(97) {
+                        400
+                    } else {
+                        0
+                    };
+                b
+            })
+            .collect();
+        let shape = Plane {
+            family: 0,
+            geometry: Geometry {
+                grid: (bw, bh),
+                order: &order,
+                tile: None,
+            },
+        };
+        let maps = [ContextMap::single()];
+        let bytes = plane2::encode(&[(shape, &q[..])], &maps, 4096).unwrap();
+        let section = Section::parse(&bytes, &[shape], &maps).unwrap();
+        let got = gpu
+            .decode(&device, &queue, &section, 0, &shape.geometry)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(got == q, "the GPU's blocks differ");
     }
 }

@@ -1,7 +1,8 @@
 // Format 2's coefficient coding decoded on the GPU: one invocation per rANS lane, the
 // passes of `vbim_format::plane2` (its module documentation is the specification; this
 // follows it step for step). Dispatches: `flags` with parity 0 then 1, `blocks` with
-// parity 0 then 1, then `dc`. Each lane keeps its state between dispatches in `lanes`.
+// parity 0 then 1, then `dc_rows` and `dc_cols`. Each lane keeps its state between
+// dispatches in `lanes`.
 //
 // llvmpipe (lavapipe) ends every loop of an invocation once its loops have run 65,535
 // iterations in all: so no loop per symbol here (a slot table finds the token, raw bits
@@ -367,18 +368,52 @@ fn dc_near(bx: u32, by: u32, ox: i32, oy: i32) -> i32 {
     return coefs[j * 64u];
 }
 
-// The DC: the residuals' 2-D prefix sum, in raster order (one invocation; a real decoder
-// would scan rows, then columns).
-@compute @workgroup_size(1)
-fn dc(@builtin(global_invocation_id) id: vec3<u32>) {
+// The DC: the residuals' 2-D prefix sum (left + up − up-left, 0 outside the plane or, for
+// a bubble plane, outside the tile), as a scan of each row (`dc_rows`: into the block's
+// DC slot) and then of each column (`dc_cols`: in place), one invocation per row or
+// column, restarting at each tile's edge. The two scans equal the raster recurrence of
+// the specification because every cell that a prediction reaches has a block: a
+// keyframe plane has them all, and a bubble plane's predictions stay inside its tiles,
+// which have all their blocks or none (the cells of a tile with none hold 0 both ways).
+// Wrapping i32 sums, as the specification's, in any order.
+fn restarts(i: u32) -> bool {
+    return i == 0u || (prm.tile != 0u && i % prm.tile == 0u);
+}
+
+@compute @workgroup_size(64)
+fn dc_rows(@builtin(global_invocation_id) id: vec3<u32>) {
+    let by = id.x;
+    if (by >= prm.bh) {
+        return;
+    }
+    var acc = 0i;
+    for (var bx = 0u; bx < prm.bw; bx = bx + 1u) {
+        if (restarts(bx)) {
+            acc = 0i;
+        }
+        let b = grid[by * prm.bw + bx];
+        if (b != NONE) {
+            acc = acc + info[b].x;
+            coefs[b * 64u] = acc;
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn dc_cols(@builtin(global_invocation_id) id: vec3<u32>) {
+    let bx = id.x;
+    if (bx >= prm.bw) {
+        return;
+    }
+    var acc = 0i;
     for (var by = 0u; by < prm.bh; by = by + 1u) {
-        for (var bx = 0u; bx < prm.bw; bx = bx + 1u) {
-            let b = grid[by * prm.bw + bx];
-            if (b == NONE) {
-                continue;
-            }
-            coefs[b * 64u] = info[b].x + dc_near(bx, by, -1, 0) + dc_near(bx, by, 0, -1)
-                - dc_near(bx, by, -1, -1);
+        if (restarts(by)) {
+            acc = 0i;
+        }
+        let b = grid[by * prm.bw + bx];
+        if (b != NONE) {
+            acc = acc + coefs[b * 64u];
+            coefs[b * 64u] = acc;
         }
     }
 }
