@@ -271,26 +271,36 @@ mod tests {
                 q
             })
             .collect();
+        let lanes = keyframe_on_the_gpu((&gpu, &device, &queue), (bw, bh), &order, &q, usize::MAX);
+        assert!(lanes >= 6, "{lanes} lanes");
+    }
+
+    /// Codes `q`, a keyframe plane of `grid` blocks in `order`, in lanes of `lane_bytes`,
+    /// decodes it on the GPU, checks that it gave `q` back, and returns how many lanes the
+    /// plane was cut into.
+    fn keyframe_on_the_gpu(
+        (gpu, device, queue): (&Plane2Gpu, &wgpu::Device, &wgpu::Queue),
+        grid: (usize, usize),
+        order: &[(usize, usize)],
+        q: &[[i32; N * N]],
+        lane_bytes: usize,
+    ) -> usize {
         let shape = Plane {
             family: 0,
             geometry: Geometry {
-                grid: (bw, bh),
-                order: &order,
+                grid,
+                order,
                 tile: None,
             },
         };
         let maps = [ContextMap::single()];
-        let bytes = plane2::encode(&[(shape, &q[..])], &maps, usize::MAX).unwrap();
+        let bytes = plane2::encode(&[(shape, q)], &maps, lane_bytes).unwrap();
         let section = Section::parse(&bytes, &[shape], &maps).unwrap();
-        assert!(
-            section.planes[0].lanes.len() >= 6,
-            "{:?}",
-            section.planes[0].lanes
-        );
         let got = gpu
-            .decode(&device, &queue, &section, 0, &shape.geometry)
+            .decode(device, queue, &section, 0, &shape.geometry)
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(got == q, "the GPU's blocks differ");
+        section.planes[0].lanes.len()
     }
 
     #[test]
@@ -387,20 +397,6 @@ mod tests {
                 b
             })
             .collect();
-        let shape = Plane {
-            family: 0,
-            geometry: Geometry {
-                grid: (bw, bh),
-                order: &order,
-                tile: None,
-            },
-        };
-        let maps = [ContextMap::single()];
-        let bytes = plane2::encode(&[(shape, &q[..])], &maps, 4096).unwrap();
-        let section = Section::parse(&bytes, &[shape], &maps).unwrap();
-        let got = gpu
-            .decode(&device, &queue, &section, 0, &shape.geometry)
-            .unwrap_or_else(|e| panic!("{e}"));
-        assert!(got == q, "the GPU's blocks differ");
+        keyframe_on_the_gpu((&gpu, &device, &queue), (bw, bh), &order, &q, 4096);
     }
 }
