@@ -1,7 +1,10 @@
 //! Format 2's coefficient coding decoded on the GPU (`plane2.wgsl`): a prototype that
-//! decodes one plane of a coded section into blocks, tested against the specification
-//! (`vbim_format::plane2`) on a real adapter. Not yet part of the player's decode, which
-//! reads format 1; it is what format 2's decode will build on. Buffers are made per call.
+//! decodes one plane of a coded section into the dense plane the player's decode passes
+//! read (coefficients valid where a block's mask has the bit, and the set of blocks that
+//! have any), tested against the specification (`vbim_format::plane2`) on a real adapter.
+//! Not yet part of the player's decode, which reads format 2 through the decoder thread's
+//! conversion to format 1's pairs; it is what that decode will build on. Buffers are made
+//! per call.
 
 use vbim_format::dct::N;
 use vbim_format::plane2::{Geometry, Section, GROUP, REGION};
@@ -18,7 +21,7 @@ pub(crate) struct Plane2Gpu {
     dc_cols: wgpu::ComputePipeline,
 }
 
-const BINDINGS: u32 = 8;
+const BINDINGS: u32 = 9;
 
 impl Plane2Gpu {
     pub fn new(device: &wgpu::Device) -> Plane2Gpu {
@@ -130,7 +133,10 @@ impl Plane2Gpu {
             ),
             storage(bytemuck::cast_slice(&groups), "plane2 groups"),
             zeros(n * 8, "plane2 info"),
-            zeros(n * N * N * 4, "plane2 coefs"),
+            // Not cleared, as the player's dense plane is not: filled with garbage, so
+            // that a coefficient read without its mask bit shows.
+            storage(&vec![0x5Au8; (n * N * N * 4).max(8)], "plane2 coefs"),
+            zeros((2 * n + n.div_ceil(32)) * 4, "plane2 masks and sets"),
         ];
         let params = |parity: u32| {
             let p: [u32; 12] = [
@@ -143,7 +149,7 @@ impl Plane2Gpu {
                 lane_count as u32,
                 parity,
                 slots,
-                0,
+                2 * n as u32,
                 0,
                 0,
             ];
@@ -201,15 +207,31 @@ impl Plane2Gpu {
                 ));
             }
         }
+        // The dense plane as the player's passes would read it: a coefficient where its
+        // mask has the bit, and a block in the sets where it has any.
         let raw = read_buffer(device, queue, &buffers[6]);
         let coefs: &[i32] = bytemuck::cast_slice(&raw);
-        Ok((0..n)
+        let raw = read_buffer(device, queue, &buffers[7]);
+        let marks: &[u32] = bytemuck::cast_slice(&raw);
+        let (masks, sets) = marks.split_at(2 * n);
+        (0..n)
             .map(|b| {
+                let mask = masks[2 * b] as u64 | (masks[2 * b + 1] as u64) << 32;
+                if (sets[b / 32] >> (b % 32) & 1 != 0) != (mask != 0) {
+                    return Err(format!("block {b}: its set bit disagrees with its mask"));
+                }
                 let mut q = [0i32; N * N];
-                q.copy_from_slice(&coefs[b * N * N..(b + 1) * N * N]);
-                q
+                for (i, v) in q.iter_mut().enumerate() {
+                    if mask >> i & 1 != 0 {
+                        *v = coefs[b * N * N + i];
+                        if *v == 0 {
+                            return Err(format!("block {b}: mask bit {i} on a zero"));
+                        }
+                    }
+                }
+                Ok(q)
             })
-            .collect())
+            .collect()
     }
 }
 

@@ -23,7 +23,8 @@ struct Params {
     parity: u32,
     // Where the slot tables start in `tables`.
     slots: u32,
-    _pad0: u32,
+    // Where the sets of blocks with a coefficient start in `marks`.
+    sets: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -44,8 +45,13 @@ struct Params {
 @group(0) @binding(5) var<storage, read_write> groups: array<u32>;
 // Per block: its DC residual and its count of coefficients.
 @group(0) @binding(6) var<storage, read_write> info: array<vec2<i32>>;
-// 64 per block, zeroed before the first pass.
+// The dense plane as the player's decode passes read it (player/src/gpu/decode.wgsl):
+// block b's coefficients at 64 · b …, valid where its mask has the bit (never cleared:
+// only the non-zero ones are written), ...
 @group(0) @binding(7) var<storage, read_write> coefs: array<i32>;
+// ... its mask at words 2b and 2b + 1, then from `prm.sets` a bit per block that has a
+// coefficient (cleared before the first pass).
+@group(0) @binding(8) var<storage, read_write> marks: array<atomic<u32>>;
 
 const NONE: u32 = 0xFFFFFFFFu;
 const CONTEXTS: u32 = 502u;
@@ -269,11 +275,16 @@ fn neighbours(bx: u32, by: u32, four: ptr<function, array<u32, 4>>) -> u32 {
 // How many of the first n of four have a coefficient at frequency i.
 fn hits(four: ptr<function, array<u32, 4>>, n: u32, i: u32) -> u32 {
     var h = 0u;
-    if (n > 0u && coefs[(*four)[0] * 64u + i] != 0) { h = h + 1u; }
-    if (n > 1u && coefs[(*four)[1] * 64u + i] != 0) { h = h + 1u; }
-    if (n > 2u && coefs[(*four)[2] * 64u + i] != 0) { h = h + 1u; }
-    if (n > 3u && coefs[(*four)[3] * 64u + i] != 0) { h = h + 1u; }
+    if (n > 0u && has((*four)[0], i)) { h = h + 1u; }
+    if (n > 1u && has((*four)[1], i)) { h = h + 1u; }
+    if (n > 2u && has((*four)[2], i)) { h = h + 1u; }
+    if (n > 3u && has((*four)[3], i)) { h = h + 1u; }
     return h;
+}
+
+// Whether block b (decoded by an earlier dispatch) has a coefficient at frequency i.
+fn has(b: u32, i: u32) -> bool {
+    return ((atomicLoad(&marks[2u * b + i / 32u]) >> (i % 32u)) & 1u) != 0u;
 }
 
 // Decodes block b at (bx, by), of this pass's parity.
@@ -303,6 +314,7 @@ fn block(b: u32, bx: u32, by: u32) {
         nz = 0u;
     }
     info[b] = vec2<i32>(r, i32(nz));
+    var mask = vec2<u32>(0u, 0u);
     var left = nz;
     for (var i = 1u; i < 64u && left > 0u; i = i + 1u) {
         var ctx = left_bucket(left) * 12u + band(i);
@@ -312,12 +324,18 @@ fn block(b: u32, bx: u32, by: u32) {
             ctx = AC_EVEN + ctx;
         }
         let v = unpack(symbol(ctx));
-        coefs[b * 64u + i] = v;
-        left = left - select(0u, 1u, v != 0);
+        if (v != 0) {
+            coefs[b * 64u + i] = v;
+            mask[i / 32u] = mask[i / 32u] | (1u << (i % 32u));
+            left = left - 1u;
+        }
     }
     if (left > 0u) {
         fail();
     }
+    // The DC's bit comes with the DC (`dc_cols`).
+    atomicStore(&marks[2u * b], mask.x);
+    atomicStore(&marks[2u * b + 1u], mask.y);
 }
 
 @compute @workgroup_size(64)
@@ -414,6 +432,15 @@ fn dc_cols(@builtin(global_invocation_id) id: vec3<u32>) {
         if (b != NONE) {
             acc = acc + coefs[b * 64u];
             coefs[b * 64u] = acc;
+            // The block's last pass: its DC's bit, and its bit in the sets.
+            var low = atomicLoad(&marks[2u * b]);
+            if (acc != 0) {
+                low = low | 1u;
+                atomicStore(&marks[2u * b], low);
+            }
+            if ((low | atomicLoad(&marks[2u * b + 1u])) != 0u) {
+                atomicOr(&marks[prm.sets + b / 32u], 1u << (b % 32u));
+            }
         }
     }
 }
