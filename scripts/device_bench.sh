@@ -1,10 +1,9 @@
 #!/usr/bin/env bash
 # The runtime's GPU figures on a hardware GPU, in one short run: for every stream in DIR,
 # the GPU time of a displayed frame against a reference blend and where it goes, pass by
-# pass (`vbim bench render --passes`, a 60 Hz display; the timestamps between passes
-# cost the frame a little) and a segment's GPU decode by pass (`vbim bench decode
-# --gpu`); then the
-# speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
+# pass (`vbim bench render --passes`, a 60 Hz display; the frame's figures include the
+# timestamps' own cost) and a segment's GPU decode by pass (`vbim bench decode --gpu`);
+# then the speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
 # OUT/device.log (the adapter's name first), OUT/reuse.csv and each stream's frames
 # (the last run of `bench render --csv`) in OUT/render-NAME.csv.
 #

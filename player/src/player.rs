@@ -269,7 +269,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Puts GPU timestamps between the passes of every frame from now on, where the
     /// device has them inside passes ([`bench::timing_device`]); returns whether it does.
     /// Each frame's are read with [`Player::pass_times`] once it is done. For `vbim bench
-    /// render --passes`; the marks cost a little GPU time themselves.
+    /// render --passes`; the frame's GPU time then includes the marks' own.
     ///
     /// [`bench::timing_device`]: crate::bench::timing_device
     #[cfg(feature = "bench")]

@@ -127,8 +127,8 @@ pub struct BenchRenderArgs {
     #[arg(long)]
     pub csv: Option<PathBuf>,
     /// Also time each pass of every frame (GPU timestamps between the passes, where the
-    /// adapter has them inside passes; they cost a little GPU time themselves), and print
-    /// where the frames' GPU time goes: each decode kind and the reconstruction.
+    /// adapter has them inside passes; the frame's own figures then include their cost),
+    /// and print where the frames' GPU time goes: each decode kind and the reconstruction.
     #[arg(long)]
     pub passes: bool,
 }
