@@ -143,10 +143,7 @@ fn gpu_decode(
                 n += 1;
                 // Summed per kind of pass, in the order they first came.
                 for (label, ns) in gpu.pass_times() {
-                    match passes.iter_mut().find(|(l, _)| *l == label) {
-                        Some((_, t)) => *t += ns,
-                        None => passes.push((label, ns)),
-                    }
+                    merge_by_label(&mut passes, label, ns, std::ops::Add::add);
                 }
             }
         }
@@ -157,6 +154,20 @@ fn gpu_decode(
     let per = (runs.max(1) * boxes.max(1)) as f64;
     let passes = passes.into_iter().map(|(l, ns)| (l, ns / per)).collect();
     Ok((adapter, times, boxes, passes))
+}
+
+/// Adds `ns` to `label`'s entry of `into` with `merge` (a sum, a maximum), or appends the
+/// label: GPU times by kind of pass, in the order the kinds first came.
+fn merge_by_label(
+    into: &mut Vec<(&'static str, f64)>,
+    label: &'static str,
+    ns: f64,
+    merge: fn(f64, f64) -> f64,
+) {
+    match into.iter_mut().find(|(l, _)| *l == label) {
+        Some((_, t)) => *t = merge(*t, ns),
+        None => into.push((label, ns)),
+    }
 }
 
 pub(super) fn bench_drift(a: BenchDriftArgs) -> Result<(), String> {
@@ -293,7 +304,10 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     // from submission to completion: [mean, p99, max] each.
     let mut runs: Vec<[[f64; 3]; 7]> = Vec::new();
     let (mut h, mut timed, mut work) = (None, false, (0u64, 0u64));
-    let (mut passes_timed, mut passes) = (false, Vec::<(&'static str, f64, f64)>::new());
+    // Each pass's GPU time over the last run, by label: its sum, and its largest in one
+    // frame (ns).
+    let mut passes_timed = false;
+    let (mut sums, mut largest) = (Vec::new(), Vec::new());
     for _ in 0..a.runs.max(1) {
         let f = crate::sequence::open_input(&a.file)?;
         let cfg = PlayerConfig {
@@ -306,8 +320,8 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
         let header = player.header().clone();
         passes_timed = a.passes && player.time_passes();
-        // Each pass's GPU time over the run: label, sum, largest in one frame (ns).
-        passes.clear();
+        sums.clear();
+        largest.clear();
         if a.start > 0 {
             player.set_time(
                 a.start * 1_000_000_000 * header.rate_den as u64 / header.rate_num as u64,
@@ -350,24 +364,19 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             // This frame's passes, by label (the decode's kinds, then the reconstruction).
             let mut split = (0.0, 0.0);
             if passes_timed {
-                let mut frame_passes: Vec<(&'static str, f64)> = Vec::new();
+                let mut frame_passes = Vec::new();
                 for (label, ns) in player.pass_times() {
-                    match frame_passes.iter_mut().find(|p| p.0 == label) {
-                        Some(p) => p.1 += ns,
-                        None => frame_passes.push((label, ns)),
-                    }
+                    merge_by_label(&mut frame_passes, label, ns, std::ops::Add::add);
+                }
+                for &(label, ns) in &frame_passes {
                     if label == "reconstruct" {
                         split.1 += ns * 1e-6;
                     } else {
                         split.0 += ns * 1e-6;
                     }
-                }
-                if k > warm {
-                    for (label, ns) in frame_passes {
-                        match passes.iter_mut().find(|p| p.0 == label) {
-                            Some(p) => (p.1, p.2) = (p.1 + ns, p.2.max(ns)),
-                            None => passes.push((label, ns, ns)),
-                        }
+                    if k > warm {
+                        merge_by_label(&mut sums, label, ns, std::ops::Add::add);
+                        merge_by_label(&mut largest, label, ns, f64::max);
                     }
                 }
             }
@@ -480,12 +489,12 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     if a.passes && !passes_timed {
         println!("GPU time by pass: not measured (the adapter has no timestamps inside passes)");
     } else if passes_timed {
-        let total: f64 = passes.iter().map(|p| p.1).sum();
+        let total: f64 = sums.iter().map(|p| p.1).sum();
         println!(
             "GPU time by pass per displayed frame (timestamps between passes, last run): {:.3} ms in all",
             total / a.frames as f64 / 1e6
         );
-        for (label, sum, max) in &passes {
+        for (&(label, sum), &(_, max)) in sums.iter().zip(&largest) {
             println!(
                 "  {label:<24} mean {:>7.3} ms  {:>5.1}%  largest in one frame {:>7.3} ms",
                 sum / a.frames as f64 / 1e6,

@@ -450,8 +450,8 @@ impl Gpu {
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the
     /// slice span ([`Gpu::set_decode_slice`]), each a dispatch that binds its slice's
-    /// first workgroup. The pass costs `units` blocks in
-    /// all, `per_group` in each whole workgroup.
+    /// first workgroup. The pass costs `units` blocks in all, `per_group` in each whole
+    /// workgroup.
     #[allow(clippy::too_many_arguments)]
     fn sliced(
         &mut self,
@@ -488,8 +488,9 @@ impl Gpu {
     }
 
     /// A zero pass over `job.size` texels in 8 × 8 workgroups, in slices of
-    /// [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader starts the slice's first rows down), so
-    /// that it spreads like the rest; a block per 64 texels zeroed.
+    /// [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader starts the
+    /// slice's first rows down), so that it spreads like the rest; a block per 64 texels
+    /// zeroed.
     fn rows_sliced(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, channel: u32) {
         let [w, h] = job.size;
         let rows = h.div_ceil(8);
