@@ -368,24 +368,6 @@ fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
     save(lane);
 }
 
-// The DC of block (bx + ox, by + oy) as seen from (bx, by): 0 outside the plane or, for a
-// bubble plane, outside the tile.
-fn dc_near(bx: u32, by: u32, ox: i32, oy: i32) -> i32 {
-    let u = i32(bx) + ox;
-    let v = i32(by) + oy;
-    if (u < 0 || v < 0) {
-        return 0;
-    }
-    if (prm.tile != 0u && (u32(u) / prm.tile != bx / prm.tile || u32(v) / prm.tile != by / prm.tile)) {
-        return 0;
-    }
-    let j = block_at(u, v);
-    if (j == NONE) {
-        return 0;
-    }
-    return coefs[j * 64u];
-}
-
 // The DC: the residuals' 2-D prefix sum (left + up − up-left, 0 outside the plane or, for
 // a bubble plane, outside the tile), as a scan of each row (`dc_rows`: into the block's
 // DC slot) and then of each column (`dc_cols`: in place), one invocation per row or
