@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The runtime's GPU figures on a hardware GPU, in one short run: for every stream in DIR,
-# the GPU time of a displayed frame against a reference blend and where it goes, pass by
-# pass (`vbim bench render --passes`, a 60 Hz display; the frame's figures include the
+# the GPU time of a displayed frame against a reference blend (`vbim bench render`, a
+# 60 Hz display), where it goes, pass by pass (`--passes`, one run: its frames include the
 # timestamps' own cost) and a segment's GPU decode by pass (`vbim bench decode --gpu`);
 # then the speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
 # OUT/device.log (the adapter's name first), OUT/reuse.csv and each stream's frames
@@ -32,7 +32,10 @@ streams=("$dir"/*.vbim)
 for f in "${streams[@]}"; do
     echo "== $f" | tee -a "$log"
     "$vbim" inspect "$f" 2>&1 | sed -n 1,4p | tee -a "$log"
-    "$vbim" bench render "$f" --frames "$frames" --runs "$runs" --passes \
+    # The frame as a game pays it, then where its time goes (the timestamps between
+    # passes add their own cost to that run's frames).
+    "$vbim" bench render "$f" --frames "$frames" --runs "$runs" 2>&1 | tee -a "$log"
+    "$vbim" bench render "$f" --frames "$frames" --runs 1 --passes \
         --csv "$out/render-$(basename "$f" .vbim).csv" 2>&1 | tee -a "$log"
     "$vbim" bench decode "$f" --gpu --runs "$runs" 2>&1 | tee -a "$log"
 done

@@ -73,10 +73,11 @@ pub struct PlayerConfig {
     pub preroll_margin_ns: u64,
     /// The most segment decode work one displayed frame records, in blocks (the time of
     /// an 8×8 block of one plane through the bubble write, the other passes weighted by
-    /// their measured cost; [`FrameRecord::decode_work`]). `None`: each segment's decode
-    /// is spread evenly over the frames before it is shown but the last, at the display
-    /// rate the frames so far give, and a segment needed at once
-    /// (the first, or after a seek) is decoded at once. With a budget, a segment needed
+    /// their measured cost, and each step of the decode [`step_cost`](Self::step_cost)
+    /// more; [`FrameRecord::decode_work`]). `None`: each
+    /// segment's decode is spread evenly over the frames before it is shown but the last,
+    /// at the display rate the frames so far give, and a segment needed at once (the
+    /// first, or after a seek) is decoded at once. With a budget, a segment needed
     /// before its decode is done is late (the display holds or waits, as the policy says)
     /// and [`Totals::budget_late`] counts it: the budget is too small for the stream.
     ///
@@ -96,6 +97,18 @@ pub struct PlayerConfig {
     ///
     /// [`Totals::over_budget`]: crate::Totals::over_budget
     pub decode_slice: Option<u32>,
+    /// Parse a coefficient stream with a workgroup per piece (`true`: its 64 lanes read
+    /// the piece's bytes and pairs side by side, joined by scans) or with an invocation
+    /// per piece, reading its pairs in sequence (`false`). `None`: the adapter's default,
+    /// wide on a GPU, where a chain of dependent reads leaves the chip waiting on memory
+    /// (BENCHMARKS.md, "On a hardware GPU"). Both write the same coefficients.
+    pub wide_parse: Option<bool>,
+    /// What each step of a segment's decode (a dispatch, a clear, the upload) costs beside
+    /// its work, in the blocks of [`decode_budget`](Self::decode_budget): the work its
+    /// latency is worth, so that a frame of many small steps counts as the GPU time it
+    /// takes. `None`: the adapter's default, 40 000 on a GPU (measured on an H100,
+    /// BENCHMARKS.md "On a hardware GPU"), 0 on a CPU adapter, where time follows work.
+    pub step_cost: Option<u64>,
     /// How far a part of the lightmap may lag the exact image before it is evaluated
     /// again, as a share of the protocol's bound on the GPU against the reference decoder
     /// (2^-10 relative for HDR, 0.5/255 for 8-bit). The reconstruction evaluates a tile
@@ -127,6 +140,8 @@ impl Default for PlayerConfig {
             preroll_margin_ns: 0,
             decode_budget: None,
             decode_slice: None,
+            wide_parse: None,
+            step_cost: None,
             reuse_share: 0.25,
             limits: Limits::default(),
         }

@@ -1004,30 +1004,31 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
 #[test]
 fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop() {
     let (device, queue) = device();
-    every_frame_matches_the_reference(&device, &queue, None);
+    every_frame_matches_the_reference(&device, &queue, (None, None));
 }
 
 #[test]
 fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop_on_gl() {
     let (device, queue) = gl_device();
-    every_frame_matches_the_reference(&device, &queue, None);
+    every_frame_matches_the_reference(&device, &queue, (None, None));
 }
 
-/// A hardware GPU decodes in dispatches of 2048 workgroups (lavapipe, the tests' adapter,
-/// in 32): the same frames in a GPU's slices, and in slices of 96 (several spans of 32,
-/// passes that end inside a slice).
+/// A hardware GPU decodes in dispatches of 2048 workgroups and parses with a workgroup
+/// per piece (lavapipe, the tests' adapter, in 32 and an invocation per piece): the same
+/// frames as a GPU decodes them, and in slices of 96 (several spans of 32, passes that
+/// end inside a slice).
 #[test]
-fn every_frame_matches_the_reference_in_a_gpus_decode_slices() {
+fn every_frame_matches_the_reference_as_a_gpu_decodes() {
     let (device, queue) = device();
     for slice in [2048, 96] {
-        every_frame_matches_the_reference(&device, &queue, Some(slice));
+        every_frame_matches_the_reference(&device, &queue, (Some(slice), Some(true)));
     }
 }
 
 fn every_frame_matches_the_reference(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    slice: Option<u32>,
+    (slice, wide_parse): (Option<u32>, Option<bool>),
 ) {
     let n = 48;
     for (kind, ch, (w, h)) in [
@@ -1062,10 +1063,13 @@ fn every_frame_matches_the_reference(
         let mut reference = Decoder::new(r).unwrap();
         let cfg = PlayerConfig {
             decode_slice: slice,
+            wide_parse,
             ..inline(Policy::Interpolate, Throttle::UNLIMITED)
         };
         let mut player = Player::open(device, queue, Cursor::new(bytes), cfg).unwrap();
-        let what = format!("{kind:?}, {ch} channel(s), {w}×{h}, decode slice {slice:?}");
+        let what = format!(
+            "{kind:?}, {ch} channel(s), {w}×{h}, decode slice {slice:?}, wide parse {wide_parse:?}"
+        );
         let mode = if kind == InputKind::Srgb8 {
             Output::Stored
         } else {
@@ -1186,10 +1190,21 @@ fn a_callers_texture_gets_what_the_players_own_would_show() {
 /// A per-frame decode budget in simulated time: across a loop, a 500 ms stall and a seek
 /// into a long predicted chain, no frame records more decode work than the budget, every
 /// exact frame matches the reference within the protocol's bound, and nothing is late
-/// for the budget; a budget too small for the stream is reported.
+/// for the budget; a budget too small for the stream is reported. With lavapipe's cost of
+/// a step (its work alone) and with a GPU's (a fixed cost per step beside it).
 #[test]
 fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     let (device, queue) = device();
+    for step_cost in [None, Some(2000)] {
+        a_decode_budget_bounds_every_frame(&device, &queue, step_cost);
+    }
+}
+
+fn a_decode_budget_bounds_every_frame(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    step_cost: Option<u64>,
+) {
     let (w, h, n) = (64, 48, 96);
     let mut cfg = config(SegmentMode::Fixed(8));
     cfg.intra_interval_s = 1000.0;
@@ -1205,9 +1220,10 @@ fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     let whole = {
         let cfg = PlayerConfig {
             decode_budget: Some(u64::MAX),
+            step_cost,
             ..inline(Policy::Interpolate, throttle)
         };
-        let mut player = Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg).unwrap();
+        let mut player = Player::open(device, queue, Cursor::new(bytes.clone()), cfg).unwrap();
         (0..300)
             .map(|_| player.advance(DISPLAY).decode_work)
             .max()
@@ -1217,16 +1233,17 @@ fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     let budget = whole.div_ceil(8);
     let cfg = PlayerConfig {
         decode_budget: Some(budget),
+        step_cost,
         ..inline(Policy::Interpolate, throttle)
     };
-    let mut player = Player::open(&device, &queue, Cursor::new(bytes.clone()), cfg).unwrap();
+    let mut player = Player::open(device, queue, Cursor::new(bytes.clone()), cfg).unwrap();
     let mut check = |player: &mut Player<Cursor<Vec<u8>>>, frames: usize, what: &str| {
         let mut exact = 0;
         for _ in 0..frames {
             let r = player.advance(DISPLAY);
             assert!(
                 r.decode_work <= budget,
-                "{what}, frame {}: {} blocks of decode over a budget of {budget}",
+                "{what}, step cost {step_cost:?}, frame {}: {} blocks of decode over a budget of {budget}",
                 r.index,
                 r.decode_work
             );
@@ -1261,9 +1278,10 @@ fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     let small = whole.div_ceil(24);
     let cfg = PlayerConfig {
         decode_budget: Some(small),
+        step_cost,
         ..inline(Policy::Interpolate, Throttle::UNLIMITED)
     };
-    let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
+    let mut player = Player::open(device, queue, Cursor::new(bytes), cfg).unwrap();
     for _ in 0..300 {
         let over = player.totals().over_budget;
         let r = player.advance(DISPLAY);

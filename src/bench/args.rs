@@ -109,6 +109,14 @@ pub struct BenchRenderArgs {
     /// the adapter's default (32 on a CPU adapter, 2048 on a GPU).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
     pub slice: Option<u32>,
+    /// `PlayerConfig::wide_parse`: parse with a workgroup per piece (true) or an
+    /// invocation per piece (false); unset: the adapter's default.
+    #[arg(long)]
+    pub wide_parse: Option<bool>,
+    /// `PlayerConfig::step_cost`: what each step of a segment's decode costs beside its
+    /// work, in blocks of the decode budget; unset: the adapter's default.
+    #[arg(long)]
+    pub step_cost: Option<u64>,
     /// `PlayerConfig::reuse_share`: how far a tile may lag before it is evaluated again,
     /// as a share of the protocol's GPU bound (0: every texel every frame).
     #[arg(long, default_value_t = 0.25, value_parser = crate::cli::parse_share)]
@@ -252,6 +260,10 @@ pub struct BenchDecodeArgs {
     /// the adapter's default (32 on a CPU adapter, 2048 on a GPU).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
     pub slice: Option<u32>,
+    /// `PlayerConfig::wide_parse`: parse with a workgroup per piece (true) or an
+    /// invocation per piece (false); unset: the adapter's default.
+    #[arg(long)]
+    pub wide_parse: Option<bool>,
 }
 
 #[derive(Args)]

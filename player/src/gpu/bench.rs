@@ -49,6 +49,14 @@ impl GpuDecoder {
         GpuDecoder(gpu)
     }
 
+    /// Parses with a workgroup per piece or an invocation per piece
+    /// ([`PlayerConfig::wide_parse`]).
+    ///
+    /// [`PlayerConfig::wide_parse`]: crate::PlayerConfig::wide_parse
+    pub fn set_wide_parse(&mut self, wide: Option<bool>) {
+        self.0.set_wide_parse(wide);
+    }
+
     /// The GPU time between the marks of the last decode, each to the pass it ends (ns;
     /// empty unless the device has timestamps inside passes: [`timing_device`]). Call it
     /// after each [`GpuDecoder::decode`]: the query set holds one decode's marks.

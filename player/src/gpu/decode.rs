@@ -38,6 +38,34 @@ pub(crate) fn default_slice_groups(device: &wgpu::Device) -> u32 {
     }
 }
 
+/// Whether the parse runs a workgroup per piece (`parse_wide`) rather than an invocation
+/// per piece (`parse`) when the caller names neither: on a GPU, where the serial parse's
+/// chain of dependent reads left the chip idle (BENCHMARKS.md, "On a hardware GPU").
+/// On lavapipe the serial parse is cheaper: there a segment's decode took 105 ms with the
+/// wide parse against 91 ms (a 512² day), time following work, and the scans are work.
+pub(crate) fn default_wide_parse(device: &wgpu::Device) -> bool {
+    device.adapter_info().device_type != wgpu::DeviceType::Cpu
+}
+
+/// What one step of a decode (a dispatch, a clear, the upload) costs on a GPU beside its
+/// work, in blocks ([`Op::cost`]'s unit). On an H100 a segment's decode took as long at
+/// 512² as at 2048² (1.4–1.5 ms for 68 steps: about 20 µs each, whatever their work),
+/// and a frame's decode time followed how many steps it recorded far more than their work
+/// (0.4 ms for 200 000 blocks in a few steps, 3.3 ms for 160 000 in many small ones).
+/// From the 4096² decode, a block's work is about 0.45 ns there: 20 µs is the work of
+/// about 44 000 blocks. On a CPU adapter a step costs its work alone (0): lavapipe's time
+/// follows work, and the weights ([`Kind::weight`]) were measured there.
+const GPU_STEP_COST: u64 = 40_000;
+
+/// [`GPU_STEP_COST`] on a GPU, 0 on a CPU adapter.
+pub(crate) fn default_step_cost(device: &wgpu::Device) -> u64 {
+    if device.adapter_info().device_type == wgpu::DeviceType::Cpu {
+        0
+    } else {
+        GPU_STEP_COST
+    }
+}
+
 /// A parse slice is this many slices' workgroups: as many pairs per dispatch as when a
 /// piece was 256 pairs, so that shorter pieces shorten each dispatch's serial chain
 /// without making more dispatches.
@@ -54,7 +82,10 @@ enum Kind {
     Clear {
         bytes: u64,
     },
+    /// An invocation per piece of a stream.
     Parse,
+    /// A workgroup per piece.
+    ParseWide,
     KeyZero,
     KeyAdd,
     KeyRange,
@@ -84,7 +115,8 @@ pub(crate) struct Op {
     /// The work it records, in blocks: the time of 8×8 texels of one plane through
     /// `bubble_write`, the other passes' units weighted by their measured cost
     /// ([`Kind::weight`]; a parse's unit is an entry point, a zero pass's 64 texels, a
-    /// pack's 1/16 of a 32² region). What [`PlayerConfig::decode_budget`] counts.
+    /// pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its latency
+    /// ([`GPU_STEP_COST`]). What [`PlayerConfig::decode_budget`] counts.
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
     pub cost: u64,
@@ -119,6 +151,20 @@ impl Gpu {
     pub fn set_decode_slice(&mut self, groups: Option<u32>) {
         let groups = groups.unwrap_or_else(|| default_slice_groups(&self.device));
         self.slice_span = groups.clamp(1, MAX_SLICE_GROUPS).div_ceil(SLICE_GROUPS);
+    }
+
+    /// Parses with a workgroup per piece (`true`) or an invocation per piece; `None`:
+    /// the adapter's default ([`default_wide_parse`]). Applies to the decodes planned from
+    /// then on.
+    pub fn set_wide_parse(&mut self, wide: Option<bool>) {
+        self.wide_parse = wide.unwrap_or_else(|| default_wide_parse(&self.device));
+    }
+
+    /// Sets what each step of a decode costs beside its work ([`Op::cost`]); `None`: the
+    /// adapter's default ([`default_step_cost`]). Applies to the decodes planned from
+    /// then on.
+    pub fn set_step_cost(&mut self, cost: Option<u64>) {
+        self.step_cost = cost.unwrap_or_else(|| default_step_cost(&self.device));
     }
 
     /// Whether a segment's coefficients fit one storage binding of this device.
@@ -208,7 +254,7 @@ impl Gpu {
                             size: [pw, ph],
                             ..job
                         };
-                        self.rows_sliced(ops, Kind::KeyZero, zero, p);
+                        self.rows_sliced(ops, Kind::KeyZero, zero, (p, 1));
                     }
                     // A predicted keyframe is added onto the head: the keyframe it follows.
                     let groups = blocks.div_ceil(GROUP_BLOCKS);
@@ -231,13 +277,13 @@ impl Gpu {
                 0,
             ));
             let layers = (seg.layers.saturating_sub(2) as u32 * ch).min(set_layers);
-            for l in 0..layers {
+            if layers > 0 {
                 let zero = Job {
-                    base: base + l,
+                    base,
                     size: [pw / 2, ph],
                     ..self.base_job()
                 };
-                self.rows_sliced(ops, Kind::BubbleZero, zero, 0);
+                self.rows_sliced(ops, Kind::BubbleZero, zero, (0, layers));
             }
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let layer = base + (i - seg.bubbles) as u32;
@@ -277,6 +323,11 @@ impl Gpu {
         if slices > self.slices.size() {
             self.slices = slice_buffer(&self.device, grown(slices) / JOB_STRIDE + 1);
             self.bind_decode();
+        }
+        // On a GPU each step also costs its latency: the barrier before it and the
+        // filling and draining of the chip (see `step_cost`).
+        for op in ops.iter_mut() {
+            op.cost += self.step_cost;
         }
         let jobs = self.job_bytes.len() as u64;
         if jobs > self.jobs.size() {
@@ -353,6 +404,7 @@ impl Gpu {
 
     fn dispatch(&self, pass: &mut wgpu::ComputePass, op: &Op) {
         let (pipeline, group, label) = match op.kind {
+            Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref(), "parse"),
             Kind::Parse => (&self.parse, self.parse_group.as_ref(), "parse"),
             Kind::KeyZero => (
                 &self.key_zero,
@@ -443,9 +495,13 @@ impl Gpu {
     fn parse_ops(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
         let bytes = groups_offset(self.part) + group_bytes(blocks);
         ops.push(Op::new(Kind::Clear { bytes }, 0, [0; 3], channel, 0));
-        let units = (job.count as u64, 64);
-        let groups = job.count.div_ceil(64);
-        self.sliced_by(ops, Kind::Parse, job, (groups, PARSE_SPAN), channel, units);
+        // An invocation per piece, 64 to a workgroup; or a workgroup per piece.
+        let (kind, groups, per_group) = match self.wide_parse {
+            false => (Kind::Parse, job.count.div_ceil(64), 64),
+            true => (Kind::ParseWide, job.count, 1),
+        };
+        let units = (job.count as u64, per_group);
+        self.sliced_by(ops, kind, job, (groups, PARSE_SPAN), channel, units);
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the
@@ -487,11 +543,17 @@ impl Gpu {
         }
     }
 
-    /// A zero pass over `job.size` texels in 8 × 8 workgroups, in slices of
-    /// [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader starts the
-    /// slice's first rows down), so that it spreads like the rest; a block per 64 texels
-    /// zeroed.
-    fn rows_sliced(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, channel: u32) {
+    /// A zero pass over `job.size` texels of `layers` layers in 8 × 8 workgroups, in
+    /// slices of [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader
+    /// starts the slice's first rows down), so that it spreads like the rest; a block per
+    /// 64 texels zeroed.
+    fn rows_sliced(
+        &mut self,
+        ops: &mut Vec<Op>,
+        kind: Kind,
+        job: Job,
+        (channel, layers): (u32, u32),
+    ) {
         let [w, h] = job.size;
         let rows = h.div_ceil(8);
         let at = self.push_job(job);
@@ -499,8 +561,8 @@ impl Gpu {
         for k in 0..rows.div_ceil(size) {
             let from = k * size;
             let n = (rows - from).min(size);
-            let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64;
-            let op = Op::new(kind, at, [w.div_ceil(8), n, 1], channel, texels / 64);
+            let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64 * layers as u64;
+            let op = Op::new(kind, at, [w.div_ceil(8), n, layers], channel, texels / 64);
             ops.push(op.in_slice(k * self.slice_span));
         }
     }
@@ -554,7 +616,7 @@ impl Kind {
     /// (63–75% of a segment's GPU time).
     fn weight(self) -> u64 {
         match self {
-            Kind::Parse => 55,
+            Kind::Parse | Kind::ParseWide => 55,
             Kind::KeyAdd => 12,
             Kind::BubbleWrite => 4,
             Kind::BubbleBound => 2,

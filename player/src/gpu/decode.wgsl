@@ -297,7 +297,8 @@ fn bubble_write(
     }
 }
 
-// Zeros layer `job.base` of the bubble planes (`job.size` R32Uint texels),
+// Zeros layers `job.base` + z of the bubble planes (`job.size` R32Uint texels each; one
+// dispatch for a segment's layers, whose latency is most of its cost on a GPU),
 // `slice.x` rows of workgroups down (a slice of rows).
 @compute @workgroup_size(8, 8)
 fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -305,7 +306,7 @@ fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
     if (xy.x >= job.size.x || xy.y >= job.size.y) {
         return;
     }
-    textureStore(planes16, xy, job.base, vec4<u32>(0u));
+    textureStore(planes16, xy, job.base + id.z, vec4<u32>(0u));
 }
 
 // The side of a region of the previous keyframe with its own range. Small enough that a

@@ -57,6 +57,8 @@ pub(crate) struct Gpu {
     hold_layout: wgpu::BindGroupLayout,
     hold_group: wgpu::BindGroup,
     parse: wgpu::ComputePipeline,
+    /// The parse with a workgroup per piece (`parse_wide` in parse.wgsl).
+    parse_wide: wgpu::ComputePipeline,
     key_add: wgpu::ComputePipeline,
     key_zero: wgpu::ComputePipeline,
     key_range: wgpu::ComputePipeline,
@@ -127,6 +129,11 @@ pub(crate) struct Gpu {
     ///
     /// [`SLICE_GROUPS`]: decode::SLICE_GROUPS
     slice_span: u32,
+    /// Parse with a workgroup per piece ([`Gpu::set_wide_parse`]).
+    wide_parse: bool,
+    /// What each step of a decode costs beside its work, in blocks
+    /// (`decode::default_step_cost`).
+    step_cost: u64,
     /// Bubble layers of one set ([`BUBBLE_SETS`] sets, one after the other).
     pub set_layers: u32,
     /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).

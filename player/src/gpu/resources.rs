@@ -3,7 +3,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::decode::{default_slice_groups, SLICE_GROUPS};
+use super::decode::{default_slice_groups, default_step_cost, default_wide_parse, SLICE_GROUPS};
 use super::job::{decode_source, Job, JOB_STRIDE};
 use super::plan::*;
 use super::reconstruct::Params;
@@ -97,7 +97,12 @@ impl Gpu {
         let pipeline_for =
             |label, source, layout, entry| compute_pipeline(device, label, source, layout, entry);
         let decode = &decode_source(include_str!("decode.wgsl"));
-        let parse_source = &decode_source(include_str!("parse.wgsl"));
+        let parse_source = &decode_source(&format!(
+            "const PIECE_PAIRS: u32 = {}u;\nconst FILL_BLOCKS: u32 = {}u;\n{}",
+            vbim_format::chunk::ENTRY_PAIRS,
+            vbim_format::chunk::FILL_BLOCKS,
+            include_str!("parse.wgsl")
+        ));
         let pipeline = pipeline_for(
             "vbim reconstruct",
             include_str!("reconstruct.wgsl"),
@@ -118,6 +123,7 @@ impl Gpu {
         );
         let hold_group = hold_group(device, &hold_layout, &display_view, &held_view);
         let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
+        let parse_wide = pipeline_for("vbim parse_wide", parse_source, &parse_layout, "parse_wide");
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
         let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
@@ -137,11 +143,16 @@ impl Gpu {
         };
         use wgpu::BufferUsages as B;
         let part = part_blocks(plane);
-        let coefs = buffer("vbim dense coefficients", part as u64 * 256, B::STORAGE);
+        // (Copied from in the parse's tests only: the usage costs nothing.)
+        let coefs = buffer(
+            "vbim dense coefficients",
+            part as u64 * 256,
+            B::STORAGE | B::COPY_SRC,
+        );
         let masks = buffer(
             "vbim coefficient masks and sets",
             mask_bytes(part),
-            B::STORAGE | B::COPY_DST,
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
         // (COPY_SRC: tests read it back.)
         let bounds = buffer(
@@ -190,6 +201,7 @@ impl Gpu {
             hold_layout,
             hold_group,
             parse,
+            parse_wide,
             key_add,
             key_zero,
             key_range,
@@ -235,6 +247,8 @@ impl Gpu {
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
             slice_span: default_slice_groups(device) / SLICE_GROUPS,
+            wide_parse: default_wide_parse(device),
+            step_cost: default_step_cost(device),
             set_layers: set_layers(max_degree, channels),
             #[cfg(feature = "bench")]
             marks: None,

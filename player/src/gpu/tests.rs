@@ -3,7 +3,7 @@
 use vbim_format::chunk::Scanned;
 use vbim_format::plane::{self, Blocks, Onto, Plane};
 
-use super::plan::{lightmap_descriptor, REGION};
+use super::plan::{groups_offset, lightmap_descriptor, REGION};
 use super::*;
 use crate::coded::{Coded, PlaneSpan};
 use crate::decoder::{KeyStep, SegmentData};
@@ -67,21 +67,21 @@ fn decode_key_step(gpu: &mut Gpu, number: usize, span: PlaneSpan, data: Coded) {
 }
 
 /// The head keyframe's plane 0 matches `want` within 1e-5 of its peak.
-fn assert_head_matches(gpu: &Gpu, want: &Plane, part: Option<u32>) {
+fn assert_head_matches(gpu: &Gpu, want: &Plane, what: &str) {
     let raw = read_texture_layer(&gpu.device, &gpu.queue, &gpu.keys, 4, 0);
     let got: &[f32] = bytemuck::cast_slice(&raw);
     let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
     for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
         assert!(
             (g - w).abs() <= 1e-5 * peak,
-            "parts {part:?}, texel {i}: GPU {g} against {w}"
+            "{what}, texel {i}: GPU {g} against {w}"
         );
     }
 }
 
 /// A smooth plane whose DC repeats for hundreds of blocks: the scan cuts the runs into
-/// pieces of `FILL_BLOCKS`, each parsed by an invocation of its own, and the GPU's
-/// keyframe is the reference decoder's, in one part and in parts.
+/// pieces of `FILL_BLOCKS`, each parsed on its own, and the GPU's keyframe is the
+/// reference decoder's, in one part and in parts, by either parse.
 #[test]
 fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
     let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
@@ -97,8 +97,14 @@ fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
             q
         })
         .collect();
-    for part in [None, Some(100)] {
+    for (part, wide) in [
+        (None, false),
+        (Some(100), false),
+        (None, true),
+        (Some(100), true),
+    ] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+        gpu.set_wide_parse(Some(wide));
         if let Some(p) = part {
             gpu.part = p;
             gpu.bind_decode();
@@ -113,7 +119,74 @@ fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
         let at = (0..n).map(|b| (b % bw, b / bw));
         plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, 0.01);
         decode_key_step(&mut gpu, 0, span, c);
-        assert_head_matches(&gpu, &want, part);
+        assert_head_matches(&gpu, &want, &format!("parts {part:?}, wide parse {wide}"));
+    }
+}
+
+/// Both parses write exactly the stream's coefficients into the dense plane (values,
+/// masks and sets) on a plane of hundreds of pieces: dense and empty blocks, values of
+/// every varint length up to five bytes, long runs of equal DC that the scan cuts (of a
+/// zero DC and not), and a last piece that ends in a run to the plane's end.
+#[test]
+fn both_parses_write_every_coefficient_of_a_large_random_plane() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph) = (4096u32, 256u32);
+    let n = (pw as usize / 8) * (ph as usize / 8);
+    let mut seed = 5u32;
+    let mut blocks = random_blocks(n, &mut seed);
+    for (b, q) in blocks.iter_mut().enumerate() {
+        match b {
+            // Long runs of one DC: not zero, then zero, then not zero again.
+            1000..1900 => *q = [0; 64],
+            1900..2400 => {
+                *q = [0; 64];
+                q[0] = -(1 << 29);
+            }
+            2400..3000 => *q = [0; 64],
+            // Five-byte varints, and the largest runs' neighbours.
+            _ if b % 211 == 0 => {
+                q[0] = i32::MAX / 3;
+                q[63] = -(1 << 30);
+            }
+            _ => {}
+        }
+        if (1000..1900).contains(&b) {
+            q[0] = 77;
+        }
+    }
+    // The last blocks empty: the stream ends in a zero run to the plane's end.
+    for q in &mut blocks[n - 300..] {
+        *q = [0; 64];
+    }
+    for wide in [false, true] {
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+        gpu.set_wide_parse(Some(wide));
+        let mut c = Coded::default();
+        let (span, _) = coded_plane(&mut c, 0.01, &blocks, None);
+        assert!(span.count > 400, "{} pieces", span.count);
+        decode_key_step(&mut gpu, 0, span, c);
+        let coefs = read_buffer(&gpu.device, &gpu.queue, &gpu.coefs);
+        let coefs: &[i32] = bytemuck::cast_slice(&coefs);
+        let masks = read_buffer(&gpu.device, &gpu.queue, &gpu.masks);
+        let masks: &[u32] = bytemuck::cast_slice(&masks);
+        let sets = &masks[groups_offset(gpu.part) as usize / 4..];
+        for (d, q) in blocks.iter().enumerate() {
+            let mask = masks[2 * d] as u64 | (masks[2 * d + 1] as u64) << 32;
+            for (f, &v) in q.iter().enumerate() {
+                let set = mask >> f & 1 == 1;
+                assert_eq!(
+                    set,
+                    v != 0,
+                    "wide parse {wide}, block {d}, coefficient {f}: mask"
+                );
+                if set {
+                    let got = coefs[d * 64 + f];
+                    assert_eq!(got, v, "wide parse {wide}, block {d}, coefficient {f}");
+                }
+            }
+            let marked = sets[d / 32] >> (d % 32) & 1 == 1;
+            assert_eq!(marked, mask != 0, "wide parse {wide}, block {d}: set");
+        }
     }
 }
 
@@ -127,8 +200,14 @@ fn keyframe_passes_match_the_reference_kernel() {
     let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
     let (pw, ph) = (96u32, 32u32);
     let (bw, bh) = (pw as usize / 8, ph as usize / 8);
-    for part in [None, Some(7)] {
+    for (part, wide) in [
+        (None, false),
+        (Some(7), false),
+        (None, true),
+        (Some(7), true),
+    ] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+        gpu.set_wide_parse(Some(wide));
         if let Some(p) = part {
             gpu.part = p;
             gpu.bind_decode();
@@ -147,7 +226,7 @@ fn keyframe_passes_match_the_reference_kernel() {
             plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
             decode_key_step(&mut gpu, n, span, c);
         }
-        assert_head_matches(&gpu, &want, part);
+        assert_head_matches(&gpu, &want, &format!("parts {part:?}, wide parse {wide}"));
         // The previous keyframe: 16-bit steps of each 32² region's range.
         let first = first.expect("two steps");
         let raw = read_texture_layer(&device, &queue, &gpu.packed, 4, 0);
@@ -189,8 +268,14 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
     let per2 = (ts / 8) * (ts / 8);
     let blocks = random_blocks(members * per2, &mut 11);
     let step = 0.004;
-    for part in [None, Some(7)] {
+    for (part, wide) in [
+        (None, false),
+        (Some(7), false),
+        (None, true),
+        (Some(7), true),
+    ] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, ts as u32);
+        gpu.set_wide_parse(Some(wide));
         if let Some(p) = part {
             gpu.part = p;
             gpu.bind_decode();
@@ -220,7 +305,7 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
         assert!(
             bound >= peak && bound < 3.0 * peak,
-            "parts {part:?}: bound {bound} for a peak of {peak}"
+            "parts {part:?}, wide parse {wide}: bound {bound} for a peak of {peak}"
         );
         let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
         let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
@@ -230,7 +315,7 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
             assert!(
                 (g - w).abs() <= 0.5001 * scale,
-                "parts {part:?}, texel {i}: GPU {g} against {w} (scale {scale})"
+                "parts {part:?}, wide parse {wide}, texel {i}: GPU {g} against {w} (scale {scale})"
             );
         }
     }
