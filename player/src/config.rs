@@ -4,6 +4,7 @@
 use std::sync::Arc;
 
 use crate::clock::{Clock, SystemClock};
+use crate::shape::DecodeShape;
 use crate::throttle::Throttle;
 use vbim_format::Limits;
 
@@ -73,8 +74,8 @@ pub struct PlayerConfig {
     pub preroll_margin_ns: u64,
     /// The most segment decode work one displayed frame records, in blocks (the time of
     /// an 8×8 block of one plane through the bubble write, the other passes weighted by
-    /// their measured cost, and each step of the decode [`step_cost`](Self::step_cost)
-    /// more; [`FrameRecord::decode_work`]). `None`: each
+    /// their measured cost, and each step of the decode [`DecodeShape::step_cost`] more;
+    /// [`FrameRecord::decode_work`]). `None`: each
     /// segment's decode is spread evenly over the frames before it is shown but the last,
     /// at the display rate the frames so far give, and a segment needed at once (the
     /// first, or after a seek) is decoded at once. With a budget, a segment needed
@@ -84,31 +85,11 @@ pub struct PlayerConfig {
     /// [`FrameRecord::decode_work`]: crate::FrameRecord::decode_work
     /// [`Totals::budget_late`]: crate::Totals::budget_late
     pub decode_budget: Option<u64>,
-    /// How many workgroups (of 64 blocks) one dispatch of a decode pass covers: the grain
-    /// at which a segment's decode is recorded over frames. `None`: 32 on a CPU adapter
-    /// (lavapipe), where a dispatch's time is in proportion to its work and small slices
-    /// spread a decode evenly; 2048 on a GPU, where a dispatch of 32 workgroups fills a
-    /// small part of the chip and costs mostly its latency (BENCHMARKS.md, "On a hardware
-    /// GPU"). Rounded up to a multiple of 32, at most 16 384. A slice is the smallest
-    /// piece of work a frame records: with a [`decode_budget`](Self::decode_budget)
-    /// smaller than one slice's cost (2048 workgroups of a bubble pass are 131 072
-    /// blocks), each frame records one slice and [`Totals::over_budget`] counts it; a
-    /// small budget wants a small slice.
-    ///
-    /// [`Totals::over_budget`]: crate::Totals::over_budget
-    pub decode_slice: Option<u32>,
-    /// Parse a coefficient stream with a workgroup per piece (`true`: its 64 lanes read
-    /// the piece's bytes and pairs side by side, joined by scans) or with an invocation
-    /// per piece, reading its pairs in sequence (`false`). `None`: the adapter's default,
-    /// wide on a GPU, where a chain of dependent reads leaves the chip waiting on memory
-    /// (BENCHMARKS.md, "On a hardware GPU"). Both write the same coefficients.
-    pub wide_parse: Option<bool>,
-    /// What each step of a segment's decode (a dispatch, a clear, the upload) costs beside
-    /// its work, in the blocks of [`decode_budget`](Self::decode_budget): the work its
-    /// latency is worth, so that a frame of many small steps counts as the GPU time it
-    /// takes. `None`: the adapter's default, 40 000 on a GPU (measured on an H100,
-    /// BENCHMARKS.md "On a hardware GPU"), 0 on a CPU adapter, where time follows work.
-    pub step_cost: Option<u64>,
+    /// How the GPU decode is cut into dispatches and what each costs
+    /// ([`DecodeShape`]); `None`: the adapter's ([`DecodeShape::for_adapter`]: on a GPU,
+    /// large dispatches, the wide parse and a cost per step for its latency; on a CPU
+    /// adapter such as lavapipe, small dispatches whose cost is their work).
+    pub decode_shape: Option<DecodeShape>,
     /// How far a part of the lightmap may lag the exact image before it is evaluated
     /// again, as a share of the protocol's bound on the GPU against the reference decoder
     /// (2^-10 relative for HDR, 0.5/255 for 8-bit). The reconstruction evaluates a tile
@@ -139,9 +120,7 @@ impl Default for PlayerConfig {
             preroll_ns: None,
             preroll_margin_ns: 0,
             decode_budget: None,
-            decode_slice: None,
-            wide_parse: None,
-            step_cost: None,
+            decode_shape: None,
             reuse_share: 0.25,
             limits: Limits::default(),
         }

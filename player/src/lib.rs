@@ -51,6 +51,7 @@ mod player;
 mod readback;
 mod reader;
 mod record;
+mod shape;
 mod slots;
 mod stats;
 mod throttle;
@@ -65,6 +66,7 @@ pub use gpu::{
 pub use player::Player;
 pub use readback::read_texture;
 pub use record::{Frame, FrameRecord, FrameState, Totals};
+pub use shape::DecodeShape;
 pub use stats::{frames_csv, Summary};
 pub use throttle::{Stall, Throttle};
 /// The memory a stream may take ([`PlayerConfig::limits`]).

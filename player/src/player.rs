@@ -193,9 +193,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             memory_needed(&header, &entries, ring_bytes, min_array_layers(device)),
         )?;
         let mut gpu = Gpu::for_stream(device, queue, &header);
-        gpu.set_decode_slice(cfg.decode_slice);
-        gpu.set_wide_parse(cfg.wide_parse);
-        gpu.set_step_cost(cfg.step_cost);
+        if let Some(shape) = cfg.decode_shape {
+            gpu.set_decode_shape(shape);
+        }
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         let reuse = reuse_threshold(cfg.reuse_share, header.transfer);

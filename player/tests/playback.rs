@@ -12,7 +12,8 @@ use vbim_format::curve::linear_to_srgb;
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::Reader;
 use vbim_player::{
-    headless_device, headless_device_on, FrameState, Player, PlayerConfig, Policy, Stall, Throttle,
+    headless_device, headless_device_on, DecodeShape, FrameState, Player, PlayerConfig, Policy,
+    Stall, Throttle,
 };
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
@@ -1004,31 +1005,36 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
 #[test]
 fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop() {
     let (device, queue) = device();
-    every_frame_matches_the_reference(&device, &queue, (None, None));
+    every_frame_matches_the_reference(&device, &queue, None);
 }
 
 #[test]
 fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop_on_gl() {
     let (device, queue) = gl_device();
-    every_frame_matches_the_reference(&device, &queue, (None, None));
+    every_frame_matches_the_reference(&device, &queue, None);
 }
 
-/// A hardware GPU decodes in dispatches of 2048 workgroups and parses with a workgroup
-/// per piece (lavapipe, the tests' adapter, in 32 and an invocation per piece): the same
-/// frames as a GPU decodes them, and in slices of 96 (several spans of 32, passes that
-/// end inside a slice).
+/// A hardware GPU decodes in the shape `DecodeShape::GPU` (dispatches of 2048
+/// workgroups, a workgroup per piece of a stream, groups of blocks split among 8
+/// workgroups; lavapipe, the tests' adapter, in `DecodeShape::CPU`): the same frames as a
+/// GPU decodes them, and in slices of 96 (several spans of 32, passes that end inside a
+/// slice).
 #[test]
 fn every_frame_matches_the_reference_as_a_gpu_decodes() {
     let (device, queue) = device();
-    for slice in [2048, 96] {
-        every_frame_matches_the_reference(&device, &queue, (Some(slice), Some(true)));
+    for slice_groups in [2048, 96] {
+        let shape = DecodeShape {
+            slice_groups,
+            ..DecodeShape::GPU
+        };
+        every_frame_matches_the_reference(&device, &queue, Some(shape));
     }
 }
 
 fn every_frame_matches_the_reference(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    (slice, wide_parse): (Option<u32>, Option<bool>),
+    decode_shape: Option<DecodeShape>,
 ) {
     let n = 48;
     for (kind, ch, (w, h)) in [
@@ -1062,14 +1068,11 @@ fn every_frame_matches_the_reference(
         assert!(longest >= 12, "a chain of {longest} predicted keyframes");
         let mut reference = Decoder::new(r).unwrap();
         let cfg = PlayerConfig {
-            decode_slice: slice,
-            wide_parse,
+            decode_shape,
             ..inline(Policy::Interpolate, Throttle::UNLIMITED)
         };
         let mut player = Player::open(device, queue, Cursor::new(bytes), cfg).unwrap();
-        let what = format!(
-            "{kind:?}, {ch} channel(s), {w}×{h}, decode slice {slice:?}, wide parse {wide_parse:?}"
-        );
+        let what = format!("{kind:?}, {ch} channel(s), {w}×{h}, decode shape {decode_shape:?}");
         let mode = if kind == InputKind::Srgb8 {
             Output::Stored
         } else {
@@ -1195,15 +1198,19 @@ fn a_callers_texture_gets_what_the_players_own_would_show() {
 #[test]
 fn a_decode_budget_bounds_every_frame_and_a_budget_too_small_is_reported() {
     let (device, queue) = device();
-    for step_cost in [None, Some(2000)] {
-        a_decode_budget_bounds_every_frame(&device, &queue, step_cost);
+    let gpu_like = DecodeShape {
+        step_cost: 2000,
+        ..DecodeShape::CPU
+    };
+    for shape in [None, Some(gpu_like)] {
+        a_decode_budget_bounds_every_frame(&device, &queue, shape);
     }
 }
 
 fn a_decode_budget_bounds_every_frame(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    step_cost: Option<u64>,
+    decode_shape: Option<DecodeShape>,
 ) {
     let (w, h, n) = (64, 48, 96);
     let mut cfg = config(SegmentMode::Fixed(8));
@@ -1220,7 +1227,7 @@ fn a_decode_budget_bounds_every_frame(
     let whole = {
         let cfg = PlayerConfig {
             decode_budget: Some(u64::MAX),
-            step_cost,
+            decode_shape,
             ..inline(Policy::Interpolate, throttle)
         };
         let mut player = Player::open(device, queue, Cursor::new(bytes.clone()), cfg).unwrap();
@@ -1233,7 +1240,7 @@ fn a_decode_budget_bounds_every_frame(
     let budget = whole.div_ceil(8);
     let cfg = PlayerConfig {
         decode_budget: Some(budget),
-        step_cost,
+        decode_shape,
         ..inline(Policy::Interpolate, throttle)
     };
     let mut player = Player::open(device, queue, Cursor::new(bytes.clone()), cfg).unwrap();
@@ -1243,7 +1250,7 @@ fn a_decode_budget_bounds_every_frame(
             let r = player.advance(DISPLAY);
             assert!(
                 r.decode_work <= budget,
-                "{what}, step cost {step_cost:?}, frame {}: {} blocks of decode over a budget of {budget}",
+                "{what}, decode shape {decode_shape:?}, frame {}: {} blocks of decode over a budget of {budget}",
                 r.index,
                 r.decode_work
             );
@@ -1278,7 +1285,7 @@ fn a_decode_budget_bounds_every_frame(
     let small = whole.div_ceil(24);
     let cfg = PlayerConfig {
         decode_budget: Some(small),
-        step_cost,
+        decode_shape,
         ..inline(Policy::Interpolate, Throttle::UNLIMITED)
     };
     let mut player = Player::open(device, queue, Cursor::new(bytes), cfg).unwrap();

@@ -105,18 +105,8 @@ pub struct BenchRenderArgs {
     /// unset: the default, each segment spread over the frames before it is due.
     #[arg(long)]
     pub budget: Option<u64>,
-    /// Workgroups per dispatch of a decode pass (`PlayerConfig::decode_slice`); unset:
-    /// the adapter's default (32 on a CPU adapter, 2048 on a GPU).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
-    pub slice: Option<u32>,
-    /// `PlayerConfig::wide_parse`: parse with a workgroup per piece (true) or an
-    /// invocation per piece (false); unset: the adapter's default.
-    #[arg(long)]
-    pub wide_parse: Option<bool>,
-    /// `PlayerConfig::step_cost`: what each step of a segment's decode costs beside its
-    /// work, in blocks of the decode budget; unset: the adapter's default.
-    #[arg(long)]
-    pub step_cost: Option<u64>,
+    #[command(flatten)]
+    pub shape: ShapeArgs,
     /// `PlayerConfig::reuse_share`: how far a tile may lag before it is evaluated again,
     /// as a share of the protocol's GPU bound (0: every texel every frame).
     #[arg(long, default_value_t = 0.25, value_parser = crate::cli::parse_share)]
@@ -256,14 +246,8 @@ pub struct BenchDecodeArgs {
     /// GPU time per frame only includes.
     #[arg(long)]
     pub gpu: bool,
-    /// Workgroups per dispatch of a decode pass (`PlayerConfig::decode_slice`); unset:
-    /// the adapter's default (32 on a CPU adapter, 2048 on a GPU).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
-    pub slice: Option<u32>,
-    /// `PlayerConfig::wide_parse`: parse with a workgroup per piece (true) or an
-    /// invocation per piece (false); unset: the adapter's default.
-    #[arg(long)]
-    pub wide_parse: Option<bool>,
+    #[command(flatten)]
+    pub shape: ShapeArgs,
 }
 
 #[derive(Args)]
@@ -283,4 +267,39 @@ pub struct BenchBakeArgs {
     /// Moving clouds on or off.
     #[arg(long, default_value_t = false)]
     pub clouds: bool,
+}
+
+/// The GPU decode's shape (`vbim_player::DecodeShape`), each field the adapter's default
+/// unless named.
+#[derive(Args, Clone, Copy, Debug)]
+pub struct ShapeArgs {
+    /// Workgroups per dispatch of a decode pass (`DecodeShape::slice_groups`; 32 on a CPU
+    /// adapter, 2048 on a GPU).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    pub slice: Option<u32>,
+    /// Parse with a workgroup per piece (true) or an invocation per piece (false)
+    /// (`DecodeShape::wide_parse`; true on a GPU).
+    #[arg(long)]
+    pub wide_parse: Option<bool>,
+    /// Workgroups per group of 64 blocks in the block passes (`DecodeShape::group_split`;
+    /// 8 on a GPU, 1 on a CPU adapter).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub split: Option<u32>,
+    /// What each step of a segment's decode costs beside its work, in blocks of the
+    /// decode budget (`DecodeShape::step_cost`; 40 000 on a GPU, 0 on a CPU adapter).
+    #[arg(long)]
+    pub step_cost: Option<u64>,
+}
+
+impl ShapeArgs {
+    /// The adapter's shape with what was named.
+    pub fn shape(&self, info: &wgpu::AdapterInfo) -> vbim_player::DecodeShape {
+        let base = vbim_player::DecodeShape::for_adapter(info);
+        vbim_player::DecodeShape {
+            slice_groups: self.slice.unwrap_or(base.slice_groups),
+            wide_parse: self.wide_parse.unwrap_or(base.wide_parse),
+            group_split: self.split.unwrap_or(base.group_split),
+            step_cost: self.step_cost.unwrap_or(base.step_cost),
+        }
+    }
 }

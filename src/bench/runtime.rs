@@ -66,16 +66,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     }
     let gpu = a
         .gpu
-        .then(|| {
-            gpu_decode(
-                &h,
-                &layout,
-                &entries,
-                &chunks,
-                a.runs,
-                (a.slice, a.wide_parse),
-            )
-        })
+        .then(|| gpu_decode(&h, &layout, &entries, &chunks, a.runs, &a.shape))
         .transpose()?;
     let (zm, z0, z1) = stats(&mut zstd_t);
     let (fm, f0, f1) = stats(&mut full_t);
@@ -97,13 +88,8 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     if let Some((adapter, mut times, boxes, passes)) = gpu {
         let (gm, g0, g1) = stats(&mut times);
         println!(
-            "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}, {} parse",
+            "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}",
             1e3 * gm / boxes.max(1) as f64,
-            match a.wide_parse {
-                None => "the adapter's",
-                Some(true) => "wide",
-                Some(false) => "serial",
-            }
         );
         if passes.is_empty() {
             println!(
@@ -129,6 +115,17 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
 
 /// The adapter, each run's seconds, the number of segments, and the GPU time per segment
 /// of each kind of pass (ns; empty where the adapter has no timestamps inside passes).
+/// A decode shape in words, for the benchmarks' first line.
+fn describe(s: &vbim_player::DecodeShape) -> String {
+    format!(
+        "dispatches of {} workgroups, {} parse, groups of blocks split in {}, {} blocks per step",
+        s.slice_groups,
+        if s.wide_parse { "wide" } else { "serial" },
+        s.group_split,
+        s.step_cost
+    )
+}
+
 type GpuTimes = (String, Vec<f64>, usize, Vec<(&'static str, f64)>);
 
 /// The GPU decode of every segment of a stream, `runs` times.
@@ -138,13 +135,18 @@ fn gpu_decode(
     entries: &[vbim_format::IndexEntry],
     chunks: &[&[u8]],
     runs: usize,
-    (slice, wide_parse): (Option<u32>, Option<bool>),
+    shape: &super::args::ShapeArgs,
 ) -> Result<GpuTimes, String> {
     use vbim_player::bench::{timing_device, DecoderCore, Event, GpuDecoder, SegmentData};
     let (device, queue, info) = timing_device().map_err(|e| e.to_string())?;
-    let adapter = format!("{} ({:?})", info.name, info.backend);
-    let mut gpu = GpuDecoder::new(&device, &queue, h, slice);
-    gpu.set_wide_parse(wide_parse);
+    let shape = shape.shape(&info);
+    let adapter = format!(
+        "{} ({:?}), decode shape: {}",
+        info.name,
+        info.backend,
+        describe(&shape)
+    );
+    let mut gpu = GpuDecoder::new(&device, &queue, h, Some(shape));
     let (mut times, mut boxes) = (Vec::new(), 0);
     let mut passes: Vec<(&'static str, f64)> = Vec::new();
     for _ in 0..runs.max(1) {
@@ -327,9 +329,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         let f = crate::sequence::open_input(&a.file)?;
         let cfg = PlayerConfig {
             decode_budget: a.budget,
-            decode_slice: a.slice,
-            wide_parse: a.wide_parse,
-            step_cost: a.step_cost,
+            decode_shape: Some(a.shape.shape(&info)),
             reuse_share: a.reuse_share,
             ..PlayerConfig::default()
         };
@@ -445,18 +445,12 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         );
     };
     println!(
-        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode slice {} workgroups, {} parse, step cost {}, reuse share {}; median over runs (min–max)",
+        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode shape: {}, reuse share {}; median over runs (min–max)",
         h.width, h.height, h.rate_num, h.rate_den,
         if a.slow > 1 { format!(" played {}× slower", a.slow) } else { String::new() },
         a.frames, runs.len(), info.name, info.backend,
         a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame")),
-        a.slice.map_or("the adapter's".to_string(), |s| s.to_string()),
-        match a.wide_parse {
-            None => "the adapter's",
-            Some(true) => "wide",
-            Some(false) => "serial",
-        },
-        a.step_cost.map_or("the adapter's".to_string(), |c| format!("{c} blocks")),
+        describe(&a.shape.shape(&info)),
         a.reuse_share
     );
     line(

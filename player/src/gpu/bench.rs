@@ -33,28 +33,22 @@ impl Gpu {
 pub struct GpuDecoder(Gpu);
 
 impl GpuDecoder {
-    /// GPU state for the stream `h` describes, decoding in dispatches of `slice`
-    /// workgroups ([`PlayerConfig::decode_slice`]).
+    /// GPU state for the stream `h` describes, decoding in the shape given (`None`: the
+    /// adapter's, [`DecodeShape::for_adapter`]).
     ///
-    /// [`PlayerConfig::decode_slice`]: crate::PlayerConfig::decode_slice
+    /// [`DecodeShape::for_adapter`]: crate::DecodeShape::for_adapter
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         h: &vbim_format::Header,
-        slice: Option<u32>,
+        shape: Option<crate::DecodeShape>,
     ) -> Self {
         let mut gpu = Gpu::for_stream(device, queue, h);
-        gpu.set_decode_slice(slice);
+        if let Some(shape) = shape {
+            gpu.set_decode_shape(shape);
+        }
         gpu.marks = crate::marks::Marks::new(device);
         GpuDecoder(gpu)
-    }
-
-    /// Parses with a workgroup per piece or an invocation per piece
-    /// ([`PlayerConfig::wide_parse`]).
-    ///
-    /// [`PlayerConfig::wide_parse`]: crate::PlayerConfig::wide_parse
-    pub fn set_wide_parse(&mut self, wide: Option<bool>) {
-        self.0.set_wide_parse(wide);
     }
 
     /// The GPU time between the marks of the last decode, each to the pass it ends (ns;

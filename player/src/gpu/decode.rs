@@ -9,62 +9,16 @@ use super::resources::slice_buffer;
 use super::Gpu;
 use crate::coded::Coded;
 use crate::decoder::SegmentData;
+use crate::DecodeShape;
 
 /// Workgroups of one slice of a pass: a pass over more goes in several dispatches, which
 /// may land in different frames. (32 workgroups of 64 blocks: 131 072 texels of a plane.)
 pub(crate) const SLICE_GROUPS: u32 = 32;
 
-/// Workgroups of a slice on a GPU ([`default_slice_groups`]): 2048 workgroups of 64
-/// blocks, 8.4 M texels of a plane.
-const GPU_SLICE_GROUPS: u32 = 2048;
-
-/// The most workgroups a decode dispatch may cover ([`Gpu::set_decode_slice`]): a parse
-/// slice ([`PARSE_SPAN`] of them) stays within WebGPU's 65 535 workgroups per dimension.
+/// The most workgroups a decode dispatch may cover ([`DecodeShape::slice_groups`]): a
+/// parse slice ([`PARSE_SPAN`] of them) stays within WebGPU's 65 535 workgroups per
+/// dimension.
 pub(crate) const MAX_SLICE_GROUPS: u32 = 16_384;
-
-/// Workgroups of a decode dispatch when the caller names none
-/// ([`PlayerConfig::decode_slice`]): [`SLICE_GROUPS`] on a CPU adapter, where a dispatch
-/// takes time in proportion to its work, so that small slices spread a decode evenly over
-/// frames; [`GPU_SLICE_GROUPS`] elsewhere, where a dispatch of 32 workgroups fills a
-/// fraction of the GPU and its time is mostly latency (on an H100 a 4096² segment took
-/// 82 ms in 32-workgroup slices, BENCHMARKS.md).
-///
-/// [`PlayerConfig::decode_slice`]: crate::PlayerConfig::decode_slice
-pub(crate) fn default_slice_groups(device: &wgpu::Device) -> u32 {
-    if device.adapter_info().device_type == wgpu::DeviceType::Cpu {
-        SLICE_GROUPS
-    } else {
-        GPU_SLICE_GROUPS
-    }
-}
-
-/// Whether the parse runs a workgroup per piece (`parse_wide`) rather than an invocation
-/// per piece (`parse`) when the caller names neither: on a GPU, where the serial parse's
-/// chain of dependent reads left the chip idle (BENCHMARKS.md, "On a hardware GPU").
-/// On lavapipe the serial parse is cheaper: there a segment's decode took 105 ms with the
-/// wide parse against 91 ms (a 512² day), time following work, and the scans are work.
-pub(crate) fn default_wide_parse(device: &wgpu::Device) -> bool {
-    device.adapter_info().device_type != wgpu::DeviceType::Cpu
-}
-
-/// What one step of a decode (a dispatch, a clear, the upload) costs on a GPU beside its
-/// work, in blocks ([`Op::cost`]'s unit). On an H100 a segment's decode took as long at
-/// 512² as at 2048² (1.4–1.5 ms for 68 steps: about 20 µs each, whatever their work),
-/// and a frame's decode time followed how many steps it recorded far more than their work
-/// (0.4 ms for 200 000 blocks in a few steps, 3.3 ms for 160 000 in many small ones).
-/// From the 4096² decode, a block's work is about 0.45 ns there: 20 µs is the work of
-/// about 44 000 blocks. On a CPU adapter a step costs its work alone (0): lavapipe's time
-/// follows work, and the weights ([`Kind::weight`]) were measured there.
-const GPU_STEP_COST: u64 = 40_000;
-
-/// [`GPU_STEP_COST`] on a GPU, 0 on a CPU adapter.
-pub(crate) fn default_step_cost(device: &wgpu::Device) -> u64 {
-    if device.adapter_info().device_type == wgpu::DeviceType::Cpu {
-        0
-    } else {
-        GPU_STEP_COST
-    }
-}
 
 /// A parse slice is this many slices' workgroups: as many pairs per dispatch as when a
 /// piece was 256 pairs, so that shorter pieces shorten each dispatch's serial chain
@@ -116,7 +70,7 @@ pub(crate) struct Op {
     /// `bubble_write`, the other passes' units weighted by their measured cost
     /// ([`Kind::weight`]; a parse's unit is an entry point, a zero pass's 64 texels, a
     /// pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its latency
-    /// ([`GPU_STEP_COST`]). What [`PlayerConfig::decode_budget`] counts.
+    /// ([`DecodeShape::step_cost`]). What [`PlayerConfig::decode_budget`] counts.
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
     pub cost: u64,
@@ -145,26 +99,17 @@ pub(crate) struct Target {
 }
 
 impl Gpu {
-    /// Sets how many workgroups one dispatch of a decode pass covers (rounded up to a
-    /// multiple of [`SLICE_GROUPS`], at most [`MAX_SLICE_GROUPS`]); `None`: the adapter's
-    /// default ([`default_slice_groups`]). Applies to the decodes planned from then on.
-    pub fn set_decode_slice(&mut self, groups: Option<u32>) {
-        let groups = groups.unwrap_or_else(|| default_slice_groups(&self.device));
-        self.slice_span = groups.clamp(1, MAX_SLICE_GROUPS).div_ceil(SLICE_GROUPS);
-    }
-
-    /// Parses with a workgroup per piece (`true`) or an invocation per piece; `None`:
-    /// the adapter's default ([`default_wide_parse`]). Applies to the decodes planned from
-    /// then on.
-    pub fn set_wide_parse(&mut self, wide: Option<bool>) {
-        self.wide_parse = wide.unwrap_or_else(|| default_wide_parse(&self.device));
-    }
-
-    /// Sets what each step of a decode costs beside its work ([`Op::cost`]); `None`: the
-    /// adapter's default ([`default_step_cost`]). Applies to the decodes planned from
-    /// then on.
-    pub fn set_step_cost(&mut self, cost: Option<u64>) {
-        self.step_cost = cost.unwrap_or_else(|| default_step_cost(&self.device));
+    /// Shapes the decodes planned from then on ([`DecodeShape`]): the slice rounded up to
+    /// a multiple of [`SLICE_GROUPS`] (at most [`MAX_SLICE_GROUPS`]), the group split
+    /// down to a power of two (at most [`GROUP_BLOCKS`]).
+    pub fn set_decode_shape(&mut self, shape: DecodeShape) {
+        self.slice_span = shape
+            .slice_groups
+            .clamp(1, MAX_SLICE_GROUPS)
+            .div_ceil(SLICE_GROUPS);
+        self.wide_parse = shape.wide_parse;
+        self.group_split = 1 << shape.group_split.clamp(1, GROUP_BLOCKS).ilog2();
+        self.step_cost = shape.step_cost;
     }
 
     /// Whether a segment's coefficients fit one storage binding of this device.
@@ -257,9 +202,7 @@ impl Gpu {
                         self.rows_sliced(ops, Kind::KeyZero, zero, (p, 1));
                     }
                     // A predicted keyframe is added onto the head: the keyframe it follows.
-                    let groups = blocks.div_ceil(GROUP_BLOCKS);
-                    let units = (blocks as u64, GROUP_BLOCKS as u64);
-                    self.sliced(ops, Kind::KeyAdd, job, groups, p, units);
+                    self.block_pass(ops, Kind::KeyAdd, job, blocks, p);
                 }
             }
         }
@@ -299,8 +242,7 @@ impl Gpu {
                     let units = (blocks as u64, 64);
                     self.sliced(ops, Kind::BubbleBound, job, blocks.div_ceil(64), 0, units);
                     if whole {
-                        let groups = blocks.div_ceil(GROUP_BLOCKS);
-                        self.sliced(ops, Kind::BubbleWrite, job, groups, 0, units);
+                        self.block_pass(ops, Kind::BubbleWrite, job, blocks, 0);
                     }
                 }
                 if whole {
@@ -309,9 +251,7 @@ impl Gpu {
                 for job in self.part_jobs(span, layer) {
                     let blocks = job.hi - job.lo.min(job.hi);
                     self.parse_ops(ops, job, blocks, 0);
-                    let groups = blocks.div_ceil(GROUP_BLOCKS);
-                    let units = (blocks as u64, 64);
-                    self.sliced(ops, Kind::BubbleWrite, job, groups, 0, units);
+                    self.block_pass(ops, Kind::BubbleWrite, job, blocks, 0);
                 }
             }
         }
@@ -325,7 +265,7 @@ impl Gpu {
             self.bind_decode();
         }
         // On a GPU each step also costs its latency: the barrier before it and the
-        // filling and draining of the chip (see `step_cost`).
+        // filling and draining of the chip ([`DecodeShape::step_cost`]).
         for op in ops.iter_mut() {
             op.cost += self.step_cost;
         }
@@ -452,6 +392,7 @@ impl Gpu {
     /// A job with the plane's geometry and nothing else.
     fn base_job(&self) -> Job {
         Job {
+            split: self.group_split,
             groups_x: GROUPS_X,
             blocks_x: self.plane[0] / 8,
             per: self.per,
@@ -502,6 +443,15 @@ impl Gpu {
         };
         let units = (job.count as u64, per_group);
         self.sliced_by(ops, kind, job, (groups, PARSE_SPAN), channel, units);
+    }
+
+    /// A block pass (`key_add`, `bubble_write`) over `blocks` blocks of `job`: a workgroup
+    /// per group of [`GROUP_BLOCKS`], or [`DecodeShape::group_split`] workgroups per group.
+    fn block_pass(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, blocks: u32, channel: u32) {
+        let split = job.split.max(1);
+        let groups = blocks.div_ceil(GROUP_BLOCKS) * split;
+        let units = (blocks as u64, (GROUP_BLOCKS / split) as u64);
+        self.sliced(ops, kind, job, groups, channel, units);
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the

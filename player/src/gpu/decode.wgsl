@@ -166,6 +166,37 @@ fn block_sum(d: u32, m: vec2<u32>, x: u32, y: u32, acc: f32, pair: bool) -> vec2
     return vec2<f32>(a, b);
 }
 
+// Bits [a, b) of a 32-bit word (a ≤ b ≤ 32).
+fn bits_between(a: u32, b: u32) -> u32 {
+    if (b - a >= 32u) {
+        return 0xFFFFFFFFu;
+    }
+    return ((1u << (b - a)) - 1u) << a;
+}
+
+// The group of GROUP_BLOCKS blocks a block pass's workgroup visits, and which of its
+// blocks: those with a coefficient, all of them or, with `job.split` workgroups per group
+// (on a GPU), this workgroup's share, so that no workgroup's chain of blocks in sequence
+// is long (one workgroup per 64 blocks left an H100 waiting on the longest chains).
+struct Share {
+    group: u32,
+    present: Bits,
+}
+
+fn group_share(wg: vec3<u32>) -> Share {
+    let i = group_index(wg);
+    let split = max(job.split, 1u);
+    let g = i / split;
+    let width = GROUP_BLOCKS / split;
+    let lo = (i % split) * width;
+    let hi = lo + width;
+    let keep = vec2<u32>(
+        bits_between(min(lo, 32u), min(hi, 32u)),
+        bits_between(max(lo, 32u) - 32u, max(hi, 32u) - 32u),
+    );
+    return Share(g, bits_of(groups[g] & keep));
+}
+
 // A keyframe plane's blocks added onto what the plane holds: the reference keyframe for a
 // predicted keyframe, zeros (`key_zero` first) for an intra one.
 @compute @workgroup_size(8, 8)
@@ -173,9 +204,9 @@ fn key_add(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_id) l: vec3<u32>,
 ) {
-    let g = group_index(wg);
-    let first = job.lo + g * GROUP_BLOCKS;
-    var present = bits_of(groups[g]);
+    let share = group_share(wg);
+    let first = job.lo + share.group * GROUP_BLOCKS;
+    var present = share.present;
     var span = first_span(first);
     loop {
         let j = next_bit(&present);
@@ -272,9 +303,9 @@ fn bubble_write(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_id) l: vec3<u32>,
 ) {
-    let g = group_index(wg);
-    let first = job.lo + g * GROUP_BLOCKS;
-    var present = bits_of(groups[g]);
+    let share = group_share(wg);
+    let first = job.lo + share.group * GROUP_BLOCKS;
+    var present = share.present;
     if (l.x >= 4u) {
         return;
     }

@@ -59,8 +59,9 @@ job! {
     size: [u32; 2] => "vec2<u32>",
     /// Bubble zero pass: the layer it zeros.
     base: u32 => "u32",
-    /// Unused: keeps the struct a whole number of 8-byte words.
-    pad: u32 => "u32",
+    /// Block passes (`key_add`, `bubble_write`): workgroups per group of 64 blocks, each
+    /// visiting its share of them (1, 2, 4 … 64).
+    split: u32 => "u32",
 }
 
 /// Bytes between two jobs in the jobs buffer: WebGPU's default

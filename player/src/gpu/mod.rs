@@ -124,15 +124,14 @@ pub(crate) struct Gpu {
     parse_group: Option<wgpu::BindGroup>,
     /// Scratch for the jobs of one segment (kept: no allocation per segment).
     job_bytes: Vec<u8>,
-    /// A decode pass's dispatch covers this many [`SLICE_GROUPS`] of workgroups
-    /// ([`Gpu::set_decode_slice`]).
+    /// The decode's shape ([`Gpu::set_decode_shape`]): a dispatch covers this many
+    /// [`SLICE_GROUPS`] of workgroups, the parse is wide or serial, a group of blocks is
+    /// split among this many workgroups, and each step costs this much beside its work.
     ///
     /// [`SLICE_GROUPS`]: decode::SLICE_GROUPS
     slice_span: u32,
-    /// Parse with a workgroup per piece ([`Gpu::set_wide_parse`]).
     wide_parse: bool,
-    /// What each step of a decode costs beside its work, in blocks
-    /// (`decode::default_step_cost`).
+    group_split: u32,
     step_cost: u64,
     /// Bubble layers of one set ([`BUBBLE_SETS`] sets, one after the other).
     pub set_layers: u32,

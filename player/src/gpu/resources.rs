@@ -3,7 +3,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::decode::{default_slice_groups, default_step_cost, default_wide_parse, SLICE_GROUPS};
+use super::decode::SLICE_GROUPS;
 use super::job::{decode_source, Job, JOB_STRIDE};
 use super::plan::*;
 use super::reconstruct::Params;
@@ -246,9 +246,10 @@ impl Gpu {
             bubble_group: None,
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
-            slice_span: default_slice_groups(device) / SLICE_GROUPS,
-            wide_parse: default_wide_parse(device),
-            step_cost: default_step_cost(device),
+            slice_span: 1,
+            wide_parse: false,
+            group_split: 1,
+            step_cost: 0,
             set_layers: set_layers(max_degree, channels),
             #[cfg(feature = "bench")]
             marks: None,
@@ -260,6 +261,7 @@ impl Gpu {
             tiles_x: plane[0] / tile_size,
         };
         gpu.bind_decode();
+        gpu.set_decode_shape(crate::DecodeShape::for_adapter(&device.adapter_info()));
         gpu
     }
 

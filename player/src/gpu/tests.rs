@@ -9,6 +9,16 @@ use crate::coded::{Coded, PlaneSpan};
 use crate::decoder::{KeyStep, SegmentData};
 use crate::readback::{read_buffer, read_texture_layer};
 
+/// A GPU's decode shape (the wide parse, groups split among workgroups) or a CPU
+/// adapter's, on the tests' adapter.
+fn shape(gpu: bool) -> crate::DecodeShape {
+    if gpu {
+        crate::DecodeShape::GPU
+    } else {
+        crate::DecodeShape::CPU
+    }
+}
+
 fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
     let mut next = || {
         *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -104,7 +114,7 @@ fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
         (Some(100), true),
     ] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
-        gpu.set_wide_parse(Some(wide));
+        gpu.set_decode_shape(shape(wide));
         if let Some(p) = part {
             gpu.part = p;
             gpu.bind_decode();
@@ -119,7 +129,7 @@ fn long_runs_of_equal_dc_parsed_in_pieces_match_the_reference() {
         let at = (0..n).map(|b| (b % bw, b / bw));
         plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, 0.01);
         decode_key_step(&mut gpu, 0, span, c);
-        assert_head_matches(&gpu, &want, &format!("parts {part:?}, wide parse {wide}"));
+        assert_head_matches(&gpu, &want, &format!("parts {part:?}, GPU shape {wide}"));
     }
 }
 
@@ -160,7 +170,7 @@ fn both_parses_write_every_coefficient_of_a_large_random_plane() {
     }
     for wide in [false, true] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
-        gpu.set_wide_parse(Some(wide));
+        gpu.set_decode_shape(shape(wide));
         let mut c = Coded::default();
         let (span, _) = coded_plane(&mut c, 0.01, &blocks, None);
         assert!(span.count > 400, "{} pieces", span.count);
@@ -177,15 +187,15 @@ fn both_parses_write_every_coefficient_of_a_large_random_plane() {
                 assert_eq!(
                     set,
                     v != 0,
-                    "wide parse {wide}, block {d}, coefficient {f}: mask"
+                    "GPU shape {wide}, block {d}, coefficient {f}: mask"
                 );
                 if set {
                     let got = coefs[d * 64 + f];
-                    assert_eq!(got, v, "wide parse {wide}, block {d}, coefficient {f}");
+                    assert_eq!(got, v, "GPU shape {wide}, block {d}, coefficient {f}");
                 }
             }
             let marked = sets[d / 32] >> (d % 32) & 1 == 1;
-            assert_eq!(marked, mask != 0, "wide parse {wide}, block {d}: set");
+            assert_eq!(marked, mask != 0, "GPU shape {wide}, block {d}: set");
         }
     }
 }
@@ -207,7 +217,7 @@ fn keyframe_passes_match_the_reference_kernel() {
         (Some(7), true),
     ] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
-        gpu.set_wide_parse(Some(wide));
+        gpu.set_decode_shape(shape(wide));
         if let Some(p) = part {
             gpu.part = p;
             gpu.bind_decode();
@@ -226,7 +236,7 @@ fn keyframe_passes_match_the_reference_kernel() {
             plane::add_blocks_of(&mut want, at, Onto::Plane, &parsed, 0, step);
             decode_key_step(&mut gpu, n, span, c);
         }
-        assert_head_matches(&gpu, &want, &format!("parts {part:?}, wide parse {wide}"));
+        assert_head_matches(&gpu, &want, &format!("parts {part:?}, GPU shape {wide}"));
         // The previous keyframe: 16-bit steps of each 32² region's range.
         let first = first.expect("two steps");
         let raw = read_texture_layer(&device, &queue, &gpu.packed, 4, 0);
@@ -275,7 +285,7 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         (Some(7), true),
     ] {
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, ts as u32);
-        gpu.set_wide_parse(Some(wide));
+        gpu.set_decode_shape(shape(wide));
         if let Some(p) = part {
             gpu.part = p;
             gpu.bind_decode();
@@ -305,7 +315,7 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
         assert!(
             bound >= peak && bound < 3.0 * peak,
-            "parts {part:?}, wide parse {wide}: bound {bound} for a peak of {peak}"
+            "parts {part:?}, GPU shape {wide}: bound {bound} for a peak of {peak}"
         );
         let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
         let got: Vec<f32> = bytemuck::cast_slice::<u8, i16>(&raw)
@@ -315,7 +325,7 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
             assert!(
                 (g - w).abs() <= 0.5001 * scale,
-                "parts {part:?}, wide parse {wide}, texel {i}: GPU {g} against {w} (scale {scale})"
+                "parts {part:?}, GPU shape {wide}, texel {i}: GPU {g} against {w} (scale {scale})"
             );
         }
     }
