@@ -66,7 +66,7 @@ pub use gpu::{
 pub use player::Player;
 pub use readback::read_texture;
 pub use record::{Frame, FrameRecord, FrameState, Totals};
-pub use shape::DecodeShape;
+pub use shape::{DecodeShape, PassWeights};
 pub use stats::{frames_csv, Summary};
 pub use throttle::{Stall, Throttle};
 /// The memory a stream may take ([`PlayerConfig::limits`]).

@@ -29,6 +29,8 @@ pub struct DecodeShape {
     /// its latency is worth, so that a frame of many small steps counts as the time it
     /// takes.
     pub step_cost: u64,
+    /// What a unit of each decode pass costs, in the same blocks.
+    pub weights: PassWeights,
 }
 
 impl DecodeShape {
@@ -41,19 +43,21 @@ impl DecodeShape {
         wide_parse: false,
         group_split: 1,
         step_cost: 0,
+        weights: PassWeights::LAVAPIPE,
     };
 
     /// For a GPU, as measured on an H100: slices of 2048 workgroups (a 4096² segment
     /// took 82 ms in slices of 32, 7.7 ms in 2048), the wide parse (a 4096² segment's
-    /// parse 3.2 → 0.34 ms), groups split in 8 (no workgroup walks more than 8 blocks in
-    /// sequence), and 40 000 blocks per step: a segment's decode took as long at 512² as
-    /// at 2048² (about 20 µs per step whatever its work), and a block's work about
-    /// 0.45 ns.
+    /// parse 3.2 → 0.34 ms), groups split in up to 8 where a pass has too few to fill the
+    /// chip (a 512² segment's `key_add` 0.33 → 0.09 ms), and 35 000 blocks per step: a
+    /// segment's decode took as long at 512² as at 2048² (about 20 µs per step whatever
+    /// its work), and a block through `bubble_write` about 0.58 ns ([`PassWeights::H100`]).
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
         wide_parse: true,
         group_split: 8,
-        step_cost: 40_000,
+        step_cost: 35_000,
+        weights: PassWeights::H100,
     };
 
     /// [`DecodeShape::CPU`] on a CPU adapter, [`DecodeShape::GPU`] on any other.
@@ -64,4 +68,64 @@ impl DecodeShape {
             DecodeShape::GPU
         }
     }
+}
+
+/// What one unit of each decode pass costs, in quarters of a block through `bubble_write`
+/// (the unit of [`PlayerConfig::decode_budget`]): how the player shares a segment's decode
+/// out over frames. Each pass's unit is named with its field.
+///
+/// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PassWeights {
+    /// An entry point of a coefficient stream: a piece of up to 128 pairs.
+    pub parse: u32,
+    /// A block of a keyframe plane added onto the head.
+    pub key_add: u32,
+    /// 64 texels of a keyframe plane zeroed.
+    pub key_zero: u32,
+    /// 1/16 of a 32² region of the head measured, before the pack.
+    pub key_range: u32,
+    /// 1/16 of a 32² region of the head packed into 16 bits.
+    pub key_pack: u32,
+    /// 64 words (128 texels) of a bubble layer zeroed.
+    pub bubble_zero: u32,
+    /// A block of a bubble plane bounded.
+    pub bubble_bound: u32,
+    /// A block of a bubble plane written: the unit, 4.
+    pub bubble_write: u32,
+}
+
+impl PassWeights {
+    /// Measured on lavapipe from the frames of `vbim bench render --csv` (the extra time
+    /// of each frame against the work of each kind it recorded): an entry point reads 128
+    /// pairs in sequence, a keyframe block's inverse transform reads every coefficient of
+    /// a dense keyframe where a bubble term's are few, zeroing and packing touch a texel
+    /// once.
+    pub const LAVAPIPE: PassWeights = PassWeights {
+        parse: 55,
+        key_add: 12,
+        key_zero: 1,
+        key_range: 1,
+        key_pack: 1,
+        bubble_zero: 1,
+        bubble_bound: 2,
+        bubble_write: 4,
+    };
+
+    /// Fitted on an H100 from each pass's GPU time per 4096² segment (`vbim bench decode
+    /// --gpu`, timestamps between passes), less 20 µs per dispatch (the step cost): a
+    /// block through `bubble_write` about 0.58 ns there. Arithmetic is cheap on a GPU
+    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12) and memory
+    /// is not (zeroing 64 texels 4, against 1); a parse's entry point, 3.5–10 ns of work
+    /// beside its dispatch's latency, 40.
+    pub const H100: PassWeights = PassWeights {
+        parse: 40,
+        key_add: 3,
+        key_zero: 4,
+        key_range: 1,
+        key_pack: 1,
+        bubble_zero: 4,
+        bubble_bound: 1,
+        bubble_write: 4,
+    };
 }

@@ -300,6 +300,7 @@ impl ShapeArgs {
             wide_parse: self.wide_parse.unwrap_or(base.wide_parse),
             group_split: self.split.unwrap_or(base.group_split),
             step_cost: self.step_cost.unwrap_or(base.step_cost),
+            weights: base.weights,
         }
     }
 }

@@ -118,11 +118,12 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
 /// A decode shape in words, for the benchmarks' first line.
 fn describe(s: &vbim_player::DecodeShape) -> String {
     format!(
-        "dispatches of {} workgroups, {} parse, groups of blocks split in {}, {} blocks per step",
+        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights",
         s.slice_groups,
         if s.wide_parse { "wide" } else { "serial" },
         s.group_split,
-        s.step_cost
+        s.step_cost,
+        if s.weights == vbim_player::PassWeights::H100 { "H100" } else if s.weights == vbim_player::PassWeights::LAVAPIPE { "lavapipe" } else { "own" }
     )
 }
 

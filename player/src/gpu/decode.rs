@@ -9,7 +9,7 @@ use super::resources::slice_buffer;
 use super::Gpu;
 use crate::coded::Coded;
 use crate::decoder::SegmentData;
-use crate::DecodeShape;
+use crate::{DecodeShape, PassWeights};
 
 /// Workgroups of one slice of a pass: a pass over more goes in several dispatches, which
 /// may land in different frames. (32 workgroups of 64 blocks: 131 072 texels of a plane.)
@@ -19,6 +19,11 @@ pub(crate) const SLICE_GROUPS: u32 = 32;
 /// parse slice ([`PARSE_SPAN`] of them) stays within WebGPU's 65 535 workgroups per
 /// dimension.
 pub(crate) const MAX_SLICE_GROUPS: u32 = 16_384;
+
+/// Workgroups a block pass needs to fill a large GPU (an H100 runs about 2000 of them at
+/// once): a pass with fewer groups of blocks splits each among more workgroups, up to
+/// [`DecodeShape::group_split`].
+const FILL_GROUPS: u32 = 4096;
 
 /// A parse slice is this many slices' workgroups: as many pairs per dispatch as when a
 /// piece was 256 pairs, so that shorter pieces shorten each dispatch's serial chain
@@ -74,6 +79,8 @@ pub(crate) struct Op {
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
     pub cost: u64,
+    /// The work it records in its pass's own unit ([`PassWeights`] says which).
+    units: u64,
     /// Whether this op packs the head into a slot: once all of a pack's ops are
     /// recorded, the slot holds the head's keyframe.
     pub packs: bool,
@@ -110,6 +117,7 @@ impl Gpu {
         self.wide_parse = shape.wide_parse;
         self.group_split = 1 << shape.group_split.clamp(1, GROUP_BLOCKS).ilog2();
         self.step_cost = shape.step_cost;
+        self.weights = shape.weights;
     }
 
     /// Whether a segment's coefficients fit one storage binding of this device.
@@ -264,10 +272,12 @@ impl Gpu {
             self.slices = slice_buffer(&self.device, grown(slices) / JOB_STRIDE + 1);
             self.bind_decode();
         }
-        // On a GPU each step also costs its latency: the barrier before it and the
-        // filling and draining of the chip ([`DecodeShape::step_cost`]).
+        // Each step costs its work by the adapter's weights, and on a GPU its latency too:
+        // the barrier before it and the filling and draining of the chip
+        // ([`DecodeShape::step_cost`]).
         for op in ops.iter_mut() {
-            op.cost += self.step_cost;
+            op.cost =
+                (op.units * op.kind.weight(&self.weights) as u64).div_ceil(4) + self.step_cost;
         }
         let jobs = self.job_bytes.len() as u64;
         if jobs > self.jobs.size() {
@@ -392,7 +402,7 @@ impl Gpu {
     /// A job with the plane's geometry and nothing else.
     fn base_job(&self) -> Job {
         Job {
-            split: self.group_split,
+            split: 1,
             groups_x: GROUPS_X,
             blocks_x: self.plane[0] / 8,
             per: self.per,
@@ -448,10 +458,17 @@ impl Gpu {
     /// A block pass (`key_add`, `bubble_write`) over `blocks` blocks of `job`: a workgroup
     /// per group of [`GROUP_BLOCKS`], or [`DecodeShape::group_split`] workgroups per group.
     fn block_pass(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, blocks: u32, channel: u32) {
-        let split = job.split.max(1);
-        let groups = blocks.div_ceil(GROUP_BLOCKS) * split;
+        // Split only as far as the pass needs to fill a large GPU: on an H100 splitting in
+        // 8 took a 512² segment's `key_add` from 0.33 to 0.09 ms, and a 4096² one's from
+        // 0.45 to 0.97 ms, where 4096 groups of 64 blocks already fill it.
+        let whole = blocks.div_ceil(GROUP_BLOCKS);
+        let split = FILL_GROUPS
+            .div_ceil(whole.max(1))
+            .next_power_of_two()
+            .min(self.group_split);
+        let job = Job { split, ..job };
         let units = (blocks as u64, (GROUP_BLOCKS / split) as u64);
-        self.sliced(ops, kind, job, groups, channel, units);
+        self.sliced(ops, kind, job, whole * split, channel, units);
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the
@@ -506,14 +523,24 @@ impl Gpu {
     ) {
         let [w, h] = job.size;
         let rows = h.div_ceil(8);
-        let at = self.push_job(job);
         let size = SLICE_GROUPS * self.slice_span;
-        for k in 0..rows.div_ceil(size) {
-            let from = k * size;
-            let n = (rows - from).min(size);
-            let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64 * layers as u64;
-            let op = Op::new(kind, at, [w.div_ceil(8), n, layers], channel, texels / 64);
-            ops.push(op.in_slice(k * self.slice_span));
+        // As many layers in one dispatch as one slice's rows hold: a slice stays the grain
+        // it is for every pass (the 4096² bubble layers zeroed in one dispatch made the
+        // largest step of a frame).
+        let depth = (size / rows).max(1);
+        for first in (0..layers).step_by(depth as usize) {
+            let d = depth.min(layers - first);
+            let at = self.push_job(Job {
+                base: job.base + first,
+                ..job
+            });
+            for k in 0..rows.div_ceil(size) {
+                let from = k * size;
+                let n = (rows - from).min(size);
+                let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64 * d as u64;
+                let op = Op::new(kind, at, [w.div_ceil(8), n, d], channel, texels / 64);
+                ops.push(op.in_slice(k * self.slice_span));
+            }
         }
     }
 
@@ -557,20 +584,16 @@ impl Gpu {
 
 impl Kind {
     /// What one unit of the pass costs, in quarters of a block through `bubble_write`.
-    /// Measured on lavapipe from the frames of `vbim bench render --csv` (the extra time
-    /// of each frame against the work of each kind it recorded): a parse's entry point
-    /// reads 128 pairs in sequence (96 when it read 256; the parse alone took 0.57× as
-    /// long per entry point at 128 as at 256), a keyframe block's inverse transform reads every
-    /// coefficient of a keyframe (dense, where a bubble term's are few), zeroing and
-    /// packing touch a texel once. On an H100 too the parse is the costliest per unit
-    /// (63–75% of a segment's GPU time).
-    fn weight(self) -> u64 {
+    fn weight(self, w: &PassWeights) -> u32 {
         match self {
-            Kind::Parse | Kind::ParseWide => 55,
-            Kind::KeyAdd => 12,
-            Kind::BubbleWrite => 4,
-            Kind::BubbleBound => 2,
-            Kind::KeyZero | Kind::BubbleZero | Kind::KeyRange | Kind::KeyPack => 1,
+            Kind::Parse | Kind::ParseWide => w.parse,
+            Kind::KeyAdd => w.key_add,
+            Kind::KeyZero => w.key_zero,
+            Kind::KeyRange => w.key_range,
+            Kind::KeyPack => w.key_pack,
+            Kind::BubbleZero => w.bubble_zero,
+            Kind::BubbleBound => w.bubble_bound,
+            Kind::BubbleWrite => w.bubble_write,
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } => 0,
         }
     }
@@ -584,7 +607,8 @@ impl Op {
             slice: 0,
             groups,
             channel,
-            cost: (units * kind.weight()).div_ceil(4),
+            units,
+            cost: 0,
             packs: false,
         }
     }

@@ -133,6 +133,7 @@ pub(crate) struct Gpu {
     wide_parse: bool,
     group_split: u32,
     step_cost: u64,
+    weights: crate::PassWeights,
     /// Bubble layers of one set ([`BUBBLE_SETS`] sets, one after the other).
     pub set_layers: u32,
     /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).

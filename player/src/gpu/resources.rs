@@ -250,6 +250,7 @@ impl Gpu {
             wide_parse: false,
             group_split: 1,
             step_cost: 0,
+            weights: crate::PassWeights::LAVAPIPE,
             set_layers: set_layers(max_degree, channels),
             #[cfg(feature = "bench")]
             marks: None,
