@@ -472,7 +472,7 @@ impl Gpu {
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the
-    /// slice span ([`Gpu::set_decode_slice`]), each a dispatch that binds its slice's
+    /// slice span ([`Gpu::set_decode_shape`]), each a dispatch that binds its slice's
     /// first workgroup. The pass costs `units` blocks in all, `per_group` in each whole
     /// workgroup.
     #[allow(clippy::too_many_arguments)]
