@@ -73,9 +73,9 @@ pub(crate) struct Op {
     channel: u32,
     /// The work it records, in blocks: the time of 8×8 texels of one plane through
     /// `bubble_write`, the other passes' units weighted by their measured cost
-    /// ([`Kind::weight`]; a parse's unit is an entry point, a zero pass's 64 texels, a
-    /// pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its latency
-    /// ([`DecodeShape::step_cost`]). What [`PlayerConfig::decode_budget`] counts.
+    /// ([`DecodeShape::weights`]; a parse's unit is an entry point, a zero pass's 64
+    /// texels, a pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its
+    /// latency ([`DecodeShape::step_cost`]). What [`PlayerConfig::decode_budget`] counts.
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
     pub cost: u64,
