@@ -25,9 +25,10 @@ pub(crate) const MAX_SLICE_GROUPS: u32 = 16_384;
 /// [`DecodeShape::group_split`].
 const FILL_GROUPS: u32 = 4096;
 
-/// A parse slice is this many slices' workgroups: as many pairs per dispatch as when a
-/// piece was 256 pairs, so that shorter pieces shorten each dispatch's serial chain
-/// without making more dispatches.
+/// A parse slice is this many slices' workgroups: for the serial parse, as many pairs
+/// per dispatch as when a piece was 256 pairs, so that shorter pieces shorten each
+/// dispatch's serial chain without making more dispatches; for the wide parse (a
+/// workgroup per piece), 4096 pieces per dispatch at a GPU's slice of 2048.
 const PARSE_SPAN: u32 = (256 / vbim_format::chunk::ENTRY_PAIRS) as u32;
 const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
 

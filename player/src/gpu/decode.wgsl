@@ -5,9 +5,10 @@
 // The stream (docs/FORMAT.md, "Coefficient streams") is a sequence of (zero run, value)
 // pairs of LEB128 varints over the positions f · n + b (zig-zag index f of block b, n
 // blocks), the first n positions holding each block's DC as the difference from the
-// previous block's. The decoder thread scanned it and noted an entry point every 256
-// pairs (byte, position, running DC), so that `parse` runs one invocation per entry point.
-// The scan refused malformed streams: the pairs seen here are well-formed.
+// previous block's. The decoder thread scanned it and noted an entry point every 128
+// pairs (byte, position, running DC, first block written), so that the parse
+// (parse.wgsl) runs an invocation, or on a GPU a workgroup, per entry point. The scan
+// refused malformed streams: the pairs seen here are well-formed.
 //
 // `parse` writes every non-zero coefficient into a dense plane of i32 coefficients, 64 per
 // block, and sets its bit in the block's 64-bit mask; the plane was cleared before it
