@@ -134,7 +134,7 @@ fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
 // The wide parse, for a GPU: a workgroup per piece, its 64 lanes reading the piece's
 // bytes, varints and pairs side by side, joined by scans over the lanes. The serial
 // parse's chain of 2 · PIECE_PAIRS dependent varint reads per piece left a GPU idle,
-// waiting on memory (docs/PLAYER.md, "Where a frame's GPU time goes"); here a piece costs
+// waiting on memory (BENCHMARKS.md, "On a hardware GPU"); here a piece costs
 // one load per lane and a few dozen steps through workgroup memory. It writes what the
 // serial parse writes: the same coefficients, masks and sets.
 //
