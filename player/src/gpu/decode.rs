@@ -32,7 +32,7 @@ const FILL_GROUPS: u32 = 4096;
 const PARSE_SPAN: u32 = (256 / vbim_format::chunk::ENTRY_PAIRS) as u32;
 const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
 // The wide parse gives each of its 64 lanes a whole number of a piece's pairs.
-const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS % 64 == 0);
+const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 
 /// What one step of a decode records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
