@@ -75,15 +75,18 @@ pub struct PlayerConfig {
     /// The most segment decode work one displayed frame records, in blocks (the time of
     /// an 8×8 block of one plane through the bubble write, the other passes weighted by
     /// their measured cost, and each step of the decode [`DecodeShape::step_cost`] more;
-    /// [`FrameRecord::decode_work`]). `None`: each
-    /// segment's decode is spread evenly over the frames before it is shown but the last,
-    /// at the display rate the frames so far give, and a segment needed at once (the
-    /// first, or after a seek) is decoded at once. With a budget, a segment needed
-    /// before its decode is done is late (the display holds or waits, as the policy says)
-    /// and [`Totals::budget_late`] counts it: the budget is too small for the stream.
+    /// [`FrameRecord::decode_work`]). `None`: each segment's decode is spread evenly over
+    /// the frames before it is shown but the last, at the display rate the frames so far
+    /// give, and a segment needed at once (the first, or after a seek) is decoded at
+    /// once. With a budget, a segment needed before its decode is done is late (the
+    /// display holds or waits, as the policy says) and [`Totals::budget_late`] counts it:
+    /// the budget is too small for the stream. A step that costs more than the budget
+    /// (on a GPU, any step once the budget is below the step cost) runs alone in its
+    /// frame and [`Totals::over_budget`] counts it.
     ///
     /// [`FrameRecord::decode_work`]: crate::FrameRecord::decode_work
     /// [`Totals::budget_late`]: crate::Totals::budget_late
+    /// [`Totals::over_budget`]: crate::Totals::over_budget
     pub decode_budget: Option<u64>,
     /// How the GPU decode is cut into dispatches and what each costs
     /// ([`DecodeShape`]); `None`: the adapter's ([`DecodeShape::for_adapter`]: on a GPU,
