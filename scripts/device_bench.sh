@@ -2,7 +2,8 @@
 # The runtime's GPU figures on a hardware GPU, in one short run: for every stream in DIR,
 # the GPU time of a displayed frame against a reference blend (`vbim bench render`, a
 # 60 Hz display), where it goes, pass by pass (`--passes`, one run: its frames include the
-# timestamps' own cost) and a segment's GPU decode by pass (`vbim bench decode --gpu`);
+# timestamps' own cost) and a segment's GPU decode by pass (`vbim bench decode --gpu
+# --fit`, with the card's latency per dispatch and cost per unit of each pass);
 # then the speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
 # OUT/device.log (the adapter's name first), OUT/reuse.csv and each stream's frames
 # (the last run of `bench render --csv`) in OUT/render-NAME.csv.
@@ -37,7 +38,7 @@ for f in "${streams[@]}"; do
     "$vbim" bench render "$f" --frames "$frames" --runs "$runs" 2>&1 | tee -a "$log"
     "$vbim" bench render "$f" --frames "$frames" --runs 1 --passes \
         --csv "$out/render-$(basename "$f" .vbim).csv" 2>&1 | tee -a "$log"
-    "$vbim" bench decode "$f" --gpu --runs "$runs" 2>&1 | tee -a "$log"
+    "$vbim" bench decode "$f" --gpu --fit --runs "$runs" 2>&1 | tee -a "$log"
 done
 if [ "${REUSE:-1}" != 0 ]; then
     CLOCK=timestamps VBIM="$vbim" scripts/reuse_bench.sh "${streams[0]}" "$out/reuse.csv" 2>&1 | tee -a "$log"

@@ -79,6 +79,7 @@ pub use vbim_format::Limits;
 pub mod bench {
     pub use crate::decoder::{DecoderCore, Event, KeyStep, SegmentData};
     pub use crate::fuzz::decoder as fuzz_decoder;
+    pub use crate::gpu::PASS_CHANGES;
     pub use crate::gpu::{timing_device, GpuDecoder};
 }
 

@@ -246,6 +246,11 @@ pub struct BenchDecodeArgs {
     /// GPU time per frame only includes.
     #[arg(long)]
     pub gpu: bool,
+    /// With `--gpu`: fit each dispatch's GPU time to a latency per dispatch and a cost
+    /// per unit of each pass's work, and print them as a decode shape's `step_cost` and
+    /// weights for this adapter (needs timestamps inside passes).
+    #[arg(long, requires = "gpu")]
+    pub fit: bool,
     #[command(flatten)]
     pub shape: ShapeArgs,
 }

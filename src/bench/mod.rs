@@ -8,11 +8,12 @@
 //! times each displayed frame's GPU work and the reference blend),
 //! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
 //! and `entropy` (what a context-adaptive coder would save: a research harness for the
-//! format's next coding).
+//! format's next coding); `fit` fits a GPU's decode costs from its timestamps.
 
 mod args;
 mod changes;
 mod entropy;
+mod fit;
 mod frame_gpu;
 mod offline;
 mod runtime;

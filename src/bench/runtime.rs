@@ -85,7 +85,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         100.0 * zm / duration
     );
     println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);
-    if let Some((adapter, mut times, boxes, passes)) = gpu {
+    if let Some((adapter, mut times, boxes, passes, (names, samples))) = gpu {
         let (gm, g0, g1) = stats(&mut times);
         println!(
             "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}",
@@ -108,13 +108,14 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
                     100.0 * ns / total.max(1.0)
                 );
             }
+            if a.fit {
+                super::fit::print(&names, &samples);
+            }
         }
     }
     Ok(())
 }
 
-/// The adapter, each run's seconds, the number of segments, and the GPU time per segment
-/// of each kind of pass (ns; empty where the adapter has no timestamps inside passes).
 /// A decode shape in words, for the benchmarks' first line.
 fn describe(s: &vbim_player::DecodeShape) -> String {
     format!(
@@ -127,7 +128,16 @@ fn describe(s: &vbim_player::DecodeShape) -> String {
     )
 }
 
-type GpuTimes = (String, Vec<f64>, usize, Vec<(&'static str, f64)>);
+/// The adapter in words, each run's time, the segments decoded, the time by pass per
+/// segment (ns; empty where the adapter has no timestamps inside passes), and each
+/// dispatch timed (the pass names, then (pass, work, ns) for the fit).
+type GpuTimes = (
+    String,
+    Vec<f64>,
+    usize,
+    Vec<(&'static str, f64)>,
+    (Vec<&'static str>, Vec<super::fit::Sample>),
+);
 
 /// The GPU decode of every segment of a stream, `runs` times.
 fn gpu_decode(
@@ -150,6 +160,7 @@ fn gpu_decode(
     let mut gpu = GpuDecoder::new(&device, &queue, h, Some(shape));
     let (mut times, mut boxes) = (Vec::new(), 0);
     let mut passes: Vec<(&'static str, f64)> = Vec::new();
+    let (mut names, mut samples) = (Vec::new(), Vec::new());
     for _ in 0..runs.max(1) {
         let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.to_vec());
         let mut seg = SegmentData::new();
@@ -157,10 +168,27 @@ fn gpu_decode(
         for (i, c) in chunks.iter().enumerate() {
             if let Event::Ready(s) = dec.take(i, Some(c)) {
                 dec.fill(s, 0, 0, &mut seg)?;
-                t += gpu.decode(&seg).as_secs_f64();
+                let (dt, steps) = gpu.decode(&seg);
+                t += dt.as_secs_f64();
                 n += 1;
+                let marks = gpu.pass_times();
+                // Each dispatch's own mark, in order (a compute pass's first mark times the
+                // clears before it): the samples of the fit, where they pair up.
+                let timed: Vec<_> = marks
+                    .iter()
+                    .filter(|(l, _)| *l != vbim_player::bench::PASS_CHANGES)
+                    .collect();
+                if timed.len() == steps.len() && timed.iter().zip(&steps).all(|(m, s)| m.0 == s.0) {
+                    for (&&(_, ns), &(label, units)) in timed.iter().zip(&steps) {
+                        let p = names.iter().position(|&n| n == label).unwrap_or_else(|| {
+                            names.push(label);
+                            names.len() - 1
+                        });
+                        samples.push((p, units as f64, ns));
+                    }
+                }
                 // Summed per kind of pass, in the order they first came.
-                for (label, ns) in gpu.pass_times() {
+                for (label, ns) in marks {
                     merge_by_label(&mut passes, label, ns, std::ops::Add::add);
                 }
             }
@@ -171,7 +199,7 @@ fn gpu_decode(
     // Per segment, the mean over runs.
     let per = (runs.max(1) * boxes.max(1)) as f64;
     let passes = passes.into_iter().map(|(l, ns)| (l, ns / per)).collect();
-    Ok((adapter, times, boxes, passes))
+    Ok((adapter, times, boxes, passes, (names, samples)))
 }
 
 /// Adds `ns` to `label`'s entry of `into` with `merge` (a sum, a maximum), or appends the

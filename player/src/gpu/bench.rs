@@ -59,15 +59,18 @@ impl GpuDecoder {
     }
 
     /// Decodes `seg` (its keyframes and bubble planes), waits for the GPU and returns the
-    /// wall-clock time from recording to completion.
-    pub fn decode(&mut self, seg: &SegmentData) -> std::time::Duration {
+    /// wall-clock time from recording to completion, and each dispatch's pass and work in
+    /// the pass's own unit ([`PassWeights`]), in the order of their marks.
+    ///
+    /// [`PassWeights`]: crate::PassWeights
+    pub fn decode(&mut self, seg: &SegmentData) -> (std::time::Duration, Vec<(&'static str, u64)>) {
         let t = std::time::Instant::now();
         let mut enc = self.0.device.create_command_encoder(&Default::default());
         // A first mark, so that the time before the decode is not counted.
         self.0.mark_start(&mut enc);
-        self.0.decode(&mut enc, seg, true);
+        let steps = self.0.decode(&mut enc, seg, true);
         self.0.queue.submit([enc.finish()]);
         self.0.wait();
-        t.elapsed()
+        (t.elapsed(), steps)
     }
 }

@@ -20,6 +20,10 @@ pub(crate) const SLICE_GROUPS: u32 = 32;
 /// dimension.
 pub(crate) const MAX_SLICE_GROUPS: u32 = 16_384;
 
+/// The label of a compute pass's first timestamp (`vbim bench decode --gpu`): the time
+/// since the one before is the clears and the pass change before it, not a dispatch's.
+pub const PASS_CHANGES: &str = "clears and pass changes";
+
 /// Workgroups a block pass needs to fill a large GPU (an H100 runs about 2000 of them at
 /// once): a pass with fewer groups of blocks splits each among more workgroups, up to
 /// [`DecodeShape::group_split`].
@@ -315,7 +319,7 @@ impl Gpu {
                     // A run of dispatches: one compute pass (the time since the last mark,
                     // the clears and the pass change, goes to its first mark).
                     let mut pass = enc.begin_compute_pass(&Default::default());
-                    self.mark(&mut pass, "clears and pass changes");
+                    self.mark(&mut pass, PASS_CHANGES);
                     while i < ops.len() && ops[i].dispatches() {
                         self.dispatch(&mut pass, &ops[i]);
                         i += 1;
@@ -343,8 +347,15 @@ impl Gpu {
     /// Plans and records the whole decode of `seg` at once: its keyframe steps (the head
     /// packed into slot 0 before the last one) and, with `bubbles`, its bubble planes
     /// into set 0. For tests and `vbim bench decode --gpu`.
+    /// Returns each dispatch's pass and work in the pass's own unit, in the order they
+    /// are recorded (and marked, [`Gpu::mark`]).
     #[cfg(any(test, feature = "bench"))]
-    pub fn decode(&mut self, enc: &mut wgpu::CommandEncoder, seg: &SegmentData, bubbles: bool) {
+    pub fn decode(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        seg: &SegmentData,
+        bubbles: bool,
+    ) -> Vec<(&'static str, u64)> {
         let target = Target {
             pack_first: None,
             pack_before_last: Some(0),
@@ -353,44 +364,27 @@ impl Gpu {
         let mut ops = Vec::new();
         self.plan_decode(seg, target, &mut ops);
         self.record(enc, &ops, Some(seg));
+        ops.iter()
+            .filter_map(|o| o.kind.label().map(|l| (l, o.units)))
+            .collect()
     }
 
     fn dispatch(&self, pass: &mut wgpu::ComputePass, op: &Op) {
-        let (pipeline, group, label) = match op.kind {
-            Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref(), "parse"),
-            Kind::Parse => (&self.parse, self.parse_group.as_ref(), "parse"),
-            Kind::KeyZero => (
-                &self.key_zero,
-                self.key_groups.get(op.channel as usize),
-                "key_zero",
-            ),
-            Kind::KeyAdd => (
-                &self.key_add,
-                self.key_groups.get(op.channel as usize),
-                "key_add",
-            ),
-            Kind::KeyRange => (
-                &self.key_range,
-                self.key_groups.get(op.channel as usize),
-                "key_range",
-            ),
-            Kind::KeyPack => (
-                &self.key_pack,
-                self.key_groups.get(op.channel as usize),
-                "key_pack",
-            ),
-            Kind::BubbleZero => (&self.bubble_zero, self.bubble_group.as_ref(), "bubble_zero"),
-            Kind::BubbleBound => (
-                &self.bubble_bound,
-                self.bubble_group.as_ref(),
-                "bubble_bound",
-            ),
-            Kind::BubbleWrite => (
-                &self.bubble_write,
-                self.bubble_group.as_ref(),
-                "bubble_write",
-            ),
+        let key = self.key_groups.get(op.channel as usize);
+        let (pipeline, group) = match op.kind {
+            Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref()),
+            Kind::Parse => (&self.parse, self.parse_group.as_ref()),
+            Kind::KeyZero => (&self.key_zero, key),
+            Kind::KeyAdd => (&self.key_add, key),
+            Kind::KeyRange => (&self.key_range, key),
+            Kind::KeyPack => (&self.key_pack, key),
+            Kind::BubbleZero => (&self.bubble_zero, self.bubble_group.as_ref()),
+            Kind::BubbleBound => (&self.bubble_bound, self.bubble_group.as_ref()),
+            Kind::BubbleWrite => (&self.bubble_write, self.bubble_group.as_ref()),
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } => return,
+        };
+        let Some(label) = op.kind.label() else {
+            return;
         };
         let group = group.expect("made at creation");
         pass.set_pipeline(pipeline);
@@ -586,6 +580,22 @@ impl Gpu {
 }
 
 impl Kind {
+    /// The name of a dispatch's pass (its shader entry point; both parses are "parse"),
+    /// as its timestamp is labelled; `None` for what is not a dispatch.
+    fn label(self) -> Option<&'static str> {
+        Some(match self {
+            Kind::Parse | Kind::ParseWide => "parse",
+            Kind::KeyZero => "key_zero",
+            Kind::KeyAdd => "key_add",
+            Kind::KeyRange => "key_range",
+            Kind::KeyPack => "key_pack",
+            Kind::BubbleZero => "bubble_zero",
+            Kind::BubbleBound => "bubble_bound",
+            Kind::BubbleWrite => "bubble_write",
+            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } => return None,
+        })
+    }
+
     /// What one unit of the pass costs, in quarters of a block through `bubble_write`.
     fn weight(self, w: &PassWeights) -> u32 {
         match self {

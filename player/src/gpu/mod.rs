@@ -37,6 +37,8 @@ mod tests;
 
 #[cfg(feature = "bench")]
 pub use bench::GpuDecoder;
+#[cfg(feature = "bench")]
+pub use decode::PASS_CHANGES;
 pub(crate) use decode::{Op, Target};
 #[cfg(feature = "bench")]
 pub use device::timing_device;

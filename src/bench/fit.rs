@@ -1,0 +1,161 @@
+//! `vbim bench decode --gpu --fit`: a GPU's decode costs from its own timestamps. Each
+//! dispatch of a segment's decode is timed (timestamps between dispatches) and knows its
+//! pass and its work in the pass's unit; a least-squares fit of
+//! `time = latency + cost[pass] × work` over every dispatch gives the adapter's latency
+//! per step and cost per unit of each pass, which `DecodeShape::step_cost` and
+//! `PassWeights` express in blocks through `bubble_write`. The shipped
+//! `DecodeShape::GPU` was fitted by hand on one H100; this puts the same fit in one
+//! command for any card.
+
+/// One dispatch: the index of its pass, its work in the pass's unit, its GPU time (ns).
+pub type Sample = (usize, f64, f64);
+
+/// The fit of `ns = latency + cost[pass] × units` over `samples`, by least squares:
+/// `(latency, cost per unit of each of the `passes` passes)`. `None` where the samples
+/// cannot separate them (a pass whose work never varies, and no other to tell its cost
+/// from the latency; or no samples).
+pub fn fit(samples: &[Sample], passes: usize) -> Option<(f64, Vec<f64>)> {
+    if samples.is_empty() {
+        return None;
+    }
+    // Each pass's units scaled by their mean, so that the normal equations are of one
+    // magnitude (a parse's tens of units beside a zero pass's millions).
+    let mut scale = vec![0.0f64; passes];
+    let mut count = vec![0usize; passes];
+    for &(p, u, _) in samples {
+        scale[p] += u;
+        count[p] += 1;
+    }
+    for (s, &c) in scale.iter_mut().zip(&count) {
+        *s = if c > 0 && *s > 0.0 {
+            *s / c as f64
+        } else {
+            1.0
+        };
+    }
+    // Unknowns: the latency, then each pass's cost. The normal equations AᵀA x = Aᵀt,
+    // with A's row for a sample 1 in the latency's column and its scaled units in its
+    // pass's.
+    let n = passes + 1;
+    let mut m = vec![vec![0.0f64; n + 1]; n];
+    for &(p, u, t) in samples {
+        let cols = [(0, 1.0), (p + 1, u / scale[p])];
+        for &(i, a) in &cols {
+            for &(j, b) in &cols {
+                m[i][j] += a * b;
+            }
+            m[i][n] += a * t;
+        }
+    }
+    // A pass without samples: its cost is 0 (an equation of its own).
+    for (p, &c) in count.iter().enumerate() {
+        if c == 0 {
+            m[p + 1][p + 1] = 1.0;
+        }
+    }
+    let x = solve(m)?;
+    let costs = (0..passes).map(|p| x[p + 1] / scale[p]).collect();
+    Some((x[0], costs))
+}
+
+/// Gaussian elimination with partial pivoting on the augmented matrix `m` (n × n + 1).
+fn solve(mut m: Vec<Vec<f64>>) -> Option<Vec<f64>> {
+    let n = m.len();
+    let size = m
+        .iter()
+        .flat_map(|r| r[..n].iter())
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    for col in 0..n {
+        let pivot = (col..n).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if m[pivot][col].abs() <= size * 1e-12 {
+            return None;
+        }
+        m.swap(col, pivot);
+        let pivot_row = m[col].clone();
+        for (row, r) in m.iter_mut().enumerate() {
+            if row != col {
+                let f = r[col] / pivot_row[col];
+                if f != 0.0 {
+                    for (v, p) in r[col..].iter_mut().zip(&pivot_row[col..]) {
+                        *v -= f * p;
+                    }
+                }
+            }
+        }
+    }
+    Some((0..n).map(|i| m[i][n] / m[i][i]).collect())
+}
+
+/// Prints the fit of `samples` (pass names in `names`) and what it makes of a decode
+/// shape for the adapter: the step cost and each pass's weight in quarter-blocks of
+/// `bubble_write`, the unit of `PlayerConfig::decode_budget`.
+pub fn print(names: &[&'static str], samples: &[Sample]) {
+    let Some((latency, costs)) = fit(samples, names.len()) else {
+        println!("fit: the dispatches do not separate latency from work (too few, or work that never varies)");
+        return;
+    };
+    println!(
+        "fit over {} dispatches, time = latency + cost × work (least squares): latency {:.1} µs per dispatch",
+        samples.len(),
+        latency / 1e3
+    );
+    let unit = names
+        .iter()
+        .position(|&n| n == "bubble_write")
+        .map(|i| costs[i])
+        .filter(|&c| c > 0.0);
+    for (name, cost) in names.iter().zip(&costs) {
+        let n = samples.iter().filter(|s| names[s.0] == *name).count();
+        let weight = unit.map_or(String::new(), |u| {
+            format!(", weight {:.1} quarter-blocks", 4.0 * cost / u)
+        });
+        println!("  {name:<14} {cost:>9.3} ns per unit ({n} dispatches){weight}");
+    }
+    match unit {
+        Some(u) => println!(
+            "as a DecodeShape for this adapter: step_cost {:.0} blocks (the latency in blocks through bubble_write at {u:.3} ns each), weights as above (negative: the pass's time is its latency alone; use 1)",
+            latency / u
+        ),
+        None => println!("no bubble_write dispatch with a cost: no weights in its unit"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Dispatches made from a known latency and known costs, with a little noise, give
+    /// them back.
+    #[test]
+    fn the_fit_recovers_a_known_latency_and_costs() {
+        let (latency, costs) = (20_000.0, [35.0, 0.42, 0.58, 2.5]);
+        let mut s = 7u32;
+        let mut next = move || {
+            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (s >> 8) as f64 / (1u32 << 24) as f64
+        };
+        let mut samples = Vec::new();
+        for i in 0..400 {
+            let p = i % costs.len();
+            let units = [300.0, 200_000.0, 150_000.0, 40_000.0][p] * (0.2 + next());
+            let ns = latency + costs[p] * units + 50.0 * (next() - 0.5);
+            samples.push((p, units, ns));
+        }
+        let (l, c) = fit(&samples, costs.len()).expect("a fit");
+        assert!((l - latency).abs() < 100.0, "latency {l}");
+        for (got, want) in c.iter().zip(costs) {
+            assert!(
+                (got - want).abs() < want * 0.01,
+                "cost {got} against {want}"
+            );
+        }
+    }
+
+    /// One pass whose work never varies cannot be told from the latency: no fit.
+    #[test]
+    fn a_pass_of_constant_work_alone_cannot_be_fitted() {
+        let samples: Vec<Sample> = (0..10).map(|_| (0, 100.0, 5000.0)).collect();
+        assert!(fit(&samples, 1).is_none());
+        assert!(fit(&[], 3).is_none());
+    }
+}
