@@ -121,10 +121,10 @@ impl Gpu {
             .slice_groups
             .clamp(1, MAX_SLICE_GROUPS)
             .div_ceil(SLICE_GROUPS);
-        self.wide_parse = shape.wide_parse;
-        self.group_split = 1 << shape.group_split.clamp(1, GROUP_BLOCKS).ilog2();
-        self.step_cost = shape.step_cost;
-        self.weights = shape.weights;
+        self.shape = DecodeShape {
+            group_split: 1 << shape.group_split.clamp(1, GROUP_BLOCKS).ilog2(),
+            ..shape
+        };
     }
 
     /// Whether a segment's coefficients fit one storage binding of this device.
@@ -283,8 +283,8 @@ impl Gpu {
         // the barrier before it and the filling and draining of the chip
         // ([`DecodeShape::step_cost`]).
         for op in ops.iter_mut() {
-            op.cost =
-                (op.units * op.kind.weight(&self.weights) as u64).div_ceil(4) + self.step_cost;
+            op.cost = (op.units * op.kind.weight(&self.shape.weights) as u64).div_ceil(4)
+                + self.shape.step_cost;
         }
         let jobs = self.job_bytes.len() as u64;
         if jobs > self.jobs.size() {
@@ -444,7 +444,7 @@ impl Gpu {
         let bytes = groups_offset(self.part) + group_bytes(blocks);
         ops.push(Op::new(Kind::Clear { bytes }, 0, [0; 3], channel, 0));
         // An invocation per piece, 64 to a workgroup; or a workgroup per piece.
-        let (kind, groups, per_group) = match self.wide_parse {
+        let (kind, groups, per_group) = match self.shape.wide_parse {
             false => (Kind::Parse, job.count.div_ceil(64), 64),
             true => (Kind::ParseWide, job.count, 1),
         };
@@ -462,7 +462,7 @@ impl Gpu {
         let split = FILL_GROUPS
             .div_ceil(whole.max(1))
             .next_power_of_two()
-            .min(self.group_split);
+            .min(self.shape.group_split);
         let job = Job { split, ..job };
         let units = (blocks as u64, (GROUP_BLOCKS / split) as u64);
         self.sliced(ops, kind, job, whole * split, channel, units);
@@ -502,8 +502,8 @@ impl Gpu {
         for k in 0..groups.div_ceil(size) {
             let from = k * size;
             let n = (groups - from).min(size);
-            let cost = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
-            ops.push(Op::new(kind, at, [n, 1, 1], channel, cost).in_slice(k * span));
+            let work = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
+            ops.push(Op::new(kind, at, [n, 1, 1], channel, work).in_slice(k * span));
         }
     }
 
@@ -636,9 +636,6 @@ impl Op {
 
     /// Whether it is a dispatch (recorded inside a compute pass).
     fn dispatches(&self) -> bool {
-        !matches!(
-            self.kind,
-            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. }
-        )
+        self.kind.label().is_some()
     }
 }

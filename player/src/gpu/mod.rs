@@ -126,16 +126,12 @@ pub(crate) struct Gpu {
     parse_group: Option<wgpu::BindGroup>,
     /// Scratch for the jobs of one segment (kept: no allocation per segment).
     job_bytes: Vec<u8>,
-    /// The decode's shape ([`Gpu::set_decode_shape`]): a dispatch covers this many
-    /// [`SLICE_GROUPS`] of workgroups, the parse is wide or serial, a group of blocks is
-    /// split among this many workgroups, and each step costs this much beside its work.
+    /// The decode's shape ([`Gpu::set_decode_shape`], its group split a power of two),
+    /// and its slice in [`SLICE_GROUPS`] of workgroups.
     ///
     /// [`SLICE_GROUPS`]: decode::SLICE_GROUPS
+    shape: crate::DecodeShape,
     slice_span: u32,
-    wide_parse: bool,
-    group_split: u32,
-    step_cost: u64,
-    weights: crate::PassWeights,
     /// Bubble layers of one set ([`BUBBLE_SETS`] sets, one after the other).
     pub set_layers: u32,
     /// Timestamps between the decode's dispatches (`vbim bench decode --gpu`).

@@ -25,6 +25,11 @@ fn stream_byte(at: u32) -> u32 {
     return (held >> ((at & 3u) * 8u)) & 0xFFu;
 }
 
+// A zig-zag coded value (0, −1, 1, −2 … as 0, 1, 2, 3 …), as the u32 bits of the i32.
+fn unzigzag(u: u32) -> u32 {
+    return (u >> 1u) ^ (0u - (u & 1u));
+}
+
 // One LEB128 varint at `*at`, advancing it.
 fn varint(at: ptr<function, u32>) -> u32 {
     var u = 0u;
@@ -116,7 +121,7 @@ fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
             break;
         }
         let u = varint(&at);
-        let v = bitcast<i32>(u >> 1u) ^ -bitcast<i32>(u & 1u);
+        let v = bitcast<i32>(unzigzag(u));
         if (p < n) {
             dc = dc + v;
             put(p, 0u, dc);
@@ -279,7 +284,7 @@ fn parse_wide(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_in
         let at_value = sat_add(rel, varints[2u * j]);
         if (at_value < rel_end && p0 + at_value < n) {
             let u = varints[2u * j + 1u];
-            dc_sum = dc_sum + ((u >> 1u) ^ (0u - (u & 1u)));
+            dc_sum = dc_sum + unzigzag(u);
         }
         rel = sat_add(at_value, 1u);
     }
@@ -306,7 +311,7 @@ fn parse_wide(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_in
         filled = filled + select(0u, to - lo_block, to > lo_block);
         if (at_value < rel_end) {
             let u = varints[2u * j + 1u];
-            let v = (u >> 1u) ^ (0u - (u & 1u));
+            let v = unzigzag(u);
             let p = p0 + at_value;
             if (p < n) {
                 dc = dc + v;

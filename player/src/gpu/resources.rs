@@ -246,11 +246,9 @@ impl Gpu {
             bubble_group: None,
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
+            // (Set from the adapter below.)
+            shape: crate::DecodeShape::CPU,
             slice_span: 1,
-            wide_parse: false,
-            group_split: 1,
-            step_cost: 0,
-            weights: crate::PassWeights::LAVAPIPE,
             set_layers: set_layers(max_degree, channels),
             #[cfg(feature = "bench")]
             marks: None,
