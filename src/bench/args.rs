@@ -291,7 +291,7 @@ pub struct ShapeArgs {
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub split: Option<u32>,
     /// What each step of a segment's decode costs beside its work, in blocks of the
-    /// decode budget (`DecodeShape::step_cost`; 40 000 on a GPU, 0 on a CPU adapter).
+    /// decode budget (`DecodeShape::step_cost`; 35 000 on a GPU, 0 on a CPU adapter).
     #[arg(long)]
     pub step_cost: Option<u64>,
 }
