@@ -79,8 +79,9 @@ pub struct PlayerConfig {
     /// the frames before it is shown but the last, at the display rate the frames so far
     /// give, and a segment needed at once (the first, or after a seek) is decoded at
     /// once. With a budget, a segment needed before its decode is done is late (the
-    /// display holds or waits, as the policy says) and [`Totals::budget_late`] counts it:
-    /// the budget is too small for the stream. A step that costs more than the budget
+    /// display holds or waits, as the policy says) and, where a segment's own length of
+    /// frames at the budget would not have decoded it either, [`Totals::budget_late`]
+    /// counts it: the budget is too small for the stream. A step that costs more than the budget
     /// (on a GPU, any step once the budget is below the step cost) runs alone in its
     /// frame and [`Totals::over_budget`] counts it.
     ///

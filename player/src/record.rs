@@ -110,11 +110,13 @@ pub struct Totals {
     /// The most decode work one frame recorded.
     pub decode_work_max: u64,
     /// Frames that needed a segment whose decode the per-frame budget had not let finish
-    /// (the display held or waited instead): the budget is too small for the stream at
-    /// this display rate.
+    /// (the display held or waited instead), where the segment's own length of frames
+    /// at the budget would not have decoded it either: the budget is too small for the
+    /// stream at this display rate. (A segment late because it arrived late, after a
+    /// stall or behind a seek's rebuild, is not counted here.)
     pub budget_late: u64,
     /// Frames that recorded more than the budget because one step of the decode (a
-    /// slice of a pass, or a zero pass over whole planes) costs more than the budget.
+    /// slice of a pass, or the clear of a bubble layer) costs more than the budget.
     pub over_budget: u64,
     /// The last damage or budget shortfall reported, naming the chunk or segment.
     pub last_error: Option<String>,

@@ -81,8 +81,6 @@ pub struct PassWeights {
     pub parse: u32,
     /// A block of a keyframe plane added onto the head.
     pub key_add: u32,
-    /// 64 texels of a keyframe plane zeroed.
-    pub key_zero: u32,
     /// 1/16 of a 32² region of the head measured, before the pack.
     pub key_range: u32,
     /// 1/16 of a 32² region of the head packed into 16 bits.
@@ -104,7 +102,6 @@ impl PassWeights {
     pub const LAVAPIPE: PassWeights = PassWeights {
         parse: 55,
         key_add: 12,
-        key_zero: 1,
         key_range: 1,
         key_pack: 1,
         bubble_zero: 1,
@@ -115,16 +112,15 @@ impl PassWeights {
     /// Fitted on an H100 from each pass's GPU time per 4096² segment (`vbim bench decode
     /// --gpu`, timestamps between passes), less 20 µs per dispatch (the step cost): a
     /// block through `bubble_write` about 0.58 ns there. Arithmetic is cheap on a GPU
-    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12) and memory
-    /// is not (zeroing 64 texels 4, against 1); a parse's entry point, 3.5–10 ns of work
-    /// beside its dispatch's latency, 40.
+    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12); zeroing,
+    /// eight rows per invocation, stores at about 2.5 TB/s (`--fit`: 0.4–0.5, so 1); a
+    /// parse's entry point, 3.5–10 ns of work beside its dispatch's latency, 40.
     pub const H100: PassWeights = PassWeights {
         parse: 40,
         key_add: 3,
-        key_zero: 4,
         key_range: 1,
         key_pack: 1,
-        bubble_zero: 4,
+        bubble_zero: 1,
         bubble_bound: 1,
         bubble_write: 4,
     };

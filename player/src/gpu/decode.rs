@@ -38,6 +38,11 @@ const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
 // The wide parse gives each of its 64 lanes a whole number of a piece's pairs.
 const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 
+/// Rows of texels each invocation of the bubble zero pass zeros (`ZERO_ROWS` in
+/// decode.wgsl).
+const ZERO_ROWS: u32 = 8;
+const _: () = assert!(SLICE_GROUPS.is_multiple_of(ZERO_ROWS));
+
 /// What one step of a decode records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
@@ -52,7 +57,6 @@ enum Kind {
     Parse,
     /// A workgroup per piece.
     ParseWide,
-    KeyZero,
     KeyAdd,
     KeyRange,
     KeyPack,
@@ -206,18 +210,13 @@ impl Gpu {
             }
             for p in 0..ch {
                 let span = &seg.planes[st.plane + p as usize];
-                for (k, job) in self.part_jobs(span, p).enumerate() {
+                for job in self.part_jobs(span, p) {
                     let blocks = job.hi - job.lo.min(job.hi);
                     self.parse_ops(ops, job, blocks, p);
-                    if k == 0 && st.intra {
-                        let zero = Job {
-                            size: [pw, ph],
-                            ..job
-                        };
-                        self.rows_sliced(ops, Kind::KeyZero, zero, (p, 1));
-                    }
-                    // A predicted keyframe is added onto the head: the keyframe it follows.
-                    self.block_pass(ops, Kind::KeyAdd, job, blocks, p);
+                    // A predicted keyframe is added onto the head (the keyframe it
+                    // follows); an intra one is written over it, zeros and all.
+                    let intra = st.intra as u32;
+                    self.block_pass(ops, Kind::KeyAdd, Job { intra, ..job }, blocks, p);
                 }
             }
         }
@@ -374,7 +373,6 @@ impl Gpu {
         let (pipeline, group) = match op.kind {
             Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref()),
             Kind::Parse => (&self.parse, self.parse_group.as_ref()),
-            Kind::KeyZero => (&self.key_zero, key),
             Kind::KeyAdd => (&self.key_add, key),
             Kind::KeyRange => (&self.key_range, key),
             Kind::KeyPack => (&self.key_pack, key),
@@ -507,7 +505,8 @@ impl Gpu {
         }
     }
 
-    /// A zero pass over `job.size` texels of `layers` layers in 8 × 8 workgroups, in
+    /// A zero pass over `job.size` texels of `layers` layers in 8 × 8 workgroups of
+    /// [`ZERO_ROWS`] texels each, in
     /// slices of [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader
     /// starts the slice's first rows down), so that it spreads like the rest; a block per
     /// 64 texels zeroed.
@@ -519,11 +518,14 @@ impl Gpu {
         (channel, layers): (u32, u32),
     ) {
         let [w, h] = job.size;
-        let rows = h.div_ceil(8);
-        let size = SLICE_GROUPS * self.slice_span;
-        // As many layers in one dispatch as one slice's rows hold: a slice stays the grain
-        // it is for every pass (the 4096² bubble layers zeroed in one dispatch made the
-        // largest step of a frame).
+        let tall = 8 * ZERO_ROWS;
+        let rows = h.div_ceil(tall);
+        // A slice's rows of workgroups: as many texels as a slice of one-row workgroups
+        // (slice k starts k · size rows down: the shader divides the slice's first
+        // workgroup by ZERO_ROWS). As many layers in one dispatch as one slice's rows
+        // hold: a slice stays the grain it is for every pass (the 4096² bubble layers
+        // zeroed in one dispatch made the largest step of a frame).
+        let size = SLICE_GROUPS * self.slice_span / ZERO_ROWS;
         let depth = (size / rows).max(1);
         for first in (0..layers).step_by(depth as usize) {
             let d = depth.min(layers - first);
@@ -534,7 +536,7 @@ impl Gpu {
             for k in 0..rows.div_ceil(size) {
                 let from = k * size;
                 let n = (rows - from).min(size);
-                let texels = w as u64 * (h.min((from + n) * 8) - from * 8) as u64 * d as u64;
+                let texels = w as u64 * (h.min((from + n) * tall) - from * tall) as u64 * d as u64;
                 let op = Op::new(kind, at, [w.div_ceil(8), n, d], channel, texels / 64);
                 ops.push(op.in_slice(k * self.slice_span));
             }
@@ -585,7 +587,6 @@ impl Kind {
     fn label(self) -> Option<&'static str> {
         Some(match self {
             Kind::Parse | Kind::ParseWide => "parse",
-            Kind::KeyZero => "key_zero",
             Kind::KeyAdd => "key_add",
             Kind::KeyRange => "key_range",
             Kind::KeyPack => "key_pack",
@@ -601,7 +602,6 @@ impl Kind {
         match self {
             Kind::Parse | Kind::ParseWide => w.parse,
             Kind::KeyAdd => w.key_add,
-            Kind::KeyZero => w.key_zero,
             Kind::KeyRange => w.key_range,
             Kind::KeyPack => w.key_pack,
             Kind::BubbleZero => w.bubble_zero,

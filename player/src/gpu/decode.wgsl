@@ -179,9 +179,11 @@ fn bits_between(a: u32, b: u32) -> u32 {
 // blocks: those with a coefficient, all of them or, with `job.split` workgroups per group
 // (on a GPU), this workgroup's share, so that no workgroup's chain of blocks in sequence
 // is long (one workgroup per 64 blocks left an H100 waiting on the longest chains).
+// `every`: the share's blocks of the part, with a coefficient or not.
 struct Share {
     group: u32,
     present: Bits,
+    every: Bits,
 }
 
 fn group_share(wg: vec3<u32>) -> Share {
@@ -195,11 +197,17 @@ fn group_share(wg: vec3<u32>) -> Share {
         bits_between(min(lo, 32u), min(hi, 32u)),
         bits_between(max(lo, 32u) - 32u, max(hi, 32u) - 32u),
     );
-    return Share(g, bits_of(groups[g] & keep));
+    let first = job.lo + g * GROUP_BLOCKS;
+    let n = select(0u, min(job.hi - first, GROUP_BLOCKS), first < job.hi);
+    let inside = vec2<u32>(bits_between(0u, min(n, 32u)), bits_between(0u, max(n, 32u) - 32u));
+    return Share(g, bits_of(groups[g] & keep), bits_of(keep & inside));
 }
 
-// A keyframe plane's blocks added onto what the plane holds: the reference keyframe for a
-// predicted keyframe, zeros (`key_zero` first) for an intra one.
+// A keyframe plane's blocks added onto what the plane holds (the reference keyframe) for
+// a predicted keyframe. An intra keyframe's are written over it, every block of the part,
+// those without a coefficient as zeros (their masks are empty): no pass zeros the plane
+// first (on an H100 such a pass stored 400 GB/s, a third of a 4096² segment's keyframe
+// time), and nothing is read.
 @compute @workgroup_size(8, 8)
 fn key_add(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -208,6 +216,9 @@ fn key_add(
     let share = group_share(wg);
     let first = job.lo + share.group * GROUP_BLOCKS;
     var present = share.present;
+    if (job.intra != 0u) {
+        present = share.every;
+    }
     var span = first_span(first);
     loop {
         let j = next_bit(&present);
@@ -217,19 +228,13 @@ fn key_add(
         let b = first + j;
         let m = mask(b - job.lo);
         let xy = block_origin(b, &span) + l.xy;
-        let s = block_sum(b - job.lo, m, l.x, l.y, textureLoad(key_plane, xy).x, false);
+        var acc = 0.0;
+        if (job.intra == 0u) {
+            acc = textureLoad(key_plane, xy).x;
+        }
+        let s = block_sum(b - job.lo, m, l.x, l.y, acc, false);
         textureStore(key_plane, xy, vec4<f32>(s.x, 0.0, 0.0, 0.0));
     }
-}
-
-// Zeros a keyframe plane, `slice.x` rows of workgroups down (a slice of rows).
-@compute @workgroup_size(8, 8)
-fn key_zero(@builtin(global_invocation_id) id: vec3<u32>) {
-    let xy = vec2<u32>(id.x, id.y + slice.x * 8u);
-    if (xy.x >= job.size.x || xy.y >= job.size.y) {
-        return;
-    }
-    textureStore(key_plane, xy, vec4<f32>(0.0));
 }
 
 // The scale of a bubble plane whose texels are at most `bound` in magnitude: 16-bit
@@ -329,16 +334,32 @@ fn bubble_write(
     }
 }
 
+// Rows each invocation of `bubble_zero` zeros, 8 apart (`ZERO_ROWS` in decode.rs): a
+// workgroup zeros 8 × 64 texels. With one texel per invocation the pass was a stream of
+// tiny workgroups, and an H100 stored 410 GB/s.
+const ZERO_ROWS: u32 = 8u;
+
 // Zeros layers `job.base` + z of the bubble planes (`job.size` R32Uint texels each; one
-// dispatch for a segment's layers, whose latency is most of its cost on a GPU),
+// dispatch for a slice's worth of layers, whose latency is most of its cost on a GPU),
 // `slice.x` rows of workgroups down (a slice of rows).
 @compute @workgroup_size(8, 8)
-fn bubble_zero(@builtin(global_invocation_id) id: vec3<u32>) {
-    let xy = vec2<u32>(id.x, id.y + slice.x * 8u);
-    if (xy.x >= job.size.x || xy.y >= job.size.y) {
+fn bubble_zero(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) l: vec3<u32>,
+) {
+    if (id.x >= job.size.x) {
         return;
     }
-    textureStore(planes16, xy, job.base + id.z, vec4<u32>(0u));
+    // (A slice starts slice.x / ZERO_ROWS rows of workgroups down: decode.rs sizes
+    // slices of this pass by the texels, not the workgroups.)
+    let top = (wg.y + slice.x / ZERO_ROWS) * 8u * ZERO_ROWS + l.y;
+    for (var r = 0u; r < ZERO_ROWS; r = r + 1u) {
+        let y = top + r * 8u;
+        if (y < job.size.y) {
+            textureStore(planes16, vec2<u32>(id.x, y), job.base + id.z, vec4<u32>(0u));
+        }
+    }
 }
 
 // The side of a region of the previous keyframe with its own range. Small enough that a

@@ -57,11 +57,17 @@ job! {
     tiles_x: u32 => "u32",
     /// Texels of the plane (zero and pack passes).
     size: [u32; 2] => "vec2<u32>",
-    /// Bubble zero pass: the layer it zeros.
+    /// Bubble zero pass: the first layer it zeros; pack passes: the first word of the
+    /// regions' extents in the bounds buffer.
     base: u32 => "u32",
     /// Block passes (`key_add`, `bubble_write`): workgroups per group of 64 blocks, each
     /// visiting its share of them (1, 2, 4 … 64).
     split: u32 => "u32",
+    /// `key_add`: 1 for an intra keyframe (its blocks written over the plane, those
+    /// without a coefficient as zeros), 0 for a predicted one (added onto it).
+    intra: u32 => "u32",
+    /// (The struct's size a multiple of 16 bytes, as a uniform binding's must be.)
+    pad: u32 => "u32",
 }
 
 /// Bytes between two jobs in the jobs buffer: WebGPU's default
@@ -80,7 +86,8 @@ mod tests {
 
     /// The WGSL struct has the Rust struct's fields in the same order at the same offsets:
     /// every field is 4-byte scalars or an 8-byte vector at an offset its size divides
-    /// (WGSL's alignment rule for these types), and the Rust struct has no padding.
+    /// (WGSL's alignment rule for these types), the Rust struct has no padding, and its
+    /// size is what a uniform binding of the WGSL struct needs.
     #[test]
     fn the_wgsl_job_has_the_rust_layout() {
         let mut offset = 0;
@@ -96,6 +103,10 @@ mod tests {
         }
         assert_eq!(offset, std::mem::size_of::<Job>());
         assert!(offset as u64 <= JOB_STRIDE);
+        assert!(
+            offset.is_multiple_of(16),
+            "a uniform struct's size is a multiple of 16"
+        );
         assert!(JOB_WGSL.starts_with("struct Job {\n    step: f32,\n"));
         let declared = |l: &str| l.trim_start().starts_with("struct Job");
         assert!(

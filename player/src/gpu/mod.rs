@@ -62,7 +62,6 @@ pub(crate) struct Gpu {
     /// The parse with a workgroup per piece (`parse_wide` in parse.wgsl).
     parse_wide: wgpu::ComputePipeline,
     key_add: wgpu::ComputePipeline,
-    key_zero: wgpu::ComputePipeline,
     key_range: wgpu::ComputePipeline,
     key_pack: wgpu::ComputePipeline,
     bubble_bound: wgpu::ComputePipeline,

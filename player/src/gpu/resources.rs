@@ -125,14 +125,13 @@ impl Gpu {
         let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
         let parse_wide = pipeline_for("vbim parse_wide", parse_source, &parse_layout, "parse_wide");
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
-        let key_zero = pipeline_for("vbim key_zero", decode, &key_layout, "key_zero");
         let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
+        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
         let bubble_bound =
             pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
         let bubble_write =
             pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
-        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
         let buffer = |label: &str, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -203,12 +202,11 @@ impl Gpu {
             parse,
             parse_wide,
             key_add,
-            key_zero,
             key_range,
             key_pack,
+            bubble_zero,
             bubble_bound,
             bubble_write,
-            bubble_zero,
             key_layout,
             bubble_layout,
             parse_layout,

@@ -331,6 +331,64 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
     }
 }
 
+/// A segment's bubble layers are zeroed before its blocks are written, over every slice
+/// of the zero pass: after a segment whose plane had every tile, the next one's reads
+/// zero outside its own tiles and in its blocks without a coefficient (a plane taller
+/// than one slice, 256 rows at the smallest).
+#[test]
+fn bubble_layers_are_zeroed_between_segments_over_several_slices() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph, ts) = (32u32, 336u32, 16usize);
+    let tiles_x = pw as usize / ts;
+    let tiles = tiles_x * (ph as usize / ts);
+    let per2 = (ts / 8) * (ts / 8);
+    let step = 0.004;
+    let every: &dyn Fn(usize) -> bool = &|_| true;
+    let some: &dyn Fn(usize) -> bool = &|t| t % 3 == 0;
+    for wide in [false, true] {
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, ts as u32);
+        gpu.set_decode_shape(crate::DecodeShape {
+            slice_groups: 1,
+            ..shape(wide)
+        });
+        for (seed, member) in [(3, every), (4, some)] {
+            let members = (0..tiles).filter(|&t| member(t)).count();
+            let blocks = random_blocks(members * per2, &mut { seed });
+            let mut c = Coded::default();
+            let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, member)));
+            let mut want = Plane::zeros(pw as usize, ph as usize);
+            for (rank, t) in (0..tiles).filter(|&t| member(t)).enumerate() {
+                let at = plane::tile_blocks(t, tiles_x, ts);
+                plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, rank * per2, step);
+            }
+            let mut seg = SegmentData::new();
+            seg.steps = Vec::new();
+            seg.planes = vec![span, span];
+            seg.bubbles = 1;
+            seg.data = c;
+            seg.layers = 3;
+            let mut enc = device.create_command_encoder(&Default::default());
+            gpu.decode(&mut enc, &seg, true);
+            queue.submit([enc.finish()]);
+            let bounds = read_buffer(&device, &queue, &gpu.bounds);
+            let scale = bytemuck::cast_slice::<u8, f32>(&bounds)[0] * step * (1.0 + 1e-3) / 32767.0;
+            let raw = read_texture_layer(&device, &queue, &gpu.bubbles, 4, 0);
+            for (i, (&q, w)) in bytemuck::cast_slice::<u8, i16>(&raw)
+                .iter()
+                .zip(&want.data)
+                .enumerate()
+            {
+                let g = q as f32 * scale;
+                assert!(
+                    (g - w).abs() <= 0.5001 * scale,
+                    "GPU shape {wide}, seed {seed}, texel {i} (row {}): GPU {g} against {w}",
+                    i / pw as usize
+                );
+            }
+        }
+    }
+}
+
 /// The held image: what is on screen, packed by the hold pass and read back through
 /// a blend at its start (alpha 0), is within a 9-bit step of the texel's largest
 /// channel (and the output's half-float rounding), from zero to beyond RGB9E5's range.

@@ -29,6 +29,8 @@ pub(super) struct Decoding {
     pack_end: usize,
     /// The cost of the ops not yet chosen, blocks.
     left: u64,
+    /// The cost of all its ops, blocks.
+    total: u64,
     /// Work allowed but not yet spent, blocks: an op is chosen once the frames' shares
     /// add up to its cost, so that a decode spread thinly (a slow day, many frames before
     /// it is due) records an op every few frames, not one every frame.
@@ -141,6 +143,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             early,
             pack_end,
             left,
+            total: left,
             credit: 0,
             steps: key_steps,
             data: Some(b),
@@ -245,7 +248,17 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             }
             self.last_eval = None;
             self.retire(d);
-        } else if !done && d.early && self.budget.is_some() && needed {
+        } else if !done
+            && d.early
+            && needed
+            && self.budget.is_some_and(|b| {
+                // The budget's fault only if a segment's own length of frames at the budget
+                // could not have decoded it; one that arrived late (a stall, a seek's
+                // rebuild before it) is the read's, and the frames' states show it.
+                let frames = (d.range.1 - d.range.0) / per_frame.max(1);
+                d.total > b.saturating_mul(frames.saturating_sub(1))
+            })
+        {
             self.totals.budget_late += 1;
             self.totals.last_error = Some(format!(
                 "a segment was due with {} blocks of its decode left under a budget of {} per frame: the budget is too small for this stream at this display rate",
