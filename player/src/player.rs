@@ -129,7 +129,7 @@ pub(crate) fn memory_needed(
     let textures = planned_texture_bytes(
         (header.width, header.height),
         [pw as u32, ph as u32],
-        header.max_degree as u32,
+        (header.max_degree as u32, header.tile_size as u32),
         header.channels as u32,
         min_layers,
     );

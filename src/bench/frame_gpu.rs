@@ -175,3 +175,34 @@ pub(super) fn bytes_per_texel(h: &vbim_format::Header) -> (u64, u64, u64) {
     let head = 2 * ch + 4 * ch + bubbles + write;
     (head, packed, 16 + 8)
 }
+
+/// The bytes per texel of [`bytes_per_texel`] (K_{s+1} packed) over the tiles of the file
+/// at `path`: a tile reads its bubble terms up to its own degree only, so the mean over
+/// its tile maps (each tile and plane weighted by its segment's frames). `None` for a
+/// file without tile map chunks (format 2 keeps them in its sections).
+pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<f64>, String> {
+    use vbim_format::{chunk, ChunkKind, Reader};
+    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut r = Reader::open(std::io::BufReader::new(file)).map_err(|e| e.to_string())?;
+    let h = r.header().clone();
+    let entries = r.entries().to_vec();
+    let (mut bytes, mut weight) = (0.0, 0.0);
+    for (i, e) in entries.iter().enumerate() {
+        if e.kind != ChunkKind::TileMap {
+            continue;
+        }
+        let frames = (e.last_frame - e.first_frame) as f64;
+        let raw = r.read_chunk(i).map_err(|e| e.to_string())?;
+        let t = chunk::read_tilemap(&h, &raw, e.last_frame - e.first_frame)
+            .map_err(|e| format!("{}: chunk {i}: {e}", path.display()))?;
+        for p in 0..h.channels as usize {
+            for &d in t.degrees(p) {
+                // K_s and K_{s+1}, 16 bits each, and the tile's bubble terms.
+                bytes += frames * 2.0 * (2 + (d as usize).saturating_sub(1)) as f64;
+                weight += frames;
+            }
+        }
+    }
+    let tiles = weight / h.channels.max(1) as f64;
+    Ok((tiles > 0.0).then(|| bytes / tiles + 8.0))
+}

@@ -332,7 +332,7 @@ pub(super) fn bench_drift(a: BenchDriftArgs) -> Result<(), String> {
 }
 
 pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
-    use super::frame_gpu::{bytes_per_texel, FrameTimer};
+    use super::frame_gpu::{bytes_per_texel, mean_bytes_per_texel, FrameTimer};
     use vbim_player::{Player, PlayerConfig};
     let name = a.file.display().to_string();
     // Timestamps where the adapter has them (lavapipe does); the player asks for none.
@@ -536,6 +536,12 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         h.max_degree,
         packed as f64 / blend as f64
     );
+    if let Some(mean) = mean_bytes_per_texel(&a.file)? {
+        println!(
+            "  over this file's tiles, each read up to its own degree: {mean:.1} on average (K_(s+1) packed; {:.2}× the blend)",
+            mean / blend as f64
+        );
+    }
     println!(
         "decode work: at most {} blocks in one frame; frames late for the budget: {}",
         work.0, work.1

@@ -55,10 +55,10 @@ job! {
     per: u32 => "u32",
     /// Tiles across the plane.
     tiles_x: u32 => "u32",
-    /// Texels of the plane (zero and pack passes).
+    /// Texels of the plane (pack passes).
     size: [u32; 2] => "vec2<u32>",
-    /// Bubble zero pass: the first layer it zeros; pack passes: the first word of the
-    /// regions' extents in the bounds buffer.
+    /// `bubble_write`: the first word of the plane's tile degrees in the degrees buffer;
+    /// pack passes: the first word of the regions' extents in the bounds buffer.
     base: u32 => "u32",
     /// Block passes (`key_add`, `bubble_write`): workgroups per group of 64 blocks, each
     /// visiting its share of them (1, 2, 4 … 64).
@@ -66,8 +66,8 @@ job! {
     /// `key_add`: 1 for an intra keyframe (its blocks written over the plane, those
     /// without a coefficient as zeros), 0 for a predicted one (added onto it).
     intra: u32 => "u32",
-    /// (The struct's size a multiple of 16 bytes, as a uniform binding's must be.)
-    pad: u32 => "u32",
+    /// `bubble_write`: the plane's term k (2 …), which marks its tiles' degrees.
+    term: u32 => "u32",
 }
 
 /// Bytes between two jobs in the jobs buffer: WebGPU's default

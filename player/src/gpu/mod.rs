@@ -66,7 +66,6 @@ pub(crate) struct Gpu {
     key_pack: wgpu::ComputePipeline,
     bubble_bound: wgpu::ComputePipeline,
     bubble_write: wgpu::ComputePipeline,
-    bubble_zero: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,
     bubble_layout: wgpu::BindGroupLayout,
     parse_layout: wgpu::BindGroupLayout,
@@ -144,6 +143,10 @@ pub(crate) struct Gpu {
     /// Blocks across a tile, and tiles across a plane.
     per: u32,
     tiles_x: u32,
+    /// Tiles in a plane.
+    tile_count: u32,
+    /// Each tile's degree per bubble set and plane (`degrees` in decode.wgsl).
+    degrees: wgpu::Buffer,
 }
 
 impl Gpu {

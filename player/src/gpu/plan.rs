@@ -183,13 +183,20 @@ pub(super) fn texture_plans(
     ]
 }
 
+/// Bytes of the tiles' degrees: a u32 per tile of `tile`² texels, plane and bubble set
+/// (`degrees` in decode.wgsl), at least one word.
+pub(super) fn degree_bytes(plane: [u32; 2], tile: u32, channels: u32) -> u64 {
+    let [tx, ty] = plane.map(|n| (n / tile.max(1)) as u64);
+    (tx * ty * channels as u64 * BUBBLE_SETS as u64 * 4).max(4)
+}
+
 /// Bytes of the textures, the range buffer and the dense plane [`Gpu::new`] creates for a
-/// stream ([`texture_plans`]'s), known before creating them, so that a stream is refused
-/// before anything that size exists.
+/// stream ([`texture_plans`]'s) of tiles of `tile`² texels, known before creating them, so
+/// that a stream is refused before anything that size exists.
 pub(crate) fn planned_texture_bytes(
     size: (u32, u32),
     plane: [u32; 2],
-    max_degree: u32,
+    (max_degree, tile): (u32, u32),
     channels: u32,
     min_layers: u32,
 ) -> u64 {
@@ -203,6 +210,7 @@ pub(crate) fn planned_texture_bytes(
         + bound_bytes(plane)
         + tile_bytes(size).0
         + tile_bytes(size).1
+        + degree_bytes(plane, tile, channels)
 }
 
 /// Tiles of 16² texels the reconstruction decides for (a workgroup each).
@@ -262,5 +270,6 @@ impl Gpu {
             + self.bounds.size()
             + self.tiles.size()
             + self.peaks.size()
+            + self.degrees.size()
     }
 }

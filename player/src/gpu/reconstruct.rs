@@ -36,6 +36,13 @@ pub(crate) struct Params {
     pub reuse: f32,
     /// Which copy of the tiles' state the frame reads (set by [`Gpu::reconstruct`]).
     pub parity: u32,
+    /// The stream's tiles: their side in texels, how many across a plane and in it
+    /// (set by [`Gpu::reconstruct`]).
+    pub tile: u32,
+    pub tiles_x: u32,
+    pub tiles: u32,
+    /// The first word of the bubble set's tile degrees (set by [`Gpu::reconstruct`]).
+    pub degrees: u32,
     pub _pad: [u32; 3],
 }
 
@@ -102,7 +109,13 @@ impl Gpu {
                 &view,
                 &self.packed_view,
             ],
-            [&self.ranges, &self.bounds, &self.tiles, &self.peaks],
+            [
+                &self.ranges,
+                &self.bounds,
+                &self.tiles,
+                &self.peaks,
+                &self.degrees,
+            ],
             &self.params,
         );
         let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
@@ -138,6 +151,10 @@ impl Gpu {
         let mut params = Params {
             regions: self.regions,
             gen: self.gen,
+            tile: self.per * 8,
+            tiles_x: self.tiles_x,
+            tiles: self.tile_count,
+            degrees: params.set_base / self.set_layers.max(1) * self.channels * self.tile_count,
             ..*params
         };
         // Anything but the weights changed: the tiles' bounds and images are another

@@ -40,6 +40,12 @@ struct Params {
     reuse: f32,
     // Which copy of the tiles' state this frame reads (the other it writes).
     parity: u32,
+    // The stream's tiles: side in texels, across a plane, in a plane.
+    tile: u32,
+    tiles_x: u32,
+    tiles: u32,
+    // The first word of the bubble set's tile degrees.
+    degrees: u32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
@@ -71,6 +77,10 @@ const STATE_WORDS: u32 = 10u;
 // Cleared before the first frame of a generation, which finds them.
 @group(0) @binding(12) var<storage, read_write> peaks: array<atomic<u32>>;
 const PEAK_WORDS: u32 = 9u;
+// Per bubble set, plane and tile (row-major), the tile's degree: its terms are k ≤ degree
+// (decode.wgsl, `bubble_write`); a tile reads no further, so a plane's texels outside the
+// tiles it codes are never read (nor zeroed).
+@group(0) @binding(11) var<storage, read> degrees: array<u32>;
 
 // A bubble layer's scale, as decode.wgsl's `bubble_write` computes it from the same bound.
 fn bubble_scale(layer: u32) -> f32 {
@@ -149,12 +159,22 @@ fn max4(v: vec4<f32>) -> f32 {
     return max(max(v.x, v.y), max(v.z, v.w));
 }
 
+// The end of the terms of plane `plane` at the quad: its tile's degree + 1, at most the
+// segment's layers. (The reference decoder adds the terms beyond it too, all zeros: the
+// sum is the same.)
+fn terms_end(xy: vec2<i32>, plane: u32) -> u32 {
+    let t = vec2<u32>(xy) / p.tile;
+    let degree = degrees[p.degrees + plane * p.tiles + t.y * p.tiles_x + t.x];
+    return min(p.layers, degree + 1u);
+}
+
 // Plane `plane` of the segment's polynomial at the quad, in the reference decoder's order:
 // w0·K0 + w1·K1, then each bubble term.
 fn plane_value(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec4<f32> {
     var c = weight(0u) * packed_plane(w, region, p.keys.x + plane)
         + weight(1u) * next_plane(xy, w, region, plane);
-    for (var k = 2u; k < p.layers; k = k + 1u) {
+    let end = terms_end(xy, plane);
+    for (var k = 2u; k < end; k = k + 1u) {
         c = c + weight(k) * bubble_plane(w, (k - 2u) * p.channels + plane);
     }
     return c;
@@ -174,7 +194,8 @@ fn plane_peaks(
     var c = weight(0u) * k0 + weight(1u) * k1;
     (*peak)[0] += max4(abs(k1 - k0));
     (*peak)[1] += max4(abs(k0));
-    for (var k = 2u; k < p.layers; k = k + 1u) {
+    let end = terms_end(xy, plane);
+    for (var k = 2u; k < end; k = k + 1u) {
         let term = bubble_plane(w, (k - 2u) * p.channels + plane);
         c = c + weight(k) * term;
         (*peak)[k] += max4(abs(term));

@@ -127,7 +127,6 @@ impl Gpu {
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
-        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
         let bubble_bound =
             pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
         let bubble_write =
@@ -170,6 +169,12 @@ impl Gpu {
             tile_bytes((width, height)).1,
             B::STORAGE | B::COPY_DST,
         );
+        // (COPY_SRC: tests read it back.)
+        let degrees = buffer(
+            "vbim tile degrees",
+            degree_bytes(plane, tile_size, channels),
+            B::STORAGE | B::COPY_DST | B::COPY_SRC,
+        );
         let bind_group = reconstruct_group(
             device,
             &bgl,
@@ -180,7 +185,7 @@ impl Gpu {
                 &display_view,
                 &packed_view,
             ],
-            [&ranges, &bounds, &tiles, &peaks],
+            [&ranges, &bounds, &tiles, &peaks, &degrees],
             &params,
         );
         let jobs = buffer(
@@ -204,7 +209,6 @@ impl Gpu {
             key_add,
             key_range,
             key_pack,
-            bubble_zero,
             bubble_bound,
             bubble_write,
             key_layout,
@@ -256,6 +260,8 @@ impl Gpu {
             channels,
             per: tile_size / 8,
             tiles_x: plane[0] / tile_size,
+            tile_count: (plane[0] / tile_size) * (plane[1] / tile_size),
+            degrees,
         };
         gpu.bind_decode();
         gpu.set_decode_shape(crate::DecodeShape::for_adapter(&device.adapter_info()));
@@ -350,21 +356,25 @@ impl Gpu {
                 )
             })
             .collect();
+        let degrees = wgpu::BindGroupEntry {
+            binding: 9,
+            resource: self.degrees.as_entire_binding(),
+        };
         self.bubble_group = Some(group(
             &self.bubble_layout,
-            &[tables.clone(), view(4, &self.bubble_view), bounds],
+            &[tables.clone(), view(4, &self.bubble_view), bounds, degrees],
         ));
     }
 }
 
 /// The reconstruction's bind group: its parameters, then the head keyframe, bubble
 /// planes, held image, output and 16-bit keyframe views, the 16-bit keyframes' ranges,
-/// the bubble planes' bounds and the tiles' state.
+/// the bubble planes' bounds, the tiles' state and the tiles' degrees.
 pub(super) fn reconstruct_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     views: [&wgpu::TextureView; 5],
-    [ranges, bounds, tiles, peaks]: [&wgpu::Buffer; 4],
+    [ranges, bounds, tiles, peaks, degrees]: [&wgpu::Buffer; 5],
     params: &wgpu::Buffer,
 ) -> wgpu::BindGroup {
     let mut entries = vec![wgpu::BindGroupEntry {
@@ -377,7 +387,13 @@ pub(super) fn reconstruct_group(
             resource: wgpu::BindingResource::TextureView(v),
         });
     }
-    for (binding, buffer) in [(6, ranges), (9, bounds), (10, tiles), (12, peaks)] {
+    for (binding, buffer) in [
+        (6, ranges),
+        (9, bounds),
+        (10, tiles),
+        (12, peaks),
+        (11, degrees),
+    ] {
         entries.push(wgpu::BindGroupEntry {
             binding,
             resource: buffer.as_entire_binding(),
@@ -512,6 +528,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
             entry(9, storage(true)),
             entry(10, storage(false)),
             entry(12, storage(false)),
+            entry(11, storage(true)),
         ],
     });
     let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -574,6 +591,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
             entry(6, storage(true)),
             entry(7, storage(true)),
             entry(8, storage(false)),
+            entry(9, storage(false)),
             entry(10, storage(true)),
         ],
     });
