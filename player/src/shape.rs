@@ -85,6 +85,8 @@ pub struct PassWeights {
     pub key_range: u32,
     /// 1/16 of a 32² region of the head packed into 16 bits.
     pub key_pack: u32,
+    /// 64 words (128 texels) of a bubble layer zeroed.
+    pub bubble_zero: u32,
     /// A block of a bubble plane bounded.
     pub bubble_bound: u32,
     /// A block of a bubble plane written: the unit, 4.
@@ -95,12 +97,14 @@ impl PassWeights {
     /// Measured on lavapipe from the frames of `vbim bench render --csv` (the extra time
     /// of each frame against the work of each kind it recorded): an entry point reads 128
     /// pairs in sequence, a keyframe block's inverse transform reads every coefficient of
-    /// a dense keyframe where a bubble term's are few, packing touches a texel once.
+    /// a dense keyframe where a bubble term's are few, zeroing and packing touch a texel
+    /// once.
     pub const LAVAPIPE: PassWeights = PassWeights {
         parse: 55,
         key_add: 12,
         key_range: 1,
         key_pack: 1,
+        bubble_zero: 1,
         bubble_bound: 2,
         bubble_write: 4,
     };
@@ -108,13 +112,15 @@ impl PassWeights {
     /// Fitted on an H100 from each pass's GPU time per 4096² segment (`vbim bench decode
     /// --gpu`, timestamps between passes), less 20 µs per dispatch (the step cost): a
     /// block through `bubble_write` about 0.58 ns there. Arithmetic is cheap on a GPU
-    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12); a parse's
-    /// entry point, 3.5–10 ns of work beside its dispatch's latency, 40.
+    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12); zeroing,
+    /// eight rows per invocation, stores at about 2.5 TB/s (`--fit`: 0.4–0.5, so 1); a
+    /// parse's entry point, 3.5–10 ns of work beside its dispatch's latency, 40.
     pub const H100: PassWeights = PassWeights {
         parse: 40,
         key_add: 3,
         key_range: 1,
         key_pack: 1,
+        bubble_zero: 1,
         bubble_bound: 1,
         bubble_write: 4,
     };

@@ -38,6 +38,11 @@ const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
 // The wide parse gives each of its 64 lanes a whole number of a piece's pairs.
 const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 
+/// Rows of texels each invocation of the bubble zero pass zeros (`ZERO_ROWS` in
+/// decode.wgsl).
+const ZERO_ROWS: u32 = 8;
+const _: () = assert!(SLICE_GROUPS.is_multiple_of(ZERO_ROWS));
+
 /// What one step of a decode records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
@@ -65,6 +70,7 @@ enum Kind {
         offset: u64,
         bytes: u64,
     },
+    BubbleZero,
     BubbleBound,
     BubbleWrite,
 }
@@ -83,7 +89,8 @@ pub(crate) struct Op {
     channel: u32,
     /// The work it records, in blocks: the time of 8×8 texels of one plane through
     /// `bubble_write`, the other passes' units weighted by their measured cost
-    /// ([`DecodeShape::weights`]; a parse's unit is an entry point, a pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its
+    /// ([`DecodeShape::weights`]; a parse's unit is an entry point, a zero pass's 64
+    /// texels, a pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its
     /// latency ([`DecodeShape::step_cost`]). What [`PlayerConfig::decode_budget`] counts.
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
@@ -231,14 +238,23 @@ impl Gpu {
                 0,
                 0,
             ));
-            // The tiles' degrees found again: a bubble layer is written only in the
-            // tiles its plane codes, and the reconstruction reads no further.
+            // The tiles' degrees found again (the reconstruction reads a tile's terms
+            // up to its degree only), and the layers zeroed.
             let words = (ch * self.tile_count) as u64;
             let degrees = Kind::Degrees {
                 offset: set as u64 * words * 4,
                 bytes: words * 4,
             };
             ops.push(Op::new(degrees, 0, [0; 3], 0, 0));
+            let layers = (seg.layers.saturating_sub(2) as u32 * ch).min(set_layers);
+            if layers > 0 {
+                let zero = Job {
+                    base,
+                    size: [pw / 2, ph],
+                    ..self.base_job()
+                };
+                self.rows_sliced(ops, Kind::BubbleZero, zero, (0, layers));
+            }
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let n = (i - seg.bubbles) as u32;
                 let layer = base + n;
@@ -394,6 +410,7 @@ impl Gpu {
             Kind::KeyAdd => (&self.key_add, key),
             Kind::KeyRange => (&self.key_range, key),
             Kind::KeyPack => (&self.key_pack, key),
+            Kind::BubbleZero => (&self.bubble_zero, self.bubble_group.as_ref()),
             Kind::BubbleBound => (&self.bubble_bound, self.bubble_group.as_ref()),
             Kind::BubbleWrite => (&self.bubble_write, self.bubble_group.as_ref()),
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
@@ -524,6 +541,44 @@ impl Gpu {
         }
     }
 
+    /// A zero pass over `job.size` texels of `layers` layers in 8 × 8 workgroups of
+    /// [`ZERO_ROWS`] texels each, in
+    /// slices of [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader
+    /// starts the slice's first rows down), so that it spreads like the rest; a block per
+    /// 64 texels zeroed.
+    fn rows_sliced(
+        &mut self,
+        ops: &mut Vec<Op>,
+        kind: Kind,
+        job: Job,
+        (channel, layers): (u32, u32),
+    ) {
+        let [w, h] = job.size;
+        let tall = 8 * ZERO_ROWS;
+        let rows = h.div_ceil(tall);
+        // A slice's rows of workgroups: as many texels as a slice of one-row workgroups
+        // (slice k starts k · size rows down: the shader divides the slice's first
+        // workgroup by ZERO_ROWS). As many layers in one dispatch as one slice's rows
+        // hold: a slice stays the grain it is for every pass (the 4096² bubble layers
+        // zeroed in one dispatch made the largest step of a frame).
+        let size = SLICE_GROUPS * self.slice_span / ZERO_ROWS;
+        let depth = (size / rows).max(1);
+        for first in (0..layers).step_by(depth as usize) {
+            let d = depth.min(layers - first);
+            let at = self.push_job(Job {
+                base: job.base + first,
+                ..job
+            });
+            for k in 0..rows.div_ceil(size) {
+                let from = k * size;
+                let n = (rows - from).min(size);
+                let texels = w as u64 * (h.min((from + n) * tall) - from * tall) as u64 * d as u64;
+                let op = Op::new(kind, at, [w.div_ceil(8), n, d], channel, texels / 64);
+                ops.push(op.in_slice(k * self.slice_span));
+            }
+        }
+    }
+
     /// A timestamp after what `pass` recorded so far (`vbim bench decode --gpu`), where
     /// the device has them; nothing otherwise.
     #[inline]
@@ -571,6 +626,7 @@ impl Kind {
             Kind::KeyAdd => "key_add",
             Kind::KeyRange => "key_range",
             Kind::KeyPack => "key_pack",
+            Kind::BubbleZero => "bubble_zero",
             Kind::BubbleBound => "bubble_bound",
             Kind::BubbleWrite => "bubble_write",
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
@@ -586,6 +642,7 @@ impl Kind {
             Kind::KeyAdd => w.key_add,
             Kind::KeyRange => w.key_range,
             Kind::KeyPack => w.key_pack,
+            Kind::BubbleZero => w.bubble_zero,
             Kind::BubbleBound => w.bubble_bound,
             Kind::BubbleWrite => w.bubble_write,
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => 0,

@@ -52,7 +52,8 @@ struct Tables {
 // their order is the u32 order, so `atomicMax` takes the largest).
 @group(0) @binding(8) var<storage, read_write> bounds: array<atomic<u32>>;
 // Per bubble set, plane and tile (row-major), the tile's degree: the largest term k of
-// the set's bubble planes that codes the tile, 0 where none does (`bubble_write`).
+// the set's bubble planes with a coefficient in the tile, 0 where none has
+// (`bubble_write`).
 @group(0) @binding(9) var<storage, read_write> degrees: array<atomic<u32>>;
 
 // Blocks one workgroup of a block pass decodes, one after another: 64, one per
@@ -302,15 +303,16 @@ fn quantize(x: f32, inv_scale: f32) -> u32 {
     return bitcast<u32>(q) & 0xFFFFu;
 }
 
-// A bubble plane's blocks, every block of its tiles (those without a coefficient as
-// zeros), each of the first four columns of invocations making two horizontally adjacent
-// texels, one R32Uint texel of the layer. (Eight columns, half of them idle: with a
-// workgroup of 4 × 8 lavapipe ran the loop over a workgroup's blocks once only. Idle
-// lanes cost what working ones do on a SIMD machine, so the work is the same as 64
-// invocations of one texel.) The first block of each tile marks the tile's degree in the
-// set with this plane's term (`degrees`, cleared before the set's first plane): the
-// reconstruction reads a tile's terms up to its degree only, so the texels of tiles a
-// plane does not code are never read and never zeroed.
+// A bubble plane's blocks, written whole (the zero pass cleared the rest): each of the
+// first four columns of invocations makes two horizontally adjacent texels, one R32Uint
+// texel of the layer. (Eight columns, half of them idle: with a workgroup of 4 × 8
+// lavapipe ran the loop over a workgroup's blocks once only. Idle lanes cost what working
+// ones do on a SIMD machine, so the work is the same as 64 invocations of one texel.)
+// Each block marks its tile's degree in the set with this plane's term (`degrees`,
+// cleared before the set's first plane): the reconstruction reads a tile's terms up to
+// the last with a coefficient in it, the layers beyond holding zeros there. (Writing every
+// block of a plane's tiles instead, zeros and all, so that no zero pass was needed, made a
+// 512² segment's `bubble_write` 2.7 times as long on lavapipe.)
 @compute @workgroup_size(8, 8)
 fn bubble_write(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -318,7 +320,7 @@ fn bubble_write(
 ) {
     let share = group_share(wg);
     let first = job.lo + share.group * GROUP_BLOCKS;
-    var present = share.every;
+    var present = share.present;
     if (l.x >= 4u) {
         return;
     }
@@ -326,6 +328,9 @@ fn bubble_write(
     let inv_scale = 1.0 / bubble_scale(bound);
     let x = 2u * l.x;
     var span = first_span(first);
+    // The tile this workgroup marked last: a tile's blocks come one after another, so a
+    // tile is marked once per workgroup, not once per block (atomics cost lavapipe).
+    var marked = 0xFFFFFFFFu;
     loop {
         let j = next_bit(&present);
         if (j == 64u) {
@@ -338,10 +343,40 @@ fn bubble_write(
         let at = vec2<u32>(o.x / 2u + l.x, o.y + l.y);
         let packed = quantize(s.x, inv_scale) | (quantize(s.y, inv_scale) << 16u);
         textureStore(planes16, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
-        if (l.x == 0u && l.y == 0u && b % (job.per * job.per) == 0u) {
+        let rank = b / (job.per * job.per);
+        if (l.x == 0u && l.y == 0u && rank != marked) {
+            marked = rank;
             let side = job.per * 8u;
             let tile = (o.y / side) * job.tiles_x + o.x / side;
             atomicMax(&degrees[job.base + tile], job.term);
+        }
+    }
+}
+
+// Rows each invocation of `bubble_zero` zeros, 8 apart (`ZERO_ROWS` in decode.rs): a
+// workgroup zeros 8 × 64 texels. With one texel per invocation the pass was a stream of
+// tiny workgroups, and an H100 stored 410 GB/s.
+const ZERO_ROWS: u32 = 8u;
+
+// Zeros layers `job.base` + z of the bubble planes (`job.size` R32Uint texels each; one
+// dispatch for a slice's worth of layers, whose latency is most of its cost on a GPU),
+// `slice.x` rows of workgroups down (a slice of rows).
+@compute @workgroup_size(8, 8)
+fn bubble_zero(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) l: vec3<u32>,
+) {
+    if (id.x >= job.size.x) {
+        return;
+    }
+    // (A slice starts slice.x / ZERO_ROWS rows of workgroups down: decode.rs sizes
+    // slices of this pass by the texels, not the workgroups.)
+    let top = (wg.y + slice.x / ZERO_ROWS) * 8u * ZERO_ROWS + l.y;
+    for (var r = 0u; r < ZERO_ROWS; r = r + 1u) {
+        let y = top + r * 8u;
+        if (y < job.size.y) {
+            textureStore(planes16, vec2<u32>(id.x, y), job.base + id.z, vec4<u32>(0u));
         }
     }
 }

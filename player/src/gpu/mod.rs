@@ -64,6 +64,7 @@ pub(crate) struct Gpu {
     key_add: wgpu::ComputePipeline,
     key_range: wgpu::ComputePipeline,
     key_pack: wgpu::ComputePipeline,
+    bubble_zero: wgpu::ComputePipeline,
     bubble_bound: wgpu::ComputePipeline,
     bubble_write: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,

@@ -77,9 +77,9 @@ const STATE_WORDS: u32 = 10u;
 // Cleared before the first frame of a generation, which finds them.
 @group(0) @binding(12) var<storage, read_write> peaks: array<atomic<u32>>;
 const PEAK_WORDS: u32 = 9u;
-// Per bubble set, plane and tile (row-major), the tile's degree: its terms are k ≤ degree
-// (decode.wgsl, `bubble_write`); a tile reads no further, so a plane's texels outside the
-// tiles it codes are never read (nor zeroed).
+// Per bubble set, plane and tile (row-major), the tile's degree: the last term k with a
+// coefficient in the tile (decode.wgsl, `bubble_write`); the layers beyond hold zeros
+// there, so a tile reads no further.
 @group(0) @binding(11) var<storage, read> degrees: array<u32>;
 
 // A bubble layer's scale, as decode.wgsl's `bubble_write` computes it from the same bound.

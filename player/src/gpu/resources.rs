@@ -127,6 +127,7 @@ impl Gpu {
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
+        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
         let bubble_bound =
             pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
         let bubble_write =
@@ -209,6 +210,7 @@ impl Gpu {
             key_add,
             key_range,
             key_pack,
+            bubble_zero,
             bubble_bound,
             bubble_write,
             key_layout,
