@@ -258,22 +258,15 @@ impl Gpu {
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let n = (i - seg.bubbles) as u32;
                 let layer = base + n;
-                // Term k = n / channels + 2 of plane n % channels: its tiles' degrees.
+                // Term k = n / channels + 2 of plane n % channels, whose tiles' degrees
+                // its jobs mark.
                 let (term, p) = (n / ch + 2, n % ch);
-                let tiles = Job {
-                    term,
-                    base: (set * ch + p) * self.tile_count,
-                    ..self.base_job()
-                };
+                let base = (set * ch + p) * self.tile_count;
+                let marking = move |job: Job| Job { term, base, ..job };
                 let whole = parts(span.blocks, self.part) == 1;
                 // The bound first (over every part), then the blocks, parsed again if the
                 // plane went in parts.
-                for job in self.part_jobs(span, layer) {
-                    let job = Job {
-                        term: tiles.term,
-                        base: tiles.base,
-                        ..job
-                    };
+                for job in self.part_jobs(span, layer).map(marking) {
                     let blocks = job.hi - job.lo.min(job.hi);
                     if blocks == 0 {
                         continue;
@@ -288,12 +281,7 @@ impl Gpu {
                 if whole {
                     continue;
                 }
-                for job in self.part_jobs(span, layer) {
-                    let job = Job {
-                        term: tiles.term,
-                        base: tiles.base,
-                        ..job
-                    };
+                for job in self.part_jobs(span, layer).map(marking) {
                     let blocks = job.hi - job.lo.min(job.hi);
                     self.parse_ops(ops, job, blocks, 0);
                     self.block_pass(ops, Kind::BubbleWrite, job, blocks, 0);

@@ -59,6 +59,39 @@ fn coded_plane(
     (c.push_plane(step, s, members), parsed)
 }
 
+/// The reference decoder's bubble plane of `pw × ph` texels from `parsed`, the blocks of
+/// the tiles of `ts`² texels that `member` keeps, in rank order (zeros elsewhere).
+fn bubble_reference(
+    parsed: &Blocks,
+    member: &dyn Fn(usize) -> bool,
+    (pw, ph, ts): (u32, u32, usize),
+    step: f32,
+) -> Plane {
+    let tiles_x = pw as usize / ts;
+    let tiles = tiles_x * (ph as usize / ts);
+    let per2 = (ts / 8) * (ts / 8);
+    let mut want = Plane::zeros(pw as usize, ph as usize);
+    for (rank, t) in (0..tiles).filter(|&t| member(t)).enumerate() {
+        let at = plane::tile_blocks(t, tiles_x, ts);
+        plane::add_blocks_of(&mut want, at, Onto::Zeros, parsed, rank * per2, step);
+    }
+    want
+}
+
+/// Decodes the plane at `span` of `data` as a segment's one bubble plane (term 2 of a
+/// one-channel stream, no keyframe step) into bubble set 0.
+fn decode_bubble_plane(gpu: &mut Gpu, data: Coded, span: PlaneSpan) {
+    let mut seg = SegmentData::new();
+    seg.steps = Vec::new();
+    seg.planes = vec![span, span];
+    seg.bubbles = 1;
+    seg.data = data;
+    seg.layers = 3;
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    gpu.decode(&mut enc, &seg, true);
+    gpu.queue.submit([enc.finish()]);
+}
+
 /// Decodes one keyframe step (plane 0 of a one-channel stream) onto the head.
 fn decode_key_step(gpu: &mut Gpu, number: usize, span: PlaneSpan, data: Coded) {
     let mut seg = SegmentData::new();
@@ -294,20 +327,8 @@ fn bubble_passes_match_the_reference_kernel_within_half_a_step() {
         // A keyframe plane before it, so that the bubble plane's offsets are not 0.
         coded_plane(&mut c, 1.0, &random_blocks(4, &mut 5), None);
         let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, &member)));
-        let mut want = Plane::zeros(pw as usize, ph as usize);
-        for (rank, t) in (0..tiles).filter(|&t| member(t)).enumerate() {
-            let at = plane::tile_blocks(t, tiles_x, ts);
-            plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, rank * per2, step);
-        }
-        let mut seg = SegmentData::new();
-        seg.steps = Vec::new();
-        seg.planes = vec![span, span];
-        seg.bubbles = 1;
-        seg.data = c;
-        seg.layers = 3;
-        let mut enc = device.create_command_encoder(&Default::default());
-        gpu.decode(&mut enc, &seg, true);
-        queue.submit([enc.finish()]);
+        let want = bubble_reference(&parsed, &member, (pw, ph, ts), step);
+        decode_bubble_plane(&mut gpu, c, span);
 
         let bound =
             bytemuck::cast_slice::<u8, f32>(&read_buffer(&device, &queue, &gpu.bounds))[0] * step;
@@ -357,20 +378,8 @@ fn bubble_layers_and_tile_degrees_follow_each_segment() {
             let blocks = random_blocks(members * per2, &mut { seed });
             let mut c = Coded::default();
             let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, member)));
-            let mut want = Plane::zeros(pw as usize, ph as usize);
-            for (rank, t) in (0..tiles).filter(|&t| member(t)).enumerate() {
-                let at = plane::tile_blocks(t, tiles_x, ts);
-                plane::add_blocks_of(&mut want, at, Onto::Zeros, &parsed, rank * per2, step);
-            }
-            let mut seg = SegmentData::new();
-            seg.steps = Vec::new();
-            seg.planes = vec![span, span];
-            seg.bubbles = 1;
-            seg.data = c;
-            seg.layers = 3;
-            let mut enc = device.create_command_encoder(&Default::default());
-            gpu.decode(&mut enc, &seg, true);
-            queue.submit([enc.finish()]);
+            let want = bubble_reference(&parsed, member, (pw, ph, ts), step);
+            decode_bubble_plane(&mut gpu, c, span);
             // Set 0, plane 0: term 2 in the plane's tiles with a coefficient, 0 elsewhere.
             let degrees = read_buffer(&device, &queue, &gpu.degrees);
             let degrees: &[u32] = bytemuck::cast_slice(&degrees);
