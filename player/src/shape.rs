@@ -11,7 +11,11 @@
 pub struct DecodeShape {
     /// How many workgroups one dispatch of a decode pass covers: the grain at which a
     /// segment's decode is recorded over frames. Rounded up to a multiple of 32, at most
-    /// 16 384 (a parse dispatch then stays within WebGPU's 65 535 workgroups). A slice is
+    /// 16 384 (a parse dispatch then stays within WebGPU's 65 535 workgroups). A pass whose
+    /// workgroups cost less than `bubble_write`'s over a whole group of 64 blocks (by
+    /// [`DecodeShape::weights`]: the keyframe's range and pack, the bound, a split group)
+    /// covers as many more, up to 16 384, so that its dispatches record the same work in
+    /// fewer steps. A slice is
     /// the smallest piece of work a frame records: with a
     /// [`decode_budget`](crate::PlayerConfig::decode_budget) smaller than one slice's cost,
     /// each frame records one slice and [`Totals::over_budget`](crate::Totals::over_budget)

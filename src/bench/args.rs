@@ -294,6 +294,18 @@ pub struct ShapeArgs {
     /// decode budget (`DecodeShape::step_cost`; 35 000 on a GPU, 0 on a CPU adapter).
     #[arg(long)]
     pub step_cost: Option<u64>,
+    /// Whose cost of each pass's work the decode is planned by (`DecodeShape::weights`;
+    /// `h100` on a GPU, `lavapipe` on a CPU adapter): with the other shape fields, plans
+    /// a GPU's decode on lavapipe, to count its steps.
+    #[arg(long, value_enum)]
+    pub weights: Option<Weights>,
+}
+
+/// The measured pass weights (`vbim_player::PassWeights`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum Weights {
+    Lavapipe,
+    H100,
 }
 
 impl ShapeArgs {
@@ -305,7 +317,11 @@ impl ShapeArgs {
             wide_parse: self.wide_parse.unwrap_or(base.wide_parse),
             group_split: self.split.unwrap_or(base.group_split),
             step_cost: self.step_cost.unwrap_or(base.step_cost),
-            weights: base.weights,
+            weights: match self.weights {
+                Some(Weights::Lavapipe) => vbim_player::PassWeights::LAVAPIPE,
+                Some(Weights::H100) => vbim_player::PassWeights::H100,
+                None => base.weights,
+            },
         }
     }
 }

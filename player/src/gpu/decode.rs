@@ -174,33 +174,30 @@ impl Gpu {
         ops.push(Op::new(Kind::Upload, 0, [0; 3], 0, 0));
         let [rx, ry] = self.regions;
         let pack = |gpu: &mut Gpu, ops: &mut Vec<Op>, slot: u32| {
+            // Every plane's regions' extents cleared (one step), then per plane found and
+            // its texels packed: an invocation per row of a region, 64 per workgroup; a
+            // pass costs 8 units (1/16 of a region each) per region.
+            let n = ops.len();
+            let regions = rx * ry;
+            let extents = Kind::Bounds {
+                offset: BOUND_BYTES,
+                bytes: regions as u64 * 8 * ch as u64,
+            };
+            ops.push(Op::new(extents, 0, [0; 3], 0, 0));
             for p in 0..ch {
                 let job = Job {
                     layer: slot * ch + p,
                     size: [pw, ph],
+                    base: (BOUND_BYTES / 4) as u32 + 2 * regions * p,
                     ..gpu.base_job()
-                };
-                let n = ops.len();
-                // The regions' extents cleared, found, then the texels packed: an
-                // invocation per row of a region, 64 per workgroup; a pass costs 8 units
-                // (1/16 of a region each) per region.
-                let regions = rx * ry;
-                let extents = Kind::Bounds {
-                    offset: BOUND_BYTES,
-                    bytes: regions as u64 * 8,
-                };
-                ops.push(Op::new(extents, 0, [0; 3], p, 0));
-                let job = Job {
-                    base: (BOUND_BYTES / 4) as u32,
-                    ..job
                 };
                 let groups = (regions * REGION).div_ceil(64);
                 let units = (regions as u64 * 8, 16);
                 gpu.sliced(ops, Kind::KeyRange, job, groups, p, units);
                 gpu.sliced(ops, Kind::KeyPack, job, groups, p, units);
-                for op in &mut ops[n..] {
-                    op.packs = true;
-                }
+            }
+            for op in &mut ops[n..] {
+                op.packs = true;
             }
         };
         if let Some(slot) = target.pack_first {
@@ -507,8 +504,12 @@ impl Gpu {
         self.sliced_by(ops, kind, job, (groups, 1), channel, units);
     }
 
-    /// [`Gpu::sliced`] with slices `span` times as long (slice k binds the slices
-    /// buffer's entry k · `span` · the slice span).
+    /// [`Gpu::sliced`] with slices at least `span` times as long (slice k binds the
+    /// slices buffer's entry k · its span · the slice span). A pass whose workgroups cost
+    /// less than `bubble_write`'s over a whole group gets slices as many times longer (up
+    /// to [`MAX_SLICE_GROUPS`]), so that each slice records about the same work: on a GPU
+    /// a step costs about 16 µs of latency whatever its work, and a 4096² segment's
+    /// keyframe packs (a unit of work a sixteenth of a region) took 72 of its 240 steps.
     fn sliced_by(
         &mut self,
         ops: &mut Vec<Op>,
@@ -519,7 +520,7 @@ impl Gpu {
         (units, per_group): (u64, u64),
     ) {
         let at = self.push_job(job);
-        let span = span * self.slice_span;
+        let span = span.max(self.cheap_span(kind, per_group)) * self.slice_span;
         let size = span * SLICE_GROUPS;
         for k in 0..groups.div_ceil(size) {
             let from = k * size;
@@ -527,6 +528,17 @@ impl Gpu {
             let work = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
             ops.push(Op::new(kind, at, [n, 1, 1], channel, work).in_slice(k * span));
         }
+    }
+
+    /// How many slices one dispatch of `kind` may cover for its work to stay within a
+    /// slice of `bubble_write` over whole groups, when each workgroup records `per_group`
+    /// units; never so many that a dispatch covers more than [`MAX_SLICE_GROUPS`].
+    fn cheap_span(&self, kind: Kind, per_group: u64) -> u32 {
+        let w = &self.shape.weights;
+        let full = GROUP_BLOCKS as u64 * w.bubble_write as u64;
+        let own = (per_group * kind.weight(w) as u64).max(1);
+        let most = MAX_SLICE_GROUPS / (SLICE_GROUPS * self.slice_span);
+        (full / own).clamp(1, most.max(1) as u64) as u32
     }
 
     /// A zero pass over `job.size` texels of `layers` layers in 8 × 8 workgroups of

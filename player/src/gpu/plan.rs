@@ -207,7 +207,7 @@ pub(crate) fn planned_texture_bytes(
         + range_bytes(plane, channels)
         + part_blocks(plane) as u64 * 256
         + mask_bytes(part_blocks(plane))
-        + bound_bytes(plane)
+        + bound_bytes(plane, channels)
         + tile_bytes(size).0
         + tile_bytes(size).1
         + degree_bytes(plane, tile, channels)
@@ -227,12 +227,13 @@ pub(super) fn tile_bytes(size: (u32, u32)) -> (u64, u64) {
 /// Bytes of the bubble bounds: one u32 per bubble plane of each set.
 pub(super) const BOUND_BYTES: u64 = BUBBLE_SETS as u64 * MAX_BUBBLE_PLANES as u64 * 4;
 
-/// Bytes of the bounds buffer for planes of `plane` texels: the bubble bounds, then the
-/// extent (lowest and highest value, two u32) of each region of the plane being packed
-/// into a 16-bit keyframe (`key_range` in decode.wgsl).
-pub(super) fn bound_bytes(plane: [u32; 2]) -> u64 {
+/// Bytes of the bounds buffer for `channels` planes of `plane` texels: the bubble bounds,
+/// then the extent (lowest and highest value, two u32) of each region of each plane being
+/// packed into a 16-bit keyframe (`key_range` in decode.wgsl); a plane's extents follow
+/// the one before, so that one clear serves a whole pack.
+pub(super) fn bound_bytes(plane: [u32; 2], channels: u32) -> u64 {
     let [rx, ry] = regions(plane);
-    BOUND_BYTES + rx as u64 * ry as u64 * 8
+    BOUND_BYTES + rx as u64 * ry as u64 * 8 * channels as u64
 }
 
 /// Bytes a texture holds (one mip level, every layer).

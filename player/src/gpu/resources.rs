@@ -156,7 +156,7 @@ impl Gpu {
         // (COPY_SRC: tests read it back.)
         let bounds = buffer(
             "vbim bubble bounds and region extents",
-            bound_bytes(plane),
+            bound_bytes(plane, channels),
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
         // Zeroed at creation: generation 0, which no frame has.

@@ -3,7 +3,7 @@
 use vbim_format::chunk::Scanned;
 use vbim_format::plane::{self, Blocks, Onto, Plane};
 
-use super::plan::{groups_offset, lightmap_descriptor, REGION};
+use super::plan::{groups_offset, lightmap_descriptor, GROUP_BLOCKS, REGION};
 use super::*;
 use crate::coded::{Coded, PlaneSpan};
 use crate::decoder::{KeyStep, SegmentData};
@@ -471,5 +471,50 @@ fn the_held_image_keeps_nine_bits_of_each_texels_largest_channel() {
                 s[c]
             );
         }
+    }
+}
+
+/// A pass whose workgroups cost less than `bubble_write`'s goes in longer slices of about
+/// a `bubble_write` slice's work, not in more steps: a 512² keyframe's range and pack
+/// (128 workgroups each, a sixteenth of a `bubble_write` workgroup's work) take one
+/// dispatch each at slices of 32 workgroups, and no slice of any cheap pass records
+/// more than a slice of `bubble_write` over whole groups.
+#[test]
+fn cheap_passes_take_slices_of_a_bubble_write_slices_work() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph) = (512u32, 512u32);
+    let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+    gpu.set_decode_shape(shape(false));
+    let w = crate::PassWeights::LAVAPIPE;
+    let full = (super::decode::SLICE_GROUPS * GROUP_BLOCKS * w.bubble_write) as u64;
+    let blocks = random_blocks((pw * ph / 64) as usize, &mut 5);
+    let mut c = Coded::default();
+    let (span, _) = coded_plane(&mut c, 0.01, &blocks, None);
+    let mut seg = SegmentData::new();
+    seg.steps = vec![KeyStep {
+        number: 0,
+        intra: true,
+        plane: 0,
+    }];
+    seg.planes = vec![span];
+    seg.bubbles = 1;
+    seg.data = c;
+    seg.layers = 2;
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    let dispatches = gpu.decode(&mut enc, &seg, false);
+    gpu.queue.submit([enc.finish()]);
+    for (pass, weight) in [("key_range", w.key_range), ("key_pack", w.key_pack)] {
+        let of: Vec<u64> = dispatches
+            .iter()
+            .filter(|d| d.0 == pass)
+            .map(|d| d.1 * weight as u64)
+            .collect();
+        // 256 regions, 8 units each.
+        assert_eq!(of.iter().sum::<u64>(), 256 * 8 * weight as u64, "{pass}");
+        assert_eq!(of.len(), 1, "{pass}: {of:?}");
+        assert!(
+            of.iter().all(|&u| u <= full),
+            "{pass}: {of:?} against {full}"
+        );
     }
 }
