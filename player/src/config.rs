@@ -77,7 +77,9 @@ pub struct PlayerConfig {
     /// their measured cost, and each step of the decode [`DecodeShape::step_cost`] more;
     /// [`FrameRecord::decode_work`]). `None`: each segment's decode is spread evenly over
     /// the frames before it is shown but the last, at the display rate the frames so far
-    /// give, and a segment needed at once (the first, or after a seek) is decoded at
+    /// give, from the frame the segment before it goes on screen, each frame recording
+    /// the steps nearest its share (at least one; a frame may exceed its share by half a
+    /// step), and a segment needed at once (the first, or after a seek) is decoded at
     /// once. With a budget, a segment needed before its decode is done is late (the
     /// display holds or waits, as the policy says) and, where a segment's own length of
     /// frames at the budget would not have decoded it either, [`Totals::budget_late`]

@@ -401,6 +401,23 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// versions, which had to call it, keep working unchanged.
     pub fn submitted(&mut self) {}
 
+    /// Starts decoding the segment the decoder thread sent, if none is decoding and one
+    /// came (one dropped if a seek made it stale); returns the bytes it uploads.
+    fn start_incoming(&mut self, pos: MediaTime, n: MediaTime) -> u64 {
+        if self.decoding.is_some() {
+            return 0;
+        }
+        match self.incoming.take() {
+            Some(b) if b.generation != self.generation => {
+                // Decoded before a seek: no longer wanted.
+                self.pipeline.give_back(b);
+                0
+            }
+            Some(b) => self.start_decode(b, pos, n),
+            None => 0,
+        }
+    }
+
     /// The CPU side of a frame, allocation-free: takes what the reader and decoder
     /// produced, decides what is shown under the policy, and computes the shader's weights.
     pub fn plan(&mut self, dt: u64) -> Frame {
@@ -417,19 +434,17 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         }
         // Start decoding an arrived segment into what is not on screen (one at a time),
         // then record this frame's share of the decode in flight.
-        let mut uploaded = 0;
-        if self.decoding.is_none() {
-            if let Some(b) = self.incoming.take() {
-                if b.generation != self.generation {
-                    // Decoded before a seek: no longer wanted.
-                    self.pipeline.give_back(b);
-                } else {
-                    uploaded = self.start_decode(b, pos, n);
-                }
-            }
-        }
+        let mut uploaded = self.start_incoming(pos, n);
         let per_frame = ticks_to_media(dt, rate.0, rate.1);
         self.frame_work = self.step_decode(pos, per_frame, n);
+        if self.decoding.is_none() && self.frame_ops.is_empty() {
+            // The segment decoded ahead went on screen this frame, which frees what the
+            // one before it held: the next decode starts now, not a frame later (a
+            // 10-frame segment's next decode then has all its frames, not the 7 its
+            // spread had left after the start's frame and the margin).
+            uploaded += self.start_incoming(pos, n);
+            self.frame_work = self.step_decode(pos, per_frame, n);
+        }
         let missing = !self.resident.is_some_and(|r| r.start <= pos && pos < r.end);
         if missing && self.ticks.saturating_sub(self.last_seek) > SEEK_COOLDOWN_NS {
             // So far behind that reading on would only deliver the past: re-synchronise

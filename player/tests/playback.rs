@@ -1367,3 +1367,49 @@ fn reused_tiles_stay_within_their_share_of_the_bound_and_an_unbounded_share_lags
         worst[2]
     );
 }
+
+/// With no budget (the default), each segment's decode starts in the frame the segment
+/// before it goes on screen, which frees what it writes, and is spread evenly over the
+/// frames until it is due but the last: a segment of 20 displayed frames leaves at most
+/// its margin frame and one more without decode work, and no frame records more than
+/// twice the even share.
+#[test]
+fn without_a_budget_a_decode_starts_at_once_and_spreads_over_the_frames_before_it_is_due() {
+    let (device, queue) = device();
+    let (w, h, n) = (256, 192, 96);
+    let bytes = encode_bytes(&noisy(w, h, n), &config(SegmentMode::Fixed(8)));
+    let cfg = inline(Policy::Interpolate, Throttle::UNLIMITED);
+    let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
+    let frames: Vec<_> = (0..330).map(|_| player.advance(DISPLAY)).collect();
+    // Runs of frames showing one segment, the first two (the start) and the last
+    // (unfinished) left out.
+    let mut runs: Vec<Vec<u64>> = Vec::new();
+    let mut last = usize::MAX;
+    for r in &frames {
+        if r.segment != last {
+            runs.push(Vec::new());
+            last = r.segment;
+        }
+        runs.last_mut().unwrap().push(r.decode_work);
+    }
+    let steady = &runs[2..runs.len() - 1];
+    assert!(steady.len() >= 10, "{} segments", steady.len());
+    for (i, work) in steady.iter().enumerate() {
+        assert_eq!(work.len(), 20, "segment {i}: {work:?}");
+        assert!(
+            work[0] > 0,
+            "segment {i}: the next decode waited a frame: {work:?}"
+        );
+        let idle = work.iter().filter(|&&x| x == 0).count();
+        assert!(
+            idle <= 2,
+            "segment {i}: {idle} frames without decode: {work:?}"
+        );
+        let share = work.iter().sum::<u64>().div_ceil(work.len() as u64 - 1);
+        let most = *work.iter().max().unwrap();
+        assert!(
+            most <= 2 * share,
+            "segment {i}: {most} against a share of {share}: {work:?}"
+        );
+    }
+}

@@ -186,9 +186,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             Some(b) => b,
             None if needed => u64::MAX,
             // Spread evenly over the frames left before it is due but the last, which is
-            // kept as a margin for the display's rate wandering.
+            // kept as a margin for the display's rate wandering. The frames left are the
+            // time left in frame times rounded to the nearest: a display position a hair
+            // off the media grid (8 frames and 1e-9 left, or 1e-9 short) must not make
+            // the count jump by one between frames, which left the last frame before the
+            // margin twice the others' share on lavapipe.
             None => {
-                let frames = d.range.0.saturating_sub(pos) / per_frame.max(1);
+                let pf = per_frame.max(1);
+                let frames = (d.range.0.saturating_sub(pos) + pf / 2) / pf;
                 remaining.div_ceil(frames.saturating_sub(1).max(1))
             }
         };
@@ -200,7 +205,16 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let (start, mut work) = (d.next, 0u64);
         while d.next < d.ops.len() {
             let cost = d.ops[d.next].cost;
-            if cost > d.credit {
+            if self.budget.is_none() {
+                // Spreading: the steps nearest the frame's share, at least one. Steps
+                // are coarse (a slice of a pass); recording only those within the
+                // share left a frame idle whenever the next step was larger than what
+                // remained of it, and the frame after with two shares. The shares that
+                // follow are taken from what is left, so an overshoot evens out.
+                if work > 0 && work + cost / 2 > allowance {
+                    break;
+                }
+            } else if cost > d.credit {
                 // One step costs more than the budget: it runs alone, first in a frame
                 // (whose credit is then the whole budget), and is reported.
                 let alone = self.budget.is_some_and(|b| cost > b && work == 0);
