@@ -3,8 +3,10 @@
 //! read (coefficients valid where a block's mask has the bit, and the set of blocks that
 //! have any), tested against the specification (`vbim_format::plane2`) on a real adapter.
 //! Not yet part of the player's decode, which reads format 2 through the decoder thread's
-//! conversion to format 1's pairs; it is what that decode will build on. Buffers are made
-//! per call.
+//! conversion to format 1's pairs; it is what that decode will build on. It takes what
+//! the player would upload for a plane (its words, lanes and histograms, a bubble plane's
+//! member spans as `coded.rs` lays them out) and builds the rest on the GPU: the slot
+//! tables, each tile's rank, each group's flags. Buffers are made per call.
 
 use vbim_format::dct::N;
 use vbim_format::plane2::{Geometry, Section, GROUP, REGION};
@@ -15,6 +17,8 @@ use crate::readback::read_buffer;
 /// The prototype's pipelines.
 pub(crate) struct Plane2Gpu {
     layout: wgpu::BindGroupLayout,
+    slots: wgpu::ComputePipeline,
+    prepare: wgpu::ComputePipeline,
     flags: wgpu::ComputePipeline,
     blocks: wgpu::ComputePipeline,
     dc_rows: wgpu::ComputePipeline,
@@ -32,7 +36,7 @@ impl Plane2Gpu {
                 ty: wgpu::BindingType::Buffer {
                     ty: match binding {
                         0 => wgpu::BufferBindingType::Uniform,
-                        1 | 3 | 4 => wgpu::BufferBindingType::Storage { read_only: true },
+                        1 | 4 => wgpu::BufferBindingType::Storage { read_only: true },
                         _ => wgpu::BufferBindingType::Storage { read_only: false },
                     },
                     has_dynamic_offset: false,
@@ -50,6 +54,8 @@ impl Plane2Gpu {
             super::resources::compute_pipeline(device, "vbim plane2", source, &layout, entry)
         };
         Plane2Gpu {
+            slots: pipeline("slots"),
+            prepare: pipeline("prepare"),
             flags: pipeline("flags"),
             blocks: pipeline("blocks"),
             dc_rows: pipeline("dc_rows"),
@@ -73,12 +79,26 @@ impl Plane2Gpu {
         let (bw, bh) = geo.grid;
         let (gw, gh) = (bw.div_ceil(GROUP), bh.div_ceil(GROUP));
         let n = geo.order.len();
-        // The grid's blocks and the groups that have one.
-        let mut grid = vec![u32::MAX; bw * bh];
-        let mut groups = vec![0u32; (gw * gh).max(1)];
-        for (b, &(x, y)) in geo.order.iter().enumerate() {
-            grid[y * bw + x] = b as u32;
-            groups[(y / GROUP) * gw + x / GROUP] = 1;
+        // A bubble plane's member spans, as the player uploads them: its blocks come a
+        // whole tile after another, member tiles in raster order.
+        let ts = geo.tile.unwrap_or(0);
+        let (tiles_x, tiles_y) = match ts {
+            0 => (0, 0),
+            _ if !bw.is_multiple_of(ts) || !bh.is_multiple_of(ts) || !n.is_multiple_of(ts * ts) => {
+                return Err("a bubble plane of partial tiles".into());
+            }
+            _ => (bw / ts, bh / ts),
+        };
+        let mut spans: Vec<[u32; 2]> = Vec::new();
+        if ts > 0 {
+            let mut last = None;
+            for (rank, c) in geo.order.chunks(ts * ts).enumerate() {
+                let t = (c[0].1 / ts) * tiles_x + c[0].0 / ts;
+                if last.is_none_or(|l| t != l + 1) {
+                    spans.push([t as u32, rank as u32]);
+                }
+                last = Some(t);
+            }
         }
         let w = &section.words;
         let mut lanes = Vec::with_capacity(2 * sp.lanes.len());
@@ -96,7 +116,8 @@ impl Plane2Gpu {
             .map(|p| p[0] as u32 | (*p.get(1).unwrap_or(&0) as u32) << 16)
             .chain([0])
             .collect();
-        // Contexts' histograms, each histogram's frequencies, then its slot table.
+        // Contexts' histograms, each histogram's frequencies, then room for its slot
+        // table (`slots` fills it).
         let hs = &section.histograms;
         let mut tables: Vec<u32> = sp.histogram_of.iter().map(|&h| h as u32).collect();
         tables.extend(
@@ -104,17 +125,7 @@ impl Plane2Gpu {
                 .flat_map(|h| (0..128).map(move |t| h.frequency(t) | h.cumulative(t) << 16)),
         );
         let slots = tables.len() as u32;
-        for h in hs {
-            let mut slot = vec![0u8; 4096];
-            for t in 0..128 {
-                let (c, f) = (h.cumulative(t) as usize, h.frequency(t) as usize);
-                slot[c.min(4096)..(c + f).min(4096)].fill(t as u8);
-            }
-            tables.extend(
-                slot.chunks(4)
-                    .map(|q| u32::from_le_bytes([q[0], q[1], q[2], q[3]])),
-            );
-        }
+        tables.resize(tables.len() + hs.len() * 1024, 0);
         let storage = |data: &[u8], label| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -128,10 +139,15 @@ impl Plane2Gpu {
             storage(bytemuck::cast_slice(&lanes), "plane2 lanes"),
             storage(bytemuck::cast_slice(&tables), "plane2 tables"),
             storage(
-                bytemuck::cast_slice(&grid.iter().copied().chain([0]).collect::<Vec<u32>>()),
-                "plane2 grid",
+                bytemuck::cast_slice(&spans.iter().copied().chain([[0; 2]]).collect::<Vec<_>>()),
+                "plane2 spans",
             ),
-            storage(bytemuck::cast_slice(&groups), "plane2 groups"),
+            // Filled with garbage: `prepare` must write every group's flags and every
+            // tile's rank.
+            storage(
+                &vec![0xA5u8; (gw * gh + tiles_x * tiles_y) * 4],
+                "plane2 groups",
+            ),
             zeros(n * 8, "plane2 info"),
             // Not cleared, as the player's dense plane is not: filled with garbage, so
             // that a coefficient read without its mask bit shows.
@@ -139,18 +155,22 @@ impl Plane2Gpu {
             zeros((2 * n + n.div_ceil(32)) * 4, "plane2 masks and sets"),
         ];
         let params = |parity: u32| {
-            let p: [u32; 12] = [
+            let p: [u32; 16] = [
                 bw as u32,
                 bh as u32,
                 gw as u32,
                 gh as u32,
                 bw.div_ceil(REGION) as u32,
-                geo.tile.unwrap_or(0) as u32,
+                ts as u32,
                 lane_count as u32,
                 parity,
                 slots,
                 2 * n as u32,
-                0,
+                tiles_x as u32,
+                tiles_y as u32,
+                spans.len() as u32,
+                (n / (ts * ts).max(1)) as u32,
+                hs.len() as u32,
                 0,
             ];
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -178,7 +198,10 @@ impl Plane2Gpu {
         let bind = [groups_of(0), groups_of(1)];
         let mut enc = device.create_command_encoder(&Default::default());
         let lane_groups = (lane_count as u32).div_ceil(64);
+        let cells = (tiles_x * tiles_y).max(gw * gh) as u32;
         for (pipeline, parity, groups) in [
+            (&self.slots, 0, (hs.len() as u32 * 1024).div_ceil(64)),
+            (&self.prepare, 0, cells.div_ceil(64)),
             (&self.flags, 0, lane_groups),
             (&self.flags, 1, lane_groups),
             (&self.blocks, 0, lane_groups),
@@ -329,41 +352,59 @@ mod tests {
     fn the_gpu_decodes_what_the_specification_decodes() {
         let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
         let gpu = Plane2Gpu::new(&device);
+        // An odd-sized keyframe plane; a bubble plane of whole tiles (the player pads its
+        // planes to them), some not members, in tiles of 2 blocks (the player's 16²
+        // texels) or 4.
         let (bw, bh) = (45, 35);
         let key_order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
-        let mut bubble_order = Vec::new();
-        for ty in 0..bh.div_ceil(4) {
-            for tx in 0..bw.div_ceil(4) {
-                if (tx * 5 + ty * 3) % 4 == 0 {
-                    continue;
-                }
-                for y in ty * 4..(ty * 4 + 4).min(bh) {
-                    for x in tx * 4..(tx * 4 + 4).min(bw) {
-                        bubble_order.push((x, y));
+        let key = blocks(&key_order, 1);
+        for ts in [2, 4] {
+            let (tw, th) = (48 / ts, 36 / ts);
+            let mut bubble_order = Vec::new();
+            for ty in 0..th {
+                for tx in 0..tw {
+                    if (tx * 5 + ty * 3) % 4 == 0 {
+                        continue;
+                    }
+                    for y in ty * ts..ty * ts + ts {
+                        for x in tx * ts..tx * ts + ts {
+                            bubble_order.push((x, y));
+                        }
                     }
                 }
             }
+            let bubble = blocks(&bubble_order, 2);
+            let shapes = [
+                Plane {
+                    family: 0,
+                    geometry: Geometry {
+                        grid: (bw, bh),
+                        order: &key_order,
+                        tile: None,
+                    },
+                },
+                Plane {
+                    family: 1,
+                    geometry: Geometry {
+                        grid: (48, 36),
+                        order: &bubble_order,
+                        tile: Some(ts),
+                    },
+                },
+            ];
+            sections_decode_on_the_gpu(&gpu, (&device, &queue), &shapes, [&key, &bubble]);
         }
-        let key = blocks(&key_order, 1);
-        let bubble = blocks(&bubble_order, 2);
-        let shapes = [
-            Plane {
-                family: 0,
-                geometry: Geometry {
-                    grid: (bw, bh),
-                    order: &key_order,
-                    tile: None,
-                },
-            },
-            Plane {
-                family: 1,
-                geometry: Geometry {
-                    grid: (bw, bh),
-                    order: &bubble_order,
-                    tile: Some(4),
-                },
-            },
-        ];
+    }
+
+    /// Codes two planes (`shapes`, blocks `q`) as one section in lanes of several sizes
+    /// and checks the GPU's blocks against the specification's, then damages the words:
+    /// an error or other blocks, never a hang.
+    fn sections_decode_on_the_gpu(
+        gpu: &Plane2Gpu,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
+        shapes: &[Plane; 2],
+        q: [&[[i32; N * N]]; 2],
+    ) {
         let mut seed = 7;
         let maps = [
             ContextMap {
@@ -374,13 +415,13 @@ mod tests {
             ContextMap::single(),
         ];
         for lane_bytes in [usize::MAX, 200, 16] {
-            let input = [(shapes[0], &key[..]), (shapes[1], &bubble[..])];
+            let input = [(shapes[0], q[0]), (shapes[1], q[1])];
             let bytes = plane2::encode(&input, &maps, lane_bytes).unwrap();
-            let section = Section::parse(&bytes, &shapes, &maps).unwrap();
-            let want = plane2::decode(&bytes, &shapes, &maps).unwrap();
+            let section = Section::parse(&bytes, shapes, &maps).unwrap();
+            let want = plane2::decode(&bytes, shapes, &maps).unwrap();
             for (p, want) in want.iter().enumerate() {
                 let got = gpu
-                    .decode(&device, &queue, &section, p, &shapes[p].geometry)
+                    .decode(device, queue, &section, p, &shapes[p].geometry)
                     .unwrap_or_else(|e| panic!("plane {p}, lanes of {lane_bytes} B: {e}"));
                 assert_eq!(got.len(), want.len());
                 for (b, (g, w)) in got.iter().zip(want).enumerate() {
@@ -392,7 +433,8 @@ mod tests {
             for w in bad.words.iter_mut().skip(7).step_by(13) {
                 *w ^= 0x5A5A;
             }
-            let _ = gpu.decode(&device, &queue, &bad, 0, &shapes[0].geometry);
+            let _ = gpu.decode(device, queue, &bad, 0, &shapes[0].geometry);
+            let _ = gpu.decode(device, queue, &bad, 1, &shapes[1].geometry);
         }
     }
 

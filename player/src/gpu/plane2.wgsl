@@ -1,8 +1,12 @@
 // Format 2's coefficient coding decoded on the GPU: one invocation per rANS lane, the
 // passes of `vbim_format::plane2` (its module documentation is the specification; this
-// follows it step for step). Dispatches: `flags` with parity 0 then 1, `blocks` with
+// follows it step for step). Dispatches: `slots` once per section (the slot tables from
+// the histograms' frequencies), then per plane `prepare` (each tile's rank, each group's
+// flag cleared and whether it has a block), `flags` with parity 0 then 1, `blocks` with
 // parity 0 then 1, then `dc_rows` and `dc_cols`. Each lane keeps its state between
-// dispatches in `lanes`.
+// dispatches in `lanes`. The host uploads what the player's decode uploads for a plane:
+// its words, lanes and histograms, and a bubble plane's member spans; nothing per block
+// or per slot.
 //
 // llvmpipe (lavapipe) ends every loop of an invocation once its loops have run 65,535
 // iterations in all: so no loop per symbol here (a slot table finds the token, raw bits
@@ -25,8 +29,14 @@ struct Params {
     slots: u32,
     // Where the sets of blocks with a coefficient start in `marks`.
     sets: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // A bubble plane's tiles across and down, member spans and member tiles (0 for a
+    // keyframe plane); the section's histograms.
+    tiles_x: u32,
+    tiles_y: u32,
+    span_count: u32,
+    members: u32,
+    histograms: u32,
+    _pad: u32,
 }
 
 @group(0) @binding(0) var<uniform> prm: Params;
@@ -37,11 +47,18 @@ struct Params {
 @group(0) @binding(2) var<storage, read_write> lanes: array<vec4<u32>>;
 // Per context its histogram (0xFFFF: none sent); then per histogram 128 entries,
 // frequency | cumulative frequency << 16; then from `prm.slots` per histogram the token
-// of each of the 4096 slots, four to a word.
-@group(0) @binding(3) var<storage, read> tables: array<u32>;
-// Per cell of the block grid, its block (0xFFFFFFFF: none).
-@group(0) @binding(4) var<storage, read> grid: array<u32>;
-// Per group: bit 0, it has a block (set by the host); bit 1, it holds something.
+// of each of the 4096 slots, four to a word (written by `slots`).
+@group(0) @binding(3) var<storage, read_write> tables: array<u32>;
+// A bubble plane's member spans, as the player's decode reads them
+// (player/src/coded.rs): the span's first tile (raster order over the plane's tiles) and
+// that tile's rank among the members, spans in raster order.
+@group(0) @binding(4) var<storage, read> spans: array<vec2<u32>>;
+// Per group: bit 0, it has a block; bit 1, it holds something (both written by
+// `prepare`, bit 1 then by `flags`). Then, from word gw · gh, a bubble plane's rank of
+// each tile among its members (NONE: not a member), also written by `prepare`: the lookup
+// from a cell to its block without a loop (llvmpipe's budget of loop iterations per
+// invocation, above) and without a table per cell from the host. (One buffer for both:
+// WebGPU's default limit is 8 storage buffers a stage.)
 @group(0) @binding(5) var<storage, read_write> groups: array<u32>;
 // Per block: its DC residual and its count of coefficients.
 @group(0) @binding(6) var<storage, read_write> info: array<vec2<i32>>;
@@ -187,11 +204,107 @@ fn band(i: u32) -> u32 {
     return 11u;
 }
 
+// The block at cell (cx, cy), NONE where there is none: raster order for a keyframe
+// plane; for a bubble plane, its tile's rank among the members times the blocks of a
+// tile, then raster order within the tile (the plane is whole tiles).
 fn block_at(cx: i32, cy: i32) -> u32 {
     if (cx < 0 || cy < 0 || cx >= i32(prm.bw) || cy >= i32(prm.bh)) {
         return NONE;
     }
-    return grid[u32(cy) * prm.bw + u32(cx)];
+    let x = u32(cx);
+    let y = u32(cy);
+    if (prm.tile == 0u) {
+        return y * prm.bw + x;
+    }
+    let r = groups[prm.gw * prm.gh + (y / prm.tile) * prm.tiles_x + x / prm.tile];
+    if (r == NONE) {
+        return NONE;
+    }
+    return (r * prm.tile + y % prm.tile) * prm.tile + x % prm.tile;
+}
+
+// The rank of tile t among a bubble plane's members, NONE if it is not one: the last
+// span whose first tile is at most t, if t is within its length (a binary search of at
+// most 32 steps).
+fn rank_of(t: u32) -> u32 {
+    var lo = 0u;
+    var hi = prm.span_count;
+    while (lo < hi) {
+        let mid = (lo + hi) / 2u;
+        if (spans[mid].x <= t) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    if (lo == 0u) {
+        return NONE;
+    }
+    let s = spans[lo - 1u];
+    var next = prm.members;
+    if (lo < prm.span_count) {
+        next = spans[lo].y;
+    }
+    let r = s.y + (t - s.x);
+    return select(NONE, r, r < next);
+}
+
+// The slot tables: invocation i fills word i of them (four slots of histogram i / 1024),
+// each slot's token the last whose cumulative frequency is at most the slot (tokens of
+// frequency 0 share the next one's, which comes after them).
+@compute @workgroup_size(64)
+fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
+    let h = id.x / 1024u;
+    if (h >= prm.histograms) {
+        return;
+    }
+    var w = 0u;
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        let slot = (id.x % 1024u) * 4u + k;
+        var lo = 0u;
+        var hi = 128u;
+        while (lo < hi) {
+            let mid = (lo + hi) / 2u;
+            if ((tables[CONTEXTS + h * 128u + mid] >> 16u) <= slot) {
+                lo = mid + 1u;
+            } else {
+                hi = mid;
+            }
+        }
+        w = w | ((max(lo, 1u) - 1u) << (k * 8u));
+    }
+    tables[prm.slots + id.x] = w;
+}
+
+// Per plane, before its lanes: each tile's rank (a bubble plane), and each group's
+// flags: bit 0 if it has a block, bit 1 cleared (the plane before may have set it).
+@compute @workgroup_size(64)
+fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if (prm.tile != 0u && i < prm.tiles_x * prm.tiles_y) {
+        groups[prm.gw * prm.gh + i] = rank_of(i);
+    }
+    if (i >= prm.gw * prm.gh) {
+        return;
+    }
+    let gx = i % prm.gw;
+    let gy = i / prm.gw;
+    var has = 1u;
+    if (prm.tile != 0u) {
+        // The tiles the group's blocks lie in (its own ranks are not written yet: this
+        // dispatch writes them).
+        has = 0u;
+        let x1 = min((gx + 1u) * GROUP, prm.bw) - 1u;
+        let y1 = min((gy + 1u) * GROUP, prm.bh) - 1u;
+        for (var ty = gy * GROUP / prm.tile; ty <= y1 / prm.tile; ty = ty + 1u) {
+            for (var tx = gx * GROUP / prm.tile; tx <= x1 / prm.tile; tx = tx + 1u) {
+                if (rank_of(ty * prm.tiles_x + tx) != NONE) {
+                    has = 1u;
+                }
+            }
+        }
+    }
+    groups[i] = has;
 }
 
 fn load(lane: u32) -> vec2<u32> {
@@ -357,7 +470,7 @@ fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                     continue;
                 }
                 for (var bx = gx * GROUP; bx < min((gx + 1u) * GROUP, prm.bw); bx = bx + 1u) {
-                    let b = grid[cy * prm.bw + bx];
+                    let b = block_at(i32(bx), i32(cy));
                     if (b != NONE && (bx + cy) % 2u == prm.parity) {
                         block(b, bx, cy);
                     }
@@ -391,7 +504,7 @@ fn dc_rows(@builtin(global_invocation_id) id: vec3<u32>) {
         if (restarts(bx)) {
             acc = 0i;
         }
-        let b = grid[by * prm.bw + bx];
+        let b = block_at(i32(bx), i32(by));
         if (b != NONE) {
             acc = acc + info[b].x;
             coefs[b * 64u] = acc;
@@ -410,7 +523,7 @@ fn dc_cols(@builtin(global_invocation_id) id: vec3<u32>) {
         if (restarts(by)) {
             acc = 0i;
         }
-        let b = grid[by * prm.bw + bx];
+        let b = block_at(i32(bx), i32(by));
         if (b != NONE) {
             acc = acc + coefs[b * 64u];
             coefs[b * 64u] = acc;
