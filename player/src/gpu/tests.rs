@@ -92,8 +92,14 @@ fn decode_bubble_plane(gpu: &mut Gpu, data: Coded, span: PlaneSpan) {
     gpu.queue.submit([enc.finish()]);
 }
 
-/// Decodes one keyframe step (plane 0 of a one-channel stream) onto the head.
-fn decode_key_step(gpu: &mut Gpu, number: usize, span: PlaneSpan, data: Coded) {
+/// Decodes one keyframe step (plane 0 of a one-channel stream) onto the head; returns
+/// each dispatch's pass and work ([`Gpu::decode`]).
+fn decode_key_step(
+    gpu: &mut Gpu,
+    number: usize,
+    span: PlaneSpan,
+    data: Coded,
+) -> Vec<(&'static str, u64)> {
     let mut seg = SegmentData::new();
     seg.steps = vec![KeyStep {
         number,
@@ -105,8 +111,9 @@ fn decode_key_step(gpu: &mut Gpu, number: usize, span: PlaneSpan, data: Coded) {
     seg.data = data;
     seg.layers = 2;
     let mut enc = gpu.device.create_command_encoder(&Default::default());
-    gpu.decode(&mut enc, &seg, false);
+    let dispatches = gpu.decode(&mut enc, &seg, false);
     gpu.queue.submit([enc.finish()]);
+    dispatches
 }
 
 /// The head keyframe's plane 0 matches `want` within 1e-5 of its peak.
@@ -490,19 +497,7 @@ fn cheap_passes_take_slices_of_a_bubble_write_slices_work() {
     let blocks = random_blocks((pw * ph / 64) as usize, &mut 5);
     let mut c = Coded::default();
     let (span, _) = coded_plane(&mut c, 0.01, &blocks, None);
-    let mut seg = SegmentData::new();
-    seg.steps = vec![KeyStep {
-        number: 0,
-        intra: true,
-        plane: 0,
-    }];
-    seg.planes = vec![span];
-    seg.bubbles = 1;
-    seg.data = c;
-    seg.layers = 2;
-    let mut enc = gpu.device.create_command_encoder(&Default::default());
-    let dispatches = gpu.decode(&mut enc, &seg, false);
-    gpu.queue.submit([enc.finish()]);
+    let dispatches = decode_key_step(&mut gpu, 0, span, c);
     for (pass, weight) in [("key_range", w.key_range), ("key_pack", w.key_pack)] {
         let of: Vec<u64> = dispatches
             .iter()
