@@ -10,11 +10,30 @@
 /// One dispatch: the index of its pass, its work in the pass's unit, its GPU time (ns).
 pub type Sample = (usize, f64, f64);
 
-/// The fit of `ns = latency + cost[pass] × units` over `samples`, by least squares:
-/// `(latency, cost per unit of each of the `passes` passes)`. `None` where the samples
-/// cannot separate them (a pass whose work never varies, and no other to tell its cost
-/// from the latency; or no samples).
+/// The fit of `ns = latency + cost[pass] × units` over `samples`, by least squares with
+/// none of them below 0: `(latency, cost per unit of each of the `passes` passes)`. An
+/// unknown that the plain fit puts below 0 (on lavapipe, whose time follows work, the
+/// latency came out at −0.6 ms; a pass whose time is its latency alone can get a
+/// negative cost) is held at 0 and the others fitted again, the most negative first,
+/// until none is. `None` where the samples cannot separate them (a pass whose work never
+/// varies, and no other to tell its cost from the latency; or no samples).
 pub fn fit(samples: &[Sample], passes: usize) -> Option<(f64, Vec<f64>)> {
+    let mut held = vec![false; passes + 1];
+    loop {
+        let x = fit_free(samples, passes, &held)?;
+        let below = (0..=passes)
+            .filter(|&i| !held[i] && x[i] < 0.0)
+            .min_by(|&a, &b| x[a].total_cmp(&x[b]));
+        match below {
+            Some(i) => held[i] = true,
+            None => return Some((x[0], x[1..].to_vec())),
+        }
+    }
+}
+
+/// The least-squares fit with the unknowns `held` at 0: the latency, then each pass's
+/// cost per unit.
+fn fit_free(samples: &[Sample], passes: usize, held: &[bool]) -> Option<Vec<f64>> {
     if samples.is_empty() {
         return None;
     }
@@ -35,27 +54,30 @@ pub fn fit(samples: &[Sample], passes: usize) -> Option<(f64, Vec<f64>)> {
     }
     // Unknowns: the latency, then each pass's cost. The normal equations AᵀA x = Aᵀt,
     // with A's row for a sample 1 in the latency's column and its scaled units in its
-    // pass's.
+    // pass's (a held unknown's column left out).
     let n = passes + 1;
     let mut m = vec![vec![0.0f64; n + 1]; n];
     for &(p, u, t) in samples {
         let cols = [(0, 1.0), (p + 1, u / scale[p])];
-        for &(i, a) in &cols {
-            for &(j, b) in &cols {
+        let cols = cols.iter().filter(|c| !held[c.0]);
+        for &(i, a) in cols.clone() {
+            for &(j, b) in cols.clone() {
                 m[i][j] += a * b;
             }
             m[i][n] += a * t;
         }
     }
-    // A pass without samples: its cost is 0 (an equation of its own).
-    for (p, &c) in count.iter().enumerate() {
-        if c == 0 {
-            m[p + 1][p + 1] = 1.0;
+    // A held unknown, or a pass without samples: 0 (an equation of its own).
+    for i in 0..n {
+        if held[i] || (i > 0 && count[i - 1] == 0) {
+            m[i][i] = 1.0;
         }
     }
-    let x = solve(m)?;
-    let costs = (0..passes).map(|p| x[p + 1] / scale[p]).collect();
-    Some((x[0], costs))
+    let mut x = solve(m)?;
+    for p in 0..passes {
+        x[p + 1] /= scale[p];
+    }
+    Some(x)
 }
 
 /// Gaussian elimination with partial pivoting on the augmented matrix `m` (n × n + 1).
@@ -95,7 +117,7 @@ pub fn print(names: &[&'static str], samples: &[Sample]) {
         return;
     };
     println!(
-        "fit over {} dispatches, time = latency + cost × work (least squares): latency {:.1} µs per dispatch",
+        "fit over {} dispatches, time = latency + cost × work (least squares, none below 0): latency {:.1} µs per dispatch",
         samples.len(),
         latency / 1e3
     );
@@ -113,7 +135,7 @@ pub fn print(names: &[&'static str], samples: &[Sample]) {
     }
     match unit {
         Some(u) => println!(
-            "as a DecodeShape for this adapter: step_cost {:.0} blocks (the latency in blocks through bubble_write at {u:.3} ns each), weights as above (negative: the pass's time is its latency alone; use 1)",
+            "as a DecodeShape for this adapter: step_cost {:.0} blocks (the latency in blocks through bubble_write at {u:.3} ns each), weights as above (0: the pass's time is its latency alone; use 1)",
             latency / u
         ),
         None => println!("no bubble_write dispatch with a cost: no weights in its unit"),
@@ -149,6 +171,33 @@ mod tests {
                 "cost {got} against {want}"
             );
         }
+    }
+
+    /// Times that a plain fit would give a negative latency (time falling short of work
+    /// in proportion), and a pass whose time falls as its work grows: each held at 0,
+    /// the others fitted again.
+    #[test]
+    fn no_latency_or_cost_is_fitted_below_zero() {
+        let us = (0..100).map(|i| 1000.0 + 10.0 * i as f64);
+        let short: Vec<Sample> = us.clone().map(|u| (0, u, 2.0 * u - 1500.0)).collect();
+        let (l, c) = fit(&short, 1).expect("a fit");
+        assert_eq!(l, 0.0, "latency held at 0");
+        // Then through the origin: Σ u t / Σ u².
+        let (ut, uu) = short
+            .iter()
+            .fold((0.0, 0.0), |(a, b), s| (a + s.1 * s.2, b + s.1 * s.1));
+        assert!(
+            (c[0] - ut / uu).abs() < 1e-9 * c[0],
+            "{} against {}",
+            c[0],
+            ut / uu
+        );
+        // A latency of 1000 ns that the first pass pins down, and a second pass below it.
+        let mut mixed: Vec<Sample> = us.clone().map(|u| (0, u, 1000.0 + u)).collect();
+        mixed.extend(us.map(|u| (1, u, 1100.0 - 0.2 * u)));
+        let (l, c) = fit(&mixed, 2).expect("a fit");
+        assert_eq!(c[1], 0.0, "a cost that falls with work held at 0");
+        assert!(l > 0.0 && c[0] > 0.0, "latency {l}, costs {c:?}");
     }
 
     /// One pass whose work never varies cannot be told from the latency: no fit.
