@@ -85,12 +85,8 @@ impl Coded {
             self.words.extend([e.byte, e.position, e.dc as u32, e.from]);
         }
         let at = self.words.len() as u32;
-        let mut rank = 0u32;
         if let Some((tiles, member)) = members {
-            for (a, b) in spans(tiles, member) {
-                self.words.extend([a as u32, rank]);
-                rank += (b - a) as u32;
-            }
+            self.words.extend(member_spans(tiles, member).flatten());
         }
         PlaneSpan {
             step,
@@ -115,6 +111,21 @@ impl Coded {
             ..*s
         }));
     }
+}
+
+/// The member spans of a bubble plane over `tiles` tiles of which `member` keeps some, as
+/// the GPU decode reads them: each span's first tile and that tile's rank among the
+/// members.
+pub(crate) fn member_spans(
+    tiles: usize,
+    member: &dyn Fn(usize) -> bool,
+) -> impl Iterator<Item = [u32; 2]> + '_ {
+    let mut rank = 0u32;
+    spans(tiles, member).map(move |(a, b)| {
+        let span = [a as u32, rank];
+        rank += (b - a) as u32;
+        span
+    })
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ use vbim_format::dct::N;
 use vbim_format::plane2::{Geometry, Section, GROUP, REGION};
 use wgpu::util::DeviceExt;
 
+use crate::coded::member_spans;
 use crate::readback::read_buffer;
 
 /// The prototype's pipelines.
@@ -89,17 +90,13 @@ impl Plane2Gpu {
             }
             _ => (bw / ts, bh / ts),
         };
-        let mut spans: Vec<[u32; 2]> = Vec::new();
+        let mut member = vec![false; tiles_x * tiles_y];
         if ts > 0 {
-            let mut last = None;
-            for (rank, c) in geo.order.chunks(ts * ts).enumerate() {
-                let t = (c[0].1 / ts) * tiles_x + c[0].0 / ts;
-                if last.is_none_or(|l| t != l + 1) {
-                    spans.push([t as u32, rank as u32]);
-                }
-                last = Some(t);
+            for c in geo.order.chunks(ts * ts) {
+                member[(c[0].1 / ts) * tiles_x + c[0].0 / ts] = true;
             }
         }
+        let spans: Vec<[u32; 2]> = member_spans(member.len(), &|t| member[t]).collect();
         let w = &section.words;
         let mut lanes = Vec::with_capacity(2 * sp.lanes.len());
         for &(r0, r1, w0, w1) in &sp.lanes {
