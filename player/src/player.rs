@@ -436,8 +436,9 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         // then record this frame's share of the decode in flight.
         let mut uploaded = self.start_incoming(pos, n);
         let per_frame = ticks_to_media(dt, rate.0, rate.1);
+        let was_decoding = self.decoding.is_some();
         self.frame_work = self.step_decode(pos, per_frame, n);
-        if self.decoding.is_none() && self.frame_ops.is_empty() {
+        if was_decoding && self.decoding.is_none() && self.frame_ops.is_empty() {
             // The segment decoded ahead went on screen this frame, which frees what the
             // one before it held: the next decode starts now, not a frame later (a
             // 10-frame segment's next decode then has all its frames, not the 7 its

@@ -197,35 +197,35 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 remaining.div_ceil(frames.saturating_sub(1).max(1))
             }
         };
-        // With a budget, what a frame may record is the budget at most.
-        d.credit = d
-            .credit
-            .saturating_add(allowance)
-            .min(self.budget.unwrap_or(u64::MAX));
+        // With a budget, the work not recorded carries over as credit, up to the budget
+        // (spreading needs none: each frame's share is taken from what is left).
+        if let Some(b) = self.budget {
+            d.credit = d.credit.saturating_add(allowance).min(b);
+        }
         let (start, mut work) = (d.next, 0u64);
         while d.next < d.ops.len() {
             let cost = d.ops[d.next].cost;
-            if self.budget.is_none() {
+            match self.budget {
                 // Spreading: the steps nearest the frame's share, at least one. Steps
                 // are coarse (a slice of a pass); recording only those within the
                 // share left a frame idle whenever the next step was larger than what
                 // remained of it, and the frame after with two shares. The shares that
                 // follow are taken from what is left, so an overshoot evens out.
-                if work > 0 && work + cost / 2 > allowance {
-                    break;
+                None if work > 0 && work + cost / 2 > allowance => break,
+                None => {}
+                Some(b) if cost > d.credit => {
+                    // One step costs more than the budget: it runs alone, first in a
+                    // frame (whose credit is then the whole budget), and is reported.
+                    if cost <= b || work > 0 {
+                        break;
+                    }
+                    self.totals.over_budget += 1;
+                    self.totals.last_error = Some(format!(
+                        "segment {}: one step of its decode costs {cost} blocks, more than the budget of {allowance} per frame: the budget is too small for this stream",
+                        d.show.map_or(0, |r| r.index)
+                    ));
                 }
-            } else if cost > d.credit {
-                // One step costs more than the budget: it runs alone, first in a frame
-                // (whose credit is then the whole budget), and is reported.
-                let alone = self.budget.is_some_and(|b| cost > b && work == 0);
-                if !alone {
-                    break;
-                }
-                self.totals.over_budget += 1;
-                self.totals.last_error = Some(format!(
-                    "segment {}: one step of its decode costs {cost} blocks, more than the budget of {allowance} per frame: the budget is too small for this stream",
-                    d.show.map_or(0, |r| r.index)
-                ));
+                Some(_) => {}
             }
             work += cost;
             d.credit = d.credit.saturating_sub(cost);
