@@ -98,6 +98,69 @@ pub fn shapes(h: &Header, what: Payload, bytes: &[u8]) -> Result<(usize, Vec<Sha
     }
 }
 
+/// A payload's head and its planes as a coefficient section codes them, without their
+/// blocks' places (what [`Section::parse_layout`](plane2::Section::parse_layout) reads:
+/// families and grids): checks the head as [`shapes`] does, without listing every block.
+pub fn section_planes(
+    h: &Header,
+    what: Payload,
+    bytes: &[u8],
+) -> Result<(usize, Vec<plane2::Plane<'static>>)> {
+    let planes = h.channels as usize;
+    let (w, ht) = padded_size(h);
+    let head = bytes
+        .get(..4)
+        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
+    let plane = |family, tile| plane2::Plane {
+        family,
+        geometry: Geometry {
+            grid: (w / N, ht / N),
+            order: &[],
+            tile,
+        },
+    };
+    let (head_len, out) = match what {
+        Payload::Keyframe => {
+            let kind = match head[0] {
+                MODE_INTRA => INTRA_KEY,
+                MODE_PREDICTED => PREDICTED_KEY,
+                m => return Err(FormatError::Invalid(format!("unknown keyframe mode {m}"))),
+            };
+            if head[1] as usize != planes {
+                return Err(FormatError::Invalid(format!(
+                    "{} planes, expected {planes}",
+                    head[1]
+                )));
+            }
+            let out = (0..planes)
+                .map(|p| plane(plane2::family(kind, p > 0), None))
+                .collect();
+            (4 + 4 * planes, out)
+        }
+        Payload::Coefficients(tiles) => {
+            let dmax = tiles.max_degree();
+            if head[0] != dmax || (dmax > 1 && head[1] as usize != planes) {
+                return Err(FormatError::Invalid(format!(
+                    "coefficients for degree {} × {} planes, tile map needs {dmax} × {planes}",
+                    head[0], head[1]
+                )));
+            }
+            let tile = Some(h.tile_size as usize / N);
+            let out = (2..=dmax)
+                .flat_map(|_| (0..planes).map(|p| plane(plane2::family(BUBBLE, p > 0), tile)))
+                .collect();
+            (4 + 4 * (dmax.max(1) as usize - 1) * planes, out)
+        }
+    };
+    if bytes.len() < head_len {
+        return Err(FormatError::Invalid(format!(
+            "a payload of {} bytes, its head {head_len}",
+            bytes.len()
+        )));
+    }
+    Ok((head_len, out))
+}
+
 /// A plane's shape and its blocks (64 integers each, zig-zag order).
 pub type PlaneBlocks = (Shape, Vec<[i32; N * N]>);
 
@@ -202,6 +265,62 @@ fn write_pairs(d: &plane2::Decoded, out: &mut Vec<u8>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn section_planes_are_the_shapes_without_their_blocks() {
+        let h = Header {
+            version_minor: 0,
+            coding: crate::Coding::Lanes(vec![ContextMap::single(); plane2::FAMILIES]),
+            width: 41,
+            height: 23,
+            channels: 3,
+            color: crate::ColorEncoding::LinearHdr,
+            looping: false,
+            frame_count: 5,
+            rate_num: 24,
+            rate_den: 1,
+            tile_size: 16,
+            max_degree: 3,
+            transfer: crate::Transfer::LogToe { v0: 1e-3 },
+            segment_count: 1,
+            keyframe_count: 2,
+            intra_interval: 4,
+            chunk_count: 5,
+            index_offset: 0,
+            file_size: 0,
+            read_ahead: Default::default(),
+            index_checksum: 0,
+            largest_payload: None,
+        };
+        let n = h.tile_count();
+        let tiles = TileMap {
+            luma: vec![3; n],
+            chroma: if h.channels == 3 {
+                vec![3; n]
+            } else {
+                Vec::new()
+            },
+        };
+        let mut head = vec![3u8, h.channels, 0, 0];
+        head.extend((0..2 * h.channels as usize).flat_map(|_| 0.5f32.to_le_bytes()));
+        for what in [Payload::Keyframe, Payload::Coefficients(&tiles)] {
+            let mut bytes = head.clone();
+            if matches!(what, Payload::Keyframe) {
+                bytes[0] = MODE_INTRA;
+                bytes.truncate(4 + 4 * h.channels as usize);
+            }
+            let (n, full) = shapes(&h, what, &bytes).unwrap();
+            let (m, light) = section_planes(&h, what, &bytes).unwrap();
+            assert_eq!(n, m);
+            assert_eq!(full.len(), light.len());
+            for (a, b) in full.iter().zip(&light) {
+                assert_eq!(a.family, b.family);
+                assert_eq!(a.tile, b.geometry.tile);
+                assert!(b.geometry.order.is_empty());
+            }
+            assert!(section_planes(&h, what, &bytes[..n - 1]).is_err());
+        }
+    }
 
     #[test]
     fn sparse_blocks_are_written_as_the_dense_ones_are() {

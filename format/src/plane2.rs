@@ -741,12 +741,29 @@ impl Coder for Lanes<'_, '_> {
 pub struct Section {
     /// The chunk's histograms.
     pub histograms: Vec<Histogram>,
+    /// For each of `histograms`, its place among the file's ([`file_histograms`]) where
+    /// it is the file's, `None` where the chunk sent its own.
+    pub file: Vec<Option<u16>>,
+    /// Per family, the histogram (an index into `histograms`, `u16::MAX`: none) of each
+    /// of its map's clusters; empty for a family the section does not use.
+    pub places: Vec<Vec<u16>>,
     /// Per plane: each lane's regions (a run from the plane's first, in raster order of
     /// regions) and words ([first, end) in `words`), and the histogram of each context
     /// (an index into `histograms`, `u16::MAX` where the chunk sent none).
     pub planes: Vec<SectionPlane>,
-    /// Every lane's words, plane after plane; a lane's first two are its state.
+    /// Where the lanes' words start in the section's bytes (two bytes each, little-endian).
+    pub words_at: usize,
+    /// Every lane's words, plane after plane; a lane's first two are its state. (Empty
+    /// from [`Section::parse_layout`].)
     pub words: Vec<u16>,
+}
+
+/// The file's histograms, numbered as [`Section::file`] numbers them: family by family,
+/// cluster by cluster, those the maps carry.
+pub fn file_histograms(maps: &[ContextMap]) -> impl Iterator<Item = (usize, usize, &Histogram)> {
+    maps.iter().enumerate().flat_map(|(f, m)| {
+        (m.tables.iter().enumerate()).filter_map(move |(k, t)| t.as_ref().map(|h| (f, k, h)))
+    })
 }
 
 /// One plane of a [`Section`].
@@ -761,10 +778,32 @@ pub struct SectionPlane {
 impl Section {
     /// Parses a coefficient section [`encode`] wrote for `planes` with the file's `maps`.
     pub fn parse(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Section> {
+        let mut s = Section::parse_layout(bytes, planes, maps)?;
+        s.words = bytes[s.words_at..]
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            .collect();
+        Ok(s)
+    }
+
+    /// [`Section::parse`] without copying the lanes' words out (`words` stays empty): a
+    /// GPU decoder uploads them from `bytes[words_at..]` as they are. Only the planes'
+    /// families and grids are read, not their blocks' places.
+    pub fn parse_layout(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Section> {
         let used = used_families(planes.iter(), maps.len())?;
         let mut r = BitReader::new(bytes);
         let mut place = vec![Vec::new(); maps.len()];
         let mut histograms = Vec::new();
+        let mut file = Vec::new();
+        // Each family's first place among the file's histograms.
+        let firsts: Vec<usize> = maps
+            .iter()
+            .scan(0, |n, m| {
+                let first = *n;
+                *n += m.tables.iter().flatten().count();
+                Some(first)
+            })
+            .collect();
         for &f in &used {
             for k in 0..maps[f].clusters as usize {
                 if r.get(1)? == 0 {
@@ -774,13 +813,17 @@ impl Section {
                 place[f].push(histograms.len() as u16);
                 if r.get(1)? == 1 {
                     histograms.push(Histogram::read(&mut r)?);
+                    file.push(None);
                 } else {
-                    let file = maps[f].tables.get(k).and_then(Option::as_ref);
-                    histograms.push(file.cloned().ok_or_else(|| {
+                    let tables = &maps[f].tables;
+                    let table = tables.get(k).and_then(Option::as_ref);
+                    histograms.push(table.cloned().ok_or_else(|| {
                         FormatError::Invalid(format!(
                             "family {f}, cluster {k}: the file's histogram, which it has not"
                         ))
                     })?);
+                    let rank = tables[..k].iter().flatten().count();
+                    file.push(Some((firsts[f] + rank) as u16));
                 }
             }
         }
@@ -801,6 +844,13 @@ impl Section {
             for _ in 0..count {
                 let n = varint::get_u32(bytes, &mut at)? as usize;
                 let w = varint::get_u32(bytes, &mut at)? as usize;
+                // What a GPU decoder's lane may loop over (the encoder's caps), and a
+                // state to start from.
+                if n > MAX_LANE_REGIONS || w < 2 {
+                    return Err(FormatError::Invalid(format!(
+                        "a lane of {n} regions and {w} words (at most {MAX_LANE_REGIONS} regions, at least 2 words)"
+                    )));
+                }
                 let end = covered.saturating_add(n);
                 let words_end = total_words.saturating_add(w);
                 lanes.push((covered, end, total_words, words_end));
@@ -827,14 +877,13 @@ impl Section {
                 bytes.len() - at
             )));
         }
-        let words = bytes[at..]
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect();
         Ok(Section {
             histograms,
+            file,
+            places: place,
             planes: out,
-            words,
+            words_at: at,
+            words: Vec::new(),
         })
     }
 }
@@ -1005,6 +1054,20 @@ mod tests {
             vec![ContextMap::single(), ContextMap::single()],
             vec![spread.clone(), ContextMap::single()],
         ] {
+            // A GPU decoder's view: the file's histograms by their place among the
+            // file's, the words where they lie.
+            let bytes = encode(&planes, &maps, 64).unwrap();
+            let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
+            let layout = Section::parse_layout(&bytes, &shapes, &maps).unwrap();
+            let full = Section::parse(&bytes, &shapes, &maps).unwrap();
+            assert!(layout.words.is_empty());
+            assert_eq!(bytes.len() - layout.words_at, 2 * full.words.len());
+            let file: Vec<&Histogram> = file_histograms(&maps).map(|(_, _, h)| h).collect();
+            for (h, g) in full.histograms.iter().zip(&full.file) {
+                if let Some(g) = g {
+                    assert_eq!(file[*g as usize], h);
+                }
+            }
             let one = round_trip(&planes, &maps, usize::MAX);
             let many = round_trip(&planes, &maps, 64);
             // Lanes cost their states and lengths, a few bytes each.

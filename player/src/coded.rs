@@ -14,8 +14,50 @@
 //!
 //! This is what makes the upload follow the file: a smooth plane whose zstd'd stream is a
 //! fraction of a byte per block uploads about twice that, not a record per block.
+//!
+//! A version 2 file's planes come as coded (`lanes.wgsl` decodes them): per section (a
+//! chunk's planes) its lanes' words as stored (16-bit, two to a word, the first in the low
+//! half), the frequencies of the histograms the chunk sent itself (128 16-bit frequencies
+//! each, 64 words), and per family it uses the histogram of each cluster of the family
+//! ([`SectionSpan`]); per plane, its lanes (two words each: first region, first word
+//! from the section's first) and a final pair (regions, words), then a bubble plane's
+//! member spans as above. The file's own histograms go to the GPU once, when the stream
+//! opens.
 
 use vbim_format::chunk::{spans, Scanned};
+use vbim_format::plane2::{Section, SectionPlane, FAMILIES};
+
+/// A place that holds nothing (a family a section does not use).
+pub(crate) const NONE: u32 = u32::MAX;
+
+/// Where one coefficient section of a version 2 chunk lies in a [`Coded`] buffer (offsets
+/// in words).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SectionSpan {
+    /// Its lanes' words: the first word.
+    pub words: u32,
+    /// The frequencies of the histograms it sent itself: first word, and how many.
+    pub own: u32,
+    pub own_count: u32,
+    /// Per family, the first word of the histogram of each of its clusters (the file's
+    /// histogram g as g, the section's own i as the file's count + i, [`NONE`]: none);
+    /// [`NONE`] for a family it does not use.
+    pub places: [u32; FAMILIES],
+}
+
+/// A plane coded by rANS lanes (version 2): which section and family, and its lanes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct LanePlane {
+    /// The section's index among the box's.
+    pub section: u32,
+    /// Its family (the context map that codes it).
+    pub family: u32,
+    /// Its lanes: first word, and how many.
+    pub table: u32,
+    pub count: u32,
+    /// Its lanes' 16-bit words in all (the work of its decode).
+    pub words: u32,
+}
 
 /// Where one plane's data lies in a [`Coded`] buffer (all offsets in words).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -32,6 +74,8 @@ pub(crate) struct PlaneSpan {
     /// A bubble plane's member spans: first word and number (0 for a keyframe plane).
     pub members: u32,
     pub member_count: u32,
+    /// A version 2 plane's lanes (its stream and entry points are then unused).
+    pub lanes: Option<LanePlane>,
 }
 
 /// Streams, entry points and member spans of several planes, appended one after another.
@@ -71,15 +115,7 @@ impl Coded {
         members: Option<(usize, &dyn Fn(usize) -> bool)>,
     ) -> PlaneSpan {
         let stream = self.words.len() as u32;
-        let chunks = s.stream.chunks_exact(4);
-        let tail = chunks.remainder();
-        self.words
-            .extend(chunks.map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])));
-        if !tail.is_empty() {
-            let mut last = [0u8; 4];
-            last[..tail.len()].copy_from_slice(tail);
-            self.words.push(u32::from_le_bytes(last));
-        }
+        self.push_bytes(s.stream);
         let entries = self.words.len() as u32;
         for e in s.entries {
             self.words.extend([e.byte, e.position, e.dc as u32, e.from]);
@@ -96,18 +132,128 @@ impl Coded {
             blocks: s.blocks as u32,
             members: if members.is_some() { at } else { 0 },
             member_count: (self.words.len() as u32 - at) / 2,
+            lanes: None,
         }
     }
 
-    /// Appends a copy of `src`'s planes (as [`Coded::push_plane`] left them there),
-    /// returning their spans here.
-    pub fn push_copy(&mut self, src: &Coded, spans: &[PlaneSpan], out: &mut Vec<PlaneSpan>) {
+    /// Appends a coefficient section's words (from `bytes`, the section as stored, which
+    /// `section` was parsed from) and its own histograms, and each family's places;
+    /// `file_count` is how many histograms the file carries.
+    pub fn push_section(
+        &mut self,
+        bytes: &[u8],
+        section: &Section,
+        file_count: u32,
+    ) -> SectionSpan {
+        let words = self.words.len() as u32;
+        self.push_bytes(&bytes[section.words_at..]);
+        let own = self.words.len() as u32;
+        let mine = section.histograms.iter().zip(&section.file);
+        let mut index = Vec::with_capacity(section.histograms.len());
+        for (h, file) in mine {
+            match file {
+                Some(g) => index.push(*g as u32),
+                None => {
+                    index.push(file_count + (self.words.len() as u32 - own) / 64);
+                    let f = |t: usize| h.frequency(t);
+                    self.words
+                        .extend((0..64).map(|i| f(2 * i) | f(2 * i + 1) << 16));
+                }
+            }
+        }
+        let own_count = (self.words.len() as u32 - own) / 64;
+        let mut places = [NONE; FAMILIES];
+        for (f, clusters) in section.places.iter().enumerate() {
+            if clusters.is_empty() {
+                continue;
+            }
+            places[f] = self.words.len() as u32;
+            self.words
+                .extend((clusters.iter()).map(|&k| index.get(k as usize).copied().unwrap_or(NONE)));
+        }
+        SectionSpan {
+            words,
+            own,
+            own_count,
+            places,
+        }
+    }
+
+    /// Appends a version 2 plane: plane `sp` of section `section` (the box's
+    /// `section`-th, `span` where it lies), of `family`, with `blocks` blocks; with
+    /// `members`, a bubble plane's member spans as for [`Coded::push_plane`].
+    pub fn push_lane_plane(
+        &mut self,
+        step: f32,
+        (sp, section, family): (&SectionPlane, u32, usize),
+        blocks: usize,
+        members: Option<(usize, &dyn Fn(usize) -> bool)>,
+    ) -> PlaneSpan {
+        let table = self.words.len() as u32;
+        for &(r0, _, w0, _) in &sp.lanes {
+            self.words.extend([r0 as u32, w0 as u32]);
+        }
+        let &(_, r1, _, w1) = sp.lanes.last().expect("a plane has a lane");
+        self.words.extend([r1 as u32, w1 as u32]);
+        let at = self.words.len() as u32;
+        if let Some((tiles, member)) = members {
+            self.words.extend(member_spans(tiles, member).flatten());
+        }
+        PlaneSpan {
+            step,
+            blocks: blocks as u32,
+            members: if members.is_some() { at } else { 0 },
+            member_count: (self.words.len() as u32 - at) / 2,
+            lanes: Some(LanePlane {
+                section,
+                family: family as u32,
+                table,
+                count: sp.lanes.len() as u32,
+                words: (w1 - sp.lanes[0].2) as u32,
+            }),
+            ..PlaneSpan::default()
+        }
+    }
+
+    /// Appends bytes four to a word, little-endian, the last word padded with zeros.
+    fn push_bytes(&mut self, bytes: &[u8]) {
+        let chunks = bytes.chunks_exact(4);
+        let tail = chunks.remainder();
+        self.words
+            .extend(chunks.map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])));
+        if !tail.is_empty() {
+            let mut last = [0u8; 4];
+            last[..tail.len()].copy_from_slice(tail);
+            self.words.push(u32::from_le_bytes(last));
+        }
+    }
+
+    /// Appends a copy of `src`'s planes and sections (as [`Coded::push_plane`] and
+    /// [`Coded::push_section`] left them there), returning their spans here.
+    pub fn push_copy(
+        &mut self,
+        src: &Coded,
+        (spans, sections): (&[PlaneSpan], &[SectionSpan]),
+        out: (&mut Vec<PlaneSpan>, &mut Vec<SectionSpan>),
+    ) {
         let d = self.words.len() as u32;
+        let first_section = out.1.len() as u32;
         self.words.extend_from_slice(&src.words);
-        out.extend(spans.iter().map(|s| PlaneSpan {
+        out.0.extend(spans.iter().map(|s| PlaneSpan {
             stream: s.stream + d,
             entries: s.entries + d,
             members: if s.member_count > 0 { s.members + d } else { 0 },
+            lanes: s.lanes.map(|l| LanePlane {
+                section: l.section + first_section,
+                table: l.table + d,
+                ..l
+            }),
+            ..*s
+        }));
+        out.1.extend(sections.iter().map(|s| SectionSpan {
+            words: s.words + d,
+            own: s.own + d,
+            places: s.places.map(|p| if p == NONE { NONE } else { p + d }),
             ..*s
         }));
     }
@@ -176,8 +322,8 @@ mod tests {
         // A copy moves the offsets with the words.
         let mut d = Coded::default();
         d.words.extend([1, 2, 3]);
-        let mut spans = Vec::new();
-        d.push_copy(&c, &[key, bubble], &mut spans);
+        let (mut spans, mut sections) = (Vec::new(), Vec::new());
+        d.push_copy(&c, (&[key, bubble], &[]), (&mut spans, &mut sections));
         assert_eq!(spans[0].stream, 4);
         assert_eq!((spans[1].members, spans[1].member_count), (24, 3));
         assert_eq!(&d.words[3..], &c.words[..]);

@@ -12,11 +12,13 @@
 //! keyframe, a tile map or coefficient chunk only its segment. Playback resumes with the
 //! first segment whose parts are all good.
 
-use crate::coded::{Coded, PlaneSpan};
+use crate::coded::{Coded, PlaneSpan, SectionSpan};
 use crate::cpu_time::thread_cpu_ns;
 
-use vbim_format::chunk::{self, TileMap};
+use vbim_format::chunk::{self, Payload, TileMap};
 use vbim_format::index::Layout;
+use vbim_format::payload2::section_planes;
+use vbim_format::plane2::Section;
 use vbim_format::verify_chunk;
 use vbim_format::{ChunkKind, Header, IndexEntry};
 
@@ -61,6 +63,8 @@ pub struct SegmentData {
     /// Every plane: the steps' keyframe planes, then bubble planes from `bubbles` on
     /// (term k ≥ 2, plane p at `bubbles + (k − 2)·channels + p`).
     pub(crate) planes: Vec<PlaneSpan>,
+    /// A version 2 box's coefficient sections (its planes name theirs).
+    pub(crate) sections: Vec<SectionSpan>,
     /// Where the bubble planes start in `planes`.
     pub bubbles: usize,
     pub(crate) data: Coded,
@@ -93,6 +97,7 @@ impl SegmentData {
             steps: Vec::new(),
             keys_only: false,
             planes: Vec::new(),
+            sections: Vec::new(),
             bubbles: 0,
             data: Coded::default(),
             staged: None,
@@ -157,7 +162,7 @@ pub enum Event {
 struct KeyData {
     intra: bool,
     chunk: Vec<u8>,
-    scanned: Option<(Vec<PlaneSpan>, Coded)>,
+    scanned: Option<(Vec<PlaneSpan>, Vec<SectionSpan>, Coded)>,
 }
 
 /// The decoder's state between chunks: parsed keyframes back to the last intra one, and
@@ -179,6 +184,9 @@ pub struct DecoderCore {
     /// The device whose staging buffers the boxes go into (`None`: they stay on the CPU,
     /// for benchmarks and tests of the decoder thread alone).
     device: Option<wgpu::Device>,
+    /// For a version 2 file whose planes the GPU decodes as coded (`lanes.wgsl`), how
+    /// many histograms the file carries; `None`: its planes go as pairs.
+    lanes: Option<u32>,
     /// After a seek, the segment it is for: the ones before it get no box (the first box
     /// carries their keyframes in its chain), so that the GPU is not sent them one frame
     /// at a time only to drop them.
@@ -193,7 +201,9 @@ impl DecoderCore {
     pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
         let k = layout.keyframes.len();
         let s = layout.segments.len();
+        let lanes = crate::gpu::decodes_lanes(&header);
         DecoderCore {
+            lanes,
             header,
             layout,
             entries,
@@ -206,6 +216,13 @@ impl DecoderCore {
             first_segment: 0,
             last_closing: None,
         }
+    }
+
+    /// Whether a version 2 file's sections go to the GPU as coded (`true`, the default,
+    /// where the planes fit the GPU's dense plane) or decoded to pairs
+    /// ([`DecodeShape::lanes`](crate::DecodeShape::lanes)). Before the first chunk.
+    pub fn set_lanes(&mut self, on: bool) {
+        self.lanes = crate::gpu::decodes_lanes(&self.header).filter(|_| on);
     }
 
     /// Packs each box into a staging buffer of `device` (the pipeline's decoders do; the
@@ -263,9 +280,9 @@ impl DecoderCore {
                 let t = thread_cpu_ns();
                 let mut data = Coded::default();
                 let mut planes = Vec::with_capacity(self.header.channels as usize);
-                let mode = chunk::keyframe_streams(&self.header, bytes, |_, step, s| {
-                    planes.push(data.push_plane(step, s, None));
-                });
+                let mut sections = Vec::new();
+                let out = (&mut data, &mut planes, &mut sections);
+                let mode = push_keyframe(&self.header, self.lanes, bytes, out);
                 self.key_ns += thread_cpu_ns() - t;
                 let mode = match mode {
                     Ok(m) => m,
@@ -286,7 +303,7 @@ impl DecoderCore {
                 self.keys[n] = Some(KeyData {
                     intra,
                     chunk: bytes.to_vec(),
-                    scanned: Some((planes, data)),
+                    scanned: Some((planes, sections, data)),
                 });
                 // Segments before n − 1 are complete or lost by now (their chunks come
                 // first). Segment n − 1 may need its chain from the last intra keyframe
@@ -386,6 +403,7 @@ impl DecoderCore {
         let k1n = self.layout.keyframe_of_boundary(s + 1);
         out.steps.clear();
         out.planes.clear();
+        out.sections.clear();
         out.data.clear();
         out.staged = None;
         // The keyframes: K_{s+1} alone when the GPU built K_s last, else the chain.
@@ -411,13 +429,15 @@ impl DecoderCore {
             });
             // Scanned when it arrived, unless a box has carried it since: then again.
             match key.scanned.take() {
-                Some((planes, data)) => out.data.push_copy(&data, &planes, &mut out.planes),
+                Some((planes, sections, data)) => out.data.push_copy(
+                    &data,
+                    (&planes, &sections),
+                    (&mut out.planes, &mut out.sections),
+                ),
                 None => {
-                    let (data, planes) = (&mut out.data, &mut out.planes);
-                    chunk::keyframe_streams(&self.header, &key.chunk, |_, step, s| {
-                        planes.push(data.push_plane(step, s, None));
-                    })
-                    .map_err(|e| format!("keyframe {k}: {e}"))?;
+                    let to = (&mut out.data, &mut out.planes, &mut out.sections);
+                    push_keyframe(&self.header, self.lanes, &key.chunk, to)
+                        .map_err(|e| format!("keyframe {k}: {e}"))?;
                 }
             }
         }
@@ -437,6 +457,30 @@ impl DecoderCore {
                 en.first_frame, en.last_frame
             )
         };
+        if let (Some(file_count), Some(maps)) = (self.lanes, h.context_maps()) {
+            // Version 2, decoded by the GPU as coded: the section as it is.
+            let (head, shapes) =
+                section_planes(h, Payload::Coefficients(&tiles), &bytes).map_err(context)?;
+            let section = Section::parse_layout(&bytes[head..], &shapes, maps).map_err(context)?;
+            let index = out.sections.len() as u32;
+            let span = out.data.push_section(&bytes[head..], &section, file_count);
+            out.sections.push(span);
+            let layers = 1 + tiles.max_degree() as usize;
+            let (n, per) = (h.tile_count(), h.tile_size as usize / 8);
+            for (i, (sp, shape)) in section.planes.iter().zip(&shapes).enumerate() {
+                let (k, p) = (i / ch + 2, i % ch);
+                let degrees = tiles.degrees(p);
+                let member = |t: usize| degrees[t] >= k as u8;
+                let blocks = degrees.iter().filter(|&&d| d >= k as u8).count() * per * per;
+                let plane = (sp, index, shape.family);
+                let span =
+                    out.data
+                        .push_lane_plane(step_of(&bytes, i), plane, blocks, Some((n, &member)));
+                out.planes.push(span);
+            }
+            self.finish_box(s, generation, pass, layers, k1n, t0, out);
+            return Ok(());
+        }
         let mut bubbles = chunk::CoeffReader::open(h, &bytes, &tiles).map_err(context)?;
         let layers = 1 + bubbles.max_degree() as usize;
         let n = h.tile_count();
@@ -493,4 +537,44 @@ impl DecoderCore {
             }
         }
     }
+}
+
+/// Quantiser step `i` of a payload's head (after its four bytes of mode or degree and
+/// planes), which the caller checked holds it.
+fn step_of(payload: &[u8], i: usize) -> f32 {
+    let at = 4 + 4 * i;
+    f32::from_le_bytes([
+        payload[at],
+        payload[at + 1],
+        payload[at + 2],
+        payload[at + 3],
+    ])
+}
+
+/// Appends keyframe chunk `bytes`'s planes: for a version 2 file the GPU decodes as coded
+/// (`lanes`: the file's histogram count), its section as it is; otherwise each plane's
+/// pairs and entry points (decompressed, or a version 2 section decoded to pairs, and
+/// scanned). Returns its mode byte.
+fn push_keyframe(
+    h: &Header,
+    lanes: Option<u32>,
+    bytes: &[u8],
+    (data, planes, sections): (&mut Coded, &mut Vec<PlaneSpan>, &mut Vec<SectionSpan>),
+) -> vbim_format::Result<u8> {
+    let (Some(file_count), Some(maps)) = (lanes, h.context_maps()) else {
+        return chunk::keyframe_streams(h, bytes, |_, step, s| {
+            planes.push(data.push_plane(step, s, None));
+        });
+    };
+    let (head, shapes) = section_planes(h, Payload::Keyframe, bytes)?;
+    let section = Section::parse_layout(&bytes[head..], &shapes, maps)?;
+    let index = sections.len() as u32;
+    sections.push(data.push_section(&bytes[head..], &section, file_count));
+    let (w, ht) = chunk::padded_size(h);
+    let blocks = (w / 8) * (ht / 8);
+    for (p, (sp, shape)) in section.planes.iter().zip(&shapes).enumerate() {
+        let plane = (sp, index, shape.family);
+        planes.push(data.push_lane_plane(step_of(bytes, p), plane, blocks, None));
+    }
+    Ok(bytes[0])
 }

@@ -21,7 +21,7 @@ pub fn decoder(data: &[u8]) {
         return;
     };
     let (h, entries) = (r.header().clone(), r.entries().to_vec());
-    let need = crate::player::memory_needed(&h, &entries, 0, 1);
+    let need = crate::player::memory_needed(&h, &entries, 0, (1, true));
     if LIMITS.check("fuzz", need).is_err() || h.segment_count == 0 {
         return;
     }

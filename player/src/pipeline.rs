@@ -91,6 +91,7 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
         let (prod, cons) = HeapRb::<u8>::new(ring_bytes).split();
         let mut reader_core = ReaderCore::new(src, entries.to_vec(), header.looping, cfg.throttle);
         let mut decoder = DecoderCore::new(header.clone(), layout.clone(), entries.to_vec());
+        decoder.set_lanes(crate::shape::resolved(cfg, device).lanes);
         decoder.stage_on(device.clone());
         let (recycle_tx, recycle_rx) = bounded::<Box<SegmentData>>(BOXES);
         for _ in 0..BOXES {

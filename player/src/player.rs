@@ -118,12 +118,13 @@ fn preroll_ns(h: &Header, cfg: &PlayerConfig) -> u64 {
 /// payloads, boxes, scanned keyframes and the stream buffer, each at most a few times the
 /// largest payload (which the file's own chunk sizes bound: `limits::MAX_EXPANSION`), and
 /// in version 2 what decoding a section holds.
-/// Array textures have at least `min_layers` layers.
+/// Array textures have at least `min_layers` layers; `lanes`: the GPU decodes a version 2
+/// file's sections as coded ([`DecodeShape::lanes`](crate::DecodeShape::lanes)).
 pub(crate) fn memory_needed(
     header: &Header,
     entries: &[IndexEntry],
     ring_bytes: usize,
-    min_layers: u32,
+    (min_layers, lanes): (u32, bool),
 ) -> u64 {
     let (pw, ph) = vbim_format::chunk::padded_size(header);
     let textures = planned_texture_bytes(
@@ -143,9 +144,14 @@ pub(crate) fn memory_needed(
         * header.max_degree.max(1) as u64
         * (blocks / vbim_format::chunk::FILL_BLOCKS + 1)
         * 16;
-    // A version 2 file's sections are decoded to pairs on the decoder thread.
+    // A version 2 file's sections: decoded to pairs on the decoder thread where its
+    // planes are larger than the dense plane, else the GPU's scratch for decoding them.
     let sections = vbim_format::section_memory(header, entries);
-    textures + ring_bytes as u64 + 8 * payload + fill_entries + sections
+    let lanes = match lanes {
+        true => crate::gpu::lanes_bytes(header),
+        false => 0,
+    };
+    textures + ring_bytes as u64 + 8 * payload + fill_entries + sections + lanes
 }
 
 impl<R: Read + Seek + Send + 'static> Player<R> {
@@ -165,6 +171,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             return Err(PlayerError::NothingToPlay);
         }
         let ring_bytes = ring_capacity(&header, &entries, &cfg);
+        let shape = crate::shape::resolved(&cfg, device);
         let preroll = preroll_ns(&header, &cfg);
         if header.max_degree as usize - 1 > MAX_BUBBLE_PLANES / 3 {
             return Err(PlayerError::Format(vbim_format::FormatError::Invalid(
@@ -190,12 +197,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 "playing a {}×{} stream of {} channel(s), degree ≤ {}",
                 header.width, header.height, header.channels, header.max_degree
             ),
-            memory_needed(&header, &entries, ring_bytes, min_array_layers(device)),
+            memory_needed(
+                &header,
+                &entries,
+                ring_bytes,
+                (min_array_layers(device), shape.lanes),
+            ),
         )?;
-        let mut gpu = Gpu::for_stream(device, queue, &header);
-        if let Some(shape) = cfg.decode_shape {
-            gpu.set_decode_shape(shape);
-        }
+        let gpu = Gpu::for_stream(device, queue, &header, shape);
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         let reuse = reuse_threshold(cfg.reuse_share, header.transfer);

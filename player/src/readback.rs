@@ -4,14 +4,27 @@
 /// Copies a buffer to the CPU: blocks until the GPU is done. For tests and benchmarks.
 #[cfg(any(test, feature = "bench"))]
 pub(crate) fn read_buffer(device: &wgpu::Device, queue: &wgpu::Queue, b: &wgpu::Buffer) -> Vec<u8> {
+    read_buffer_range(device, queue, b, 0, b.size())
+}
+
+/// Copies `size` bytes of a buffer from `offset` to the CPU (both multiples of 4): blocks
+/// until the GPU is done. For tests and benchmarks.
+#[cfg(any(test, feature = "bench"))]
+pub(crate) fn read_buffer_range(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    b: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> Vec<u8> {
     let out = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("vbim readback"),
-        size: b.size(),
+        size,
         usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
         mapped_at_creation: false,
     });
     let mut enc = device.create_command_encoder(&Default::default());
-    enc.copy_buffer_to_buffer(b, 0, &out, 0, b.size());
+    enc.copy_buffer_to_buffer(b, offset, &out, 0, size);
     queue.submit(Some(enc.finish()));
     let slice = out.slice(..);
     slice.map_async(wgpu::MapMode::Read, |_| {});

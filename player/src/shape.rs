@@ -2,7 +2,7 @@
 //! the adapter: a CPU adapter (lavapipe), whose time follows work, and a GPU, whose time
 //! per dispatch is mostly latency (BENCHMARKS.md, "On a hardware GPU").
 
-/// The shape of the GPU decode ([`PlayerConfig::decode_shape`]): four settings that trade
+/// The shape of the GPU decode ([`PlayerConfig::decode_shape`]): settings that trade
 /// GPU time between adapters, all of which decode the same coefficients. Start from
 /// [`DecodeShape::CPU`], [`DecodeShape::GPU`] or [`DecodeShape::for_adapter`].
 ///
@@ -35,19 +35,28 @@ pub struct DecodeShape {
     pub step_cost: u64,
     /// What a unit of each decode pass costs, in the same blocks.
     pub weights: PassWeights,
+    /// Decode a version 2 file's coefficient sections on the GPU as the file codes them
+    /// (`lanes.wgsl`: an invocation per rANS lane); `false`: the decoder thread decodes
+    /// them to version 1's pairs, which the GPU parses. A CPU adapter runs a lane's
+    /// serial chain of symbols about 50 times slower than the decoder thread's native
+    /// code (a 512² segment: 150 ms against 5.5 ms), so there the thread does it.
+    /// Planes larger than the dense plane (about 5800² texels) always go as pairs.
+    pub lanes: bool,
 }
 
 impl DecodeShape {
     /// For a CPU adapter: slices of 32 workgroups (a dispatch's time there is in
     /// proportion to its work, and small slices spread a decode evenly), the serial parse
     /// and whole groups (the wide parse's scans and more workgroups are work there: a
-    /// 512² segment took 105 ms with the wide parse against 91 ms), no cost per step.
+    /// 512² segment took 105 ms with the wide parse against 91 ms), no cost per step,
+    /// version 2's sections decoded to pairs by the decoder thread.
     pub const CPU: DecodeShape = DecodeShape {
         slice_groups: 32,
         wide_parse: false,
         group_split: 1,
         step_cost: 0,
         weights: PassWeights::LAVAPIPE,
+        lanes: false,
     };
 
     /// For a GPU, as measured on an H100: slices of 2048 workgroups (a 4096² segment
@@ -55,13 +64,15 @@ impl DecodeShape {
     /// parse 3.2 → 0.34 ms), groups split in up to 8 where a pass has too few to fill the
     /// chip (a 512² segment's `key_add` 0.33 → 0.09 ms), and 35 000 blocks per step: a
     /// segment's decode took as long at 512² as at 2048² (about 20 µs per step whatever
-    /// its work), and a block through `bubble_write` about 0.58 ns ([`PassWeights::H100`]).
+    /// its work), and a block through `bubble_write` about 0.58 ns ([`PassWeights::H100`]);
+    /// version 2's sections decoded on the GPU as coded (not yet measured on a GPU).
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
         wide_parse: true,
         group_split: 8,
         step_cost: 35_000,
         weights: PassWeights::H100,
+        lanes: true,
     };
 
     /// [`DecodeShape::CPU`] on a CPU adapter, [`DecodeShape::GPU`] on any other.
@@ -72,6 +83,12 @@ impl DecodeShape {
             DecodeShape::GPU
         }
     }
+}
+
+/// The shape `cfg` asks for, or the adapter's ([`DecodeShape::for_adapter`]).
+pub(crate) fn resolved(cfg: &crate::PlayerConfig, device: &wgpu::Device) -> DecodeShape {
+    cfg.decode_shape
+        .unwrap_or_else(|| DecodeShape::for_adapter(&device.adapter_info()))
 }
 
 /// What one unit of each decode pass costs, in quarters of a block through `bubble_write`
@@ -95,6 +112,13 @@ pub struct PassWeights {
     pub bubble_bound: u32,
     /// A block of a bubble plane written: the unit, 4.
     pub bubble_write: u32,
+    /// A 16-bit word of a version 2 plane's rANS lanes decoded (`lane_blocks`, both
+    /// parities): the serial part of its decode.
+    pub lane_word: u32,
+    /// A block of a version 2 plane through each of its other passes (`lane_prepare`, the
+    /// two DC scans; the groups' flags per group pair; a section's tables per 16
+    /// invocations).
+    pub lane_block: u32,
 }
 
 impl PassWeights {
@@ -111,6 +135,8 @@ impl PassWeights {
         bubble_zero: 1,
         bubble_bound: 2,
         bubble_write: 4,
+        lane_word: 4,
+        lane_block: 1,
     };
 
     /// Fitted on an H100 from each pass's GPU time per 4096² segment (`vbim bench decode
@@ -127,5 +153,7 @@ impl PassWeights {
         bubble_zero: 1,
         bubble_bound: 1,
         bubble_write: 4,
+        lane_word: 4,
+        lane_block: 1,
     };
 }

@@ -1005,44 +1005,52 @@ fn an_intra_flag_that_disagrees_with_the_payload_is_refused_by_both_decoders() {
 #[test]
 fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop() {
     let (device, queue) = device();
-    every_frame_matches_the_reference(&device, &queue, None);
+    // (Format 2 here: its sections decoded to pairs by the decoder thread, the CPU
+    // adapter's shape.)
+    every_frame_matches_the_reference(&device, &queue, None, &[V1, V2]);
 }
 
 #[test]
 fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_loop_on_gl() {
     let (device, queue) = gl_device();
-    every_frame_matches_the_reference(&device, &queue, None);
+    every_frame_matches_the_reference(&device, &queue, None, &[V1]);
 }
 
 /// A hardware GPU decodes in the shape `DecodeShape::GPU` (dispatches of 2048
 /// workgroups, a workgroup per piece of a stream, groups of blocks split among 8
-/// workgroups; lavapipe, the tests' adapter, in `DecodeShape::CPU`): the same frames as a
-/// GPU decodes them, and in slices of 96 (several spans of 32, passes that end inside a
-/// slice).
+/// workgroups, format 2's sections decoded as coded, `lanes.wgsl`; lavapipe, the tests'
+/// adapter, in `DecodeShape::CPU`): the same frames as a GPU decodes them, and in slices
+/// of 96 (several spans of 32, passes that end inside a slice).
 #[test]
 fn every_frame_matches_the_reference_as_a_gpu_decodes() {
     let (device, queue) = device();
-    for slice_groups in [2048, 96] {
+    for (slice_groups, formats) in [(2048, &[V1, V2][..]), (96, &[V1][..])] {
         let shape = DecodeShape {
             slice_groups,
             ..DecodeShape::GPU
         };
-        every_frame_matches_the_reference(&device, &queue, Some(shape));
+        every_frame_matches_the_reference(&device, &queue, Some(shape), formats);
     }
 }
+
+const V1: FormatVersion = FormatVersion::V1;
+const V2: FormatVersion = FormatVersion::V2;
 
 fn every_frame_matches_the_reference(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     decode_shape: Option<DecodeShape>,
+    formats: &[FormatVersion],
 ) {
     let n = 48;
-    for (kind, ch, (w, h)) in [
+    // Each in format 1 and in format 2, whose sections the GPU decodes as coded.
+    let cases = [
         (InputKind::Hdr, 3, (1000, 600)),
         (InputKind::Srgb8, 3, (4096, 64)),
         (InputKind::Hdr, 1, (4096, 64)),
         (InputKind::Srgb8, 1, (1000, 600)),
-    ] {
+    ];
+    for (format, (kind, ch, (w, h))) in formats.iter().flat_map(|&f| cases.map(|c| (f, c))) {
         let mut src = sequence(w, h, n, kind);
         if ch == 1 {
             for f in &mut src.frames {
@@ -1052,6 +1060,7 @@ fn every_frame_matches_the_reference(
         }
         let mut cfg = config(SegmentMode::Fixed(2));
         cfg.intra_interval_s = 1000.0;
+        cfg.format = format;
         let bytes = encode_bytes(&src, &cfg);
         let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
         // The longest run of predicted keyframes (the encoder may still code one intra
@@ -1072,7 +1081,9 @@ fn every_frame_matches_the_reference(
             ..inline(Policy::Interpolate, Throttle::UNLIMITED)
         };
         let mut player = Player::open(device, queue, Cursor::new(bytes), cfg).unwrap();
-        let what = format!("{kind:?}, {ch} channel(s), {w}×{h}, decode shape {decode_shape:?}");
+        let what = format!(
+            "{format:?}, {kind:?}, {ch} channel(s), {w}×{h}, decode shape {decode_shape:?}"
+        );
         let mode = if kind == InputKind::Srgb8 {
             Output::Stored
         } else {

@@ -299,6 +299,10 @@ pub struct ShapeArgs {
     /// a GPU's decode on lavapipe, to count its steps.
     #[arg(long, value_enum)]
     pub weights: Option<Weights>,
+    /// Decode a version 2 file's sections on the GPU as coded (true) or decoded to pairs by
+    /// the decoder thread (false) (`DecodeShape::lanes`; true on a GPU).
+    #[arg(long)]
+    pub lanes: Option<bool>,
 }
 
 /// The measured pass weights (`vbim_player::PassWeights`).
@@ -322,6 +326,7 @@ impl ShapeArgs {
                 Some(Weights::H100) => vbim_player::PassWeights::H100,
                 None => base.weights,
             },
+            lanes: self.lanes.unwrap_or(base.lanes),
         }
     }
 }

@@ -23,7 +23,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         .map(|e| &bytes[e.offset as usize..(e.offset + e.length) as usize])
         .collect();
     let duration = h.frame_count as f64 / h.fps();
-    let (mut zstd_t, mut full_t) = (Vec::new(), Vec::new());
+    let (mut zstd_t, mut full_t, mut pairs_t) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..a.runs.max(1) {
         // The entropy decoding alone: every keyframe, tile map and coefficient chunk
         // decompressed (zstd), or decoded to pairs (format 2's rANS lanes).
@@ -54,15 +54,24 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         std::hint::black_box(total);
         // The player's decoder: every chunk in playback order, every segment filled for
         // the GPU (scanned streams; the GPU does the rest).
-        let t = Instant::now();
-        let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
-        let mut packed = SegmentData::new();
-        for (i, c) in chunks.iter().enumerate() {
-            if let Event::Ready(s) = dec.take(i, Some(c)) {
-                dec.fill(s, 0, 0, &mut packed)?;
+        // Format 2: with its sections as coded (for a GPU), and decoded to pairs (for a
+        // CPU adapter, `DecodeShape::lanes`).
+        let lanes = matches!(h.coding, vbim_format::Coding::Lanes(_));
+        for (as_coded, times) in [(true, &mut full_t), (false, &mut pairs_t)] {
+            if !as_coded && !lanes {
+                continue;
             }
+            let t = Instant::now();
+            let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
+            dec.set_lanes(as_coded);
+            let mut packed = SegmentData::new();
+            for (i, c) in chunks.iter().enumerate() {
+                if let Event::Ready(s) = dec.take(i, Some(c)) {
+                    dec.fill(s, 0, 0, &mut packed)?;
+                }
+            }
+            times.push(t.elapsed().as_secs_f64());
         }
-        full_t.push(t.elapsed().as_secs_f64());
     }
     let gpu = a
         .gpu
@@ -84,7 +93,19 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         zm,
         100.0 * zm / duration
     );
-    println!("full decode     median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time", fm, 100.0 * fm / duration);
+    let what = match pairs_t.is_empty() {
+        true => "full decode    ",
+        false => "full, as coded ",
+    };
+    println!(
+        "{what} median {:.3} s (min {f0:.3}, max {f1:.3}) = {:.2}% of one core in real time",
+        fm,
+        100.0 * fm / duration
+    );
+    if !pairs_t.is_empty() {
+        let (pm, p0, p1) = stats(&mut pairs_t);
+        println!("full, to pairs  median {pm:.3} s (min {p0:.3}, max {p1:.3}) = {:.2}% of one core in real time (the decoder thread's work where the GPU parses pairs: a CPU adapter)", 100.0 * pm / duration);
+    }
     if let Some((adapter, mut times, boxes, passes, (names, samples))) = gpu {
         let (gm, g0, g1) = stats(&mut times);
         println!(
@@ -119,12 +140,13 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
 /// A decode shape in words, for the benchmarks' first line.
 fn describe(s: &vbim_player::DecodeShape) -> String {
     format!(
-        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights",
+        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}",
         s.slice_groups,
         if s.wide_parse { "wide" } else { "serial" },
         s.group_split,
         s.step_cost,
-        if s.weights == vbim_player::PassWeights::H100 { "H100" } else if s.weights == vbim_player::PassWeights::LAVAPIPE { "lavapipe" } else { "own" }
+        if s.weights == vbim_player::PassWeights::H100 { "H100" } else if s.weights == vbim_player::PassWeights::LAVAPIPE { "lavapipe" } else { "own" },
+        if s.lanes { "as coded" } else { "as pairs" }
     )
 }
 
@@ -163,6 +185,7 @@ fn gpu_decode(
     let (mut names, mut samples) = (Vec::new(), Vec::new());
     for _ in 0..runs.max(1) {
         let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.to_vec());
+        dec.set_lanes(shape.lanes);
         let mut seg = SegmentData::new();
         let (mut t, mut n) = (0.0, 0);
         for (i, c) in chunks.iter().enumerate() {

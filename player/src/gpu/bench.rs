@@ -43,10 +43,9 @@ impl GpuDecoder {
         h: &vbim_format::Header,
         shape: Option<crate::DecodeShape>,
     ) -> Self {
-        let mut gpu = Gpu::for_stream(device, queue, h);
-        if let Some(shape) = shape {
-            gpu.set_decode_shape(shape);
-        }
+        let shape =
+            shape.unwrap_or_else(|| crate::DecodeShape::for_adapter(&device.adapter_info()));
+        let mut gpu = Gpu::for_stream(device, queue, h, shape);
         gpu.marks = crate::marks::Marks::new(device);
         GpuDecoder(gpu)
     }

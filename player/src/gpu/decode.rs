@@ -4,12 +4,13 @@
 //! frames before it is shown ([`Op`], [`Gpu::plan_decode`], [`Gpu::record`]).
 
 use super::job::{Job, JOB_STRIDE};
+use super::ops::{Kind, Op};
 use super::plan::*;
 use super::resources::slice_buffer;
 use super::Gpu;
 use crate::coded::Coded;
 use crate::decoder::SegmentData;
-use crate::{DecodeShape, PassWeights};
+use crate::DecodeShape;
 
 /// Workgroups of one slice of a pass: a pass over more goes in several dispatches, which
 /// may land in different frames. (32 workgroups of 64 blocks: 131 072 texels of a plane.)
@@ -42,72 +43,6 @@ const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 /// decode.wgsl).
 const ZERO_ROWS: u32 = 8;
 const _: () = assert!(SLICE_GROUPS.is_multiple_of(ZERO_ROWS));
-
-/// What one step of a decode records.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
-    /// The segment's streams into the stream buffer (from the box's staging buffer, or
-    /// its words); the box is needed until this is recorded.
-    Upload,
-    /// The dense plane's masks and sets cleared for a part (`bytes` of them).
-    Clear {
-        bytes: u64,
-    },
-    /// An invocation per piece of a stream.
-    Parse,
-    /// A workgroup per piece.
-    ParseWide,
-    KeyAdd,
-    KeyRange,
-    KeyPack,
-    /// A bubble set's bounds cleared.
-    Bounds {
-        offset: u64,
-        bytes: u64,
-    },
-    /// A bubble set's tile degrees cleared.
-    Degrees {
-        offset: u64,
-        bytes: u64,
-    },
-    BubbleZero,
-    BubbleBound,
-    BubbleWrite,
-}
-
-/// One step of a segment's decode: a dispatch (or a clear) and what it costs.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Op {
-    kind: Kind,
-    /// The job's offset in the jobs buffer.
-    job: u32,
-    /// The slice's offset in the slices buffer (slice k at k · [`JOB_STRIDE`]: its first
-    /// workgroup, k · [`SLICE_GROUPS`]).
-    slice: u32,
-    groups: [u32; 3],
-    /// A keyframe pass's plane (which view of the head it binds).
-    channel: u32,
-    /// The work it records, in blocks: the time of 8×8 texels of one plane through
-    /// `bubble_write`, the other passes' units weighted by their measured cost
-    /// ([`DecodeShape::weights`]; a parse's unit is an entry point, a zero pass's 64
-    /// texels, a pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its
-    /// latency ([`DecodeShape::step_cost`]). What [`PlayerConfig::decode_budget`] counts.
-    ///
-    /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
-    pub cost: u64,
-    /// The work it records in its pass's own unit ([`PassWeights`] says which).
-    units: u64,
-    /// Whether this op packs the head into a slot: once all of a pack's ops are
-    /// recorded, the slot holds the head's keyframe.
-    pub packs: bool,
-}
-
-impl Op {
-    /// Whether recording it needs the segment's box (the upload).
-    pub fn needs_box(&self) -> bool {
-        self.kind == Kind::Upload
-    }
-}
 
 /// Where a segment's decode puts what it builds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -170,6 +105,7 @@ impl Gpu {
         }
         let (pw, ph) = (self.plane[0], self.plane[1]);
         self.job_bytes.clear();
+        self.planned_section = None;
         ops.clear();
         ops.push(Op::new(Kind::Upload, 0, [0; 3], 0, 0));
         let [rx, ry] = self.regions;
@@ -214,7 +150,7 @@ impl Gpu {
                 let span = &seg.planes[st.plane + p as usize];
                 for job in self.part_jobs(span, p) {
                     let blocks = job.hi - job.lo.min(job.hi);
-                    self.parse_ops(ops, job, blocks, p);
+                    self.coef_ops(ops, (span, &seg.sections), job, blocks, p);
                     // A predicted keyframe is added onto the head (the keyframe it
                     // follows); an intra one is written over it, zeros and all.
                     let intra = st.intra as u32;
@@ -268,7 +204,7 @@ impl Gpu {
                     if blocks == 0 {
                         continue;
                     }
-                    self.parse_ops(ops, job, blocks, 0);
+                    self.coef_ops(ops, (span, &seg.sections), job, blocks, 0);
                     let units = (blocks as u64, 64);
                     self.sliced(ops, Kind::BubbleBound, job, blocks.div_ceil(64), 0, units);
                     if whole {
@@ -280,7 +216,7 @@ impl Gpu {
                 }
                 for job in self.part_jobs(span, layer).map(marking) {
                     let blocks = job.hi - job.lo.min(job.hi);
-                    self.parse_ops(ops, job, blocks, 0);
+                    self.coef_ops(ops, (span, &seg.sections), job, blocks, 0);
                     self.block_pass(ops, Kind::BubbleWrite, job, blocks, 0);
                 }
             }
@@ -390,6 +326,7 @@ impl Gpu {
     fn dispatch(&self, pass: &mut wgpu::ComputePass, op: &Op) {
         let key = self.key_groups.get(op.channel as usize);
         let (pipeline, group) = match op.kind {
+            Kind::Lane(which) => return self.dispatch_lanes(pass, op, which),
             Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref()),
             Kind::Parse => (&self.parse, self.parse_group.as_ref()),
             Kind::KeyAdd => (&self.key_add, key),
@@ -456,12 +393,28 @@ impl Gpu {
         })
     }
 
+    /// The ops that put the part of `job` of plane `span` into the dense plane: its lanes
+    /// decoded (a version 2 plane, [`Gpu::lane_ops`]), or its pairs parsed.
+    fn coef_ops(
+        &mut self,
+        ops: &mut Vec<Op>,
+        (span, sections): (&crate::coded::PlaneSpan, &[crate::coded::SectionSpan]),
+        job: Job,
+        blocks: u32,
+        channel: u32,
+    ) {
+        match span.lanes {
+            Some(lanes) => self.lane_ops(ops, (span, lanes), sections, channel),
+            None => self.parse_ops(ops, job, blocks, channel),
+        }
+    }
+
     /// The masks and sets of the dense plane's first `blocks` blocks cleared, then the
     /// part of `job` parsed into it from its entry points. (The coefficients themselves
     /// need no clearing: only those whose mask bit the parse sets are ever read.)
     fn parse_ops(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
         let bytes = groups_offset(self.part) + group_bytes(blocks);
-        ops.push(Op::new(Kind::Clear { bytes }, 0, [0; 3], channel, 0));
+        ops.push(Op::clear(bytes, channel));
         // An invocation per piece, 64 to a workgroup; or a workgroup per piece.
         let (kind, groups, per_group) = match self.shape.wide_parse {
             false => (Kind::Parse, job.count.div_ceil(64), 64),
@@ -593,16 +546,21 @@ impl Gpu {
 
     /// Appends `job` to the jobs of the decode being planned; returns its offset.
     fn push_job(&mut self, job: Job) -> u32 {
+        self.push_job_bytes(bytemuck::bytes_of(&job))
+    }
+
+    /// Appends a job's bytes (a [`Job`] or a lanes job) to the jobs of the decode being
+    /// planned, [`JOB_STRIDE`] apart; returns its offset.
+    pub(super) fn push_job_bytes(&mut self, job: &[u8]) -> u32 {
         // The passes over one part share its job (first slices start at workgroup 0):
         // one upload of it, not one per pass.
-        let size = std::mem::size_of::<Job>();
         if let Some(last) = self.job_bytes.len().checked_sub(JOB_STRIDE as usize) {
-            if self.job_bytes[last..last + size] == *bytemuck::bytes_of(&job) {
+            if self.job_bytes[last..last + job.len()] == *job {
                 return last as u32;
             }
         }
         let at = self.job_bytes.len();
-        self.job_bytes.extend_from_slice(bytemuck::bytes_of(&job));
+        self.job_bytes.extend_from_slice(job);
         self.job_bytes.resize(at + JOB_STRIDE as usize, 0);
         at as u32
     }
@@ -614,66 +572,5 @@ impl Gpu {
             self.queue
                 .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.words));
         }
-    }
-}
-
-impl Kind {
-    /// The name of a dispatch's pass (its shader entry point; both parses are "parse"),
-    /// as its timestamp is labelled; `None` for what is not a dispatch.
-    fn label(self) -> Option<&'static str> {
-        Some(match self {
-            Kind::Parse | Kind::ParseWide => "parse",
-            Kind::KeyAdd => "key_add",
-            Kind::KeyRange => "key_range",
-            Kind::KeyPack => "key_pack",
-            Kind::BubbleZero => "bubble_zero",
-            Kind::BubbleBound => "bubble_bound",
-            Kind::BubbleWrite => "bubble_write",
-            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
-                return None
-            }
-        })
-    }
-
-    /// What one unit of the pass costs, in quarters of a block through `bubble_write`.
-    fn weight(self, w: &PassWeights) -> u32 {
-        match self {
-            Kind::Parse | Kind::ParseWide => w.parse,
-            Kind::KeyAdd => w.key_add,
-            Kind::KeyRange => w.key_range,
-            Kind::KeyPack => w.key_pack,
-            Kind::BubbleZero => w.bubble_zero,
-            Kind::BubbleBound => w.bubble_bound,
-            Kind::BubbleWrite => w.bubble_write,
-            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => 0,
-        }
-    }
-}
-
-impl Op {
-    fn new(kind: Kind, job: u32, groups: [u32; 3], channel: u32, units: u64) -> Op {
-        Op {
-            kind,
-            job,
-            slice: 0,
-            groups,
-            channel,
-            units,
-            cost: 0,
-            packs: false,
-        }
-    }
-
-    /// The same op, in slice `k` of its pass.
-    fn in_slice(self, k: u32) -> Op {
-        Op {
-            slice: k * JOB_STRIDE as u32,
-            ..self
-        }
-    }
-
-    /// Whether it is a dispatch (recorded inside a compute pass).
-    fn dispatches(&self) -> bool {
-        self.kind.label().is_some()
     }
 }

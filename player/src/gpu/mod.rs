@@ -20,16 +20,20 @@
 //! By concern: `device` (opening one headless), `plan` (what the state holds, in bytes, before
 //! it exists), `resources` (creating it), `job` (a decode pass's parameters, as the shader
 //! declares them), `decode` (recording a segment's decode), `reconstruct` (recording a
-//! frame's reconstruction and the hold pass), `bench` (the decode alone, timed).
+//! frame's reconstruction and the hold pass), `bench` (the decode alone, timed), `ops`
+//! (one step of a decode and its cost), `lanes` (version 2's sections decoded as coded,
+//! `lanes.wgsl`).
 
 #[cfg(feature = "bench")]
 mod bench;
 mod decode;
 mod device;
 mod job;
-mod plan;
+mod lanes;
 #[cfg(test)]
-mod plane2;
+mod lanes_tests;
+mod ops;
+mod plan;
 mod reconstruct;
 mod resources;
 #[cfg(test)]
@@ -37,12 +41,14 @@ mod tests;
 
 #[cfg(feature = "bench")]
 pub use bench::GpuDecoder;
+pub(crate) use decode::Target;
 #[cfg(feature = "bench")]
 pub use decode::PASS_CHANGES;
-pub(crate) use decode::{Op, Target};
 #[cfg(feature = "bench")]
 pub use device::timing_device;
 pub use device::{headless_device, headless_device_on, DeviceError, Headless};
+pub(crate) use lanes::{decodes_lanes, lanes_bytes};
+pub(crate) use ops::Op;
 pub use plan::lightmap_descriptor;
 pub(crate) use plan::{min_array_layers, planned_texture_bytes, BUBBLE_SETS, KEY_SLOTS};
 pub use reconstruct::OutputError;
@@ -148,6 +154,11 @@ pub(crate) struct Gpu {
     tile_count: u32,
     /// Each tile's degree per bubble set and plane (`degrees` in decode.wgsl).
     degrees: wgpu::Buffer,
+    /// A version 2 stream's decode of its sections as coded (`lanes.wgsl`); `None`
+    /// where planes come as pairs.
+    lanes: Option<lanes::LanesGpu>,
+    /// The section whose tables the decode being planned last built.
+    planned_section: Option<u32>,
 }
 
 impl Gpu {

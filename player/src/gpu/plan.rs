@@ -272,5 +272,6 @@ impl Gpu {
             + self.tiles.size()
             + self.peaks.size()
             + self.degrees.size()
+            + self.lanes.as_ref().map_or(0, |l| l.scratch.size())
     }
 }

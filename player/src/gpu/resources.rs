@@ -20,10 +20,16 @@ struct Tables {
 
 impl Gpu {
     /// GPU state for the stream `h` describes (its size, padded planes, degree, channels
-    /// and tiles).
-    pub fn for_stream(device: &wgpu::Device, queue: &wgpu::Queue, h: &vbim_format::Header) -> Gpu {
+    /// and tiles), decoding in `shape` (a version 2 file's sections as coded where
+    /// [`DecodeShape::lanes`](crate::DecodeShape::lanes) says so).
+    pub fn for_stream(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        h: &vbim_format::Header,
+        shape: crate::DecodeShape,
+    ) -> Gpu {
         let (pw, ph) = vbim_format::chunk::padded_size(h);
-        Gpu::new(
+        let mut gpu = Gpu::new(
             device,
             queue,
             (h.width, h.height),
@@ -31,7 +37,21 @@ impl Gpu {
             h.max_degree as u32,
             h.channels as u32,
             h.tile_size as u32,
-        )
+        );
+        gpu.set_decode_shape(shape);
+        if let Some(maps) = h.context_maps().filter(|_| shape.lanes) {
+            gpu.decode_lanes(maps);
+        }
+        gpu
+    }
+
+    /// Decodes version 2 planes coded with `maps` as coded from now on (where they fit
+    /// the dense plane whole, [`super::lanes::Scratch::new`]).
+    pub(super) fn decode_lanes(&mut self, maps: &[vbim_format::plane2::ContextMap]) {
+        let geometry = (self.plane, self.per * 8);
+        let sets = groups_offset(self.part);
+        self.lanes = super::lanes::LanesGpu::new(&self.device, &self.queue, geometry, maps, sets);
+        self.bind_decode();
     }
 
     /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
@@ -264,6 +284,8 @@ impl Gpu {
             tiles_x: plane[0] / tile_size,
             tile_count: (plane[0] / tile_size) * (plane[1] / tile_size),
             degrees,
+            lanes: None,
+            planned_section: None,
         };
         gpu.bind_decode();
         gpu.set_decode_shape(crate::DecodeShape::for_adapter(&device.adapter_info()));
@@ -366,6 +388,11 @@ impl Gpu {
             &self.bubble_layout,
             &[tables.clone(), view(4, &self.bubble_view), bounds, degrees],
         ));
+        if let Some(mut lanes) = self.lanes.take() {
+            let dense = (&self.coefs, &self.masks);
+            lanes.bind(&self.device, &self.jobs, &self.words, dense);
+            self.lanes = Some(lanes);
+        }
     }
 }
 

@@ -11,7 +11,7 @@ use crate::readback::{read_buffer, read_texture_layer};
 
 /// A GPU's decode shape (the wide parse, groups split among workgroups) or a CPU
 /// adapter's, on the tests' adapter.
-fn shape(gpu: bool) -> crate::DecodeShape {
+pub(super) fn shape(gpu: bool) -> crate::DecodeShape {
     if gpu {
         crate::DecodeShape::GPU
     } else {
@@ -19,7 +19,7 @@ fn shape(gpu: bool) -> crate::DecodeShape {
     }
 }
 
-fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
+pub(super) fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
     let mut next = || {
         *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
         *seed >> 8
@@ -39,7 +39,7 @@ fn random_blocks(n: usize, seed: &mut u32) -> Vec<[i32; 64]> {
 
 /// A stream of `blocks` scanned and appended to `c` (with `members`, as a bubble
 /// plane's).
-fn coded_plane(
+pub(super) fn coded_plane(
     c: &mut Coded,
     step: f32,
     blocks: &[[i32; 64]],
@@ -80,7 +80,7 @@ fn bubble_reference(
 
 /// Decodes the plane at `span` of `data` as a segment's one bubble plane (term 2 of a
 /// one-channel stream, no keyframe step) into bubble set 0.
-fn decode_bubble_plane(gpu: &mut Gpu, data: Coded, span: PlaneSpan) {
+pub(super) fn decode_bubble_plane(gpu: &mut Gpu, data: Coded, span: PlaneSpan) {
     let mut seg = SegmentData::new();
     seg.steps = Vec::new();
     seg.planes = vec![span, span];
@@ -94,7 +94,7 @@ fn decode_bubble_plane(gpu: &mut Gpu, data: Coded, span: PlaneSpan) {
 
 /// Decodes one keyframe step (plane 0 of a one-channel stream) onto the head; returns
 /// each dispatch's pass and work ([`Gpu::decode`]).
-fn decode_key_step(
+pub(super) fn decode_key_step(
     gpu: &mut Gpu,
     number: usize,
     span: PlaneSpan,

@@ -1,19 +1,26 @@
-// Format 2's coefficient coding decoded on the GPU: one invocation per rANS lane, the
-// passes of `vbim_format::plane2` (its module documentation is the specification; this
-// follows it step for step). Dispatches: `slots` once per section (the slot tables from
-// the histograms' frequencies), then per plane `prepare` (each tile's rank, each group's
-// flag cleared and whether it has a block), `flags` with parity 0 then 1, `blocks` with
-// parity 0 then 1, then `dc_rows` and `dc_cols`. Each lane keeps its state between
-// dispatches in `lanes`. The host uploads what the player's decode uploads for a plane:
-// its words, lanes and histograms, and a bubble plane's member spans; nothing per block
-// or per slot.
+// Format 2's coefficient sections decoded on the GPU, straight into the dense plane the
+// decode passes read (decode.wgsl): one invocation per rANS lane, the passes of
+// `vbim_format::plane2`, whose module documentation is the specification; this follows it
+// step for step. Dispatches (player/src/gpu/lanes.rs): `slots` once per section (each
+// family's histogram of each context, and the slot tables of the histograms the chunk
+// sent itself; the file's were written when the stream opened), then per plane `prepare`
+// (lanes' states, each tile's rank, each group's flags, the blocks' residuals cleared),
+// `flags` with parity 0 then 1, `blocks` with parity 0 then 1, `dc_rows` and `dc_cols`.
+// Each lane keeps its state in the scratch buffer between dispatches.
 //
 // llvmpipe (lavapipe) ends every loop of an invocation once its loops have run 65,535
 // iterations in all: so no loop per symbol here (a slot table finds the token, raw bits
-// and neighbours are unrolled), blocks are visited by the groups that hold something,
-// and the encoder bounds a lane's symbols and regions (`vbim_format::plane2`).
+// and neighbours are unrolled), blocks are visited by the rows of groups that hold
+// something, and the file bounds a lane's regions (the decoder thread refuses more than
+// `plane2::MAX_LANE_REGIONS`) and the encoder its symbols.
+//
+// Out-of-range input (a crafted section whose checksums hold) decodes to other
+// coefficients, never to reads or writes outside the plane: a lane stops at its last
+// word, a block's position comes from the grid. A lane that read past its words, decoded
+// a symbol out of range or did not end as the specification's decoder requires (every
+// word read, the state back at 2^16) sets FAULT.
 
-struct Params {
+struct LaneJob {
     // Blocks across and down the plane; groups across and down; regions across.
     bw: u32,
     bh: u32,
@@ -25,52 +32,53 @@ struct Params {
     tile: u32,
     lanes: u32,
     parity: u32,
-    // Where the slot tables start in `tables`.
-    slots: u32,
-    // Where the sets of blocks with a coefficient start in `marks`.
-    sets: u32,
-    // A bubble plane's tiles across and down, member spans and member tiles (0 for a
-    // keyframe plane); the section's histograms.
+    // The section's lanes' words (first word in `seg`); the plane's lanes (two words each:
+    // first region, first word from the section's first; then the end of both); its
+    // family; its blocks.
+    words: u32,
+    table: u32,
+    family: u32,
+    blocks: u32,
+    // A bubble plane's tiles across and down, member spans (first word in `seg`, count)
+    // and member tiles (0 for a keyframe plane).
     tiles_x: u32,
     tiles_y: u32,
+    spans: u32,
     span_count: u32,
     members: u32,
-    histograms: u32,
+    // `slots`: the histograms the section sent itself (first word in `seg`, count), and
+    // per family the first word of its clusters' histograms (NONE: not used).
+    own: u32,
+    own_count: u32,
     _pad: u32,
+    places: array<vec4<u32>, 2>,
 }
 
-@group(0) @binding(0) var<uniform> prm: Params;
-// The lanes' 16-bit words, two to a u32 (the first in the low half).
-@group(0) @binding(1) var<storage, read> words: array<u32>;
-// Two entries per lane: (state, next word, end word, failed: non-zero once the lane read
-// past its words or decoded a symbol out of range), then its regions [first, end).
-@group(0) @binding(2) var<storage, read_write> lanes: array<vec4<u32>>;
-// Per context its histogram (0xFFFF: none sent); then per histogram 128 entries,
-// frequency | cumulative frequency << 16; then from `prm.slots` per histogram the token
-// of each of the 4096 slots, four to a word (written by `slots`).
-@group(0) @binding(3) var<storage, read_write> tables: array<u32>;
-// A bubble plane's member spans, as the player's decode reads them
-// (player/src/coded.rs): the span's first tile (raster order over the plane's tiles) and
-// that tile's rank among the members, spans in raster order.
-@group(0) @binding(4) var<storage, read> spans: array<vec2<u32>>;
-// Per group: bit 0, it has a block; bit 1, it holds something (both written by
-// `prepare`, bit 1 then by `flags`). Then, from word gw · gh, a bubble plane's rank of
-// each tile among its members (NONE: not a member), also written by `prepare`: the lookup
-// from a cell to its block without a loop (llvmpipe's budget of loop iterations per
-// invocation, above) and without a table per cell from the host. (One buffer for both:
-// WebGPU's default limit is 8 storage buffers a stage.)
-@group(0) @binding(5) var<storage, read_write> groups: array<u32>;
-// Per block: its DC residual and its count of coefficients.
-@group(0) @binding(6) var<storage, read_write> info: array<vec2<i32>>;
-// The dense plane as the player's decode passes read it (player/src/gpu/decode.wgsl):
-// block b's coefficients at 64 · b …, valid where its mask has the bit (never cleared:
-// only the non-zero ones are written), ...
-@group(0) @binding(7) var<storage, read_write> coefs: array<i32>;
-// ... its mask at words 2b and 2b + 1, then from `prm.sets` a bit per block that has a
-// coefficient (cleared before the first pass).
-@group(0) @binding(8) var<storage, read_write> marks: array<atomic<u32>>;
+@group(0) @binding(0) var<uniform> prm: LaneJob;
+// The segment's words (player/src/coded.rs).
+@group(0) @binding(1) var<storage, read> seg: array<u32>;
+// The decode's own state, at the offsets below (player/src/gpu/lanes.rs sizes it).
+@group(0) @binding(2) var<storage, read_write> scratch: array<u32>;
+// The dense plane: block b's coefficients at 64 · b …, valid where its mask has the bit
+// (only the non-zero ones are written; never cleared), ...
+@group(0) @binding(3) var<storage, read_write> coefs: array<i32>;
+// ... its mask at words 2b and 2b + 1, then from SETS a bit per block that has a
+// coefficient (both cleared before the plane).
+@group(0) @binding(4) var<storage, read_write> marks: array<atomic<u32>>;
+
+// Scratch: per family the cluster of each context (the file's maps, written once) ...
+const MAPS: u32 = 0u;
+// ... per family the histogram of each context (NONE: the chunk sent none), by `slots` ...
+const HIST_OF: u32 = MAPS + FAMILIES * CONTEXTS;
+// ... per histogram (the file's, then a section's own) its 128 tokens' frequency |
+// cumulative frequency << 16 (ENTRIES) and its 4096 slots' tokens, four to a word
+// (SLOTS); per group its flags, then each tile's rank (GROUPS); per block its DC residual
+// and coefficient count (INFO); per lane its state (LANE_STATES); and FAULT, set by a lane
+// that read past its words or decoded a symbol out of range. (Declared before this file:
+// ENTRIES, SLOTS, GROUPS, INFO, LANE_STATES, FAULT, HISTOGRAMS, FILE_HISTOGRAMS, SETS.)
 
 const NONE: u32 = 0xFFFFFFFFu;
+const FAMILIES: u32 = 6u;
 const CONTEXTS: u32 = 502u;
 const FLAG: u32 = 0u;
 const DC: u32 = 6u;
@@ -89,8 +97,9 @@ fn fail() {
     failed = 1u;
 }
 
+// Word i of the section's lanes (16-bit).
 fn word(i: u32) -> u32 {
-    let w = words[i >> 1u];
+    let w = seg[prm.words + (i >> 1u)];
     return select(w & 0xFFFFu, w >> 16u, (i & 1u) == 1u);
 }
 
@@ -111,9 +120,9 @@ fn step(f: u32, c: u32) {
 // The token of histogram h whose slots hold the state's, from the slot table.
 fn token(h: u32) -> u32 {
     let slot = x & 4095u;
-    let w = tables[prm.slots + h * 1024u + (slot >> 2u)];
-    let t = (w >> ((slot & 3u) * 8u)) & 0xFFu;
-    let e = tables[CONTEXTS + h * 128u + t];
+    let w = scratch[SLOTS + h * 1024u + (slot >> 2u)];
+    let t = (w >> ((slot & 3u) * 8u)) & 0x7Fu;
+    let e = scratch[ENTRIES + h * 128u + t];
     if ((e & 0xFFFFu) == 0u) {
         fail();
     } else {
@@ -147,11 +156,11 @@ fn raw(bits: u32) -> u32 {
     return (((a << 12u) | b) << (bits - 24u)) | c;
 }
 
-// The value of the next symbol, coded in context ctx.
+// The value of the next symbol, coded in context ctx of the plane's family.
 fn symbol(ctx: u32) -> u32 {
-    let h = tables[ctx];
+    let h = scratch[HIST_OF + prm.family * CONTEXTS + ctx];
     var r = 0u;
-    if (h == 0xFFFFu) {
+    if (h >= HISTOGRAMS) {
         fail();
     } else {
         let t = token(h);
@@ -216,7 +225,7 @@ fn block_at(cx: i32, cy: i32) -> u32 {
     if (prm.tile == 0u) {
         return y * prm.bw + x;
     }
-    let r = groups[prm.gw * prm.gh + (y / prm.tile) * prm.tiles_x + x / prm.tile];
+    let r = scratch[GROUPS + prm.gw * prm.gh + (y / prm.tile) * prm.tiles_x + x / prm.tile];
     if (r == NONE) {
         return NONE;
     }
@@ -231,7 +240,7 @@ fn rank_of(t: u32) -> u32 {
     var hi = prm.span_count;
     while (lo < hi) {
         let mid = (lo + hi) / 2u;
-        if (spans[mid].x <= t) {
+        if (seg[prm.spans + 2u * mid] <= t) {
             lo = mid + 1u;
         } else {
             hi = mid;
@@ -240,49 +249,98 @@ fn rank_of(t: u32) -> u32 {
     if (lo == 0u) {
         return NONE;
     }
-    let s = spans[lo - 1u];
+    let first = seg[prm.spans + 2u * (lo - 1u)];
+    let rank = seg[prm.spans + 2u * (lo - 1u) + 1u];
     var next = prm.members;
     if (lo < prm.span_count) {
-        next = spans[lo].y;
+        next = seg[prm.spans + 2u * lo + 1u];
     }
-    let r = s.y + (t - s.x);
+    let r = rank + (t - first);
     return select(NONE, r, r < next);
 }
 
-// The slot tables: invocation i fills word i of them (four slots of histogram i / 1024),
-// each slot's token the last whose cumulative frequency is at most the slot (tokens of
-// frequency 0 share the next one's, which comes after them).
-@compute @workgroup_size(64)
-fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
-    let h = id.x / 1024u;
-    if (h >= prm.histograms) {
-        return;
-    }
-    var w = 0u;
-    for (var k = 0u; k < 4u; k = k + 1u) {
-        let slot = (id.x % 1024u) * 4u + k;
-        var lo = 0u;
-        var hi = 128u;
-        while (lo < hi) {
-            let mid = (lo + hi) / 2u;
-            if ((tables[CONTEXTS + h * 128u + mid] >> 16u) <= slot) {
-                lo = mid + 1u;
-            } else {
-                hi = mid;
-            }
-        }
-        w = w | ((max(lo, 1u) - 1u) << (k * 8u));
-    }
-    tables[prm.slots + id.x] = w;
+// Frequency of token t of the section's own histogram h.
+fn own_frequency(h: u32, t: u32) -> u32 {
+    let w = seg[prm.own + h * 64u + t / 2u];
+    return select(w & 0xFFFFu, w >> 16u, (t & 1u) == 1u);
 }
 
-// Per plane, before its lanes: each tile's rank (a bubble plane), and each group's
-// flags: bit 0 if it has a block, bit 1 cleared (the plane before may have set it).
+// Once per section: each family's histogram of each context (for the families the
+// section uses), then the entries and slot tables of the histograms it sent itself (each
+// slot's token the first whose cumulative range holds it).
+@compute @workgroup_size(64)
+fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if (i < FAMILIES * CONTEXTS) {
+        let f = i / CONTEXTS;
+        let first = prm.places[f / 4u][f % 4u];
+        if (first != NONE) {
+            scratch[HIST_OF + i] = seg[first + scratch[MAPS + i]];
+        }
+        return;
+    }
+    let j = i - FAMILIES * CONTEXTS;
+    if (j < prm.own_count * 128u) {
+        let h = j / 128u;
+        let t = j % 128u;
+        var cum = 0u;
+        for (var u = 0u; u < t; u = u + 1u) {
+            cum = cum + own_frequency(h, u);
+        }
+        let into = FILE_HISTOGRAMS + h;
+        scratch[ENTRIES + into * 128u + t] = own_frequency(h, t) | (min(cum, 4096u) << 16u);
+        return;
+    }
+    let k = j - prm.own_count * 128u;
+    if (k >= prm.own_count * 1024u) {
+        return;
+    }
+    let h = k / 1024u;
+    var t = 0u;
+    var cum = 0u;
+    var w = 0u;
+    for (var s = 0u; s < 4u; s = s + 1u) {
+        let slot = (k % 1024u) * 4u + s;
+        loop {
+            let f = own_frequency(h, t);
+            if (cum + f > slot || t >= 127u) {
+                break;
+            }
+            cum = cum + f;
+            t = t + 1u;
+        }
+        w = w | (t << (s * 8u));
+    }
+    scratch[SLOTS + (FILE_HISTOGRAMS + h) * 1024u + k % 1024u] = w;
+}
+
+// Per plane, before its lanes: each lane's state from its first words, each tile's rank
+// (a bubble plane), each group's flags (bit 0 if it has a block, bit 1 cleared) and each
+// block's residual and count cleared (blocks of groups that hold nothing are never
+// decoded, and their neighbours read them as zeros).
 @compute @workgroup_size(64)
 fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
+    if (i < prm.lanes) {
+        let w0 = seg[prm.table + 2u * i + 1u];
+        let w1 = seg[prm.table + 2u * i + 3u];
+        var state = vec4<u32>(0u, w0 + 2u, w1, 1u);
+        if (w1 >= w0 + 2u) {
+            state.x = (word(w0) << 16u) | word(w0 + 1u);
+            state.w = select(0u, 1u, state.x < 65536u);
+        }
+        let s = LANE_STATES + 4u * i;
+        scratch[s] = state.x;
+        scratch[s + 1u] = state.y;
+        scratch[s + 2u] = state.z;
+        scratch[s + 3u] = state.w;
+    }
+    if (i < prm.blocks) {
+        scratch[INFO + 2u * i] = 0u;
+        scratch[INFO + 2u * i + 1u] = 0u;
+    }
     if (prm.tile != 0u && i < prm.tiles_x * prm.tiles_y) {
-        groups[prm.gw * prm.gh + i] = rank_of(i);
+        scratch[GROUPS + prm.gw * prm.gh + i] = rank_of(i);
     }
     if (i >= prm.gw * prm.gh) {
         return;
@@ -291,8 +349,8 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let gy = i / prm.gw;
     var has = 1u;
     if (prm.tile != 0u) {
-        // The tiles the group's blocks lie in (its own ranks are not written yet: this
-        // dispatch writes them).
+        // The tiles the group's blocks lie in (their ranks are being written by this
+        // dispatch: found again).
         has = 0u;
         let x1 = min((gx + 1u) * GROUP, prm.bw) - 1u;
         let y1 = min((gy + 1u) * GROUP, prm.bh) - 1u;
@@ -304,29 +362,36 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    groups[i] = has;
+    scratch[GROUPS + i] = has;
 }
 
+// Lane `lane`'s state into the private variables; returns its regions [first, end).
 fn load(lane: u32) -> vec2<u32> {
-    let s = lanes[2u * lane];
-    x = s.x;
-    at = s.y;
-    end = s.z;
-    failed = s.w;
-    return lanes[2u * lane + 1u].xy;
+    let s = LANE_STATES + 4u * lane;
+    x = scratch[s];
+    at = scratch[s + 1u];
+    end = scratch[s + 2u];
+    failed = scratch[s + 3u];
+    return vec2<u32>(seg[prm.table + 2u * lane], seg[prm.table + 2u * lane + 2u]);
 }
 
 fn save(lane: u32) {
-    lanes[2u * lane] = vec4<u32>(x, at, end, failed);
+    let s = LANE_STATES + 4u * lane;
+    scratch[s] = x;
+    scratch[s + 1u] = at;
+    scratch[s + 2u] = end;
+    scratch[s + 3u] = failed;
+    if (failed != 0u) {
+        scratch[FAULT] = 1u;
+    }
 }
 
-// Whether group (gx, gy) has a block and, if so, holds something (bit 0, bit 1), as seen
-// from a neighbour: 0 outside the grid.
+// Group (gx, gy)'s flags as seen from a neighbour: 0 outside the grid.
 fn group_bits(gx: i32, gy: i32) -> u32 {
     if (gx < 0 || gy < 0 || gx >= i32(prm.gw) || gy >= i32(prm.gh)) {
         return 0u;
     }
-    return groups[u32(gy) * prm.gw + u32(gx)];
+    return scratch[GROUPS + u32(gy) * prm.gw + u32(gx)];
 }
 
 @compute @workgroup_size(64)
@@ -342,8 +407,8 @@ fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
         let ry = (region / prm.rw) * per;
         for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
             for (var gx = rx; gx < min(rx + per, prm.gw); gx = gx + 1u) {
-                let g = gy * prm.gw + gx;
-                if ((groups[g] & 1u) == 0u || (gx + gy) % 2u != prm.parity) {
+                let g = GROUPS + gy * prm.gw + gx;
+                if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != prm.parity) {
                     continue;
                 }
                 var ctx = 0u;
@@ -363,15 +428,15 @@ fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
                 if (f > 1u) {
                     fail();
                 }
-                groups[g] = (groups[g] & 1u) | select(0u, 2u, f == 1u);
+                scratch[g] = (scratch[g] & 1u) | select(0u, 2u, f == 1u);
             }
         }
     }
     save(lane);
 }
 
-// Block (bx, by)'s four neighbours (blocks of the other parity), NONE where there is none,
-// packed first; returns how many there are.
+// Block (bx, by)'s four neighbours (blocks of the other parity), packed first; returns
+// how many there are.
 fn neighbours(bx: u32, by: u32, four: ptr<function, array<u32, 4>>) -> u32 {
     var n = 0u;
     let l = block_at(i32(bx) - 1, i32(by));
@@ -385,19 +450,20 @@ fn neighbours(bx: u32, by: u32, four: ptr<function, array<u32, 4>>) -> u32 {
     return n;
 }
 
-// How many of the first n of four have a coefficient at frequency i.
-fn hits(four: ptr<function, array<u32, 4>>, n: u32, i: u32) -> u32 {
-    var h = 0u;
-    if (n > 0u && has((*four)[0], i)) { h = h + 1u; }
-    if (n > 1u && has((*four)[1], i)) { h = h + 1u; }
-    if (n > 2u && has((*four)[2], i)) { h = h + 1u; }
-    if (n > 3u && has((*four)[3], i)) { h = h + 1u; }
-    return h;
+// Block b's mask (decoded by an earlier dispatch); none for NONE.
+fn mask_of(b: u32) -> vec2<u32> {
+    if (b == NONE) {
+        return vec2<u32>(0u, 0u);
+    }
+    return vec2<u32>(atomicLoad(&marks[2u * b]), atomicLoad(&marks[2u * b + 1u]));
 }
 
-// Whether block b (decoded by an earlier dispatch) has a coefficient at frequency i.
-fn has(b: u32, i: u32) -> bool {
-    return ((atomicLoad(&marks[2u * b + i / 32u]) >> (i % 32u)) & 1u) != 0u;
+fn residual(b: u32) -> i32 {
+    return bitcast<i32>(scratch[INFO + 2u * b]);
+}
+
+fn count(b: u32) -> u32 {
+    return scratch[INFO + 2u * b + 1u];
 }
 
 // Decodes block b at (bx, by), of this pass's parity.
@@ -410,10 +476,10 @@ fn block(b: u32, bx: u32, by: u32) {
     if (odd) {
         var sizes = 0u;
         var counts = 0u;
-        if (n4 > 0u) { sizes += size_class(info[four[0]].x); counts += u32(info[four[0]].y); }
-        if (n4 > 1u) { sizes += size_class(info[four[1]].x); counts += u32(info[four[1]].y); }
-        if (n4 > 2u) { sizes += size_class(info[four[2]].x); counts += u32(info[four[2]].y); }
-        if (n4 > 3u) { sizes += size_class(info[four[3]].x); counts += u32(info[four[3]].y); }
+        if (n4 > 0u) { sizes += size_class(residual(four[0])); counts += count(four[0]); }
+        if (n4 > 1u) { sizes += size_class(residual(four[1])); counts += count(four[1]); }
+        if (n4 > 2u) { sizes += size_class(residual(four[2])); counts += count(four[2]); }
+        if (n4 > 3u) { sizes += size_class(residual(four[3])); counts += count(four[3]); }
         dc_ctx = 1u + min(2u * sizes / n4, 3u);
         count_ctx = 3u + count_bucket((counts + n4 / 2u) / n4);
     }
@@ -426,13 +492,29 @@ fn block(b: u32, bx: u32, by: u32) {
         fail();
         nz = 0u;
     }
-    info[b] = vec2<i32>(r, i32(nz));
+    scratch[INFO + 2u * b] = bitcast<u32>(r);
+    scratch[INFO + 2u * b + 1u] = nz;
     var mask = vec2<u32>(0u, 0u);
     var left = nz;
+    // The neighbours' masks, read once (unused slots are NONE: no bits).
+    var m0 = vec2<u32>(0u, 0u);
+    var m1 = m0;
+    var m2 = m0;
+    var m3 = m0;
+    if (odd && nz > 0u) {
+        m0 = mask_of(four[0]);
+        m1 = mask_of(four[1]);
+        m2 = mask_of(four[2]);
+        m3 = mask_of(four[3]);
+    }
     for (var i = 1u; i < 64u && left > 0u; i = i + 1u) {
         var ctx = left_bucket(left) * 12u + band(i);
         if (odd) {
-            ctx = AC_ODD + min((2u * hits(&four, n4, i) + n4 - 1u) / n4, 2u) * 120u + ctx;
+            let half = i / 32u;
+            let bit = i % 32u;
+            let hits = ((m0[half] >> bit) & 1u) + ((m1[half] >> bit) & 1u)
+                + ((m2[half] >> bit) & 1u) + ((m3[half] >> bit) & 1u);
+            ctx = AC_ODD + min((2u * hits + n4 - 1u) / n4, 2u) * 120u + ctx;
         } else {
             ctx = AC_EVEN + ctx;
         }
@@ -463,20 +545,39 @@ fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
         let rx = (region % prm.rw) * per;
         let ry = (region / prm.rw) * per;
         // Blocks in raster order of the region, by the groups that hold something: a
-        // group's blocks are a run of each of its rows.
-        for (var cy = ry * GROUP; cy < min((ry + per) * GROUP, prm.bh); cy = cy + 1u) {
-            for (var gx = rx; gx < min(rx + per, prm.gw); gx = gx + 1u) {
-                if ((groups[(cy / GROUP) * prm.gw + gx] & 2u) == 0u) {
-                    continue;
-                }
-                for (var bx = gx * GROUP; bx < min((gx + 1u) * GROUP, prm.bw); bx = bx + 1u) {
-                    let b = block_at(i32(bx), i32(cy));
-                    if (b != NONE && (bx + cy) % 2u == prm.parity) {
-                        block(b, bx, cy);
+        // row of groups that holds nothing costs one iteration (lavapipe's budget of
+        // loop iterations), not one per block row.
+        for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
+            let row = GROUPS + gy * prm.gw;
+            var full = 0u;
+            if (rx < prm.gw && (scratch[row + rx] & 2u) != 0u) { full |= 1u; }
+            if (rx + 1u < prm.gw && (scratch[row + rx + 1u] & 2u) != 0u) { full |= 2u; }
+            if (rx + 2u < prm.gw && (scratch[row + rx + 2u] & 2u) != 0u) { full |= 4u; }
+            if (rx + 3u < prm.gw && (scratch[row + rx + 3u] & 2u) != 0u) { full |= 8u; }
+            if (full == 0u) {
+                continue;
+            }
+            for (var cy = gy * GROUP; cy < min((gy + 1u) * GROUP, prm.bh); cy = cy + 1u) {
+                var left = full;
+                while (left != 0u) {
+                    let k = firstTrailingBit(left);
+                    left = left & (left - 1u);
+                    let gx = rx + k;
+                    let x0 = gx * GROUP + (gx * GROUP + cy + prm.parity) % 2u;
+                    for (var bx = x0; bx < min((gx + 1u) * GROUP, prm.bw); bx = bx + 2u) {
+                        let b = block_at(i32(bx), i32(cy));
+                        if (b != NONE) {
+                            block(b, bx, cy);
+                        }
                     }
                 }
             }
         }
+    }
+    // The lane's last pass: it must end on every word read and the state it started
+    // from, as the specification's decoder checks.
+    if (prm.parity == 1u && (at != end || x != 65536u)) {
+        fail();
     }
     save(lane);
 }
@@ -506,7 +607,7 @@ fn dc_rows(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         let b = block_at(i32(bx), i32(by));
         if (b != NONE) {
-            acc = acc + info[b].x;
+            acc = acc + residual(b);
             coefs[b * 64u] = acc;
         }
     }
@@ -534,7 +635,7 @@ fn dc_cols(@builtin(global_invocation_id) id: vec3<u32>) {
                 atomicStore(&marks[2u * b], low);
             }
             if ((low | atomicLoad(&marks[2u * b + 1u])) != 0u) {
-                atomicOr(&marks[prm.sets + b / 32u], 1u << (b % 32u));
+                atomicOr(&marks[SETS + b / 32u], 1u << (b % 32u));
             }
         }
     }

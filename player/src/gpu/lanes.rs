@@ -1,0 +1,488 @@
+//! Format 2's coefficient sections decoded on the GPU as the file codes them
+//! (`lanes.wgsl`): the decoder thread hands each section's words on as they are
+//! (`coded.rs`), and per plane seven dispatches decode them into the dense plane that the
+//! keyframe and bubble passes read, as a parse of version 1's pairs leaves it. Once per
+//! section, `slots` builds the tables of the histograms the chunk sent itself; the file's
+//! histograms and context maps go to the GPU once, when the stream opens.
+//!
+//! A plane must fit the dense plane whole (up to WebGPU's default binding size: planes of
+//! about 5800² texels): the odd blocks' contexts read their neighbours anywhere in the
+//! plane. A larger stream's sections go to the GPU as pairs, decoded by the decoder
+//! thread ([`decodes_lanes`]).
+
+use vbim_format::ans::Histogram;
+use vbim_format::plane2::{file_histograms, ContextMap, CONTEXTS, FAMILIES, GROUP, REGION};
+use vbim_format::Header;
+
+use super::ops::Op;
+use super::plan::{group_bytes, groups_offset, part_blocks};
+use super::Gpu;
+use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
+
+/// One pass of a lanes decode (an entry point of `lanes.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LanePass {
+    Slots,
+    Prepare,
+    Flags,
+    Blocks,
+    DcRows,
+    DcCols,
+}
+
+impl LanePass {
+    pub const ALL: [LanePass; 6] = [
+        LanePass::Slots,
+        LanePass::Prepare,
+        LanePass::Flags,
+        LanePass::Blocks,
+        LanePass::DcRows,
+        LanePass::DcCols,
+    ];
+
+    /// Its entry point in `lanes.wgsl`.
+    pub fn entry(self) -> &'static str {
+        match self {
+            LanePass::Slots => "slots",
+            LanePass::Prepare => "prepare",
+            LanePass::Flags => "flags",
+            LanePass::Blocks => "blocks",
+            LanePass::DcRows => "dc_rows",
+            LanePass::DcCols => "dc_cols",
+        }
+    }
+
+    /// Its timestamps' label (`vbim bench decode --gpu`).
+    pub fn label(self) -> &'static str {
+        match self {
+            LanePass::Slots => "lane_slots",
+            LanePass::Prepare => "lane_prepare",
+            LanePass::Flags => "lane_flags",
+            LanePass::Blocks => "lane_blocks",
+            LanePass::DcRows => "lane_dc_rows",
+            LanePass::DcCols => "lane_dc_cols",
+        }
+    }
+}
+
+/// Where the lanes' scratch buffer holds what (in words; `lanes.wgsl` describes each).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Scratch {
+    entries: u64,
+    slots: u64,
+    groups: u64,
+    info: u64,
+    lane_states: u64,
+    fault: u64,
+    words: u64,
+    /// Histograms the tables hold room for: the file's, then a section's own (at most
+    /// one per cluster of every family).
+    histograms: u64,
+    /// The file's histograms.
+    pub file_histograms: u32,
+}
+
+impl Scratch {
+    /// The scratch of a version 2 stream whose planes fit the dense plane whole; `None`
+    /// for any other (its planes go to the GPU as pairs).
+    pub fn for_stream(h: &Header) -> Option<Scratch> {
+        let (pw, ph) = vbim_format::chunk::padded_size(h);
+        let geometry = ([pw as u32, ph as u32], h.tile_size as u32);
+        Scratch::new(geometry, h.context_maps()?)
+    }
+
+    /// The scratch for planes of `plane` texels in tiles of `tile`² coded with `maps`;
+    /// `None` if a plane is larger than the dense plane.
+    pub fn new((plane, tile): ([u32; 2], u32), maps: &[ContextMap]) -> Option<Scratch> {
+        let [pw, ph] = plane;
+        let (bw, bh) = (pw as u64 / 8, ph as u64 / 8);
+        if bw * bh > part_blocks(plane) as u64 {
+            return None;
+        }
+        let file = file_histograms(maps).count() as u64;
+        let own: u64 = maps.iter().map(|m| m.clusters as u64).sum();
+        let ts = (tile as u64).max(1);
+        let tiles = (pw as u64 / ts) * (ph as u64 / ts);
+        let groups = (bw.div_ceil(GROUP as u64)) * bh.div_ceil(GROUP as u64);
+        let lanes = bw.div_ceil(REGION as u64) * bh.div_ceil(REGION as u64);
+        let histograms = file + own;
+        let entries = 2 * (FAMILIES * CONTEXTS) as u64;
+        let slots = entries + histograms * 128;
+        let groups_at = slots + histograms * 1024;
+        let info = groups_at + groups + tiles;
+        let lane_states = info + 2 * bw * bh;
+        let fault = lane_states + 4 * lanes;
+        Some(Scratch {
+            entries,
+            slots,
+            groups: groups_at,
+            info,
+            lane_states,
+            fault,
+            words: fault + 1,
+            histograms,
+            file_histograms: file as u32,
+        })
+    }
+
+    /// Bytes of the scratch buffer.
+    pub fn bytes(&self) -> u64 {
+        self.words * 4
+    }
+
+    /// The WGSL constants `lanes.wgsl` reads its layout from; the sets of blocks with a
+    /// coefficient start at byte `sets` of the mask buffer.
+    fn constants(&self, sets: u64) -> String {
+        format!(
+            "const ENTRIES: u32 = {}u;\nconst SLOTS: u32 = {}u;\nconst GROUPS: u32 = {}u;\n\
+             const INFO: u32 = {}u;\nconst LANE_STATES: u32 = {}u;\nconst FAULT: u32 = {}u;\n\
+             const HISTOGRAMS: u32 = {}u;\nconst FILE_HISTOGRAMS: u32 = {}u;\n\
+             const SETS: u32 = {}u;\n",
+            self.entries,
+            self.slots,
+            self.groups,
+            self.info,
+            self.lane_states,
+            self.fault,
+            self.histograms,
+            self.file_histograms,
+            sets / 4
+        )
+    }
+
+    /// Where the fault flag lies, in bytes.
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub fn fault_offset(&self) -> u64 {
+        self.fault * 4
+    }
+}
+
+/// For a stream whose sections the GPU decodes as coded, how many histograms its file
+/// carries (what the decoder thread numbers a section's own histograms after); `None`
+/// where its planes go to the GPU as pairs (version 1, or planes larger than the dense
+/// plane).
+pub(crate) fn decodes_lanes(h: &Header) -> Option<u32> {
+    Scratch::for_stream(h).map(|s| s.file_histograms)
+}
+
+/// Bytes of the lanes' scratch buffer a stream needs (0 where it has none).
+pub(crate) fn lanes_bytes(h: &Header) -> u64 {
+    Scratch::for_stream(h).map_or(0, |s| s.bytes())
+}
+
+/// One lanes pass's parameters (`LaneJob` in lanes.wgsl), in the jobs buffer.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(super) struct LaneJob {
+    bw: u32,
+    bh: u32,
+    gw: u32,
+    gh: u32,
+    rw: u32,
+    tile: u32,
+    lanes: u32,
+    parity: u32,
+    words: u32,
+    table: u32,
+    family: u32,
+    blocks: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    spans: u32,
+    span_count: u32,
+    members: u32,
+    own: u32,
+    own_count: u32,
+    _pad: u32,
+    places: [u32; 8],
+}
+
+/// The lanes decode's pipelines and state.
+pub(crate) struct LanesGpu {
+    pub layout: wgpu::BindGroupLayout,
+    pipelines: Vec<wgpu::ComputePipeline>,
+    pub scratch: wgpu::Buffer,
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub plan: Scratch,
+    /// Its bind group over the jobs, streams, scratch and dense plane (remade with the
+    /// others, `Gpu::bind_decode`).
+    pub group: Option<wgpu::BindGroup>,
+}
+
+impl LanesGpu {
+    /// The pipelines and scratch for planes of `geometry` (texels, and tile side) coded
+    /// with `maps` (`None` where they go as pairs, [`Scratch::new`]), with the file's maps
+    /// and histograms written; the sets of the dense plane start at byte `sets` of its
+    /// mask buffer.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        geometry: ([u32; 2], u32),
+        maps: &[ContextMap],
+        sets: u64,
+    ) -> Option<LanesGpu> {
+        let plan = Scratch::new(geometry, maps)?;
+        let layout = lanes_layout(device);
+        let source = format!("{}{}", plan.constants(sets), include_str!("lanes.wgsl"));
+        let pipelines = LanePass::ALL
+            .iter()
+            .map(|p| {
+                super::resources::compute_pipeline(
+                    device,
+                    "vbim lanes",
+                    &source,
+                    &layout,
+                    p.entry(),
+                )
+            })
+            .collect();
+        let scratch = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim lanes scratch"),
+            size: plan.bytes(),
+            // (COPY_SRC: tests read the fault flag back.)
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        // The file's part of the tables: each family's cluster of each context, and each
+        // file histogram's entries and slots.
+        let of: Vec<u32> = (0..FAMILIES)
+            .flat_map(|f| (0..CONTEXTS).map(move |c| maps.get(f).map_or(0, |m| m.of[c] as u32)))
+            .collect();
+        queue.write_buffer(&scratch, 0, bytemuck::cast_slice(&of));
+        let (mut entries, mut slots) = (Vec::new(), Vec::new());
+        for (_, _, hist) in file_histograms(maps) {
+            let (e, s) = histogram_tables(hist);
+            entries.extend(e);
+            slots.extend(s);
+        }
+        if !entries.is_empty() {
+            queue.write_buffer(&scratch, plan.entries * 4, bytemuck::cast_slice(&entries));
+            queue.write_buffer(&scratch, plan.slots * 4, bytemuck::cast_slice(&slots));
+        }
+        Some(LanesGpu {
+            layout,
+            pipelines,
+            scratch,
+            plan,
+            group: None,
+        })
+    }
+
+    fn pipeline(&self, pass: LanePass) -> &wgpu::ComputePipeline {
+        &self.pipelines[LanePass::ALL.iter().position(|&p| p == pass).unwrap_or(0)]
+    }
+
+    /// The bind group over `jobs`, `words`, the scratch and the dense plane.
+    pub fn bind(
+        &mut self,
+        device: &wgpu::Device,
+        jobs: &wgpu::Buffer,
+        words: &wgpu::Buffer,
+        (coefs, masks): (&wgpu::Buffer, &wgpu::Buffer),
+    ) {
+        let entries = [
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: jobs,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<LaneJob>() as u64),
+                }),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: words.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: self.scratch.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: coefs.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: masks.as_entire_binding(),
+            },
+        ];
+        self.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vbim lanes"),
+            layout: &self.layout,
+            entries: &entries,
+        }));
+    }
+}
+
+/// A histogram's 128 entries (frequency | cumulative frequency << 16) and its slot table
+/// (each of the 4096 slots' token, four to a word), as `lanes.wgsl`'s `slots` builds them
+/// for a chunk's own histograms.
+pub(super) fn histogram_tables(h: &Histogram) -> (Vec<u32>, Vec<u32>) {
+    let entries: Vec<u32> = (0..128)
+        .map(|t| h.frequency(t) | h.cumulative(t).min(4096) << 16)
+        .collect();
+    let mut tokens = vec![0u8; 4096];
+    let mut t = 0usize;
+    let mut cum = 0u32;
+    for (slot, token) in tokens.iter_mut().enumerate() {
+        while t < 127 && cum + h.frequency(t) <= slot as u32 {
+            cum += h.frequency(t);
+            t += 1;
+        }
+        *token = t as u8;
+    }
+    let slots = tokens
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    (entries, slots)
+}
+
+fn lanes_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let entry = |binding: u32, ty| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: binding == 0,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    use wgpu::BufferBindingType::{Storage, Uniform};
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim lanes"),
+        entries: &[
+            entry(0, Uniform),
+            entry(1, Storage { read_only: true }),
+            entry(2, Storage { read_only: false }),
+            entry(3, Storage { read_only: false }),
+            entry(4, Storage { read_only: false }),
+        ],
+    })
+}
+
+impl Gpu {
+    /// The ops that decode version 2 plane `span` (of `lanes`) into the dense plane: its
+    /// section's tables first if the plane before was of another section
+    /// (`planned_section`), the dense plane's masks and sets cleared, then the plane's
+    /// seven passes.
+    pub(super) fn lane_ops(
+        &mut self,
+        ops: &mut Vec<Op>,
+        (span, lanes): (&PlaneSpan, LanePlane),
+        sections: &[SectionSpan],
+        channel: u32,
+    ) {
+        let Some(section) = sections.get(lanes.section as usize) else {
+            debug_assert!(false, "a plane of no section");
+            return;
+        };
+        let [pw, ph] = self.plane;
+        let (bw, bh) = (pw / 8, ph / 8);
+        let (gw, gh) = (bw.div_ceil(GROUP as u32), bh.div_ceil(GROUP as u32));
+        let tiled = span.lanes.is_some() && span.members > 0;
+        let ts = if tiled { self.per } else { 0 };
+        let (tiles_x, tiles_y) = if tiled {
+            (pw / 8 / ts, ph / 8 / ts)
+        } else {
+            (0, 0)
+        };
+        let mut places = [crate::coded::NONE; 8];
+        places[..FAMILIES].copy_from_slice(&section.places);
+        let job = LaneJob {
+            bw,
+            bh,
+            gw,
+            gh,
+            rw: bw.div_ceil(REGION as u32),
+            tile: ts,
+            lanes: lanes.count,
+            parity: 0,
+            words: section.words,
+            table: lanes.table,
+            family: lanes.family,
+            blocks: span.blocks,
+            tiles_x,
+            tiles_y,
+            spans: span.members,
+            span_count: span.member_count,
+            members: if ts > 0 { span.blocks / (ts * ts) } else { 0 },
+            own: section.own,
+            own_count: section.own_count,
+            _pad: 0,
+            places,
+        };
+        if self.planned_section != Some(lanes.section) {
+            self.planned_section = Some(lanes.section);
+            let at = self.push_job_bytes(bytemuck::bytes_of(&job));
+            let n = (FAMILIES * CONTEXTS) as u32 + section.own_count * (128 + 1024);
+            let op = Op::lanes(LanePass::Slots, at, n.div_ceil(64), channel, n as u64 / 16);
+            ops.push(op);
+        }
+        let bytes = groups_offset(self.part) + group_bytes(span.blocks);
+        ops.push(Op::clear(bytes, channel));
+        let even = self.push_job_bytes(bytemuck::bytes_of(&job));
+        let odd = self.push_job_bytes(bytemuck::bytes_of(&LaneJob { parity: 1, ..job }));
+        let cells = (gw * gh)
+            .max(tiles_x * tiles_y)
+            .max(span.blocks)
+            .max(lanes.count);
+        let by_lane = lanes.count.div_ceil(64);
+        let blocks = span.blocks as u64;
+        let words = lanes.words as u64;
+        for (pass, at, groups, units) in [
+            (LanePass::Prepare, even, cells.div_ceil(64), blocks),
+            (LanePass::Flags, even, by_lane, (gw * gh) as u64 / 2),
+            (LanePass::Flags, odd, by_lane, (gw * gh) as u64 / 2),
+            (LanePass::Blocks, even, by_lane, words / 2),
+            (LanePass::Blocks, odd, by_lane, words - words / 2),
+            (LanePass::DcRows, even, bh.div_ceil(64), blocks),
+            (LanePass::DcCols, even, bw.div_ceil(64), blocks),
+        ] {
+            ops.push(Op::lanes(pass, at, groups, channel, units));
+        }
+    }
+
+    /// Records a lanes op into `pass`.
+    pub(super) fn dispatch_lanes(&self, pass: &mut wgpu::ComputePass, op: &Op, which: LanePass) {
+        let Some(lanes) = &self.lanes else {
+            return;
+        };
+        let Some(group) = &lanes.group else {
+            return;
+        };
+        pass.set_pipeline(lanes.pipeline(which));
+        pass.set_bind_group(0, group, &[op.job]);
+        if op.groups[0] > 0 {
+            pass.dispatch_workgroups(op.groups[0], 1, 1);
+        }
+        self.mark(pass, which.label());
+    }
+
+    /// Whether a lane of a version 2 plane decoded since the last call read past its words
+    /// or decoded a symbol out of range (a damaged or crafted section); clears the flag.
+    /// Blocks until the GPU is done: for tests and checks, never per frame.
+    #[cfg(test)]
+    pub fn lanes_faulted(&self) -> bool {
+        let Some(lanes) = &self.lanes else {
+            return false;
+        };
+        let raw = crate::readback::read_buffer_range(
+            &self.device,
+            &self.queue,
+            &lanes.scratch,
+            lanes.plan.fault_offset(),
+            4,
+        );
+        self.queue
+            .write_buffer(&lanes.scratch, lanes.plan.fault_offset(), &[0; 4]);
+        raw.iter().any(|&b| b != 0)
+    }
+}
+
+/// The Rust and WGSL layouts of [`LaneJob`] agree in size (the WGSL struct's fields are
+/// all u32 but its last, an array of vec4 at a 16-byte offset).
+const _: () = assert!(std::mem::size_of::<LaneJob>() == 112);

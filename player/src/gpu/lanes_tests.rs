@@ -1,0 +1,299 @@
+//! Version 2's sections decoded on the GPU as coded (`lanes.wgsl`), on a real adapter:
+//! the dense plane they leave is the one the pairs of the same blocks leave (every mask,
+//! set and coefficient a mask names), for keyframe and bubble planes, any lanes and maps;
+//! damaged words raise the fault flag, never a hang.
+
+use vbim_format::dct::N;
+use vbim_format::plane2::{self, ContextMap, Geometry, Plane, Section, CONTEXTS};
+
+use super::plan::groups_offset;
+use super::tests::{coded_plane, decode_bubble_plane, decode_key_step, shape};
+use super::*;
+use crate::coded::Coded;
+use crate::decoder::{KeyStep, SegmentData};
+use crate::readback::read_buffer;
+
+fn lcg(seed: &mut u64) -> u32 {
+    *seed = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*seed >> 33) as u32
+}
+
+/// Smooth DCs with noise, sparse detail, empty stretches and a few extreme values.
+fn blocks(order: &[(usize, usize)], seed: u64) -> Vec<[i32; N * N]> {
+    let mut s = seed;
+    order
+        .iter()
+        .map(|&(x, y)| {
+            let mut q = [0i32; N * N];
+            if (x / 8 + y / 8) % 3 != 0 {
+                q[0] = (3 * x + 2 * y) as i32 + (lcg(&mut s) % 5) as i32 - 2;
+            }
+            if lcg(&mut s).is_multiple_of(3) {
+                for _ in 0..lcg(&mut s) % 20 {
+                    let i = 1 + (lcg(&mut s) % 63) as usize;
+                    q[i] = (lcg(&mut s) % 81) as i32 - 40;
+                }
+            }
+            if lcg(&mut s).is_multiple_of(89) {
+                q[0] = i32::MIN + (lcg(&mut s) % 3) as i32;
+                q[5] = 1 << 30;
+            }
+            q
+        })
+        .collect()
+}
+
+/// The dense plane's masks, sets and the coefficients the masks name, for `n` blocks.
+fn dense_plane(gpu: &Gpu, n: usize) -> (Vec<u32>, Vec<u32>, Vec<i32>) {
+    let raw = read_buffer(&gpu.device, &gpu.queue, &gpu.masks);
+    let words: &[u32] = bytemuck::cast_slice(&raw);
+    let masks = words[..2 * n].to_vec();
+    let sets_at = groups_offset(gpu.part) as usize / 4;
+    let sets = words[sets_at..sets_at + 2 * n.div_ceil(64)].to_vec();
+    let raw = read_buffer(&gpu.device, &gpu.queue, &gpu.coefs);
+    let coefs: &[i32] = bytemuck::cast_slice(&raw);
+    let named = (0..n * N * N)
+        .map(|i| {
+            let (b, f) = (i / 64, i % 64);
+            match masks[2 * b + f / 32] >> (f % 32) & 1 {
+                1 => coefs[i],
+                _ => 0,
+            }
+        })
+        .collect();
+    (masks, sets, named)
+}
+
+/// A segment of one plane coded as section `bytes` (planes `shapes`, maps `maps`): plane
+/// `p` as a keyframe step, or with `tile` blocks across a tile as a bubble plane whose
+/// member tiles `member` says.
+fn lane_segment(
+    (bytes, shapes, maps): (&[u8], &[Plane], &[ContextMap]),
+    p: usize,
+    bubble: Option<(usize, &dyn Fn(usize) -> bool)>,
+) -> SegmentData {
+    let section = Section::parse_layout(bytes, shapes, maps).unwrap();
+    let file_count = plane2::file_histograms(maps).count() as u32;
+    let mut data = Coded::default();
+    let span = data.push_section(bytes, &section, file_count);
+    let plane = (&section.planes[p], 0, shapes[p].family);
+    let n = shapes[p].geometry.order.len();
+    let lane = data.push_lane_plane(0.01, plane, n, bubble);
+    let mut seg = SegmentData::new();
+    seg.sections = vec![span];
+    seg.data = data;
+    match bubble {
+        None => {
+            seg.steps = vec![KeyStep {
+                number: 0,
+                intra: true,
+                plane: 0,
+            }];
+            seg.planes = vec![lane];
+            seg.bubbles = 1;
+            seg.layers = 2;
+        }
+        Some(_) => {
+            seg.planes = vec![lane, lane];
+            seg.bubbles = 1;
+            seg.layers = 3;
+        }
+    }
+    seg
+}
+
+/// Decodes `seg` (as [`lane_segment`] made it) on `gpu`.
+fn decode(gpu: &mut Gpu, seg: &SegmentData, bubbles: bool) {
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    gpu.decode(&mut enc, seg, bubbles);
+    gpu.queue.submit([enc.finish()]);
+}
+
+/// A plane and its blocks.
+type PlaneBlocks<'a> = (Plane<'a>, &'a [[i32; N * N]]);
+
+/// Codes `planes` (a keyframe plane, then a bubble plane of `ts`-block tiles) with
+/// `maps` in lanes of `lane_bytes`, decodes each on the GPU as coded and as pairs, and
+/// checks the dense planes are the same; then damages the words.
+fn lanes_match_pairs(
+    gpu: &mut Gpu,
+    (planes, maps): (&[PlaneBlocks], &[ContextMap]),
+    lane_bytes: usize,
+    members: &dyn Fn(usize) -> bool,
+) {
+    let bytes = plane2::encode(planes, maps, lane_bytes).unwrap();
+    let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
+    let tiles = |p: &Plane| {
+        let ts = p.geometry.tile.unwrap_or(1);
+        (p.geometry.grid.0 / ts) * (p.geometry.grid.1 / ts)
+    };
+    for (p, (shape, q)) in planes.iter().enumerate() {
+        let n = q.len();
+        let bubble = shape.geometry.tile.map(|_| (tiles(shape), members));
+        let what = format!("plane {p}, lanes of {lane_bytes} B");
+        // As pairs.
+        let mut c = Coded::default();
+        let (span, _) = coded_plane(&mut c, 0.01, q, bubble);
+        match bubble {
+            None => drop(decode_key_step(gpu, 0, span, c)),
+            Some(_) => decode_bubble_plane(gpu, c, span),
+        }
+        let want = dense_plane(gpu, n);
+        // As coded.
+        let seg = lane_segment((&bytes, &shapes, maps), p, bubble);
+        decode(gpu, &seg, bubble.is_some());
+        assert!(!gpu.lanes_faulted(), "{what}: a lane faulted");
+        let got = dense_plane(gpu, n);
+        assert!(got.0 == want.0, "{what}: masks differ");
+        assert!(got.1 == want.1, "{what}: sets differ");
+        for (i, (g, w)) in got.2.iter().zip(&want.2).enumerate() {
+            assert_eq!(g, w, "{what}: block {}, coefficient {}", i / 64, i % 64);
+        }
+        // Damaged words: the fault flag, never a hang.
+        let mut bad = bytes.clone();
+        let words_at = Section::parse_layout(&bytes, &shapes, maps)
+            .unwrap()
+            .words_at;
+        for b in bad.iter_mut().skip(words_at + 7).step_by(13) {
+            *b ^= 0x5A;
+        }
+        decode(
+            gpu,
+            &lane_segment((&bad, &shapes, maps), p, bubble),
+            bubble.is_some(),
+        );
+        assert!(
+            gpu.lanes_faulted(),
+            "{what}: damaged words, and no lane faulted"
+        );
+    }
+}
+
+#[test]
+fn keyframe_and_bubble_planes_decode_as_coded_to_the_dense_plane_their_pairs_give() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    // A keyframe plane of 48 × 36 blocks and a bubble plane of its tiles of 2 blocks (the
+    // player's 16² texels) or 4, some not members; maps of 9 clusters at random, and of
+    // one with a file-wide histogram.
+    let (bw, bh) = (48, 36);
+    let key_order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+    let key = blocks(&key_order, 1);
+    let mut seed = 7;
+    let spread = ContextMap {
+        clusters: 9,
+        of: (0..CONTEXTS).map(|_| (lcg(&mut seed) % 9) as u8).collect(),
+        tables: vec![None; 9],
+    };
+    for (ts, wide) in [(2usize, false), (4, true)] {
+        let (tw, th) = (bw / ts, bh / ts);
+        let member = move |t: usize| !(t % tw * 5 + t / tw * 3).is_multiple_of(4);
+        let mut bubble_order = Vec::new();
+        for t in (0..tw * th).filter(|&t| member(t)) {
+            let (tx, ty) = (t % tw, t / tw);
+            for y in ty * ts..ty * ts + ts {
+                for x in tx * ts..tx * ts + ts {
+                    bubble_order.push((x, y));
+                }
+            }
+        }
+        let bubble = blocks(&bubble_order, 2);
+        let geometry = |order, tile| Geometry {
+            grid: (bw, bh),
+            order,
+            tile,
+        };
+        let planes = [
+            (
+                Plane {
+                    family: 0,
+                    geometry: geometry(&key_order, None),
+                },
+                &key[..],
+            ),
+            (
+                Plane {
+                    family: 1,
+                    geometry: geometry(&bubble_order, Some(ts)),
+                },
+                &bubble[..],
+            ),
+        ];
+        // File-wide histograms for family 1, from its own symbols.
+        let counts = plane2::context_counts(&planes[1..], 2).unwrap();
+        let totals: Vec<u64> = (0..vbim_format::ans::TOKENS)
+            .map(|t| {
+                (0..CONTEXTS)
+                    .map(|c| counts[1][c * vbim_format::ans::TOKENS + t])
+                    .sum()
+            })
+            .collect();
+        let file = ContextMap {
+            clusters: 1,
+            of: vec![0; CONTEXTS],
+            tables: vec![vbim_format::ans::Histogram::from_counts(&totals)],
+        };
+        let maps = [spread.clone(), file];
+        let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 8 * ts as u32);
+        gpu.set_decode_shape(shape(wide));
+        gpu.decode_lanes(&maps);
+        for lane_bytes in [usize::MAX, 200, 16] {
+            lanes_match_pairs(&mut gpu, (&planes, &maps), lane_bytes, &member);
+        }
+    }
+}
+
+/// 96 × 96 dense blocks: about 90,000 symbols, beyond the 65,535 loop iterations
+/// llvmpipe allows one invocation; however large a lane the caller asks for, the
+/// encoder's caps cut it. And a 256 × 256-block night keyframe (smooth DCs, a few jumps):
+/// more cells than one invocation may visit, so the DC's prefix sum must be shared out
+/// (rows, then columns) to be right.
+#[test]
+fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let mut s = 9;
+    for (bw, bh) in [(96usize, 96usize), (256, 256)] {
+        let order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+        let q: Vec<[i32; N * N]> = order
+            .iter()
+            .map(|&(x, y)| {
+                let mut q = [0i32; N * N];
+                if bw == 96 {
+                    for v in q.iter_mut().take(12) {
+                        *v = (lcg(&mut s) % 9) as i32 - 4;
+                    }
+                } else {
+                    let jump = if lcg(&mut s).is_multiple_of(97) {
+                        400
+                    } else {
+                        0
+                    };
+                    q[0] = (x * 3 + y * 5) as i32 + jump;
+                }
+                q
+            })
+            .collect();
+        let plane = Plane {
+            family: 0,
+            geometry: Geometry {
+                grid: (bw, bh),
+                order: &order,
+                tile: None,
+            },
+        };
+        let maps = [ContextMap::single()];
+        let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+        gpu.decode_lanes(&maps);
+        let bytes = plane2::encode(&[(plane, &q[..])], &maps, usize::MAX).unwrap();
+        let lanes = Section::parse_layout(&bytes, &[plane], &maps)
+            .unwrap()
+            .planes[0]
+            .lanes
+            .len();
+        assert!(bw == 256 || lanes >= 6, "{lanes} lanes");
+        lanes_match_pairs(&mut gpu, (&[(plane, &q[..])], &maps), usize::MAX, &|_| true);
+    }
+}
