@@ -27,6 +27,27 @@
 use vbim_format::chunk::{spans, Scanned};
 use vbim_format::plane2::{Section, SectionPlane, FAMILIES};
 
+/// Blocks the GPU's dense plane holds for planes of `plane` texels: a whole plane, or as
+/// many blocks as one storage binding of WebGPU's default limits holds.
+pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
+    let whole = (plane[0] / 8) * (plane[1] / 8);
+    let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
+    whole.min(binding as u32).max(1)
+}
+
+/// For a version 2 stream whose planes fit the dense plane whole (what `lanes.wgsl`
+/// needs: an odd block's contexts read its neighbours anywhere in the plane), how many
+/// histograms its file carries (a section's own are numbered after them); `None` for any
+/// other stream, whose planes go to the GPU as pairs.
+pub(crate) fn decodes_lanes(h: &vbim_format::Header) -> Option<u32> {
+    let maps = h.context_maps()?;
+    let (pw, ph) = vbim_format::chunk::padded_size(h);
+    let plane = [pw as u32, ph as u32];
+    let whole = (plane[0] as u64 / 8) * (plane[1] as u64 / 8);
+    (whole <= part_blocks(plane) as u64)
+        .then(|| vbim_format::plane2::file_histograms(maps).count() as u32)
+}
+
 /// A place that holds nothing (a family a section does not use).
 pub(crate) const NONE: u32 = u32::MAX;
 

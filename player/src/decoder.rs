@@ -201,7 +201,7 @@ impl DecoderCore {
     pub fn new(header: Header, layout: Layout, entries: Vec<IndexEntry>) -> DecoderCore {
         let k = layout.keyframes.len();
         let s = layout.segments.len();
-        let lanes = crate::gpu::decodes_lanes(&header);
+        let lanes = crate::coded::decodes_lanes(&header);
         DecoderCore {
             lanes,
             header,
@@ -222,7 +222,7 @@ impl DecoderCore {
     /// where the planes fit the GPU's dense plane) or decoded to pairs
     /// ([`DecodeShape::lanes`](crate::DecodeShape::lanes)). Before the first chunk.
     pub fn set_lanes(&mut self, on: bool) {
-        self.lanes = crate::gpu::decodes_lanes(&self.header).filter(|_| on);
+        self.lanes = crate::coded::decodes_lanes(&self.header).filter(|_| on);
     }
 
     /// Packs each box into a staging buffer of `device` (the pipeline's decoders do; the

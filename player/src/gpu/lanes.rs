@@ -96,6 +96,7 @@ impl Scratch {
     pub fn new((plane, tile): ([u32; 2], u32), maps: &[ContextMap]) -> Option<Scratch> {
         let [pw, ph] = plane;
         let (bw, bh) = (pw as u64 / 8, ph as u64 / 8);
+        // (The rule `coded::decodes_lanes` applies for the decoder thread.)
         if bw * bh > part_blocks(plane) as u64 {
             return None;
         }
@@ -155,14 +156,6 @@ impl Scratch {
     pub fn fault_offset(&self) -> u64 {
         self.fault * 4
     }
-}
-
-/// For a stream whose sections the GPU decodes as coded, how many histograms its file
-/// carries (what the decoder thread numbers a section's own histograms after); `None`
-/// where its planes go to the GPU as pairs (version 1, or planes larger than the dense
-/// plane).
-pub(crate) fn decodes_lanes(h: &Header) -> Option<u32> {
-    Scratch::for_stream(h).map(|s| s.file_histograms)
 }
 
 /// Bytes of the lanes' scratch buffer a stream needs (0 where it has none).

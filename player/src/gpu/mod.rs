@@ -47,7 +47,7 @@ pub use decode::PASS_CHANGES;
 #[cfg(feature = "bench")]
 pub use device::timing_device;
 pub use device::{headless_device, headless_device_on, DeviceError, Headless};
-pub(crate) use lanes::{decodes_lanes, lanes_bytes};
+pub(crate) use lanes::lanes_bytes;
 pub(crate) use ops::Op;
 pub use plan::lightmap_descriptor;
 pub(crate) use plan::{min_array_layers, planned_texture_bytes, BUBBLE_SETS, KEY_SLOTS};

@@ -31,13 +31,7 @@ pub(super) fn mask_bytes(part: u32) -> u64 {
     groups_offset(part) + group_bytes(part)
 }
 
-/// Blocks the dense plane holds for planes of `plane` texels: a whole plane, or as many
-/// blocks as one storage binding of WebGPU's default limits holds.
-pub(super) fn part_blocks(plane: [u32; 2]) -> u32 {
-    let whole = (plane[0] / 8) * (plane[1] / 8);
-    let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
-    whole.min(binding as u32).max(1)
-}
+pub(super) use crate::coded::part_blocks;
 
 /// Workgroups per dispatch row: WebGPU's default limit per dimension.
 pub(super) const GROUPS_X: u32 = 65_535;
