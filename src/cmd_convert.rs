@@ -28,7 +28,7 @@ pub fn run(a: ConvertArgs) -> Result<(), String> {
                 BufReader::new(f),
                 &mut out,
                 version,
-                a.zstd_level,
+                (a.zstd_level, a.lane_bytes),
                 &progress,
             )
             .map_err(|e| e.to_string())?;

@@ -61,6 +61,9 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Some(z) = a.zstd_level {
         cfg.zstd_level = z;
     }
+    if let Some(l) = a.lane_bytes {
+        cfg.lane_bytes = l;
+    }
     cfg.format = match a.format_version {
         1 => vbim_encoder::FormatVersion::V1,
         _ => vbim_encoder::FormatVersion::V2,

@@ -52,6 +52,13 @@ pub struct EncoderConfig {
     /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
     /// payloads (1 to 22).
     pub zstd_level: i32,
+    /// Version 2: the coded size at which a rANS lane is cut ([`LANE_BYTES`] by default;
+    /// any value is valid, 0 a lane per region of 16 × 16 blocks). Every lane is a serial
+    /// chain of symbols that a GPU decodes in one invocation: shorter lanes shorten the
+    /// longest chain of a plane, for a few bytes each (BENCHMARKS.md, "Lanes").
+    ///
+    /// [`LANE_BYTES`]: crate::LANE_BYTES
+    pub lane_bytes: usize,
     /// Worker threads (0 = one per core). The output does not depend on it.
     pub threads: usize,
     /// Largest distance between independently decodable keyframes, in media seconds.
@@ -101,6 +108,7 @@ impl EncoderConfig {
             // of version 1's zstd (BENCHMARKS.md, "Format 2").
             format: FormatVersion::V1,
             zstd_level: 9,
+            lane_bytes: crate::LANE_BYTES,
             threads: 0,
             intra_interval_s: 4.0,
             tile_size: 16,

@@ -11,14 +11,15 @@ use crate::output::{write_chunks, PendingChunk};
 use crate::{EncodeError, FormatVersion, Progress};
 
 /// Reads the stream `src` (named `name` in errors) and writes it to `out` in `version`
-/// (`zstd_level` for version 1's payloads). Returns the header written. The output decodes
+/// (`zstd_level` for version 1's payloads, lanes cut at `lane_bytes` in version 2's:
+/// `EncoderConfig::lane_bytes`). Returns the header written. The output decodes
 /// to the same planes as the input, bit for bit.
 pub fn convert<R: Read + Seek, W: Write + Seek>(
     name: &str,
     src: R,
     out: W,
     version: FormatVersion,
-    zstd_level: i32,
+    (zstd_level, lane_bytes): (i32, usize),
     progress: Progress,
 ) -> Result<Header, EncodeError> {
     let verify = |source| EncodeError::Verify {
@@ -90,7 +91,7 @@ pub fn convert<R: Read + Seek, W: Write + Seek>(
         &mut chunks,
         &tiles,
         version,
-        zstd_level,
+        (zstd_level, lane_bytes),
         progress,
     )?;
     write_chunks(out, header, &chunks)

@@ -47,6 +47,7 @@ pub use config::{
 };
 pub use convert::convert;
 pub use input::{Frame, FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
+pub use payloads::LANE_BYTES;
 pub use report::{lossless_baseline, EncodeReport, Measured};
 pub use run::{encode, encode_file};
 /// Progress callback: (stage, done, total) — the bake's, so one bar serves both.
@@ -55,7 +56,7 @@ pub use vbim_files::Progress;
 /// What `vbim bench` measures of the encoder's internals (the `bench` feature).
 #[cfg(feature = "bench")]
 pub mod bench {
-    pub use crate::payloads::{cluster, HISTOGRAMS, LANE_BYTES};
+    pub use crate::payloads::{cluster, HISTOGRAMS};
 }
 
 /// Why an encode failed.

@@ -17,9 +17,12 @@ use crate::{EncodeError, Progress};
 /// Histograms per family: BENCHMARKS.md ("A static coder a GPU can decode") measured 16
 /// within 1% of 32 and 64, and each costs a chunk that uses it its table.
 pub const HISTOGRAMS: usize = 16;
-/// The coded size at which a lane is cut: a 512² keyframe plane of a day's light fills a
-/// few lanes, a 4096² one hundreds (every lane is one GPU invocation per pass).
-pub const LANE_BYTES: usize = 4096;
+/// The coded size at which a lane is cut by default (`EncoderConfig::lane_bytes`): a GPU
+/// decodes a lane's symbols in sequence, and lanes of 512 bytes rather than 4 KiB cut the
+/// longest lanes of a 2048² day's planes to a quarter for 0.7% more bytes (0.3% at 512²,
+/// where a region of 16 × 16 blocks often holds more than that and lanes cannot be cut
+/// finer).
+pub const LANE_BYTES: usize = 512;
 
 /// Which version of the format to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -27,9 +30,9 @@ pub enum FormatVersion {
     /// Version 1 (1.1): zero-run pairs through zstd. Every player reads it.
     V1,
     /// Version 2 (2.0): rANS lanes with the file's context maps, 0.69–0.77× version 1's
-    /// bytes (BENCHMARKS.md, "Format 2"). Players before version 2 refuse it, and today's
-    /// player decodes its sections on the CPU, which costs its decoder thread 10–20× the
-    /// time of version 1's zstd.
+    /// bytes (BENCHMARKS.md, "Format 2"). Players before version 2 refuse it. The player
+    /// decodes its sections on a GPU as coded; on a CPU adapter its decoder thread decodes
+    /// them to pairs, 10–20× the time of version 1's zstd.
     V2,
 }
 
@@ -40,7 +43,7 @@ pub(crate) fn code(
     chunks: &mut [PendingChunk],
     tiles: &[TileMap],
     version: FormatVersion,
-    zstd_level: i32,
+    (zstd_level, lane_bytes): (i32, usize),
     progress: Progress,
 ) -> Result<(), EncodeError> {
     let what = |c: &PendingChunk| -> Result<Payload, EncodeError> {
@@ -90,7 +93,7 @@ pub(crate) fn code(
             done.store(0, std::sync::atomic::Ordering::Relaxed);
             let h = &*header;
             chunks.par_iter_mut().filter(|c| c.raw).try_for_each(|c| {
-                c.bytes = payload2::encode(h, what(c)?, &c.bytes, &maps, LANE_BYTES)?;
+                c.bytes = payload2::encode(h, what(c)?, &c.bytes, &maps, lane_bytes)?;
                 c.raw = false;
                 tick("entropy code");
                 Ok::<_, EncodeError>(())

@@ -76,7 +76,10 @@ fn converted(bytes: &[u8], to: FormatVersion) -> Vec<u8> {
         Cursor::new(bytes),
         Cursor::new(&mut out),
         to,
-        EncoderConfig::preset(Preset::Default).zstd_level,
+        (
+            EncoderConfig::preset(Preset::Default).zstd_level,
+            vbim_encoder::LANE_BYTES,
+        ),
         &|_, _, _| {},
     )
     .unwrap();

@@ -17,8 +17,8 @@
 //!
 //! A version 2 file's planes come as coded (`lanes.wgsl` decodes them): per section (a
 //! chunk's planes) its lanes' words as stored (16-bit, two to a word, the first in the low
-//! half), the frequencies of the histograms the chunk sent itself (128 16-bit frequencies
-//! each, 64 words), and per family it uses the histogram of each cluster of the family
+//! half), the frequencies of the histograms the chunk sent itself (16-bit, up to each
+//! one's last used token), and per family it uses the histogram of each cluster of the family
 //! ([`SectionSpan`]); per plane, its lanes (two words each: first region, first word
 //! from the section's first) and a final pair (regions, words), then a bubble plane's
 //! member spans as above. The file's own histograms go to the GPU once, when the stream
@@ -76,8 +76,10 @@ pub(crate) struct LanePlane {
     /// Its lanes: first word, and how many.
     pub table: u32,
     pub count: u32,
-    /// Its lanes' 16-bit words in all (the work of its decode).
+    /// Its lanes' 16-bit words in all (the work of its decode), and its longest lane's
+    /// (the serial chain a GPU runs).
     pub words: u32,
+    pub longest: u32,
 }
 
 /// Where one plane's data lies in a [`Coded`] buffer (all offsets in words).
@@ -105,6 +107,9 @@ pub(crate) struct Coded {
     pub words: Vec<u32>,
     /// Words the last released segment held.
     hint: usize,
+    /// The last member spans appended (first word, spans): the next plane reuses them if
+    /// it has the same (two chroma planes share their tile map's degrees).
+    last_members: Option<(u32, u32)>,
 }
 
 impl Coded {
@@ -112,6 +117,7 @@ impl Coded {
     /// released held (the next segment is usually of a similar size).
     pub fn clear(&mut self) {
         self.words.clear();
+        self.last_members = None;
         self.words.reserve(std::mem::take(&mut self.hint));
     }
 
@@ -120,6 +126,24 @@ impl Coded {
     pub fn release(&mut self) {
         self.hint = self.words.len();
         self.words = Vec::new();
+        self.last_members = None;
+    }
+
+    /// Appends a bubble plane's member spans (or points at the last plane's, if they are
+    /// the same); returns their first word and number.
+    fn push_members(&mut self, (tiles, member): (usize, &dyn Fn(usize) -> bool)) -> (u32, u32) {
+        let at = self.words.len() as u32;
+        self.words.extend(member_spans(tiles, member).flatten());
+        let count = (self.words.len() as u32 - at) / 2;
+        if let Some((last, n)) = self.last_members {
+            let (a, b) = (last as usize, at as usize);
+            if n == count && self.words[a..a + 2 * n as usize] == self.words[b..] {
+                self.words.truncate(b);
+                return (last, n);
+            }
+        }
+        self.last_members = Some((at, count));
+        (at, count)
     }
 
     /// Bytes this holds as uploaded.
@@ -141,18 +165,15 @@ impl Coded {
         for e in s.entries {
             self.words.extend([e.byte, e.position, e.dc as u32, e.from]);
         }
-        let at = self.words.len() as u32;
-        if let Some((tiles, member)) = members {
-            self.words.extend(member_spans(tiles, member).flatten());
-        }
+        let (at, member_count) = members.map_or((0, 0), |m| self.push_members(m));
         PlaneSpan {
             step,
             stream,
             entries,
             count: s.entries.len() as u32,
             blocks: s.blocks as u32,
-            members: if members.is_some() { at } else { 0 },
-            member_count: (self.words.len() as u32 - at) / 2,
+            members: at,
+            member_count,
             lanes: None,
         }
     }
@@ -168,21 +189,33 @@ impl Coded {
     ) -> SectionSpan {
         let words = self.words.len() as u32;
         self.push_bytes(&bytes[section.words_at..]);
+        // The own histograms: a word each (where its frequencies start, from `own`, << 8 |
+        // how many tokens they cover), then each one's frequencies up to its last used
+        // token, two to a word.
         let own = self.words.len() as u32;
         let mine = section.histograms.iter().zip(&section.file);
+        let own_count = mine.clone().filter(|(_, f)| f.is_none()).count() as u32;
+        self.words.resize((own + own_count) as usize, 0);
         let mut index = Vec::with_capacity(section.histograms.len());
+        let mut i = 0;
         for (h, file) in mine {
             match file {
                 Some(g) => index.push(*g as u32),
                 None => {
-                    index.push(file_count + (self.words.len() as u32 - own) / 64);
+                    index.push(file_count + i);
+                    let used = (0..128)
+                        .rev()
+                        .find(|&t| h.frequency(t) > 0)
+                        .map_or(0, |t| t + 1);
+                    let at = self.words.len() as u32 - own;
+                    self.words[(own + i) as usize] = at << 8 | used as u32;
                     let f = |t: usize| h.frequency(t);
-                    self.words
-                        .extend((0..64).map(|i| f(2 * i) | f(2 * i + 1) << 16));
+                    let pairs = (0..used.div_ceil(2)).map(|k| f(2 * k) | f(2 * k + 1) << 16);
+                    self.words.extend(pairs);
+                    i += 1;
                 }
             }
         }
-        let own_count = (self.words.len() as u32 - own) / 64;
         let mut places = [NONE; FAMILIES];
         for (f, clusters) in section.places.iter().enumerate() {
             if clusters.is_empty() {
@@ -216,21 +249,19 @@ impl Coded {
         }
         let &(_, r1, _, w1) = sp.lanes.last().expect("a plane has a lane");
         self.words.extend([r1 as u32, w1 as u32]);
-        let at = self.words.len() as u32;
-        if let Some((tiles, member)) = members {
-            self.words.extend(member_spans(tiles, member).flatten());
-        }
+        let (at, member_count) = members.map_or((0, 0), |m| self.push_members(m));
         PlaneSpan {
             step,
             blocks: blocks as u32,
-            members: if members.is_some() { at } else { 0 },
-            member_count: (self.words.len() as u32 - at) / 2,
+            members: at,
+            member_count,
             lanes: Some(LanePlane {
                 section,
                 family: family as u32,
                 table,
                 count: sp.lanes.len() as u32,
                 words: (w1 - sp.lanes[0].2) as u32,
+                longest: sp.lanes.iter().map(|l| l.3 - l.2).max().unwrap_or(0) as u32,
             }),
             ..PlaneSpan::default()
         }
@@ -349,5 +380,19 @@ mod tests {
         assert_eq!((spans[1].members, spans[1].member_count), (24, 3));
         assert_eq!(&d.words[3..], &c.words[..]);
         assert_eq!(d.bytes(), (3 + c.words.len() as u64) * 4);
+        // A plane of the same members right after (two chroma planes) shares the spans;
+        // one of other members has its own.
+        let len = c.words.len();
+        let again = c.push_plane(0.25, s, Some((10, &member)));
+        assert_eq!((again.members, again.member_count), (21, 3));
+        assert_eq!(
+            c.words.len(),
+            len + 2 + 8,
+            "its stream and entry points alone"
+        );
+        let fewer = |t: usize| t == 4;
+        let other = c.push_plane(0.25, s, Some((10, &fewer)));
+        assert_eq!(other.member_count, 1);
+        assert_eq!(&c.words[other.members as usize..], &[4, 0]);
     }
 }

@@ -130,6 +130,16 @@ impl SegmentData {
         self.data.release();
     }
 
+    /// Of its version 2 planes decoded as coded: the sum of each plane's longest lane and
+    /// the lanes' words in all (16-bit words).
+    #[cfg_attr(not(feature = "bench"), allow(dead_code))]
+    pub fn lane_words(&self) -> (u64, u64) {
+        let lanes = self.planes.iter().filter_map(|p| p.lanes);
+        lanes.fold((0, 0), |(l, w), p| {
+            (l + p.longest as u64, w + p.words as u64)
+        })
+    }
+
     /// Number of planes (keyframe and bubble) the box holds.
     #[cfg_attr(not(feature = "bench"), allow(dead_code))]
     pub fn plane_count(&self) -> usize {

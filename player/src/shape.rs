@@ -112,8 +112,8 @@ pub struct PassWeights {
     pub bubble_bound: u32,
     /// A block of a bubble plane written: the unit, 4.
     pub bubble_write: u32,
-    /// A 16-bit word of a version 2 plane's rANS lanes decoded (`lane_blocks`, both
-    /// parities): the serial part of its decode.
+    /// A 16-bit word of a version 2 plane's longest rANS lane decoded (`lane_blocks`,
+    /// both parities): the serial chain its decode waits for.
     pub lane_word: u32,
     /// A block of a version 2 plane through each of its other passes (`lane_prepare`, the
     /// two DC scans; the groups' flags per group pair; a section's tables per 16
@@ -135,7 +135,10 @@ impl PassWeights {
         bubble_zero: 1,
         bubble_bound: 2,
         bubble_write: 4,
-        lane_word: 4,
+        // 13.5 µs a word of the longest lane (`bench decode --gpu --lanes true --fit` on
+        // the demo in 2.0): llvmpipe runs a workgroup's lanes in lockstep, so the other
+        // lanes' symbols add to the longest's.
+        lane_word: 220,
         lane_block: 1,
     };
 
@@ -153,7 +156,9 @@ impl PassWeights {
         bubble_zero: 1,
         bubble_bound: 1,
         bubble_write: 4,
-        lane_word: 4,
+        // Not measured: an estimate of 0.4 µs a word of the longest lane (about seven
+        // symbols, each a chain of three dependent loads of some 60 ns in all).
+        lane_word: 2800,
         lane_block: 1,
     };
 }

@@ -24,6 +24,11 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         .collect();
     let duration = h.frame_count as f64 / h.fps();
     let (mut zstd_t, mut full_t, mut pairs_t) = (Vec::new(), Vec::new(), Vec::new());
+    // Version 2 as coded: the boxes, the sum of each plane's longest lane, all lanes'
+    // words.
+    let mut chains = (0u64, 0u64, 0u64);
+    // Bytes the boxes of a play-through upload.
+    let mut upload = 0u64;
     for _ in 0..a.runs.max(1) {
         // The entropy decoding alone: every keyframe, tile map and coefficient chunk
         // decompressed (zstd), or decoded to pairs (format 2's rANS lanes).
@@ -65,10 +70,19 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
             let mut dec = DecoderCore::new(h.clone(), layout.clone(), entries.clone());
             dec.set_lanes(as_coded);
             let mut packed = SegmentData::new();
+            let mut seen = (0, 0, 0);
+            let mut uploaded = 0;
             for (i, c) in chunks.iter().enumerate() {
                 if let Event::Ready(s) = dec.take(i, Some(c)) {
                     dec.fill(s, 0, 0, &mut packed)?;
+                    let (longest, words) = packed.lane_words();
+                    seen = (seen.0 + 1, seen.1 + longest, seen.2 + words);
+                    uploaded += packed.bytes();
                 }
+            }
+            if as_coded {
+                chains = seen;
+                upload = uploaded;
             }
             times.push(t.elapsed().as_secs_f64());
         }
@@ -93,6 +107,11 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         zm,
         100.0 * zm / duration
     );
+    println!(
+        "uploads         {upload} bytes over a play-through: {:.2}× the file's {} bytes",
+        upload as f64 / bytes.len().max(1) as f64,
+        bytes.len()
+    );
     let what = match pairs_t.is_empty() {
         true => "full decode    ",
         false => "full, as coded ",
@@ -102,6 +121,14 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         fm,
         100.0 * fm / duration
     );
+    if chains.2 > 0 {
+        let n = chains.0.max(1) as f64;
+        println!(
+            "lanes           per segment {:.0} words in all; the longest lane of each plane, summed: {:.0} words (the serial chains a GPU decodes, one after another)",
+            chains.2 as f64 / n,
+            chains.1 as f64 / n
+        );
+    }
     if !pairs_t.is_empty() {
         let (pm, p0, p1) = stats(&mut pairs_t);
         println!("full, to pairs  median {pm:.3} s (min {p0:.3}, max {p1:.3}) = {:.2}% of one core in real time (the decoder thread's work where the GPU parses pairs: a CPU adapter)", 100.0 * pm / duration);

@@ -19,6 +19,9 @@ use super::plan::{group_bytes, groups_offset, part_blocks};
 use super::Gpu;
 use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
 
+/// Lanes per workgroup of the lane passes (`LANE_GROUP` in lanes.wgsl).
+const LANE_GROUP: u32 = 8;
+
 /// One pass of a lanes decode (an entry point of `lanes.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum LanePass {
@@ -423,9 +426,11 @@ impl Gpu {
             .max(tiles_x * tiles_y)
             .max(span.blocks)
             .max(lanes.count);
-        let by_lane = lanes.count.div_ceil(64);
+        let by_lane = lanes.count.div_ceil(LANE_GROUP);
         let blocks = span.blocks as u64;
-        let words = lanes.words as u64;
+        // A lane pass takes as long as its longest lane (a serial chain; the others run
+        // beside it).
+        let words = lanes.longest as u64;
         for (pass, at, groups, units) in [
             (LanePass::Prepare, even, cells.div_ceil(64), blocks),
             (LanePass::Flags, even, by_lane, (gw * gh) as u64 / 2),

@@ -78,6 +78,10 @@ const HIST_OF: u32 = MAPS + FAMILIES * CONTEXTS;
 // ENTRIES, SLOTS, GROUPS, INFO, LANE_STATES, FAULT, HISTOGRAMS, FILE_HISTOGRAMS, SETS.)
 
 const NONE: u32 = 0xFFFFFFFFu;
+// Lanes per workgroup of the lane passes (`flags`, `blocks`): a few, so that the lanes of
+// a plane spread over the adapter's cores rather than filling one workgroup's (a lane is
+// a serial chain; a workgroup runs on one core of a CPU adapter, one SM of a GPU).
+const LANE_GROUP: u32 = 8u;
 const FAMILIES: u32 = 6u;
 const CONTEXTS: u32 = 502u;
 const FLAG: u32 = 0u;
@@ -259,9 +263,15 @@ fn rank_of(t: u32) -> u32 {
     return select(NONE, r, r < next);
 }
 
-// Frequency of token t of the section's own histogram h.
+// Frequency of token t of the section's own histogram h: a word per histogram (where its
+// frequencies start << 8 | how many tokens they cover), then the frequencies, two to a
+// word (player/src/coded.rs).
 fn own_frequency(h: u32, t: u32) -> u32 {
-    let w = seg[prm.own + h * 64u + t / 2u];
+    let head = seg[prm.own + h];
+    if (t >= (head & 0xFFu)) {
+        return 0u;
+    }
+    let w = seg[prm.own + (head >> 8u) + t / 2u];
     return select(w & 0xFFFFu, w >> 16u, (t & 1u) == 1u);
 }
 
@@ -394,7 +404,7 @@ fn group_bits(gx: i32, gy: i32) -> u32 {
     return scratch[GROUPS + u32(gy) * prm.gw + u32(gx)];
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANE_GROUP)
 fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
     let lane = id.x;
     if (lane >= prm.lanes) {
@@ -533,7 +543,7 @@ fn block(b: u32, bx: u32, by: u32) {
     atomicStore(&marks[2u * b + 1u], mask.y);
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANE_GROUP)
 fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
     let lane = id.x;
     if (lane >= prm.lanes) {
