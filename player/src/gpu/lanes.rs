@@ -1,6 +1,6 @@
 //! Format 2's coefficient sections decoded on the GPU as the file codes them
 //! (`lanes.wgsl`): the decoder thread hands each section's words on as they are
-//! (`coded.rs`), and per plane seven dispatches decode them into the dense plane that the
+//! (`coded.rs`), and per plane five or six dispatches decode them into the dense plane that the
 //! keyframe and bubble passes read, as a parse of version 1's pairs leaves it. Once per
 //! section, `slots` builds the tables of the histograms the chunk sent itself; the file's
 //! histograms and context maps go to the GPU once, when the stream opens.
@@ -15,7 +15,7 @@ use vbim_format::plane2::{file_histograms, ContextMap, CONTEXTS, FAMILIES, GROUP
 use vbim_format::Header;
 
 use super::ops::Op;
-use super::plan::{group_bytes, groups_offset, part_blocks};
+use super::plan::part_blocks;
 use super::Gpu;
 use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
 
@@ -28,19 +28,23 @@ pub(crate) enum LanePass {
     Slots,
     Prepare,
     Flags,
+    Middle,
     Blocks,
     DcRows,
     DcCols,
+    DcTiles,
 }
 
 impl LanePass {
-    pub const ALL: [LanePass; 6] = [
+    pub const ALL: [LanePass; 8] = [
         LanePass::Slots,
         LanePass::Prepare,
         LanePass::Flags,
+        LanePass::Middle,
         LanePass::Blocks,
         LanePass::DcRows,
         LanePass::DcCols,
+        LanePass::DcTiles,
     ];
 
     /// Its entry point in `lanes.wgsl`.
@@ -49,9 +53,11 @@ impl LanePass {
             LanePass::Slots => "slots",
             LanePass::Prepare => "prepare",
             LanePass::Flags => "flags",
+            LanePass::Middle => "middle",
             LanePass::Blocks => "blocks",
             LanePass::DcRows => "dc_rows",
             LanePass::DcCols => "dc_cols",
+            LanePass::DcTiles => "dc_tiles",
         }
     }
 
@@ -61,9 +67,11 @@ impl LanePass {
             LanePass::Slots => "lane_slots",
             LanePass::Prepare => "lane_prepare",
             LanePass::Flags => "lane_flags",
+            LanePass::Middle => "lane_middle",
             LanePass::Blocks => "lane_blocks",
             LanePass::DcRows => "lane_dc_rows",
             LanePass::DcCols => "lane_dc_cols",
+            LanePass::DcTiles => "lane_dc_tiles",
         }
     }
 }
@@ -177,7 +185,7 @@ pub(super) struct LaneJob {
     rw: u32,
     tile: u32,
     lanes: u32,
-    parity: u32,
+    _pad0: u32,
     words: u32,
     table: u32,
     family: u32,
@@ -363,8 +371,8 @@ fn lanes_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 impl Gpu {
     /// The ops that decode version 2 plane `span` (of `lanes`) into the dense plane: its
     /// section's tables first if the plane before was of another section
-    /// (`planned_section`), the dense plane's masks and sets cleared, then the plane's
-    /// seven passes.
+    /// (`planned_section`), then the plane's five passes (six for a keyframe plane, whose
+    /// DC takes two scans).
     pub(super) fn lane_ops(
         &mut self,
         ops: &mut Vec<Op>,
@@ -396,7 +404,7 @@ impl Gpu {
             rw: bw.div_ceil(REGION as u32),
             tile: ts,
             lanes: lanes.count,
-            parity: 0,
+            _pad0: 0,
             words: section.words,
             table: lanes.table,
             family: lanes.family,
@@ -418,28 +426,30 @@ impl Gpu {
             let op = Op::lanes(LanePass::Slots, at, n.div_ceil(64), channel, n as u64 / 16);
             ops.push(op);
         }
-        let bytes = groups_offset(self.part) + group_bytes(span.blocks);
-        ops.push(Op::clear(bytes, channel));
-        let even = self.push_job_bytes(bytemuck::bytes_of(&job));
-        let odd = self.push_job_bytes(bytemuck::bytes_of(&LaneJob { parity: 1, ..job }));
-        let cells = (gw * gh)
-            .max(tiles_x * tiles_y)
-            .max(span.blocks)
-            .max(lanes.count);
+        let at = self.push_job_bytes(bytemuck::bytes_of(&job));
+        // `prepare` also clears the dense plane's masks and sets (two words per group of
+        // 64 blocks).
+        let sets = 2 * span.blocks.div_ceil(64);
+        let cells = (gw * gh).max(tiles_x * tiles_y).max(span.blocks);
+        let cells = cells.max(lanes.count).max(sets);
         let by_lane = lanes.count.div_ceil(LANE_GROUP);
         let blocks = span.blocks as u64;
         // A lane pass takes as long as its longest lane (a serial chain; the others run
         // beside it).
         let words = lanes.longest as u64;
-        for (pass, at, groups, units) in [
-            (LanePass::Prepare, even, cells.div_ceil(64), blocks),
-            (LanePass::Flags, even, by_lane, (gw * gh) as u64 / 2),
-            (LanePass::Flags, odd, by_lane, (gw * gh) as u64 / 2),
-            (LanePass::Blocks, even, by_lane, words / 2),
-            (LanePass::Blocks, odd, by_lane, words - words / 2),
-            (LanePass::DcRows, even, bh.div_ceil(64), blocks),
-            (LanePass::DcCols, even, bw.div_ceil(64), blocks),
-        ] {
+        let mut passes = vec![
+            (LanePass::Prepare, cells.div_ceil(64), blocks),
+            (LanePass::Flags, by_lane, (gw * gh) as u64 / 2),
+            (LanePass::Middle, by_lane, words / 2),
+            (LanePass::Blocks, by_lane, words - words / 2),
+        ];
+        if ts > 0 {
+            passes.push((LanePass::DcTiles, (tiles_x * tiles_y).div_ceil(64), blocks));
+        } else {
+            passes.push((LanePass::DcRows, bh.div_ceil(64), blocks));
+            passes.push((LanePass::DcCols, bw.div_ceil(64), blocks));
+        }
+        for (pass, groups, units) in passes {
             ops.push(Op::lanes(pass, at, groups, channel, units));
         }
     }

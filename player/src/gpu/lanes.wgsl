@@ -4,9 +4,11 @@
 // step for step. Dispatches (player/src/gpu/lanes.rs): `slots` once per section (each
 // family's histogram of each context, and the slot tables of the histograms the chunk
 // sent itself; the file's were written when the stream opened), then per plane `prepare`
-// (lanes' states, each tile's rank, each group's flags, the blocks' residuals cleared),
-// `flags` with parity 0 then 1, `blocks` with parity 0 then 1, `dc_rows` and `dc_cols`.
-// Each lane keeps its state in the scratch buffer between dispatches.
+// (lanes' states, each tile's rank, each group's flags, the blocks' residuals and the
+// dense plane's masks cleared), `flags` (the even groups), `middle` (the odd groups, then
+// the even blocks), `blocks` (the odd blocks), and the DC: `dc_tiles` for a bubble plane,
+// `dc_rows` then `dc_cols` for a keyframe plane. Each lane keeps its state in the scratch
+// buffer between dispatches.
 //
 // llvmpipe (lavapipe) ends every loop of an invocation once its loops have run 65,535
 // iterations in all: so no loop per symbol here (a slot table finds the token, raw bits
@@ -31,7 +33,7 @@ struct LaneJob {
     // a keyframe plane.
     tile: u32,
     lanes: u32,
-    parity: u32,
+    _pad0: u32,
     // The section's lanes' words (first word in `seg`); the plane's lanes (two words each:
     // first region, first word from the section's first; then the end of both); its
     // family; its blocks.
@@ -325,9 +327,10 @@ fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // Per plane, before its lanes: each lane's state from its first words, each tile's rank
-// (a bubble plane), each group's flags (bit 0 if it has a block, bit 1 cleared) and each
+// (a bubble plane), each group's flags (bit 0 if it has a block, bit 1 cleared), each
 // block's residual and count cleared (blocks of groups that hold nothing are never
-// decoded, and their neighbours read them as zeros).
+// decoded, and their neighbours read them as zeros), and the dense plane's masks and
+// sets cleared (one dispatch, not a clear and a dispatch).
 @compute @workgroup_size(64)
 fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -348,6 +351,12 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     if (i < prm.blocks) {
         scratch[INFO + 2u * i] = 0u;
         scratch[INFO + 2u * i + 1u] = 0u;
+        atomicStore(&marks[2u * i], 0u);
+        atomicStore(&marks[2u * i + 1u], 0u);
+    }
+    // The sets, as the passes after read them: two words per group of 64 blocks.
+    if (i < 2u * ((prm.blocks + 63u) / 64u)) {
+        atomicStore(&marks[SETS + i], 0u);
     }
     if (prm.tile != 0u && i < prm.tiles_x * prm.tiles_y) {
         scratch[GROUPS + prm.gw * prm.gh + i] = rank_of(i);
@@ -404,13 +413,8 @@ fn group_bits(gx: i32, gy: i32) -> u32 {
     return scratch[GROUPS + u32(gy) * prm.gw + u32(gx)];
 }
 
-@compute @workgroup_size(LANE_GROUP)
-fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
-    let lane = id.x;
-    if (lane >= prm.lanes) {
-        return;
-    }
-    let span = load(lane);
+// The groups' flags of parity `parity` in the lane's regions `span`.
+fn flags_of(span: vec2<u32>, parity: u32) {
     let per = REGION / GROUP;
     for (var region = span.x; region < span.y; region = region + 1u) {
         let rx = (region % prm.rw) * per;
@@ -418,11 +422,11 @@ fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
         for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
             for (var gx = rx; gx < min(rx + per, prm.gw); gx = gx + 1u) {
                 let g = GROUPS + gy * prm.gw + gx;
-                if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != prm.parity) {
+                if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != parity) {
                     continue;
                 }
                 var ctx = 0u;
-                if (prm.parity == 1u) {
+                if (parity == 1u) {
                     // The neighbouring groups (even, decoded in the first pass).
                     let l = group_bits(i32(gx) - 1, i32(gy));
                     let r = group_bits(i32(gx) + 1, i32(gy));
@@ -442,6 +446,32 @@ fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
+}
+
+// Pass 1: the even groups' flags.
+@compute @workgroup_size(LANE_GROUP)
+fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
+    let lane = id.x;
+    if (lane >= prm.lanes) {
+        return;
+    }
+    flags_of(load(lane), 0u);
+    save(lane);
+}
+
+// Passes 2 and 3 in one dispatch: the odd groups' flags (their contexts read the even
+// groups around them, decoded by the dispatch before), then the even blocks, whose
+// contexts read only the block itself and whose groups' flags are all the lane's own
+// (groups lie inside regions).
+@compute @workgroup_size(LANE_GROUP)
+fn middle(@builtin(global_invocation_id) id: vec3<u32>) {
+    let lane = id.x;
+    if (lane >= prm.lanes) {
+        return;
+    }
+    let span = load(lane);
+    flags_of(span, 1u);
+    blocks_of(span, 0u);
     save(lane);
 }
 
@@ -476,11 +506,11 @@ fn count(b: u32) -> u32 {
     return scratch[INFO + 2u * b + 1u];
 }
 
-// Decodes block b at (bx, by), of this pass's parity.
-fn block(b: u32, bx: u32, by: u32) {
+// Decodes block b at (bx, by), of parity `parity`.
+fn block(b: u32, bx: u32, by: u32, parity: u32) {
     var four = array<u32, 4>(NONE, NONE, NONE, NONE);
     let n4 = neighbours(bx, by, &four);
-    let odd = prm.parity == 1u && n4 > 0u;
+    let odd = parity == 1u && n4 > 0u;
     var dc_ctx = 0u;
     var count_ctx = 0u;
     if (odd) {
@@ -543,13 +573,8 @@ fn block(b: u32, bx: u32, by: u32) {
     atomicStore(&marks[2u * b + 1u], mask.y);
 }
 
-@compute @workgroup_size(LANE_GROUP)
-fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
-    let lane = id.x;
-    if (lane >= prm.lanes) {
-        return;
-    }
-    let span = load(lane);
+// The blocks of parity `parity` in the lane's regions `span`.
+fn blocks_of(span: vec2<u32>, parity: u32) {
     let per = REGION / GROUP;
     for (var region = span.x; region < span.y; region = region + 1u) {
         let rx = (region % prm.rw) * per;
@@ -573,20 +598,30 @@ fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                     let k = firstTrailingBit(left);
                     left = left & (left - 1u);
                     let gx = rx + k;
-                    let x0 = gx * GROUP + (gx * GROUP + cy + prm.parity) % 2u;
+                    let x0 = gx * GROUP + (gx * GROUP + cy + parity) % 2u;
                     for (var bx = x0; bx < min((gx + 1u) * GROUP, prm.bw); bx = bx + 2u) {
                         let b = block_at(i32(bx), i32(cy));
                         if (b != NONE) {
-                            block(b, bx, cy);
+                            block(b, bx, cy, parity);
                         }
                     }
                 }
             }
         }
     }
-    // The lane's last pass: it must end on every word read and the state it started
-    // from, as the specification's decoder checks.
-    if (prm.parity == 1u && (at != end || x != 65536u)) {
+}
+
+// Pass 4: the odd blocks, whose contexts read their even neighbours (decoded by the
+// dispatch before). The lane's last: it must end on every word read and the state it
+// started from, as the specification's decoder checks.
+@compute @workgroup_size(LANE_GROUP)
+fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
+    let lane = id.x;
+    if (lane >= prm.lanes) {
+        return;
+    }
+    blocks_of(load(lane), 1u);
+    if (at != end || x != 65536u) {
         fail();
     }
     save(lane);
@@ -638,15 +673,54 @@ fn dc_cols(@builtin(global_invocation_id) id: vec3<u32>) {
         if (b != NONE) {
             acc = acc + coefs[b * 64u];
             coefs[b * 64u] = acc;
-            // The block's last pass: its DC's bit, and its bit in the sets.
-            var low = atomicLoad(&marks[2u * b]);
-            if (acc != 0) {
-                low = low | 1u;
-                atomicStore(&marks[2u * b], low);
-            }
-            if ((low | atomicLoad(&marks[2u * b + 1u])) != 0u) {
-                atomicOr(&marks[SETS + b / 32u], 1u << (b % 32u));
-            }
+            finish_block(b, acc);
         }
+    }
+}
+
+// Block b's last step, once its DC is known: the DC's bit in its mask, and its bit in the
+// sets if it has any coefficient.
+fn finish_block(b: u32, dc: i32) {
+    var low = atomicLoad(&marks[2u * b]);
+    if (dc != 0) {
+        low = low | 1u;
+        atomicStore(&marks[2u * b], low);
+    }
+    if ((low | atomicLoad(&marks[2u * b + 1u])) != 0u) {
+        atomicOr(&marks[SETS + b / 32u], 1u << (b % 32u));
+    }
+}
+
+// A bubble plane's DC in one dispatch: its predictions stay inside its tiles, so an
+// invocation per member tile runs the specification's raster recurrence over the tile's
+// cells (left + up − up-left), in place of the two scans.
+@compute @workgroup_size(64)
+fn dc_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
+    let t = id.x;
+    if (t >= prm.tiles_x * prm.tiles_y) {
+        return;
+    }
+    let rank = scratch[GROUPS + prm.gw * prm.gh + t];
+    if (rank == NONE) {
+        return;
+    }
+    let n = prm.tile;
+    let first = rank * n * n;
+    for (var c = 0u; c < n * n; c = c + 1u) {
+        let cx = c % n;
+        let cy = c / n;
+        let b = first + c;
+        var dc = residual(b);
+        if (cx > 0u) {
+            dc = dc + coefs[(b - 1u) * 64u];
+        }
+        if (cy > 0u) {
+            dc = dc + coefs[(b - n) * 64u];
+        }
+        if (cx > 0u && cy > 0u) {
+            dc = dc - coefs[(b - n - 1u) * 64u];
+        }
+        coefs[b * 64u] = dc;
+        finish_block(b, dc);
     }
 }

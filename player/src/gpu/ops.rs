@@ -102,7 +102,7 @@ impl Kind {
             Kind::BubbleZero => w.bubble_zero,
             Kind::BubbleBound => w.bubble_bound,
             Kind::BubbleWrite => w.bubble_write,
-            Kind::Lane(LanePass::Blocks) => w.lane_word,
+            Kind::Lane(LanePass::Middle | LanePass::Blocks) => w.lane_word,
             Kind::Lane(_) => w.lane_block,
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => 0,
         }
