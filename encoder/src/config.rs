@@ -47,7 +47,8 @@ pub struct EncoderConfig {
     /// How segment boundaries are chosen.
     pub segment: SegmentMode,
     /// The format version written: version 1 (the default, every player reads it) or
-    /// version 2 (0.69–0.77× the bytes; its decode is heavier until the GPU does it).
+    /// version 2 (0.69–0.77× the bytes; a GPU decodes its sections as coded, a CPU
+    /// adapter's decoder thread at 12–16× version 1's CPU time).
     pub format: FormatVersion,
     /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
     /// payloads (1 to 22).
@@ -103,9 +104,10 @@ impl EncoderConfig {
             max_degree: 4,
             // Longer segments fit the budget but cost more than they save (measured).
             segment: SegmentMode::Auto { max: 32 },
-            // Version 2 becomes the default once the player decodes its sections on the
-            // GPU: until then its decoder thread decodes them on the CPU, 10–20× the work
-            // of version 1's zstd (BENCHMARKS.md, "Format 2").
+            // Version 2 becomes the default once a hardware GPU has measured its lanes'
+            // decode against version 1's parse (the player decodes them there as coded;
+            // a CPU adapter's decoder thread spends 12–16× version 1's CPU time on them,
+            // BENCHMARKS.md, "Format 2").
             format: FormatVersion::V1,
             zstd_level: 9,
             lane_bytes: crate::LANE_BYTES,
