@@ -87,7 +87,7 @@ pub(crate) struct Scratch {
     fault: u64,
     words: u64,
     /// Histograms the tables hold room for: the file's, then a section's own (at most
-    /// one per cluster of every family).
+    /// one per cluster of its kind's two families).
     histograms: u64,
     /// The file's histograms.
     pub file_histograms: u32,
@@ -112,7 +112,13 @@ impl Scratch {
             return None;
         }
         let file = file_histograms(maps).count() as u64;
-        let own: u64 = maps.iter().map(|m| m.clusters as u64).sum();
+        // A section's planes are of one kind (its luma and chroma families): it sends at
+        // most one histogram per cluster of those two.
+        let clusters = |f: usize| maps.get(f).map_or(0, |m| m.clusters as u64);
+        let own = (0..FAMILIES / 2)
+            .map(|k| clusters(2 * k) + clusters(2 * k + 1))
+            .max()
+            .unwrap_or(0);
         let ts = (tile as u64).max(1);
         let tiles = (pw as u64 / ts) * (ph as u64 / ts);
         let groups = (bw.div_ceil(GROUP as u64)) * bh.div_ceil(GROUP as u64);
