@@ -38,64 +38,37 @@ pub struct Shape {
 }
 
 /// A payload's head and the shapes of its planes: the head is format 1's (its length in
-/// bytes comes first).
+/// bytes comes first). [`section_planes`] with each plane's blocks listed.
 pub fn shapes(h: &Header, what: Payload, bytes: &[u8]) -> Result<(usize, Vec<Shape>)> {
-    let planes = h.channels as usize;
+    let (head, planes) = section_planes(h, what, bytes)?;
+    let channels = h.channels as usize;
     let (w, ht) = padded_size(h);
     let (bw, bh) = (w / N, ht / N);
-    let head = bytes
-        .get(..4)
-        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
-    match what {
-        Payload::Keyframe => {
-            let kind = match head[0] {
-                MODE_INTRA => INTRA_KEY,
-                MODE_PREDICTED => PREDICTED_KEY,
-                m => return Err(FormatError::Invalid(format!("unknown keyframe mode {m}"))),
-            };
-            if head[1] as usize != planes {
-                return Err(FormatError::Invalid(format!(
-                    "{} planes, expected {planes}",
-                    head[1]
-                )));
-            }
-            let raster: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
-            let shapes = (0..planes)
-                .map(|p| Shape {
-                    family: plane2::family(kind, p > 0),
-                    order: raster.clone(),
-                    tile: None,
-                })
-                .collect();
-            Ok((4 + 4 * planes, shapes))
-        }
-        Payload::Coefficients(tiles) => {
-            let dmax = tiles.max_degree();
-            if head[0] != dmax || (dmax > 1 && head[1] as usize != planes) {
-                return Err(FormatError::Invalid(format!(
-                    "coefficients for degree {} × {} planes, tile map needs {dmax} × {planes}",
-                    head[0], head[1]
-                )));
-            }
-            let ts = h.tile_size as usize;
-            let tx = h.tiles_x() as usize;
-            let mut shapes = Vec::new();
-            for k in 2..=dmax {
-                for p in 0..planes {
-                    let order = (0..h.tile_count())
-                        .filter(|&t| tiles.degree(p, t) >= k)
+    let (ts, tx) = (h.tile_size as usize, h.tiles_x() as usize);
+    let shapes = planes
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let order = match what {
+                Payload::Keyframe => (0..bw * bh).map(|b| (b % bw, b / bw)).collect(),
+                // Term k = i / channels + 2 of plane i % channels: the tiles whose degree
+                // reaches k, each tile's blocks in raster order.
+                Payload::Coefficients(tiles) => {
+                    let (k, c) = ((i / channels + 2) as u8, i % channels);
+                    (0..h.tile_count())
+                        .filter(|&t| tiles.degree(c, t) >= k)
                         .flat_map(|t| plane::tile_blocks(t, tx, ts))
-                        .collect();
-                    shapes.push(Shape {
-                        family: plane2::family(BUBBLE, p > 0),
-                        order,
-                        tile: Some(ts / N),
-                    });
+                        .collect()
                 }
+            };
+            Shape {
+                family: p.family,
+                order,
+                tile: p.geometry.tile,
             }
-            Ok((4 + 4 * (dmax.max(1) as usize - 1) * planes, shapes))
-        }
-    }
+        })
+        .collect();
+    Ok((head, shapes))
 }
 
 /// A payload's head and its planes as a coefficient section codes them, without their

@@ -2,30 +2,41 @@
 //! struct the player fills and the WGSL `struct Job` that `job.wgsl`, `parse.wgsl` and
 //! `decode.wgsl` read, field by field in the same order, so the two cannot drift apart.
 
-/// Declares `Job` (Rust) and [`JOB_WGSL`] (its WGSL declaration) from one list of fields,
-/// each with its Rust type and the WGSL type of the same size and alignment.
-macro_rules! job {
-    ($( $(#[doc = $doc:literal])* $name:ident : $rust:ty => $wgsl:literal ),* $(,)?) => {
-        /// One decode pass's parameters, at a [`JOB_STRIDE`] stride in a uniform buffer
-        /// bound with a dynamic offset.
+/// Declares a uniform struct of a decode pass, Rust and WGSL (its declaration in the
+/// `wgsl` constant), from one list of fields, each with its Rust type and the WGSL type of
+/// the same size and alignment; `fields` lists each field's name, bytes and WGSL type for
+/// the layout test (`check_layout`).
+macro_rules! uniform_struct {
+    (
+        $(#[doc = $sdoc:literal])* $struct:ident, $wgsl_const:ident, $fields:ident;
+        $( $(#[doc = $doc:literal])* $name:ident : $rust:ty => $wgsl:literal ),* $(,)?
+    ) => {
+        $(#[doc = $sdoc])*
         #[repr(C)]
-        #[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
-        pub(super) struct Job {
+        #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+        pub(super) struct $struct {
             $( $(#[doc = $doc])* pub $name: $rust, )*
         }
 
-        /// The WGSL declaration of [`Job`], put before the decode shaders' source.
-        pub(super) const JOB_WGSL: &str =
-            concat!("struct Job {\n", $( "    ", stringify!($name), ": ", $wgsl, ",\n", )* "}\n");
+        /// The WGSL declaration of the struct, put before its shaders' source.
+        pub(super) const $wgsl_const: &str = concat!(
+            "struct ", stringify!($struct), " {\n",
+            $( "    ", stringify!($name), ": ", $wgsl, ",\n", )*
+            "}\n"
+        );
 
         /// Each field's name, bytes and WGSL type (for the layout test).
         #[cfg(test)]
-        const FIELDS: &[(&str, usize, &str)] =
+        pub(super) const $fields: &[(&str, usize, &str)] =
             &[$( (stringify!($name), std::mem::size_of::<$rust>(), $wgsl), )*];
     };
 }
+pub(super) use uniform_struct;
 
-job! {
+uniform_struct! {
+    /// One decode pass's parameters, at a [`JOB_STRIDE`] stride in a uniform buffer
+    /// bound with a dynamic offset.
+    Job, JOB_WGSL, FIELDS;
     /// Quantiser step of the plane.
     step: f32 => "f32",
     /// Keyframe passes: the plane's channel; `key_pack`: the 16-bit layer it writes
@@ -81,32 +92,38 @@ pub(super) fn decode_source(body: &str) -> String {
 }
 
 #[cfg(test)]
+/// The WGSL struct has the Rust struct's fields in the same order at the same offsets:
+/// every field is 4-byte scalars, an 8-byte vector or an array of 16-byte vectors at
+/// an offset its alignment divides (WGSL's rule for these types), the Rust struct has
+/// no padding, and its size is what a uniform binding of the WGSL struct needs.
+pub(super) fn check_layout(fields: &[(&str, usize, &str)], size: usize) {
+    let mut offset = 0;
+    for &(name, bytes, wgsl) in fields {
+        let (wgsl_bytes, align) = match wgsl {
+            "f32" | "u32" | "i32" => (4, 4),
+            "vec2<u32>" | "vec2<f32>" => (8, 8),
+            "array<vec4<u32>, 2>" => (32, 16),
+            other => panic!("{name}: WGSL type {other} not checked here"),
+        };
+        assert_eq!(bytes, wgsl_bytes, "{name}: Rust and WGSL sizes differ");
+        assert_eq!(offset % align, 0, "{name}: WGSL would pad before it");
+        offset += bytes;
+    }
+    assert_eq!(offset, size);
+    assert!(offset as u64 <= JOB_STRIDE);
+    assert!(
+        offset.is_multiple_of(16),
+        "a uniform struct's size is a multiple of 16"
+    );
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The WGSL struct has the Rust struct's fields in the same order at the same offsets:
-    /// every field is 4-byte scalars or an 8-byte vector at an offset its size divides
-    /// (WGSL's alignment rule for these types), the Rust struct has no padding, and its
-    /// size is what a uniform binding of the WGSL struct needs.
     #[test]
     fn the_wgsl_job_has_the_rust_layout() {
-        let mut offset = 0;
-        for &(name, bytes, wgsl) in FIELDS {
-            let wgsl_bytes = match wgsl {
-                "f32" | "u32" | "i32" => 4,
-                "vec2<u32>" | "vec2<f32>" => 8,
-                other => panic!("{name}: WGSL type {other} not checked here"),
-            };
-            assert_eq!(bytes, wgsl_bytes, "{name}: Rust and WGSL sizes differ");
-            assert_eq!(offset % wgsl_bytes, 0, "{name}: WGSL would pad before it");
-            offset += bytes;
-        }
-        assert_eq!(offset, std::mem::size_of::<Job>());
-        assert!(offset as u64 <= JOB_STRIDE);
-        assert!(
-            offset.is_multiple_of(16),
-            "a uniform struct's size is a multiple of 16"
-        );
+        check_layout(FIELDS, std::mem::size_of::<Job>());
         assert!(JOB_WGSL.starts_with("struct Job {\n    step: f32,\n"));
         let declared = |l: &str| l.trim_start().starts_with("struct Job");
         assert!(

@@ -180,31 +180,53 @@ pub(crate) fn lanes_bytes(h: &Header) -> u64 {
     Scratch::for_stream(h).map_or(0, |s| s.bytes())
 }
 
-/// One lanes pass's parameters (`LaneJob` in lanes.wgsl), in the jobs buffer.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub(super) struct LaneJob {
-    bw: u32,
-    bh: u32,
-    gw: u32,
-    gh: u32,
-    rw: u32,
-    tile: u32,
-    lanes: u32,
-    _pad0: u32,
-    words: u32,
-    table: u32,
-    family: u32,
-    blocks: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-    spans: u32,
-    span_count: u32,
-    members: u32,
-    own: u32,
-    own_count: u32,
-    _pad: u32,
-    places: [u32; 8],
+super::job::uniform_struct! {
+    /// One lanes pass's parameters (`LaneJob` in lanes.wgsl), in the jobs buffer.
+    LaneJob, LANE_JOB_WGSL, LANE_FIELDS;
+    /// Blocks across and down the plane.
+    bw: u32 => "u32",
+    /// (See `bw`.)
+    bh: u32 => "u32",
+    /// Groups (4 × 4 blocks) across and down.
+    gw: u32 => "u32",
+    /// (See `gw`.)
+    gh: u32 => "u32",
+    /// Regions (16 × 16 blocks) across.
+    rw: u32 => "u32",
+    /// Blocks across a tile for a bubble plane (its DC prediction stays in the tile); 0
+    /// for a keyframe plane.
+    tile: u32 => "u32",
+    /// The plane's lanes.
+    lanes: u32 => "u32",
+    /// (Padding.)
+    _pad0: u32 => "u32",
+    /// The section's lanes' words: first word in the segment's words.
+    words: u32 => "u32",
+    /// The plane's lanes: two words each (first region, first word from the section's
+    /// first), then the end of both.
+    table: u32 => "u32",
+    /// Its family (which context map codes it).
+    family: u32 => "u32",
+    /// Its blocks.
+    blocks: u32 => "u32",
+    /// A bubble plane's tiles across and down (0 for a keyframe plane).
+    tiles_x: u32 => "u32",
+    /// (See `tiles_x`.)
+    tiles_y: u32 => "u32",
+    /// A bubble plane's member spans: first word and number.
+    spans: u32 => "u32",
+    /// (See `spans`.)
+    span_count: u32 => "u32",
+    /// A bubble plane's member tiles.
+    members: u32 => "u32",
+    /// `slots`: the histograms the section sent itself, first word and number.
+    own: u32 => "u32",
+    /// (See `own`.)
+    own_count: u32 => "u32",
+    /// (Padding.)
+    _pad: u32 => "u32",
+    /// `slots`: per family the first word of its clusters' histograms (NONE: not used).
+    places: [u32; 8] => "array<vec4<u32>, 2>",
 }
 
 /// The lanes decode's pipelines and state.
@@ -233,7 +255,11 @@ impl LanesGpu {
     ) -> Option<LanesGpu> {
         let plan = Scratch::new(geometry, maps)?;
         let layout = lanes_layout(device);
-        let source = format!("{}{}", plan.constants(sets), include_str!("lanes.wgsl"));
+        let source = format!(
+            "{}{LANE_JOB_WGSL}{}",
+            plan.constants(sets),
+            include_str!("lanes.wgsl")
+        );
         let pipelines = LanePass::ALL
             .iter()
             .map(|p| {
@@ -497,6 +523,13 @@ impl Gpu {
     }
 }
 
-/// The Rust and WGSL layouts of [`LaneJob`] agree in size (the WGSL struct's fields are
-/// all u32 but its last, an array of vec4 at a 16-byte offset).
-const _: () = assert!(std::mem::size_of::<LaneJob>() == 112);
+#[cfg(test)]
+#[test]
+fn the_wgsl_lane_job_has_the_rust_layout() {
+    super::job::check_layout(LANE_FIELDS, std::mem::size_of::<LaneJob>());
+    let declared = |l: &str| l.trim_start().starts_with("struct LaneJob");
+    assert!(
+        !include_str!("lanes.wgsl").lines().any(declared),
+        "declared twice"
+    );
+}

@@ -22,40 +22,8 @@
 // a symbol out of range or did not end as the specification's decoder requires (every
 // word read, the state back at 2^16) sets FAULT.
 
-struct LaneJob {
-    // Blocks across and down the plane; groups across and down; regions across.
-    bw: u32,
-    bh: u32,
-    gw: u32,
-    gh: u32,
-    rw: u32,
-    // Blocks across a tile for a bubble plane (its DC prediction stays in the tile); 0 for
-    // a keyframe plane.
-    tile: u32,
-    lanes: u32,
-    _pad0: u32,
-    // The section's lanes' words (first word in `seg`); the plane's lanes (two words each:
-    // first region, first word from the section's first; then the end of both); its
-    // family; its blocks.
-    words: u32,
-    table: u32,
-    family: u32,
-    blocks: u32,
-    // A bubble plane's tiles across and down, member spans (first word in `seg`, count)
-    // and member tiles (0 for a keyframe plane).
-    tiles_x: u32,
-    tiles_y: u32,
-    spans: u32,
-    span_count: u32,
-    members: u32,
-    // `slots`: the histograms the section sent itself (first word in `seg`, count), and
-    // per family the first word of its clusters' histograms (NONE: not used).
-    own: u32,
-    own_count: u32,
-    _pad: u32,
-    places: array<vec4<u32>, 2>,
-}
-
+// `struct LaneJob`, the passes' parameters, is declared before this file
+// (player/src/gpu/lanes.rs, from the Rust struct's fields).
 @group(0) @binding(0) var<uniform> prm: LaneJob;
 // The segment's words (player/src/coded.rs).
 @group(0) @binding(1) var<storage, read> seg: array<u32>;
