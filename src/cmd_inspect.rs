@@ -94,6 +94,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
         ColorEncoding::Srgb8 => "sRGB 8-bit",
     };
     let metadata = r.metadata().ok().flatten();
+    let kinds = bytes_by_kind(&h, &entries);
 
     if a.json {
         let chunks: Vec<_> = entries
@@ -130,6 +131,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                 "damaged_chunks": damaged,
             },
             "metadata_bytes": metadata.as_ref().map(|m| m.len()),
+            "bytes_by_kind": kinds.iter().map(|(k, b)| (k.to_string(), json!(b))).collect::<serde_json::Map<_, _>>(),
         });
         println!("{}", serde_json::to_string_pretty(&v).unwrap());
     } else {
@@ -191,6 +193,12 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
             Some(p) => println!("  payloads    at most {p} bytes decompressed"),
             None => println!("  payloads    largest not stated (a 1.0 file)"),
         }
+        let total = h.file_size.max(1) as f64;
+        let parts: Vec<String> = kinds
+            .iter()
+            .map(|(k, b)| format!("{k} {b} ({:.1}%)", 100.0 * *b as f64 / total))
+            .collect();
+        println!("  bytes       {}", parts.join(", "));
         println!("  chunks      {}:", h.chunk_count);
         println!(
             "    {:>5}  {:<9} {:>5}  {:>13}  {:>9}  status",
@@ -291,6 +299,54 @@ fn payload_status(
 }
 
 /// How the file codes its keyframes and coefficients (its major version).
+/// The file's bytes by what they hold: the header (with a 2.0 file's context maps apart),
+/// the index, and each kind of chunk (keyframes intra and predicted apart).
+fn bytes_by_kind(
+    h: &vbim_format::Header,
+    entries: &[vbim_format::IndexEntry],
+) -> Vec<(&'static str, u64)> {
+    let sum = |f: &dyn Fn(&vbim_format::IndexEntry) -> bool| -> u64 {
+        entries.iter().filter(|e| f(e)).map(|e| e.length).sum()
+    };
+    let header = h.header_size() as u64;
+    let maps = match h.coding {
+        // (A 2.0 header is 204 bytes before its maps: docs/FORMAT.md.)
+        vbim_format::Coding::Lanes(_) => header.saturating_sub(204),
+        vbim_format::Coding::Pairs => 0,
+    };
+    let chunks: u64 = entries.iter().map(|e| e.length).sum();
+    let mut out = vec![("header", header - maps)];
+    if maps > 0 {
+        out.push(("context maps", maps));
+    }
+    out.extend([
+        (
+            "intra keyframes",
+            sum(&|e| e.kind == ChunkKind::Keyframe && e.is_intra()),
+        ),
+        (
+            "predicted keyframes",
+            sum(&|e| e.kind == ChunkKind::Keyframe && !e.is_intra()),
+        ),
+        ("coefficients", sum(&|e| e.kind == ChunkKind::Coefficients)),
+        ("tile maps", sum(&|e| e.kind == ChunkKind::TileMap)),
+        ("metadata", sum(&|e| e.kind == ChunkKind::Metadata)),
+        (
+            "index and other",
+            h.file_size.saturating_sub(header + chunks) + sum(&|e| !known(e.kind)),
+        ),
+    ]);
+    out
+}
+
+/// Whether `bytes_by_kind` names the kind.
+fn known(k: ChunkKind) -> bool {
+    matches!(
+        k,
+        ChunkKind::Keyframe | ChunkKind::Coefficients | ChunkKind::TileMap | ChunkKind::Metadata
+    )
+}
+
 fn coding_name(h: &vbim_format::Header) -> &'static str {
     match h.coding {
         vbim_format::Coding::Pairs => "zero-run pairs through zstd",

@@ -90,6 +90,12 @@ fn bake_encode_inspect_decode_compare() {
         json["metadata_bytes"].as_u64().is_some(),
         "the bake's manifest is stored"
     );
+    // The bytes by kind add up to the file, every byte counted once.
+    let kinds = json["bytes_by_kind"].as_object().unwrap();
+    let sum: u64 = kinds.values().map(|v| v.as_u64().unwrap()).sum();
+    assert_eq!(sum, json["header"]["file_size"].as_u64().unwrap());
+    assert!(kinds["intra keyframes"].as_u64().unwrap() > 0, "{kinds:?}");
+    assert!(out.contains("  bytes       header "), "{out}");
 
     // `play --bandwidth 1.2x` reads at exactly the rate of the header's 1.2× point, so that
     // the ring is that point's read-ahead (a rounding difference once picked the 1× point).
