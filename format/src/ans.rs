@@ -131,6 +131,11 @@ impl Histogram {
         self.freq.get(token).map_or(0, |&f| f as u32)
     }
 
+    /// The token of each of the 4096 slots (what a decoder looks the state's slot up in).
+    pub fn slot_tokens(&self) -> &[u8] {
+        &self.slot
+    }
+
     /// Where `token`'s slots start among the 4096 (the sum of the frequencies before it).
     pub fn cumulative(&self, token: usize) -> u32 {
         self.cum.get(token).map_or(SCALE, |&c| c as u32)

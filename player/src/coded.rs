@@ -42,10 +42,13 @@ pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
 pub(crate) fn decodes_lanes(h: &vbim_format::Header) -> Option<u32> {
     let maps = h.context_maps()?;
     let (pw, ph) = vbim_format::chunk::padded_size(h);
-    let plane = [pw as u32, ph as u32];
-    let whole = (plane[0] as u64 / 8) * (plane[1] as u64 / 8);
-    (whole <= part_blocks(plane) as u64)
+    fits_dense_plane([pw as u32, ph as u32])
         .then(|| vbim_format::plane2::file_histograms(maps).count() as u32)
+}
+
+/// Whether a plane of `plane` texels fits the dense plane whole.
+pub(crate) fn fits_dense_plane(plane: [u32; 2]) -> bool {
+    (plane[0] as u64 / 8) * (plane[1] as u64 / 8) <= part_blocks(plane) as u64
 }
 
 /// A place that holds nothing (a family a section does not use).
@@ -80,6 +83,9 @@ pub(crate) struct LanePlane {
     /// (the serial chain a GPU runs).
     pub words: u32,
     pub longest: u32,
+    /// A bubble plane's: its blocks come tile by tile, and its DC predictions stay in
+    /// their tile.
+    pub tiled: bool,
 }
 
 /// Where one plane's data lies in a [`Coded`] buffer (all offsets in words).
@@ -262,6 +268,7 @@ impl Coded {
                 count: sp.lanes.len() as u32,
                 words: (w1 - sp.lanes[0].2) as u32,
                 longest: sp.lanes.iter().map(|l| l.3 - l.2).max().unwrap_or(0) as u32,
+                tiled: members.is_some(),
             }),
             ..PlaneSpan::default()
         }

@@ -467,27 +467,12 @@ impl DecoderCore {
                 en.first_frame, en.last_frame
             )
         };
-        if let (Some(file_count), Some(maps)) = (self.lanes, h.context_maps()) {
+        if let Some(lanes) = self.lanes {
             // Version 2, decoded by the GPU as coded: the section as it is.
-            let (head, shapes) =
-                section_planes(h, Payload::Coefficients(&tiles), &bytes).map_err(context)?;
-            let section = Section::parse_layout(&bytes[head..], &shapes, maps).map_err(context)?;
-            let index = out.sections.len() as u32;
-            let span = out.data.push_section(&bytes[head..], &section, file_count);
-            out.sections.push(span);
+            let to = (&mut out.data, &mut out.planes, &mut out.sections);
+            let what = Payload::Coefficients(&tiles);
+            push_lanes(h, lanes, what, &bytes, to).map_err(context)?;
             let layers = 1 + tiles.max_degree() as usize;
-            let (n, per) = (h.tile_count(), h.tile_size as usize / 8);
-            for (i, (sp, shape)) in section.planes.iter().zip(&shapes).enumerate() {
-                let (k, p) = (i / ch + 2, i % ch);
-                let degrees = tiles.degrees(p);
-                let member = |t: usize| degrees[t] >= k as u8;
-                let blocks = degrees.iter().filter(|&&d| d >= k as u8).count() * per * per;
-                let plane = (sp, index, shape.family);
-                let span =
-                    out.data
-                        .push_lane_plane(step_of(&bytes, i), plane, blocks, Some((n, &member)));
-                out.planes.push(span);
-            }
             self.finish_box(s, generation, pass, layers, k1n, t0, out);
             return Ok(());
         }
@@ -569,22 +554,65 @@ fn push_keyframe(
     h: &Header,
     lanes: Option<u32>,
     bytes: &[u8],
-    (data, planes, sections): (&mut Coded, &mut Vec<PlaneSpan>, &mut Vec<SectionSpan>),
+    (data, planes, sections): Boxed<'_>,
 ) -> vbim_format::Result<u8> {
-    let (Some(file_count), Some(maps)) = (lanes, h.context_maps()) else {
-        return chunk::keyframe_streams(h, bytes, |_, step, s| {
+    match lanes {
+        Some(lanes) => push_lanes(h, lanes, Payload::Keyframe, bytes, (data, planes, sections))
+            .map(|()| bytes[0]),
+        None => chunk::keyframe_streams(h, bytes, |_, step, s| {
             planes.push(data.push_plane(step, s, None));
-        });
-    };
-    let (head, shapes) = section_planes(h, Payload::Keyframe, bytes)?;
+        }),
+    }
+}
+
+/// Where a chunk's planes go in a box: its words, its planes, its sections.
+type Boxed<'a> = (
+    &'a mut Coded,
+    &'a mut Vec<PlaneSpan>,
+    &'a mut Vec<SectionSpan>,
+);
+
+/// Appends a version 2 keyframe or coefficient chunk's section as it is, and each of its
+/// planes (a bubble plane with its member tiles), for the GPU to decode as coded;
+/// `file_count` is how many histograms the file carries.
+fn push_lanes(
+    h: &Header,
+    file_count: u32,
+    what: Payload,
+    bytes: &[u8],
+    (data, planes, sections): Boxed<'_>,
+) -> vbim_format::Result<()> {
+    let maps = h.context_maps().ok_or_else(|| {
+        vbim_format::FormatError::Invalid("a version 1 file has no coefficient sections".into())
+    })?;
+    let (head, shapes) = section_planes(h, what, bytes)?;
     let section = Section::parse_layout(&bytes[head..], &shapes, maps)?;
     let index = sections.len() as u32;
     sections.push(data.push_section(&bytes[head..], &section, file_count));
     let (w, ht) = chunk::padded_size(h);
-    let blocks = (w / 8) * (ht / 8);
-    for (p, (sp, shape)) in section.planes.iter().zip(&shapes).enumerate() {
+    let (ch, n, per) = (
+        h.channels as usize,
+        h.tile_count(),
+        h.tile_size as usize / 8,
+    );
+    for (i, (sp, shape)) in section.planes.iter().zip(&shapes).enumerate() {
         let plane = (sp, index, shape.family);
-        planes.push(data.push_lane_plane(step_of(bytes, p), plane, blocks, None));
+        let span = match what {
+            Payload::Keyframe => {
+                data.push_lane_plane(step_of(bytes, i), plane, (w / 8) * (ht / 8), None)
+            }
+            // Term k = i / channels + 2 of plane i % channels: the tiles whose degree
+            // reaches k.
+            Payload::Coefficients(tiles) => {
+                let (k, p) = ((i / ch + 2) as u8, i % ch);
+                let degrees = tiles.degrees(p);
+                let member = |t: usize| degrees[t] >= k;
+                let blocks = degrees.iter().filter(|&&d| d >= k).count() * per * per;
+                let members = Some((n, &member as &dyn Fn(usize) -> bool));
+                data.push_lane_plane(step_of(bytes, i), plane, blocks, members)
+            }
+        };
+        planes.push(span);
     }
-    Ok(bytes[0])
+    Ok(())
 }

@@ -15,7 +15,6 @@ use vbim_format::plane2::{file_histograms, ContextMap, CONTEXTS, FAMILIES, GROUP
 use vbim_format::Header;
 
 use super::ops::Op;
-use super::plan::part_blocks;
 use super::Gpu;
 use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
 
@@ -105,12 +104,11 @@ impl Scratch {
     /// The scratch for planes of `plane` texels in tiles of `tile`² coded with `maps`;
     /// `None` if a plane is larger than the dense plane.
     pub fn new((plane, tile): ([u32; 2], u32), maps: &[ContextMap]) -> Option<Scratch> {
-        let [pw, ph] = plane;
-        let (bw, bh) = (pw as u64 / 8, ph as u64 / 8);
-        // (The rule `coded::decodes_lanes` applies for the decoder thread.)
-        if bw * bh > part_blocks(plane) as u64 {
+        if !crate::coded::fits_dense_plane(plane) {
             return None;
         }
+        let [pw, ph] = plane;
+        let (bw, bh) = (pw as u64 / 8, ph as u64 / 8);
         let file = file_histograms(maps).count() as u64;
         // A section's planes are of one kind (its luma and chroma families): it sends at
         // most one histogram per cluster of those two.
@@ -353,23 +351,14 @@ impl LanesGpu {
 }
 
 /// A histogram's 128 entries (frequency | cumulative frequency << 16) and its slot table
-/// (each of the 4096 slots' token, four to a word), as `lanes.wgsl`'s `slots` builds them
-/// for a chunk's own histograms.
+/// (the specification's token of each of the 4096 slots, four to a word), as
+/// `lanes.wgsl`'s `slots` builds them for a chunk's own histograms.
 pub(super) fn histogram_tables(h: &Histogram) -> (Vec<u32>, Vec<u32>) {
     let entries: Vec<u32> = (0..128)
         .map(|t| h.frequency(t) | h.cumulative(t).min(4096) << 16)
         .collect();
-    let mut tokens = vec![0u8; 4096];
-    let mut t = 0usize;
-    let mut cum = 0u32;
-    for (slot, token) in tokens.iter_mut().enumerate() {
-        while t < 127 && cum + h.frequency(t) <= slot as u32 {
-            cum += h.frequency(t);
-            t += 1;
-        }
-        *token = t as u8;
-    }
-    let slots = tokens
+    let slots = h
+        .slot_tokens()
         .chunks_exact(4)
         .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
@@ -419,9 +408,8 @@ impl Gpu {
         let [pw, ph] = self.plane;
         let (bw, bh) = (pw / 8, ph / 8);
         let (gw, gh) = (bw.div_ceil(GROUP as u32), bh.div_ceil(GROUP as u32));
-        let tiled = span.lanes.is_some() && span.members > 0;
-        let ts = if tiled { self.per } else { 0 };
-        let (tiles_x, tiles_y) = if tiled {
+        let ts = if lanes.tiled { self.per } else { 0 };
+        let (tiles_x, tiles_y) = if lanes.tiled {
             (pw / 8 / ts, ph / 8 / ts)
         } else {
             (0, 0)
