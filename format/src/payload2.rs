@@ -202,6 +202,19 @@ pub fn encode(
     Ok(out)
 }
 
+/// A version 2 payload's lanes' symbols, plane by plane ([`plane2::lane_symbols`]).
+pub fn lane_symbols(h: &Header, what: Payload, bytes: &[u8]) -> Result<Vec<Vec<u64>>> {
+    let maps = h.context_maps().ok_or_else(|| {
+        FormatError::Invalid("a version 1 file has no coefficient sections".into())
+    })?;
+    let (head, shapes) = shapes(h, what, bytes)?;
+    let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
+    let section = bytes
+        .get(head..)
+        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
+    plane2::lane_symbols(section, &geometries, maps)
+}
+
 /// A version 2 payload (`h` holds its file's context maps) as version 1's payload before
 /// zstd: the same head, then each plane's blocks as zero-run pairs. Refuses a payload
 /// whose pairs would pass `limit` bytes.

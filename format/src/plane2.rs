@@ -719,6 +719,9 @@ struct Lanes<'a, 'h> {
     decoders: Vec<ans::Decoder<'a>>,
     /// The histogram of each context (`None`: the chunk sent none).
     of: Vec<Option<&'h Histogram>>,
+    /// Each lane's symbols so far: the length of the serial chain a lane's decoder walks
+    /// ([`lane_symbols`]).
+    symbols: Vec<u64>,
 }
 
 impl Coder for Lanes<'_, '_> {
@@ -730,6 +733,7 @@ impl Coder for Lanes<'_, '_> {
             )));
         };
         let d = &mut self.decoders[lane];
+        self.symbols[lane] += 1;
         let t = d.token(h)?;
         let raw = d.raw(ans::raw_bits_of(t))?;
         Ok(ans::hybrid_value(t, raw))
@@ -911,6 +915,28 @@ pub fn decode_each(
     maps: &[ContextMap],
     mut each: impl FnMut(usize, &Decoded) -> Result<()>,
 ) -> Result<()> {
+    decode_counted(bytes, planes, maps, |i, blocks, _| each(i, blocks))
+}
+
+/// Each plane's lanes' symbols (a token and its raw bits are one), plane by plane: the
+/// serial chains a decoder of one state per lane walks, whatever the words they take (a
+/// likely zero costs a fraction of a bit, and a step all the same). Decodes the section.
+pub fn lane_symbols(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Vec<Vec<u64>>> {
+    let mut out = Vec::with_capacity(planes.len());
+    decode_counted(bytes, planes, maps, |_, _, symbols| {
+        out.push(symbols.to_vec());
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// [`decode_each`], handing on each lane's symbols too.
+fn decode_counted(
+    bytes: &[u8],
+    planes: &[Plane],
+    maps: &[ContextMap],
+    mut each: impl FnMut(usize, &Decoded, &[u64]) -> Result<()>,
+) -> Result<()> {
     let section = Section::parse(bytes, planes, maps)?;
     for (i, (p, sp)) in planes.iter().zip(&section.planes).enumerate() {
         let mut decoders = Vec::with_capacity(sp.lanes.len());
@@ -920,6 +946,7 @@ pub fn decode_each(
             lane_of.extend(std::iter::repeat_n(l, r1 - r0));
         }
         let mut lanes = Lanes {
+            symbols: vec![0; decoders.len()],
             decoders,
             of: (sp.histogram_of.iter())
                 .map(|&h| section.histograms.get(h as usize))
@@ -929,7 +956,7 @@ pub fn decode_each(
         for d in &lanes.decoders {
             d.finish()?;
         }
-        each(i, &blocks)?;
+        each(i, &blocks, &lanes.symbols)?;
     }
     Ok(())
 }
@@ -1067,6 +1094,15 @@ mod tests {
                 if let Some(g) = g {
                     assert_eq!(file[*g as usize], h);
                 }
+            }
+            // Every symbol the encoder coded is one step of one lane's chain.
+            let symbols = lane_symbols(&bytes, &shapes, &maps).unwrap();
+            for ((p, source), (lanes, sp)) in planes.iter().zip(symbols.iter().zip(&full.planes)) {
+                let mut record = Record(Vec::new());
+                walk(&p.geometry, Some(source), &|_| 0, &mut record).unwrap();
+                assert_eq!(lanes.iter().sum::<u64>(), record.0.len() as u64);
+                assert_eq!(lanes.len(), sp.lanes.len());
+                assert!(lanes.len() > 1 && lanes.iter().all(|&n| n > 0));
             }
             let one = round_trip(&planes, &maps, usize::MAX);
             let many = round_trip(&planes, &maps, 64);

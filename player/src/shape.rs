@@ -37,10 +37,13 @@ pub struct DecodeShape {
     pub weights: PassWeights,
     /// Decode a version 2 file's coefficient sections on the GPU as the file codes them
     /// (`lanes.wgsl`: an invocation per rANS lane); `false`: the decoder thread decodes
-    /// them to version 1's pairs, which the GPU parses. A CPU adapter runs a lane's
-    /// serial chain of symbols about 50 times slower than the decoder thread's native
-    /// code (a 512² segment: 150 ms against 5.5 ms), so there the thread does it.
-    /// Planes larger than the dense plane (about 5800² texels) always go as pairs.
+    /// them to version 1's pairs, which the GPU parses. Off for both adapters: a lane is
+    /// a serial chain of symbols (40 000–72 000 per segment along the longest lanes of
+    /// the benchmark streams, each symbol a few dependent loads), and an H100 took 36,
+    /// 63 and 116 ms per 512², 2048² and 4096² segment that way, against 1.9, 2.3 and
+    /// 8.5 ms for the same sections as pairs (BENCHMARKS.md, "Format 2 on the GPU");
+    /// lavapipe 224 ms against 37 ms at 512². Planes larger than the dense plane (about
+    /// 5800² texels) always go as pairs.
     pub lanes: bool,
 }
 
@@ -65,14 +68,14 @@ impl DecodeShape {
     /// chip (a 512² segment's `key_add` 0.33 → 0.09 ms), and 35 000 blocks per step: a
     /// segment's decode took as long at 512² as at 2048² (about 20 µs per step whatever
     /// its work), and a block through `bubble_write` about 0.58 ns ([`PassWeights::H100`]);
-    /// version 2's sections decoded on the GPU as coded (not yet measured on a GPU).
+    /// version 2's sections decoded to pairs by the decoder thread (`lanes`).
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
         wide_parse: true,
         group_split: 8,
         step_cost: 35_000,
         weights: PassWeights::H100,
-        lanes: true,
+        lanes: false,
     };
 
     /// [`DecodeShape::CPU`] on a CPU adapter, [`DecodeShape::GPU`] on any other.
@@ -156,9 +159,10 @@ impl PassWeights {
         bubble_zero: 1,
         bubble_bound: 1,
         bubble_write: 4,
-        // Not measured: an estimate of 0.4 µs a word of the longest lane (about seven
-        // symbols, each a chain of three dependent loads of some 60 ns in all).
-        lane_word: 2800,
+        // 9–31 µs a word of the longest lane (`bench decode --gpu` on the benchmark
+        // streams in 2.0: 12–22 symbols a word, 0.8–1.4 µs a symbol), the larger
+        // streams' 26 µs here.
+        lane_word: 180_000,
         lane_block: 1,
     };
 }

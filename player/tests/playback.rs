@@ -1018,15 +1018,21 @@ fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_lo
 
 /// A hardware GPU decodes in the shape `DecodeShape::GPU` (dispatches of 2048
 /// workgroups, a workgroup per piece of a stream, groups of blocks split among 8
-/// workgroups, format 2's sections decoded as coded, `lanes.wgsl`; lavapipe, the tests'
-/// adapter, in `DecodeShape::CPU`): the same frames as a GPU decodes them, and in slices
-/// of 96 (several spans of 32, passes that end inside a slice).
+/// workgroups; lavapipe, the tests' adapter, in `DecodeShape::CPU`): the same frames as a
+/// GPU decodes them, and in slices of 96 (several spans of 32, passes that end inside a
+/// slice); format 2's sections both as pairs (the shape's default) and decoded on the GPU
+/// as coded (`lanes`, `lanes.wgsl`).
 #[test]
 fn every_frame_matches_the_reference_as_a_gpu_decodes() {
     let (device, queue) = device();
-    for (slice_groups, formats) in [(2048, &[V1, V2][..]), (96, &[V1][..])] {
+    for (slice_groups, lanes, formats) in [
+        (2048, false, &[V1, V2][..]),
+        (2048, true, &[V2][..]),
+        (96, false, &[V1][..]),
+    ] {
         let shape = DecodeShape {
             slice_groups,
+            lanes,
             ..DecodeShape::GPU
         };
         every_frame_matches_the_reference(&device, &queue, Some(shape), formats);
@@ -1043,7 +1049,7 @@ fn every_frame_matches_the_reference(
     formats: &[FormatVersion],
 ) {
     let n = 48;
-    // Each in format 1 and in format 2, whose sections the GPU decodes as coded.
+    // Each in the formats asked for.
     let cases = [
         (InputKind::Hdr, 3, (1000, 600)),
         (InputKind::Srgb8, 3, (4096, 64)),

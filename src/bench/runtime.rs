@@ -124,9 +124,15 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     if chains.2 > 0 {
         let n = chains.0.max(1) as f64;
         println!(
-            "lanes           per segment {:.0} words in all; the longest lane of each plane, summed: {:.0} words (the serial chains a GPU decodes, one after another)",
+            "lanes           per segment {:.0} words in all; the longest lane of each plane, summed: {:.0} words",
             chains.2 as f64 / n,
             chains.1 as f64 / n
+        );
+        let (all, longest) = lane_symbols(&h, &entries, &chunks)?;
+        println!(
+            "                and {:.0} symbols in all; the longest lane of each plane, summed: {:.0} symbols (the serial chains a GPU decodes, one after another)",
+            all as f64 / n,
+            longest as f64 / n
         );
     }
     if !pairs_t.is_empty() {
@@ -162,6 +168,36 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// A version 2 file's symbols (tokens with their raw bits), and the sum over its planes of
+/// each plane's longest lane in symbols: the serial chains of a decoder of one state per
+/// lane, which a likely zero lengthens as much as a rare value.
+fn lane_symbols(
+    h: &vbim_format::Header,
+    entries: &[vbim_format::IndexEntry],
+    chunks: &[&[u8]],
+) -> Result<(u64, u64), String> {
+    use vbim_format::{chunk::Payload, payload2, ChunkKind};
+    let (mut all, mut longest, mut tiles) = (0, 0, None);
+    for (i, (e, c)) in entries.iter().zip(chunks).enumerate() {
+        let what = match e.kind {
+            ChunkKind::Keyframe => Payload::Keyframe,
+            ChunkKind::TileMap => {
+                let t = vbim_format::chunk::read_tilemap(h, c, e.last_frame - e.first_frame);
+                tiles = Some(t.map_err(|e| format!("chunk {i}: {e}"))?);
+                continue;
+            }
+            ChunkKind::Coefficients => Payload::Coefficients(tiles.as_ref().ok_or("no tile map")?),
+            _ => continue,
+        };
+        let planes = payload2::lane_symbols(h, what, c).map_err(|e| format!("chunk {i}: {e}"))?;
+        for lanes in planes {
+            all += lanes.iter().sum::<u64>();
+            longest += lanes.iter().copied().max().unwrap_or(0);
+        }
+    }
+    Ok((all, longest))
 }
 
 /// A decode shape in words, for the benchmarks' first line.
