@@ -39,10 +39,10 @@ pub struct DecodeShape {
     /// (`lanes.wgsl`: an invocation per rANS lane); `false`: the decoder thread decodes
     /// them to version 1's pairs, which the GPU parses. Off for both adapters: a lane is
     /// a serial chain of symbols (40 000–72 000 per segment along the longest lanes of
-    /// the benchmark streams, each symbol a few dependent loads), and an H100 took 36,
-    /// 63 and 116 ms per 512², 2048² and 4096² segment that way, against 1.9, 2.3 and
-    /// 8.5 ms for the same sections as pairs (BENCHMARKS.md, "Format 2 on the GPU");
-    /// lavapipe 224 ms against 37 ms at 512². Planes larger than the dense plane (about
+    /// the benchmark streams), and an H100 took 22, 32 and 61 ms per 512², 2048² and
+    /// 4096² segment that way, against 1.7, 1.8 and 6.2 ms for the same sections as
+    /// pairs (BENCHMARKS.md, "Format 2 on the GPU"); lavapipe 224 ms against 37 ms at
+    /// 512². Planes larger than the dense plane (about
     /// 5800² texels) always go as pairs.
     pub lanes: bool,
 }
@@ -159,10 +159,10 @@ impl PassWeights {
         bubble_zero: 1,
         bubble_bound: 1,
         bubble_write: 4,
-        // 9–31 µs a word of the longest lane (`bench decode --gpu` on the benchmark
-        // streams in 2.0: 12–22 symbols a word, 0.8–1.4 µs a symbol), the larger
-        // streams' 26 µs here.
-        lane_word: 180_000,
+        // 5–14 µs a word of the longest lane (`bench decode --gpu --lanes true` on the
+        // benchmark streams in 2.0, a lane to a workgroup: 12–22 symbols a word,
+        // 0.45–0.63 µs a symbol), the larger streams' 12 µs here.
+        lane_word: 80_000,
         lane_block: 1,
     };
 }

@@ -18,8 +18,8 @@ use super::ops::Op;
 use super::Gpu;
 use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
 
-/// Lanes per workgroup of the lane passes (`LANE_GROUP` in lanes.wgsl).
-const LANE_GROUP: u32 = 8;
+/// Lanes per workgroup of the lane passes (`LANE_GROUP` in lanes.wgsl, which says why one).
+const LANE_GROUP: u32 = 1;
 
 /// One pass of a lanes decode (an entry point of `lanes.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,11 +75,14 @@ impl LanePass {
     }
 }
 
-/// Where the lanes' scratch buffer holds what (in words; `lanes.wgsl` describes each).
+/// Where the lanes' tables and scratch buffers hold what (in words; `lanes.wgsl`
+/// describes each): the tables (maps, histograms' entries and slots), which the lane
+/// passes only read, then the scratch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Scratch {
-    entries: u64,
     slots: u64,
+    /// The tables' words.
+    tables: u64,
     groups: u64,
     info: u64,
     lane_states: u64,
@@ -122,16 +125,15 @@ impl Scratch {
         let groups = (bw.div_ceil(GROUP as u64)) * bh.div_ceil(GROUP as u64);
         let lanes = bw.div_ceil(REGION as u64) * bh.div_ceil(REGION as u64);
         let histograms = file + own;
-        let entries = 2 * (FAMILIES * CONTEXTS) as u64;
-        let slots = entries + histograms * 128;
-        let groups_at = slots + histograms * 1024;
-        let info = groups_at + groups + tiles;
+        let slots = 2 * (FAMILIES * CONTEXTS) as u64;
+        let tables = slots + histograms * 4096;
+        let info = groups + tiles;
         let lane_states = info + 2 * bw * bh;
         let fault = lane_states + 4 * lanes;
         Some(Scratch {
-            entries,
             slots,
-            groups: groups_at,
+            tables,
+            groups: 0,
             info,
             lane_states,
             fault,
@@ -141,20 +143,19 @@ impl Scratch {
         })
     }
 
-    /// Bytes of the scratch buffer.
+    /// Bytes of the tables and the scratch buffer.
     pub fn bytes(&self) -> u64 {
-        self.words * 4
+        (self.tables + self.words) * 4
     }
 
     /// The WGSL constants `lanes.wgsl` reads its layout from; the sets of blocks with a
     /// coefficient start at byte `sets` of the mask buffer.
     fn constants(&self, sets: u64) -> String {
         format!(
-            "const ENTRIES: u32 = {}u;\nconst SLOTS: u32 = {}u;\nconst GROUPS: u32 = {}u;\n\
+            "const SLOTS: u32 = {}u;\nconst GROUPS: u32 = {}u;\n\
              const INFO: u32 = {}u;\nconst LANE_STATES: u32 = {}u;\nconst FAULT: u32 = {}u;\n\
              const HISTOGRAMS: u32 = {}u;\nconst FILE_HISTOGRAMS: u32 = {}u;\n\
              const SETS: u32 = {}u;\n",
-            self.entries,
             self.slots,
             self.groups,
             self.info,
@@ -229,14 +230,17 @@ super::job::uniform_struct! {
 
 /// The lanes decode's pipelines and state.
 pub(crate) struct LanesGpu {
-    pub layout: wgpu::BindGroupLayout,
+    /// The lane passes' bind group layout, and `slots`' (which writes the tables).
+    layouts: [wgpu::BindGroupLayout; 2],
     pipelines: Vec<wgpu::ComputePipeline>,
-    pub scratch: wgpu::Buffer,
+    tables: wgpu::Buffer,
+    scratch: wgpu::Buffer,
     #[cfg_attr(not(test), allow(dead_code))]
     pub plan: Scratch,
-    /// Its bind group over the jobs, streams, scratch and dense plane (remade with the
-    /// others, `Gpu::bind_decode`).
-    pub group: Option<wgpu::BindGroup>,
+    /// Its bind groups over the jobs, streams, scratch, tables and dense plane (the lane
+    /// passes'), and over the jobs, streams and tables (`slots`'): remade with the
+    /// others, `Gpu::bind_decode`.
+    groups: Option<[wgpu::BindGroup; 2]>,
 }
 
 impl LanesGpu {
@@ -252,7 +256,7 @@ impl LanesGpu {
         sets: u64,
     ) -> Option<LanesGpu> {
         let plan = Scratch::new(geometry, maps)?;
-        let layout = lanes_layout(device);
+        let layouts = [lanes_layout(device), slots_layout(device)];
         let source = format!(
             "{}{LANE_JOB_WGSL}{}",
             plan.constants(sets),
@@ -260,47 +264,43 @@ impl LanesGpu {
         );
         let pipelines = LanePass::ALL
             .iter()
-            .map(|p| {
-                super::resources::compute_pipeline(
-                    device,
-                    "vbim lanes",
-                    &source,
-                    &layout,
-                    p.entry(),
-                )
+            .map(|&p| {
+                let layout = &layouts[(p == LanePass::Slots) as usize];
+                super::resources::compute_pipeline(device, "vbim lanes", &source, layout, p.entry())
             })
             .collect();
-        let scratch = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vbim lanes scratch"),
-            size: plan.bytes(),
-            // (COPY_SRC: tests read the fault flag back.)
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_DST
-                | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
+        let buffer = |label, words: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: words.max(1) * 4,
+                // (COPY_SRC: tests read the fault flag back.)
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let tables = buffer("vbim lanes tables", plan.tables);
+        let scratch = buffer("vbim lanes scratch", plan.words);
         // The file's part of the tables: each family's cluster of each context, and each
         // file histogram's entries and slots.
         let of: Vec<u32> = (0..FAMILIES)
             .flat_map(|f| (0..CONTEXTS).map(move |c| maps.get(f).map_or(0, |m| m.of[c] as u32)))
             .collect();
-        queue.write_buffer(&scratch, 0, bytemuck::cast_slice(&of));
-        let (mut entries, mut slots) = (Vec::new(), Vec::new());
-        for (_, _, hist) in file_histograms(maps) {
-            let (e, s) = histogram_tables(hist);
-            entries.extend(e);
-            slots.extend(s);
-        }
-        if !entries.is_empty() {
-            queue.write_buffer(&scratch, plan.entries * 4, bytemuck::cast_slice(&entries));
-            queue.write_buffer(&scratch, plan.slots * 4, bytemuck::cast_slice(&slots));
+        queue.write_buffer(&tables, 0, bytemuck::cast_slice(&of));
+        let slots: Vec<u32> = file_histograms(maps)
+            .flat_map(|(_, _, hist)| slot_table(hist))
+            .collect();
+        if !slots.is_empty() {
+            queue.write_buffer(&tables, plan.slots * 4, bytemuck::cast_slice(&slots));
         }
         Some(LanesGpu {
-            layout,
+            layouts,
             pipelines,
+            tables,
             scratch,
             plan,
-            group: None,
+            groups: None,
         })
     }
 
@@ -308,7 +308,12 @@ impl LanesGpu {
         &self.pipelines[LanePass::ALL.iter().position(|&p| p == pass).unwrap_or(0)]
     }
 
-    /// The bind group over `jobs`, `words`, the scratch and the dense plane.
+    /// GPU memory it holds, in bytes.
+    pub fn bytes(&self) -> u64 {
+        self.tables.size() + self.scratch.size()
+    }
+
+    /// The bind groups over `jobs`, `words`, the tables, the scratch and the dense plane.
     pub fn bind(
         &mut self,
         device: &wgpu::Device,
@@ -316,56 +321,91 @@ impl LanesGpu {
         words: &wgpu::Buffer,
         (coefs, masks): (&wgpu::Buffer, &wgpu::Buffer),
     ) {
-        let entries = [
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: jobs,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(std::mem::size_of::<LaneJob>() as u64),
-                }),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: words.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: self.scratch.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: coefs.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: masks.as_entire_binding(),
-            },
+        let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+        let job = || {
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: jobs,
+                offset: 0,
+                size: wgpu::BufferSize::new(std::mem::size_of::<LaneJob>() as u64),
+            })
+        };
+        let lanes = [
+            entry(0, job()),
+            entry(1, words.as_entire_binding()),
+            entry(2, self.scratch.as_entire_binding()),
+            entry(3, coefs.as_entire_binding()),
+            entry(4, masks.as_entire_binding()),
+            entry(5, self.tables.as_entire_binding()),
         ];
-        self.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vbim lanes"),
-            layout: &self.layout,
-            entries: &entries,
-        }));
+        let slots = [
+            entry(0, job()),
+            entry(1, words.as_entire_binding()),
+            entry(6, self.tables.as_entire_binding()),
+        ];
+        let group = |layout, entries: &[wgpu::BindGroupEntry]| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vbim lanes"),
+                layout,
+                entries,
+            })
+        };
+        self.groups = Some([
+            group(&self.layouts[0], &lanes),
+            group(&self.layouts[1], &slots),
+        ]);
     }
 }
 
-/// A histogram's 128 entries (frequency | cumulative frequency << 16) and its slot table
-/// (the specification's token of each of the 4096 slots, four to a word), as
-/// `lanes.wgsl`'s `slots` builds them for a chunk's own histograms.
-pub(super) fn histogram_tables(h: &Histogram) -> (Vec<u32>, Vec<u32>) {
-    let entries: Vec<u32> = (0..128)
-        .map(|t| h.frequency(t) | h.cumulative(t).min(4096) << 16)
-        .collect();
-    let slots = h
-        .slot_tokens()
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    (entries, slots)
+/// A histogram's slot table as `lanes.wgsl`'s `slots` builds it for a chunk's own
+/// histograms: for each of the 4096 slots, its token (the specification's), the token's
+/// frequency and the slot's offset from the token's first, packed as token | frequency << 7
+/// | offset << 20, so that a symbol takes one load.
+pub(super) fn slot_table(h: &Histogram) -> Vec<u32> {
+    h.slot_tokens()
+        .iter()
+        .enumerate()
+        .map(|(slot, &t)| {
+            let t = t as usize;
+            let offset = slot as u32 - h.cumulative(t).min(slot as u32);
+            t as u32 | h.frequency(t) << 7 | offset << 20
+        })
+        .collect()
 }
 
+/// The lane passes' bindings: the job, the segment's words, the scratch, the dense plane
+/// (coefficients, masks) and the tables, read-only.
 fn lanes_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    use wgpu::BufferBindingType::{Storage, Uniform};
+    layout(
+        device,
+        &[
+            (0, Uniform),
+            (1, Storage { read_only: true }),
+            (2, Storage { read_only: false }),
+            (3, Storage { read_only: false }),
+            (4, Storage { read_only: false }),
+            (5, Storage { read_only: true }),
+        ],
+    )
+}
+
+/// `slots`' bindings: the job, the segment's words and the tables, which it writes.
+fn slots_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    use wgpu::BufferBindingType::{Storage, Uniform};
+    layout(
+        device,
+        &[
+            (0, Uniform),
+            (1, Storage { read_only: true }),
+            (6, Storage { read_only: false }),
+        ],
+    )
+}
+
+fn layout(
+    device: &wgpu::Device,
+    bindings: &[(u32, wgpu::BufferBindingType)],
+) -> wgpu::BindGroupLayout {
     let entry = |binding: u32, ty| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -376,16 +416,10 @@ fn lanes_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         },
         count: None,
     };
-    use wgpu::BufferBindingType::{Storage, Uniform};
+    let entries: Vec<_> = bindings.iter().map(|&(b, ty)| entry(b, ty)).collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("vbim lanes"),
-        entries: &[
-            entry(0, Uniform),
-            entry(1, Storage { read_only: true }),
-            entry(2, Storage { read_only: false }),
-            entry(3, Storage { read_only: false }),
-            entry(4, Storage { read_only: false }),
-        ],
+        entries: &entries,
     })
 }
 
@@ -442,7 +476,7 @@ impl Gpu {
         if self.planned_section != Some(lanes.section) {
             self.planned_section = Some(lanes.section);
             let at = self.push_job_bytes(bytemuck::bytes_of(&job));
-            let n = (FAMILIES * CONTEXTS) as u32 + section.own_count * (128 + 1024);
+            let n = (FAMILIES * CONTEXTS) as u32 + section.own_count * 1024;
             let op = Op::lanes(LanePass::Slots, at, n.div_ceil(64), channel, n as u64 / 16);
             ops.push(op);
         }
@@ -479,10 +513,11 @@ impl Gpu {
         let Some(lanes) = &self.lanes else {
             return;
         };
-        let Some(group) = &lanes.group else {
+        let Some(groups) = &lanes.groups else {
             return;
         };
         pass.set_pipeline(lanes.pipeline(which));
+        let group = &groups[(which == LanePass::Slots) as usize];
         pass.set_bind_group(0, group, &[op.job]);
         if op.groups[0] > 0 {
             pass.dispatch_workgroups(op.groups[0], 1, 1);

@@ -29,6 +29,12 @@
 @group(0) @binding(1) var<storage, read> seg: array<u32>;
 // The decode's own state, at the offsets below (player/src/gpu/lanes.rs sizes it).
 @group(0) @binding(2) var<storage, read_write> scratch: array<u32>;
+// The symbols' tables (the file's maps and histograms, a section's own), read-only in the
+// lane passes, so that a GPU may keep them in its caches nearest the cores (a symbol's
+// chain is three loads from them); `slots` writes them through `tables_w`, the same
+// buffer bound read-write in a bind group of its own.
+@group(0) @binding(5) var<storage, read> tables: array<u32>;
+@group(0) @binding(6) var<storage, read_write> tables_w: array<u32>;
 // The dense plane: block b's coefficients at 64 · b …, valid where its mask has the bit
 // (only the non-zero ones are written; never cleared), ...
 @group(0) @binding(3) var<storage, read_write> coefs: array<i32>;
@@ -36,22 +42,24 @@
 // coefficient (both cleared before the plane).
 @group(0) @binding(4) var<storage, read_write> marks: array<atomic<u32>>;
 
-// Scratch: per family the cluster of each context (the file's maps, written once) ...
+// Tables: per family the cluster of each context (the file's maps, written once) ...
 const MAPS: u32 = 0u;
 // ... per family the histogram of each context (NONE: the chunk sent none), by `slots` ...
 const HIST_OF: u32 = MAPS + FAMILIES * CONTEXTS;
-// ... per histogram (the file's, then a section's own) its 128 tokens' frequency |
-// cumulative frequency << 16 (ENTRIES) and its 4096 slots' tokens, four to a word
-// (SLOTS); per group its flags, then each tile's rank (GROUPS); per block its DC residual
-// and coefficient count (INFO); per lane its state (LANE_STATES); and FAULT, set by a lane
-// that read past its words or decoded a symbol out of range. (Declared before this file:
-// ENTRIES, SLOTS, GROUPS, INFO, LANE_STATES, FAULT, HISTOGRAMS, FILE_HISTOGRAMS, SETS.)
+// ... per histogram (the file's, then a section's own) each of its 4096 slots' token |
+// the token's frequency << 7 | the slot's offset from the token's first slot << 20
+// (SLOTS: a symbol's one load). Scratch: per group its flags, then each tile's rank (GROUPS); per block its DC
+// residual and coefficient count (INFO); per lane its state (LANE_STATES); and FAULT, set
+// by a lane that read past its words or decoded a symbol out of range. (Declared before
+// this file: SLOTS, GROUPS, INFO, LANE_STATES, FAULT, HISTOGRAMS,
+// FILE_HISTOGRAMS, SETS.)
 
 const NONE: u32 = 0xFFFFFFFFu;
-// Lanes per workgroup of the lane passes (`flags`, `blocks`): a few, so that the lanes of
-// a plane spread over the adapter's cores rather than filling one workgroup's (a lane is
-// a serial chain; a workgroup runs on one core of a CPU adapter, one SM of a GPU).
-const LANE_GROUP: u32 = 8u;
+// Lanes per workgroup of the lane passes (`flags`, `middle`, `blocks`): one. A lane is a
+// serial chain whose branches follow its own symbols, so lanes that share a warp wait for
+// each other: on an H100, eight to a workgroup took twice as long (a 2048² segment 61.9 ms
+// against 31.5). (On lavapipe, where the lanes are off, one costs 1.3 times eight.)
+const LANE_GROUP: u32 = 1u;
 const FAMILIES: u32 = 6u;
 const CONTEXTS: u32 = 502u;
 const FLAG: u32 = 0u;
@@ -77,10 +85,10 @@ fn word(i: u32) -> u32 {
     return select(w & 0xFFFFu, w >> 16u, (i & 1u) == 1u);
 }
 
-// One rANS step: the symbol of frequency f starting at slot c leaves the state.
-fn step(f: u32, c: u32) {
-    let slot = x & 4095u;
-    x = f * (x >> 12u) + slot - c;
+// One rANS step: the symbol of frequency f, the state's slot `offset` past its first,
+// leaves the state.
+fn step(f: u32, offset: u32) {
+    x = f * (x >> 12u) + offset;
     if (x < 65536u) {
         if (at < end) {
             x = (x << 16u) | word(at);
@@ -93,22 +101,20 @@ fn step(f: u32, c: u32) {
 
 // The token of histogram h whose slots hold the state's, from the slot table.
 fn token(h: u32) -> u32 {
-    let slot = x & 4095u;
-    let w = scratch[SLOTS + h * 1024u + (slot >> 2u)];
-    let t = (w >> ((slot & 3u) * 8u)) & 0x7Fu;
-    let e = scratch[ENTRIES + h * 128u + t];
-    if ((e & 0xFFFFu) == 0u) {
+    let e = tables[SLOTS + h * 4096u + (x & 4095u)];
+    let f = (e >> 7u) & 0x1FFFu;
+    if (f == 0u) {
         fail();
     } else {
-        step(e & 0xFFFFu, e >> 16u);
+        step(f, e >> 20u);
     }
-    return t;
+    return e & 0x7Fu;
 }
 
-// The next k ≤ 12 raw bits.
+// The next k ≤ 12 raw bits: the slot's top k bits, each value 2^(12 − k) slots wide.
 fn piece(k: u32) -> u32 {
     let p = (x & 4095u) >> (12u - k);
-    step(1u << (12u - k), p << (12u - k));
+    step(1u << (12u - k), (x & 4095u) - (p << (12u - k)));
     return p;
 }
 
@@ -130,9 +136,21 @@ fn raw(bits: u32) -> u32 {
     return (((a << 12u) | b) << (bits - 24u)) | c;
 }
 
+// The plane's family's histogram of each context, for the lane passes: read once per
+// workgroup (`load_contexts`), then a symbol's first lookup is to workgroup memory.
+var<workgroup> hist_of: array<u32, CONTEXTS>;
+
+// Fills `hist_of`; every invocation of the workgroup calls it, before any returns.
+fn load_contexts(local: u32) {
+    for (var c = local; c < CONTEXTS; c = c + LANE_GROUP) {
+        hist_of[c] = tables[HIST_OF + prm.family * CONTEXTS + c];
+    }
+    workgroupBarrier();
+}
+
 // The value of the next symbol, coded in context ctx of the plane's family.
 fn symbol(ctx: u32) -> u32 {
-    let h = scratch[HIST_OF + prm.family * CONTEXTS + ctx];
+    let h = hist_of[ctx];
     var r = 0u;
     if (h >= HISTOGRAMS) {
         fail();
@@ -246,8 +264,7 @@ fn own_frequency(h: u32, t: u32) -> u32 {
 }
 
 // Once per section: each family's histogram of each context (for the families the
-// section uses), then the entries and slot tables of the histograms it sent itself (each
-// slot's token the first whose cumulative range holds it).
+// section uses), then the slot tables of the histograms it sent itself.
 @compute @workgroup_size(64)
 fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -255,30 +272,20 @@ fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
         let f = i / CONTEXTS;
         let first = prm.places[f / 4u][f % 4u];
         if (first != NONE) {
-            scratch[HIST_OF + i] = seg[first + scratch[MAPS + i]];
+            tables_w[HIST_OF + i] = seg[first + tables_w[MAPS + i]];
         }
         return;
     }
-    let j = i - FAMILIES * CONTEXTS;
-    if (j < prm.own_count * 128u) {
-        let h = j / 128u;
-        let t = j % 128u;
-        var cum = 0u;
-        for (var u = 0u; u < t; u = u + 1u) {
-            cum = cum + own_frequency(h, u);
-        }
-        let into = FILE_HISTOGRAMS + h;
-        scratch[ENTRIES + into * 128u + t] = own_frequency(h, t) | (min(cum, 4096u) << 16u);
-        return;
-    }
-    let k = j - prm.own_count * 128u;
+    let k = i - FAMILIES * CONTEXTS;
     if (k >= prm.own_count * 1024u) {
         return;
     }
+    // Four slots of histogram h: each one's token the first whose cumulative range holds
+    // it (127 past the frequencies' sum, where a crafted histogram stops short).
     let h = k / 1024u;
     var t = 0u;
     var cum = 0u;
-    var w = 0u;
+    let into = SLOTS + (FILE_HISTOGRAMS + h) * 4096u;
     for (var s = 0u; s < 4u; s = s + 1u) {
         let slot = (k % 1024u) * 4u + s;
         loop {
@@ -289,9 +296,9 @@ fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
             cum = cum + f;
             t = t + 1u;
         }
-        w = w | (t << (s * 8u));
+        let f = own_frequency(h, t) & 0x1FFFu;
+        tables_w[into + slot] = t | (f << 7u) | ((slot - cum) << 20u);
     }
-    scratch[SLOTS + (FILE_HISTOGRAMS + h) * 1024u + k % 1024u] = w;
 }
 
 // Per plane, before its lanes: each lane's state from its first words, each tile's rank
@@ -418,7 +425,11 @@ fn flags_of(span: vec2<u32>, parity: u32) {
 
 // Pass 1: the even groups' flags.
 @compute @workgroup_size(LANE_GROUP)
-fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
+fn flags(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    load_contexts(local);
     let lane = id.x;
     if (lane >= prm.lanes) {
         return;
@@ -432,7 +443,11 @@ fn flags(@builtin(global_invocation_id) id: vec3<u32>) {
 // contexts read only the block itself and whose groups' flags are all the lane's own
 // (groups lie inside regions).
 @compute @workgroup_size(LANE_GROUP)
-fn middle(@builtin(global_invocation_id) id: vec3<u32>) {
+fn middle(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    load_contexts(local);
     let lane = id.x;
     if (lane >= prm.lanes) {
         return;
@@ -583,7 +598,11 @@ fn blocks_of(span: vec2<u32>, parity: u32) {
 // dispatch before). The lane's last: it must end on every word read and the state it
 // started from, as the specification's decoder checks.
 @compute @workgroup_size(LANE_GROUP)
-fn blocks(@builtin(global_invocation_id) id: vec3<u32>) {
+fn blocks(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    load_contexts(local);
     let lane = id.x;
     if (lane >= prm.lanes) {
         return;

@@ -266,6 +266,6 @@ impl Gpu {
             + self.tiles.size()
             + self.peaks.size()
             + self.degrees.size()
-            + self.lanes.as_ref().map_or(0, |l| l.scratch.size())
+            + self.lanes.as_ref().map_or(0, |l| l.bytes())
     }
 }
