@@ -441,6 +441,9 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     // frame (ns).
     let mut passes_timed = false;
     let (mut sums, mut largest) = (Vec::new(), Vec::new());
+    // Each frame against the blend after it, over every run: the frames that recorded no
+    // decode work (the reconstruction alone), then those that did.
+    let mut by_decode: [Vec<f64>; 2] = Default::default();
     for _ in 0..a.runs.max(1) {
         let f = crate::sequence::open_input(&a.file)?;
         let cfg = PlayerConfig {
@@ -538,6 +541,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
                 // hardware GPU's changes within a run: the H100's halved halfway through).
                 series[7].push(gpu / blend.max(1e-9));
                 let r = &frame.record;
+                by_decode[(r.decode_work > 0) as usize].push(gpu / blend.max(1e-9));
                 rows += &format!(
                     "{k},{gpu:.4},{blend:.4},{gpu_wall:.4},{blend_wall:.4},{},{},{:.4},{:?},{:.4},{:.4}\n",
                     r.decode_work, r.segment, r.u, r.state, split.0, split.1
@@ -605,6 +609,14 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         let ((m, ..), (p, ..), (x, ..)) = (stat(7, 0), stat(7, 1), stat(7, 2));
         println!(
             "  each frame against the blend timed after it (the same clock): mean {m:.2}×, p99 {p:.2}×, max {x:.2}×"
+        );
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        println!(
+            "    of which {} frames recorded no decode work, mean {:.2}× (the reconstruction alone), and {} a share of a decode, mean {:.2}×",
+            by_decode[0].len(),
+            mean(&by_decode[0]),
+            by_decode[1].len(),
+            mean(&by_decode[1])
         );
     }
     // A CPU adapter's timestamps need not bracket its work (lavapipe defers some of it

@@ -30,6 +30,10 @@
 //!   neighbours have a coefficient at the same frequency;
 //! - **F**: E with a keyframe's DC plane as an integer 5/3 wavelet pyramid instead of
 //!   planar residuals (a bubble plane's DC as in E);
+//! - **G**: E with one symbol for a block's DC residual and whether it has a coefficient
+//!   (2 × the folded residual + 1 if it has; in D's DC context × whether an odd block's
+//!   neighbours have any), then its count less one only where it has one: a block with
+//!   nothing but its DC is one symbol, not two, and a GPU lane's time is its symbols;
 //! - **C, serial neighbours**: the left and upper blocks' counts and residual sizes, as a
 //!   CPU coder would use them (the reference: what parallelism costs).
 //!
@@ -67,10 +71,12 @@ const AC_EVEN: usize = AC + 120; // E: even blocks as AC
 const AC_ODD: usize = AC_EVEN + 120; // E: odd blocks, × 3 by the neighbours with a term there
 const DC_F: usize = AC_ODD + 360; // F: keyframe DC pyramid, 1 + 6 levels × 2 × 4 activity
 const DC_FB: usize = DC_F + 49; // F: bubble planes' DC as DC_D
-const CONTEXTS: usize = DC_FB + 5;
+const JOINT_G: usize = DC_FB + 5; // G: 10, DC_D's × whether a neighbour has a coefficient
+const NZ_G: usize = JOINT_G + 10; // G: as NZ_D, the count less one where there is any
+const CONTEXTS: usize = NZ_G + 11;
 
 /// The contexts each design reads, besides the shared AC ones.
-const DESIGNS: [(&str, &[std::ops::Range<usize>]); 6] = [
+const DESIGNS: [(&str, &[std::ops::Range<usize>]); 7] = [
     (
         "A, within the block",
         &[DC_A..DC_A + 1, NZ_A..NZ_A + 3, AC..AC + 120],
@@ -107,6 +113,14 @@ const DESIGNS: [(&str, &[std::ops::Range<usize>]); 6] = [
         ],
     ),
     (
+        "G, E with one symbol for a block's DC residual and whether it has a coefficient",
+        &[
+            GROUP_D..GROUP_D + 6,
+            JOINT_G..NZ_G + 11,
+            AC_EVEN..AC_ODD + 360,
+        ],
+    ),
+    (
         "C, serial neighbours",
         &[DC_C..DC_C + 4, NZ_C..NZ_C + 11, AC..AC + 120],
     ),
@@ -136,6 +150,8 @@ struct ChunkCounts {
     raw_bits: u64,
     /// Design F's raw bits less the others' (its keyframe DC symbols differ).
     raw_f: i64,
+    /// Design G's raw bits less the others' (its joint DC symbols and counts less one).
+    raw_g: i64,
     /// Blocks of each plane stream (for the lanes' states).
     planes: Vec<usize>,
     /// Bytes outside the coefficient streams, kept as they are.
@@ -157,6 +173,7 @@ impl Study {
             counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
             raw_bits: 0,
             raw_f: 0,
+            raw_g: 0,
             planes: Vec::new(),
             other,
             stored,
@@ -225,7 +242,8 @@ impl Study {
             c.raw_f += raw_f - raw_planar;
         }
         // (Each design codes the DC and the count once: their raw bits are counted with
-        // design A's symbol only.)
+        // design A's symbol only; G's difference is kept apart.)
+        let mut raw_g = 0i64;
         let mut put = |ctx: usize, v: u32, raw_too: bool| {
             let (t, raw) = hybrid_uint(v);
             c.counts[(base + ctx) * TOKENS + t] += 1;
@@ -308,6 +326,28 @@ impl Study {
             if group_full[(y / 4) * gw + x / 4] == Some(true) {
                 put(DC_D + dc_b, r, false);
                 put(NZ_D + nz_b, n, false);
+                // G: a block with nothing but its DC in one symbol, not two (the serial
+                // chain a GPU lane decodes is its symbols). A residual too large to
+                // double goes as in D.
+                match r.checked_mul(2) {
+                    Some(j) => {
+                        let j = j + (n > 0) as u32;
+                        // (An odd block's neighbours' counts were the context of its own: the
+                        // bit that joins the residual keeps a part of it.)
+                        let busy = odd && four.iter().any(|&k| nz[k] > 0);
+                        put(JOINT_G + dc_b + 5 * busy as usize, j, false);
+                        raw_g +=
+                            hybrid_uint(j).1 as i64 - (hybrid_uint(r).1 + hybrid_uint(n).1) as i64;
+                        if n > 0 {
+                            put(NZ_G + nz_b, n - 1, false);
+                            raw_g += hybrid_uint(n - 1).1 as i64;
+                        }
+                    }
+                    None => {
+                        put(JOINT_G + dc_b, r, false);
+                        put(NZ_G + nz_b, n, false);
+                    }
+                }
                 if p.tile.is_some() {
                     put(DC_FB + dc_b, r, false);
                 }
@@ -330,6 +370,7 @@ impl Study {
                 left -= (v != 0) as usize;
             }
         }
+        c.raw_g += raw_g;
     }
 
     /// The report's rows: for each design and number of histograms per family, the bytes
@@ -392,7 +433,11 @@ impl Study {
                 for (kind, b) in bytes.iter_mut().enumerate() {
                     for c in self.chunks.iter().filter(|c| c.kind == kind) {
                         // Raw bits and other bytes once per chunk (not per family).
-                        let f = if name.starts_with("F,") { c.raw_f } else { 0 };
+                        let f = match name.as_bytes()[0] {
+                            b'F' => c.raw_f,
+                            b'G' => c.raw_g,
+                            _ => 0,
+                        };
                         *b += (c.raw_bits as i64 + f) as f64 / 8.0 + c.other as f64;
                     }
                 }
@@ -419,6 +464,26 @@ impl Study {
         println!(
             "(ratios against the stored bytes; a lane's state is 4 bytes: {lanes256} B in all at a lane per 256 blocks of a plane, {lanes64} B at one per 64)"
         );
+        // Symbols: the serial chains a lane decodes (a token with its raw bits is one).
+        let symbols: Vec<String> = DESIGNS
+            .iter()
+            .map(|(name, own)| {
+                let mut n = 0u64;
+                for family in 0..FAMILIES {
+                    for c in self.chunks.iter().filter(|c| c.kind == family / 2) {
+                        for ctx in own.iter().cloned().flatten() {
+                            let at = (family * CONTEXTS + ctx) * TOKENS;
+                            n += c.counts[at..at + TOKENS]
+                                .iter()
+                                .map(|&k| k as u64)
+                                .sum::<u64>();
+                        }
+                    }
+                }
+                format!("{} {n}", &name[..1])
+            })
+            .collect();
+        println!("Symbols coded, by design: {}", symbols.join(", "));
         self.report_fixed_map(total);
         // Where design D's bytes go, each context with a histogram of its own.
         let kinds = [
@@ -721,6 +786,47 @@ mod tests {
     use super::*;
 
     #[test]
+    fn g_codes_a_block_with_nothing_but_its_dc_in_one_symbol() {
+        // 8 × 8 blocks of a keyframe: DCs that never repeat a prediction exactly, a few
+        // blocks with coefficients (every group has something).
+        let (bw, bh) = (8, 8);
+        let order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+        let blocks: Vec<[i32; N * N]> = (0..bw * bh)
+            .map(|b| {
+                let mut q = [0; N * N];
+                q[0] = (b * b % 11) as i32 * 3 + 1;
+                if b % 7 == 0 {
+                    (q[3], q[10]) = (2, -1);
+                }
+                q
+            })
+            .collect();
+        let mut study = Study::default();
+        study.start_chunk(0, 1000, 0);
+        study.plane(&PlaneStream {
+            kind: 0,
+            chroma: false,
+            blocks: &blocks,
+            order: &order,
+            grid: (bw, bh),
+            tile: None,
+        });
+        let c = &study.chunks[0];
+        let symbols = |ranges: &[std::ops::Range<usize>]| -> u64 {
+            let ctxs = ranges.iter().cloned().flatten();
+            ctxs.map(|ctx| c.counts[ctx * TOKENS..(ctx + 1) * TOKENS].iter())
+                .map(|n| n.map(|&n| n as u64).sum::<u64>())
+                .sum()
+        };
+        let with_coefficients = blocks.iter().filter(|q| q[1..].iter().any(|&v| v != 0));
+        assert_eq!(symbols(&[DC_D..DC_D + 5, NZ_D..NZ_D + 11]), 2 * 64);
+        assert_eq!(
+            symbols(&[JOINT_G..JOINT_G + 10, NZ_G..NZ_G + 11]),
+            64 + with_coefficients.count() as u64
+        );
+    }
+
+    #[test]
     fn signed_values_fold_onto_the_naturals() {
         assert_eq!(
             (-3..=3).map(pack_signed).collect::<Vec<_>>(),
@@ -760,6 +866,7 @@ mod tests {
             counts: vec![0; FAMILIES * CONTEXTS * TOKENS],
             raw_bits: 0,
             raw_f: 0,
+            raw_g: 0,
             planes: vec![],
             other: 0,
             stored: 0,
