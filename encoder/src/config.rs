@@ -47,8 +47,8 @@ pub struct EncoderConfig {
     /// How segment boundaries are chosen.
     pub segment: SegmentMode,
     /// The format version written: version 1 (the default, every player reads it) or
-    /// version 2 (0.69–0.77× the bytes; a GPU decodes its sections as coded, a CPU
-    /// adapter's decoder thread at 12–16× version 1's CPU time).
+    /// version 2 (0.69–0.90× the bytes; the player's decoder thread decodes its sections
+    /// to version 1's pairs at 13–29× version 1's CPU time).
     pub format: FormatVersion,
     /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
     /// payloads (1 to 22).
@@ -104,10 +104,9 @@ impl EncoderConfig {
             max_degree: 4,
             // Longer segments fit the budget but cost more than they save (measured).
             segment: SegmentMode::Auto { max: 32 },
-            // Version 2 becomes the default once a hardware GPU has measured its lanes'
-            // decode against version 1's parse (the player decodes them there as coded;
-            // a CPU adapter's decoder thread spends 12–16× version 1's CPU time on them,
-            // BENCHMARKS.md, "Format 2").
+            // Version 1: version 2's sections cost the player's decoder thread 13–29×
+            // version 1's CPU time (to pairs), and decoded on an H100 as coded they took
+            // 10–18× the pairs' GPU time (BENCHMARKS.md, "Format 2 on the GPU").
             format: FormatVersion::V1,
             zstd_level: 9,
             lane_bytes: crate::LANE_BYTES,

@@ -29,10 +29,10 @@ pub const LANE_BYTES: usize = 512;
 pub enum FormatVersion {
     /// Version 1 (1.1): zero-run pairs through zstd. Every player reads it.
     V1,
-    /// Version 2 (2.0): rANS lanes with the file's context maps, 0.69–0.77× version 1's
-    /// bytes (BENCHMARKS.md, "Format 2"). Players before version 2 refuse it. The player
-    /// decodes its sections on a GPU as coded; on a CPU adapter its decoder thread decodes
-    /// them to pairs, 10–20× the time of version 1's zstd.
+    /// Version 2 (2.0): rANS lanes with the file's context maps, 0.69–0.90× version 1's
+    /// bytes (BENCHMARKS.md, "Format 2"). Players before version 2 refuse it. The player's
+    /// decoder thread decodes its sections to pairs, 13–29× the time of version 1's zstd
+    /// (the GPU can decode them as coded, `DecodeShape::lanes`, off by default).
     V2,
 }
 

@@ -228,8 +228,9 @@ impl DecoderCore {
         }
     }
 
-    /// Whether a version 2 file's sections go to the GPU as coded (`true`, the default,
-    /// where the planes fit the GPU's dense plane) or decoded to pairs
+    /// Whether a version 2 file's sections go to the GPU as coded (`true`, where the
+    /// planes fit the GPU's dense plane; a new core's setting) or decoded to pairs; the
+    /// player sets it from its decode shape, whose default is pairs
     /// ([`DecodeShape::lanes`](crate::DecodeShape::lanes)). Before the first chunk.
     pub fn set_lanes(&mut self, on: bool) {
         self.lanes = crate::coded::decodes_lanes(&self.header).filter(|_| on);
