@@ -76,7 +76,7 @@ impl LanePass {
 }
 
 /// Where the lanes' tables and scratch buffers hold what (in words; `lanes.wgsl`
-/// describes each): the tables (maps, histograms' entries and slots), which the lane
+/// describes each): the tables (maps, histograms' slot tables), which the lane
 /// passes only read, then the scratch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Scratch {
