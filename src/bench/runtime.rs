@@ -444,6 +444,9 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     // Each frame against the blend after it, over every run: the frames that recorded no
     // decode work (the reconstruction alone), then those that did.
     let mut by_decode: [Vec<f64>; 2] = Default::default();
+    // Frames whose data was late (held, catching up, waiting), over every run: their GPU
+    // time is not the stream's.
+    let mut late: std::collections::BTreeMap<&'static str, usize> = Default::default();
     for _ in 0..a.runs.max(1) {
         let f = crate::sequence::open_input(&a.file)?;
         let cfg = PlayerConfig {
@@ -542,6 +545,9 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
                 series[7].push(gpu / blend.max(1e-9));
                 let r = &frame.record;
                 by_decode[(r.decode_work > 0) as usize].push(gpu / blend.max(1e-9));
+                if r.state != vbim_player::FrameState::Exact {
+                    *late.entry(r.state.name()).or_default() += 1;
+                }
                 rows += &format!(
                     "{k},{gpu:.4},{blend:.4},{gpu_wall:.4},{blend_wall:.4},{},{},{:.4},{:?},{:.4},{:.4}\n",
                     r.decode_work, r.segment, r.u, r.state, split.0, split.1
@@ -627,6 +633,13 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         // (The blend is the timer's: an adapter without timestamps has no reference.)
         line("submission to completion, the reference blend (wall)", 6, 3);
         ratios("  wall clock", 5, 6);
+    }
+    if !late.is_empty() {
+        let what: Vec<String> = late.iter().map(|(s, n)| format!("{n} {s}")).collect();
+        println!(
+            "frames whose data was late (not the stream's cost: the decoder thread or the reader fell behind): {}",
+            what.join(", ")
+        );
     }
     let (head, packed, blend) = bytes_per_texel(&h);
     println!(
