@@ -256,7 +256,10 @@ impl LanesGpu {
         sets: u64,
     ) -> Option<LanesGpu> {
         let plan = Scratch::new(geometry, maps)?;
-        let layouts = [lanes_layout(device), slots_layout(device)];
+        let layouts = [
+            layout(device, &LANE_BINDINGS),
+            layout(device, &SLOT_BINDINGS),
+        ];
         let source = format!(
             "{}{LANE_JOB_WGSL}{}",
             plan.constants(sets),
@@ -374,34 +377,23 @@ pub(super) fn slot_table(h: &Histogram) -> Vec<u32> {
 
 /// The lane passes' bindings: the job, the segment's words, the scratch, the dense plane
 /// (coefficients, masks) and the tables, read-only.
-fn lanes_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    use wgpu::BufferBindingType::{Storage, Uniform};
-    layout(
-        device,
-        &[
-            (0, Uniform),
-            (1, Storage { read_only: true }),
-            (2, Storage { read_only: false }),
-            (3, Storage { read_only: false }),
-            (4, Storage { read_only: false }),
-            (5, Storage { read_only: true }),
-        ],
-    )
-}
+const LANE_BINDINGS: [(u32, wgpu::BufferBindingType); 6] = [
+    (0, wgpu::BufferBindingType::Uniform),
+    (1, wgpu::BufferBindingType::Storage { read_only: true }),
+    (2, wgpu::BufferBindingType::Storage { read_only: false }),
+    (3, wgpu::BufferBindingType::Storage { read_only: false }),
+    (4, wgpu::BufferBindingType::Storage { read_only: false }),
+    (5, wgpu::BufferBindingType::Storage { read_only: true }),
+];
 
 /// `slots`' bindings: the job, the segment's words and the tables, which it writes.
-fn slots_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    use wgpu::BufferBindingType::{Storage, Uniform};
-    layout(
-        device,
-        &[
-            (0, Uniform),
-            (1, Storage { read_only: true }),
-            (6, Storage { read_only: false }),
-        ],
-    )
-}
+const SLOT_BINDINGS: [(u32, wgpu::BufferBindingType); 3] = [
+    (0, wgpu::BufferBindingType::Uniform),
+    (1, wgpu::BufferBindingType::Storage { read_only: true }),
+    (6, wgpu::BufferBindingType::Storage { read_only: false }),
+];
 
+/// A bind group layout of `bindings` (the job's, binding 0, at a dynamic offset).
 fn layout(
     device: &wgpu::Device,
     bindings: &[(u32, wgpu::BufferBindingType)],
