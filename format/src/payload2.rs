@@ -204,30 +204,33 @@ pub fn encode(
 
 /// A version 2 payload's lanes' symbols, plane by plane ([`plane2::lane_symbols`]).
 pub fn lane_symbols(h: &Header, what: Payload, bytes: &[u8]) -> Result<Vec<Vec<u64>>> {
+    let (maps, head, shapes) = coded(h, what, bytes)?;
+    let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
+    plane2::lane_symbols(&bytes[head..], &geometries, maps)
+}
+
+/// What decoding a version 2 payload's section needs: the file's context maps, the head's
+/// length (within `bytes`: [`section_planes`] refuses a payload shorter than its head) and
+/// the planes' shapes.
+fn coded<'h>(
+    h: &'h Header,
+    what: Payload,
+    bytes: &[u8],
+) -> Result<(&'h [ContextMap], usize, Vec<Shape>)> {
     let maps = h.context_maps().ok_or_else(|| {
         FormatError::Invalid("a version 1 file has no coefficient sections".into())
     })?;
     let (head, shapes) = shapes(h, what, bytes)?;
-    let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
-    let section = bytes
-        .get(head..)
-        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
-    plane2::lane_symbols(section, &geometries, maps)
+    Ok((maps, head, shapes))
 }
 
 /// A version 2 payload (`h` holds its file's context maps) as version 1's payload before
 /// zstd: the same head, then each plane's blocks as zero-run pairs. Refuses a payload
 /// whose pairs would pass `limit` bytes.
 pub fn to_pairs(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
-    let maps = h.context_maps().ok_or_else(|| {
-        FormatError::Invalid("a version 1 file has no coefficient sections".into())
-    })?;
-    let (head, shapes) = shapes(h, what, bytes)?;
-    let head_bytes = bytes
-        .get(..head)
-        .ok_or_else(|| FormatError::Invalid(format!("a payload of {} bytes", bytes.len())))?;
+    let (maps, head, shapes) = coded(h, what, bytes)?;
     let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
-    let mut out = head_bytes.to_vec();
+    let mut out = bytes[..head].to_vec();
     plane2::decode_each(&bytes[head..], &geometries, maps, |_, blocks| {
         write_pairs(blocks, &mut out);
         if out.len() > limit {
