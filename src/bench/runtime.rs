@@ -10,7 +10,7 @@ use super::{BenchDecodeArgs, BenchDriftArgs, BenchRenderArgs};
 
 pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     use vbim_format::chunk;
-    use vbim_format::{ChunkKind, Reader};
+    use vbim_format::Reader;
     use vbim_player::bench::{DecoderCore, Event, SegmentData};
     let name = a.file.display().to_string();
     let bytes = std::fs::read(&a.file).map_err(|e| format!("{name}: {e}"))?;
@@ -34,27 +34,14 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         // decompressed (zstd), or decoded to pairs (format 2's rANS lanes).
         let t = Instant::now();
         let mut total = 0usize;
-        let mut tiles = None;
         let limit = vbim_format::limits::MAX_CHUNK_DECODED as usize;
-        for (e, c) in entries.iter().zip(&chunks) {
-            let what = match e.kind {
-                ChunkKind::Keyframe => chunk::Payload::Keyframe,
-                ChunkKind::Coefficients => {
-                    chunk::Payload::Coefficients(tiles.as_ref().ok_or("no tile map")?)
-                }
-                ChunkKind::TileMap => {
-                    let t = chunk::read_tilemap(&h, c, e.last_frame - e.first_frame)
-                        .map_err(|e| e.to_string())?;
-                    total += t.luma.len();
-                    tiles = Some(t);
-                    continue;
-                }
-                _ => continue,
-            };
+        let tile_maps = each_payload(&h, &entries, &chunks, |what, c| {
             total += chunk::payload(&h, what, c, limit)
                 .map_err(|e| e.to_string())?
                 .len();
-        }
+            Ok(())
+        })?;
+        total += tile_maps;
         zstd_t.push(t.elapsed().as_secs_f64());
         std::hint::black_box(total);
         // The player's decoder: every chunk in playback order, every segment filled for
@@ -178,26 +165,47 @@ fn lane_symbols(
     entries: &[vbim_format::IndexEntry],
     chunks: &[&[u8]],
 ) -> Result<(u64, u64), String> {
-    use vbim_format::{chunk::Payload, payload2, ChunkKind};
-    let (mut all, mut longest, mut tiles) = (0, 0, None);
-    for (i, (e, c)) in entries.iter().zip(chunks).enumerate() {
-        let what = match e.kind {
-            ChunkKind::Keyframe => Payload::Keyframe,
-            ChunkKind::TileMap => {
-                let t = vbim_format::chunk::read_tilemap(h, c, e.last_frame - e.first_frame);
-                tiles = Some(t.map_err(|e| format!("chunk {i}: {e}"))?);
-                continue;
-            }
-            ChunkKind::Coefficients => Payload::Coefficients(tiles.as_ref().ok_or("no tile map")?),
-            _ => continue,
-        };
-        let planes = payload2::lane_symbols(h, what, c).map_err(|e| format!("chunk {i}: {e}"))?;
+    let (mut all, mut longest) = (0, 0);
+    each_payload(h, entries, chunks, |what, c| {
+        let planes = vbim_format::payload2::lane_symbols(h, what, c).map_err(|e| e.to_string())?;
         for lanes in planes {
             all += lanes.iter().sum::<u64>();
             longest += lanes.iter().copied().max().unwrap_or(0);
         }
-    }
+        Ok(())
+    })?;
     Ok((all, longest))
+}
+
+/// Calls `each` with every keyframe and coefficient chunk in file order (what its payload
+/// holds, its bytes), a coefficient chunk with the tile map read before it; errors name
+/// the chunk. Returns the bytes of the tile maps it read.
+fn each_payload(
+    h: &vbim_format::Header,
+    entries: &[vbim_format::IndexEntry],
+    chunks: &[&[u8]],
+    mut each: impl FnMut(vbim_format::chunk::Payload, &[u8]) -> Result<(), String>,
+) -> Result<usize, String> {
+    use vbim_format::{chunk, ChunkKind};
+    let (mut tiles, mut read) = (None, 0);
+    for (i, (e, c)) in entries.iter().zip(chunks).enumerate() {
+        let what = match e.kind {
+            ChunkKind::Keyframe => chunk::Payload::Keyframe,
+            ChunkKind::Coefficients => {
+                chunk::Payload::Coefficients(tiles.as_ref().ok_or("no tile map")?)
+            }
+            ChunkKind::TileMap => {
+                let t = chunk::read_tilemap(h, c, e.last_frame - e.first_frame)
+                    .map_err(|e| format!("chunk {i}: {e}"))?;
+                read += t.luma.len();
+                tiles = Some(t);
+                continue;
+            }
+            _ => continue,
+        };
+        each(what, c).map_err(|e| format!("chunk {i}: {e}"))?;
+    }
+    Ok(read)
 }
 
 /// A decode shape in words, for the benchmarks' first line.
