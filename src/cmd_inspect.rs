@@ -298,7 +298,6 @@ fn payload_status(
     }
 }
 
-/// How the file codes its keyframes and coefficients (its major version).
 /// The file's bytes by what they hold: the header (with a 2.0 file's context maps apart),
 /// the index, and each kind of chunk (keyframes intra and predicted apart).
 fn bytes_by_kind(
@@ -309,11 +308,7 @@ fn bytes_by_kind(
         entries.iter().filter(|e| f(e)).map(|e| e.length).sum()
     };
     let header = h.header_size() as u64;
-    let maps = match h.coding {
-        // (A 2.0 header is 204 bytes before its maps: docs/FORMAT.md.)
-        vbim_format::Coding::Lanes(_) => header.saturating_sub(204),
-        vbim_format::Coding::Pairs => 0,
-    };
+    let maps = h.context_maps_size() as u64;
     let chunks: u64 = entries.iter().map(|e| e.length).sum();
     let mut out = vec![("header", header - maps)];
     if maps > 0 {
@@ -347,6 +342,7 @@ fn known(k: ChunkKind) -> bool {
     )
 }
 
+/// How the file codes its keyframes and coefficients (its major version).
 fn coding_name(h: &vbim_format::Header) -> &'static str {
     match h.coding {
         vbim_format::Coding::Pairs => "zero-run pairs through zstd",

@@ -186,9 +186,18 @@ impl Header {
     /// when it states the largest payload, else 1.0's.
     pub fn header_size(&self) -> usize {
         match &self.coding {
-            Coding::Lanes(maps) => HEADER_SIZE_1_1 + 4 + maps_bytes(maps).len(),
+            Coding::Lanes(_) => HEADER_SIZE_1_1 + 4 + self.context_maps_size(),
             Coding::Pairs if self.largest_payload.is_some() => HEADER_SIZE_1_1,
             Coding::Pairs => HEADER_SIZE,
+        }
+    }
+
+    /// Bytes of a 2.0 header's context maps as stored, after their length (0 for
+    /// version 1).
+    pub fn context_maps_size(&self) -> usize {
+        match &self.coding {
+            Coding::Lanes(maps) => maps_bytes(maps).len(),
+            Coding::Pairs => 0,
         }
     }
 
