@@ -78,7 +78,7 @@ pub struct PlayArgs {
     /// Added to the header's pre-roll, at most an hour: a reader stall this long while the ring first fills is survived (`500ms`).
     #[arg(long, default_value = "0s", value_parser = crate::units::parse_short_span)]
     pub preroll_margin: Span,
-    /// The most segment-decode work one displayed frame records, in blocks (the time of 8×8 texels of one plane through the bubble write; the other passes weighted by their measured cost); a segment due before its decode is done is held or waited for and reported [default: each decode spread evenly over the frames before it is due but the last].
+    /// The most segment-decode work one displayed frame records, in blocks (the time of 64 texel sums of one 8×8 block of one plane; each pass weighted by its measured cost); a segment due before its decode is done is held or waited for and reported [default: each decode spread evenly over the frames before it is due but the last].
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub decode_budget: Option<u64>,
     /// How far a tile of the lightmap may lag the exact image before it is evaluated again, as a share of the protocol's GPU bound (2^-10 relative for HDR, 0.5/255 for 8-bit): 0 evaluates every texel every frame, larger shares trade accuracy for GPU time, `inf` evaluates a tile only when the keyframes change. The default, 0.25, keeps every frame within the bound with the evaluation's own rounding.

@@ -210,7 +210,7 @@ fn bake_encode_inspect_decode_compare() {
         row.split_whitespace().nth(1).unwrap().parse().unwrap()
     };
     // Each pass has its row; together they take time (each alone may round to 0).
-    let total: f64 = ["parse", "key_add", "bubble_write"].map(pass).iter().sum();
+    let total: f64 = ["parse", "key_add", "bubble_gather"].map(pass).iter().sum();
     assert!(total > 0.0, "{table}");
 
     // `bench entropy`: a context-adaptive model needs fewer bytes than zstd of the

@@ -105,6 +105,22 @@ pub(crate) struct PlaneSpan {
     pub member_count: u32,
     /// A version 2 plane's lanes (its stream and entry points are then unused).
     pub lanes: Option<LanePlane>,
+    /// A bound on its non-zero coefficients beyond each block's first (what a bubble set
+    /// holds of it apart from its blocks): each such term is an AC coefficient, so at most
+    /// the stream's pairs (its entry points times [`ENTRY_PAIRS`], each piece at most that
+    /// many) or, for lanes, their symbols (at most [`MAX_LANE_SYMBOLS`] each); and at most
+    /// 63 a block.
+    ///
+    /// [`ENTRY_PAIRS`]: vbim_format::chunk::ENTRY_PAIRS
+    /// [`MAX_LANE_SYMBOLS`]: vbim_format::plane2::MAX_LANE_SYMBOLS
+    pub terms: u32,
+}
+
+/// [`PlaneSpan::terms`] for a plane of `blocks` blocks from `pieces` pieces of at most
+/// `each` symbols or pairs.
+fn term_bound(pieces: usize, each: usize, blocks: usize) -> u32 {
+    let ac = (pieces as u64).saturating_mul(each as u64);
+    ac.min(blocks as u64 * 63).min(u32::MAX as u64) as u32
 }
 
 /// Streams, entry points and member spans of several planes, appended one after another.
@@ -181,6 +197,7 @@ impl Coded {
             members: at,
             member_count,
             lanes: None,
+            terms: term_bound(s.entries.len(), vbim_format::chunk::ENTRY_PAIRS, s.blocks),
         }
     }
 
@@ -270,6 +287,11 @@ impl Coded {
                 longest: sp.lanes.iter().map(|l| l.3 - l.2).max().unwrap_or(0) as u32,
                 tiled: members.is_some(),
             }),
+            terms: term_bound(
+                sp.lanes.len(),
+                vbim_format::plane2::MAX_LANE_SYMBOLS,
+                blocks,
+            ),
             ..PlaneSpan::default()
         }
     }

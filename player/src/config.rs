@@ -73,8 +73,8 @@ pub struct PlayerConfig {
     /// start-up time (measured in BENCHMARKS.md).
     pub preroll_margin_ns: u64,
     /// The most segment decode work one displayed frame records, in blocks (the time of
-    /// an 8×8 block of one plane through the bubble write, the other passes weighted by
-    /// their measured cost, and each step of the decode [`DecodeShape::step_cost`] more;
+    /// an 8×8 block's 64 texel sums of one term, each pass weighted by its measured cost
+    /// ([`DecodeShape::weights`]), and each step of the decode [`DecodeShape::step_cost`] more;
     /// [`FrameRecord::decode_work`]). `None`: each segment's decode is spread evenly over
     /// the frames before it is shown but the last, at the display rate the frames so far
     /// give, from the frame the segment before it goes on screen, each frame recording

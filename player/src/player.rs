@@ -519,7 +519,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             params.reuse = self.reuse;
             let ch = self.header.channels as u32;
             params.channels = ch;
-            params.steps = r.steps;
             // K_s from its slot; K_{s+1} from the head until the next decode packs it.
             let packed = self.keys.slot_of(r.keys[1]);
             params.keys = [r.slot0 * ch, packed.unwrap_or(0) * ch];

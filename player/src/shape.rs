@@ -12,9 +12,9 @@ pub struct DecodeShape {
     /// How many workgroups one dispatch of a decode pass covers: the grain at which a
     /// segment's decode is recorded over frames. Rounded up to a multiple of 32, at most
     /// 16 384 (a parse dispatch then stays within WebGPU's 65 535 workgroups). A pass whose
-    /// workgroups cost less than `bubble_write`'s over a whole group of 64 blocks (by
-    /// [`DecodeShape::weights`]: the keyframe's range and pack, the bound, a split group)
-    /// covers as many more, up to 16 384, so that its dispatches record the same work in
+    /// workgroups cost less than 64 blocks of the budget's unit (by
+    /// [`DecodeShape::weights`]: the keyframe's range and pack, the bubble gather, a split
+    /// group) covers as many more, up to 16 384, so that its dispatches record the same work in
     /// fewer steps. A slice is
     /// the smallest piece of work a frame records: with a
     /// [`decode_budget`](crate::PlayerConfig::decode_budget) smaller than one slice's cost,
@@ -25,8 +25,8 @@ pub struct DecodeShape {
     /// piece's bytes, varints and pairs side by side, joined by scans) rather than an
     /// invocation per piece reading its pairs in sequence.
     pub wide_parse: bool,
-    /// Workgroups that share a group of 64 blocks in the block passes (`key_add`,
-    /// `bubble_write`), each visiting its share in sequence: 1, 2, 4 … 64.
+    /// Workgroups that share a group of 64 blocks in the keyframe block pass (`key_add`),
+    /// each visiting its share in sequence: 1, 2, 4 … 64.
     pub group_split: u32,
     /// What each step of a decode (a dispatch, a clear, the upload) costs beside its work,
     /// in the blocks of [`decode_budget`](crate::PlayerConfig::decode_budget): the work
@@ -67,7 +67,7 @@ impl DecodeShape {
     /// parse 3.2 → 0.34 ms), groups split in up to 8 where a pass has too few to fill the
     /// chip (a 512² segment's `key_add` 0.33 → 0.09 ms), and 35 000 blocks per step: a
     /// segment's decode took as long at 512² as at 2048² (about 20 µs per step whatever
-    /// its work), and a block through `bubble_write` about 0.58 ns ([`PassWeights::H100`]);
+    /// its work), and a block of the budget's unit about 0.58 ns ([`PassWeights::H100`]);
     /// version 2's sections decoded to pairs by the decoder thread (`lanes`).
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
@@ -94,9 +94,11 @@ pub(crate) fn resolved(cfg: &crate::PlayerConfig, device: &wgpu::Device) -> Deco
         .unwrap_or_else(|| DecodeShape::for_adapter(&device.adapter_info()))
 }
 
-/// What one unit of each decode pass costs, in quarters of a block through `bubble_write`
-/// (the unit of [`PlayerConfig::decode_budget`]): how the player shares a segment's decode
-/// out over frames. Each pass's unit is named with its field.
+/// What one unit of each decode pass costs, in quarters of a block (the unit of
+/// [`PlayerConfig::decode_budget`]: the time of a block's 64 texel sums of one sparse term,
+/// what writing a bubble block as texels cost when bubble planes were decoded to texels;
+/// the weights below were fitted in it): how the player shares a segment's decode out over
+/// frames. Each pass's unit is named with its field.
 ///
 /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -109,12 +111,9 @@ pub struct PassWeights {
     pub key_range: u32,
     /// 1/16 of a 32² region of the head packed into 16 bits.
     pub key_pack: u32,
-    /// 64 words (128 texels) of a bubble layer zeroed.
-    pub bubble_zero: u32,
-    /// A block of a bubble plane bounded.
-    pub bubble_bound: u32,
-    /// A block of a bubble plane written: the unit, 4.
-    pub bubble_write: u32,
+    /// A block of a bubble plane gathered into its set: its mask, first term and the
+    /// rest's place written.
+    pub bubble_gather: u32,
     /// A 16-bit word of a version 2 plane's longest rANS lane decoded (`lane_blocks`,
     /// both parities): the serial chain its decode waits for.
     pub lane_word: u32,
@@ -135,9 +134,7 @@ impl PassWeights {
         key_add: 12,
         key_range: 1,
         key_pack: 1,
-        bubble_zero: 1,
-        bubble_bound: 2,
-        bubble_write: 4,
+        bubble_gather: 2,
         // 13.5 µs a word of the longest lane (`bench decode --gpu --lanes true --fit` on
         // the demo in 2.0): llvmpipe runs a workgroup's lanes in lockstep, so the other
         // lanes' symbols add to the longest's.
@@ -147,7 +144,7 @@ impl PassWeights {
 
     /// Fitted on an H100 from each pass's GPU time per 4096² segment (`vbim bench decode
     /// --gpu`, timestamps between passes), less 20 µs per dispatch (the step cost): a
-    /// block through `bubble_write` about 0.58 ns there. Arithmetic is cheap on a GPU
+    /// block of the budget's unit about 0.58 ns there. Arithmetic is cheap on a GPU
     /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12); zeroing,
     /// eight rows per invocation, stores at about 2.5 TB/s (`--fit`: 0.4–0.5, so 1); a
     /// parse's entry point, 3.5–10 ns of work beside its dispatch's latency, 40.
@@ -156,9 +153,7 @@ impl PassWeights {
         key_add: 3,
         key_range: 1,
         key_pack: 1,
-        bubble_zero: 1,
-        bubble_bound: 1,
-        bubble_write: 4,
+        bubble_gather: 1,
         // 5–14 µs a word of the longest lane (`bench decode --gpu --lanes true` on the
         // benchmark streams in 2.0, a lane to a workgroup: 12–22 symbols a word,
         // 0.45–0.63 µs a symbol), the larger streams' 12 µs here.

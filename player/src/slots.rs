@@ -15,8 +15,8 @@
 use crate::decoder::KeyStep;
 use crate::time::{MediaTime, ONE_FRAME};
 
-/// Largest number of bubble planes (7 terms of 3 planes; `reconstruct.wgsl` holds their
-/// steps in 6 vec4s).
+/// Largest number of bubble planes (7 terms of 3 planes: `reconstruct.wgsl` holds 9
+/// weights, two keyframes' and 7 bubble terms').
 pub(crate) const MAX_BUBBLE_PLANES: usize = 24;
 
 /// The resident keyframes: the chain's head (f32, built in place) and the 16-bit slots.
@@ -84,8 +84,6 @@ pub(crate) struct Resident {
     pub start: MediaTime,
     pub end: MediaTime,
     pub layers: usize,
-    /// Quantiser step of each bubble plane.
-    pub steps: [f32; MAX_BUBBLE_PLANES],
 }
 
 /// What to do with an arrived segment.
@@ -143,7 +141,6 @@ mod tests {
             start: s * 10 * F,
             end: (s + 1) * 10 * F,
             layers: 4,
-            steps: [0.0; MAX_BUBBLE_PLANES],
         }
     }
 

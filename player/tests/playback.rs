@@ -179,20 +179,22 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
             Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
         let mut player = unthrottled(device, queue, bytes);
         // The budget's figure, counted by hand: the head keyframe's ch R32Float layers,
-        // two slots of ch 16-bit keyframe layers and two sets of (degree − 1) × ch
-        // bubble layers of 16 bits, over the padded planes (48 × 32, whole 16-texel
-        // tiles), the lightmap (Rgba16Float) and its held copy (RGB9E5, 4 bytes); then the
-        // buffers: the 16-bit keyframes' ranges (2 × 1 regions of 32² per plane and slot,
-        // 8 bytes each), the 224-byte uniform of the reconstruction, the 512-byte DCT
-        // tables, and the decode jobs and coefficients, at least 16 and 64 KiB.
+        // two slots of ch 16-bit keyframe layers and two sets of (degree − 1) × ch layers
+        // of bubble blocks (16 bytes per 8 × 8 texels), over the padded planes (48 × 32,
+        // whole 16-texel tiles), the lightmap (Rgba16Float) and its held copy (RGB9E5, 4
+        // bytes); then the buffers: the 16-bit keyframes' ranges (2 × 1 regions of 32² per
+        // plane and slot, 8 bytes each), the 144-byte uniform of the reconstruction, the
+        // 512-byte DCT tables, and the decode jobs and coefficients and each set's bubble
+        // terms, at least 16, 64 and 2 × 64 KiB.
         let (planes, d) = (48 * 32u64, player.header().max_degree as u64);
         let set = (d - 1).max(1) * ch as u64;
-        let textures = planes * (layers(ch as u64) * 4 + 2 * ch as u64 * 2 + 2 * set * 2)
+        let textures = planes * (layers(ch as u64) * 4 + 2 * ch as u64 * 2)
+            + planes / 64 * 16 * 2 * set
             + (w * h) as u64 * (8 + 4);
         let ranges = 2 * 2 * ch as u64 * 8;
-        let buffers = player.gpu_bytes() - textures - ranges - 224 - 512;
+        let buffers = player.gpu_bytes() - textures - ranges - 144 - 512;
         assert!(
-            ((16 << 10) + (64 << 10)..1 << 20).contains(&buffers),
+            ((16 << 10) + (64 << 10) + (128 << 10)..1 << 20).contains(&buffers),
             "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",
             player.gpu_bytes()
         );
@@ -1304,9 +1306,10 @@ fn a_decode_budget_bounds_every_frame(
         "{t:?}"
     );
 
-    // A 24th of the largest segment per frame, where a segment lasts 20 displayed
-    // frames: segments come due before they are decoded.
-    let small = whole.div_ceil(24);
+    // A 200th of the largest decode per frame, where a segment lasts 20 displayed frames
+    // and its decode takes about 40 steps: most steps run alone, over the budget, and
+    // segments come due before they are decoded.
+    let small = whole.div_ceil(200);
     let cfg = PlayerConfig {
         decode_budget: Some(small),
         decode_shape,
@@ -1389,7 +1392,8 @@ fn reused_tiles_stay_within_their_share_of_the_bound_and_an_unbounded_share_lags
 /// before it goes on screen, which frees what it writes, and is spread evenly over the
 /// frames until it is due but the last: a segment of 20 displayed frames leaves at most
 /// its margin frame and one more without decode work, and no frame records more than
-/// twice the even share.
+/// twice the even share or, where one step is larger than the share (a keyframe plane's
+/// inverse transform, one slice of 768 blocks here), twice that step.
 #[test]
 fn without_a_budget_a_decode_starts_at_once_and_spreads_over_the_frames_before_it_is_due() {
     let (device, queue) = device();
@@ -1398,6 +1402,7 @@ fn without_a_budget_a_decode_starts_at_once_and_spreads_over_the_frames_before_i
     let cfg = inline(Policy::Interpolate, Throttle::UNLIMITED);
     let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
     let frames: Vec<_> = (0..330).map(|_| player.advance(DISPLAY)).collect();
+    let step = ((w / 8) * (h / 8)) as u64 * vbim_player::PassWeights::LAVAPIPE.key_add as u64 / 4;
     // Runs of frames showing one segment, the first two (the start) and the last
     // (unfinished) left out.
     let mut runs: Vec<Vec<u64>> = Vec::new();
@@ -1425,8 +1430,8 @@ fn without_a_budget_a_decode_starts_at_once_and_spreads_over_the_frames_before_i
         let share = work.iter().sum::<u64>().div_ceil(work.len() as u64 - 1);
         let most = *work.iter().max().unwrap();
         assert!(
-            most <= 2 * share,
-            "segment {i}: {most} against a share of {share}: {work:?}"
+            most <= 2 * share.max(step),
+            "segment {i}: {most} against a share of {share} (a step {step}): {work:?}"
         );
     }
 }

@@ -3,7 +3,8 @@
 //! pass and its work in the pass's unit; a least-squares fit of
 //! `time = latency + cost[pass] × work` over every dispatch gives the adapter's latency
 //! per step and cost per unit of each pass, which `DecodeShape::step_cost` and
-//! `PassWeights` express in blocks through `bubble_write`. The shipped
+//! `PassWeights` express in quarter-blocks, the decode budget's unit (taking `key_add` at
+//! the weight this adapter's shape gives it). The shipped
 //! `DecodeShape::GPU` was fitted by hand on one H100; this puts the same fit in one
 //! command for any card.
 
@@ -109,9 +110,11 @@ fn solve(mut m: Vec<Vec<f64>>) -> Option<Vec<f64>> {
 }
 
 /// Prints the fit of `samples` (pass names in `names`) and what it makes of a decode
-/// shape for the adapter: the step cost and each pass's weight in quarter-blocks of
-/// `bubble_write`, the unit of `PlayerConfig::decode_budget`.
-pub fn print(names: &[&'static str], samples: &[Sample]) {
+/// shape for the adapter: the step cost and each pass's weight in quarter-blocks, the
+/// unit of `PlayerConfig::decode_budget`, with `key_add` at `key_add_weight` (the weight
+/// the adapter's shape gives it: the budget's unit has no pass of its own since bubble
+/// planes stay coefficients).
+pub fn print(names: &[&'static str], samples: &[Sample], key_add_weight: u32) {
     let Some((latency, costs)) = fit(samples, names.len()) else {
         println!("fit: the dispatches do not separate latency from work (too few, or work that never varies)");
         return;
@@ -123,8 +126,8 @@ pub fn print(names: &[&'static str], samples: &[Sample]) {
     );
     let unit = names
         .iter()
-        .position(|&n| n == "bubble_write")
-        .map(|i| costs[i])
+        .position(|&n| n == "key_add")
+        .map(|i| costs[i] * 4.0 / key_add_weight.max(1) as f64)
         .filter(|&c| c > 0.0);
     for (name, cost) in names.iter().zip(&costs) {
         let n = samples.iter().filter(|s| names[s.0] == *name).count();
@@ -135,10 +138,10 @@ pub fn print(names: &[&'static str], samples: &[Sample]) {
     }
     match unit {
         Some(u) => println!(
-            "as a DecodeShape for this adapter: step_cost {:.0} blocks (the latency in blocks through bubble_write at {u:.3} ns each), weights as above (0: the pass's time is its latency alone; use 1)",
+            "as a DecodeShape for this adapter: step_cost {:.0} blocks (the latency in blocks of the budget's unit at {u:.3} ns each, key_add at weight {key_add_weight}), weights as above (0: the pass's time is its latency alone; use 1)",
             latency / u
         ),
-        None => println!("no bubble_write dispatch with a cost: no weights in its unit"),
+        None => println!("no key_add dispatch with a cost: no weights in the budget's unit"),
     }
 }
 

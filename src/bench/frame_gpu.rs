@@ -166,43 +166,82 @@ impl FrameTimer {
 
 /// Bytes per texel a displayed frame's reconstruction reads and writes at the stream's
 /// highest degree, with K_{s+1} in the f32 head (before the next decode packs it) and in
-/// 16 bits (after), and the reference blend's: two Rgba16Float reads and one write.
-pub(super) fn bytes_per_texel(h: &vbim_format::Header) -> (u64, u64, u64) {
+/// 16 bits (after), and the reference blend's: two Rgba16Float reads and one write. A
+/// bubble layer reads its block's 16 bytes per 64 texels here; the terms beyond a block's
+/// first (4 bytes each) depend on the content ([`mean_bytes_per_texel`] counts them), so
+/// these are in quarter bytes: (head, packed, blend) × 4.
+pub(super) fn quarter_bytes_per_texel(h: &vbim_format::Header) -> (u64, u64, u64) {
     let ch = h.channels as u64;
-    let bubbles = 2 * ch * (h.max_degree as u64).saturating_sub(1);
-    let write = 8;
-    let packed = 2 * ch + 2 * ch + bubbles + write;
-    let head = 2 * ch + 4 * ch + bubbles + write;
-    (head, packed, 16 + 8)
+    let bubbles = ch * (h.max_degree as u64).saturating_sub(1);
+    let write = 8 * 4;
+    let packed = 4 * (2 * ch + 2 * ch) + bubbles + write;
+    let head = 4 * (2 * ch + 4 * ch) + bubbles + write;
+    (head, packed, 4 * (16 + 8))
 }
 
-/// The bytes per texel of [`bytes_per_texel`] (K_{s+1} packed) over the tiles of the file
-/// at `path`: a tile reads its bubble terms up to its own degree only, so the mean over
-/// its tile maps (each tile and plane weighted by its segment's frames). `None` for a
-/// file without tile map chunks (format 2 keeps them in its sections).
+/// The bytes per texel a frame touches (K_{s+1} packed) over the file at `path`: each tile
+/// reads its keyframes (2 bytes a plane each) and its bubble layers up to its own degree
+/// (a block's 16 bytes per 64 texels), and the frame the terms beyond each block's first
+/// (4 bytes each), counted from the file's coefficient streams; each segment weighted by
+/// its frames. `None` for a file without tile map chunks (format 2 keeps them in its
+/// sections).
 pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<f64>, String> {
-    use vbim_format::{chunk, ChunkKind, Reader};
+    use vbim_format::chunk::{self, CoeffReader};
+    use vbim_format::plane::{read_blocks, Blocks};
+    use vbim_format::{ChunkKind, Reader};
     let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let mut r = Reader::open(std::io::BufReader::new(file)).map_err(|e| e.to_string())?;
     let h = r.header().clone();
     let entries = r.entries().to_vec();
-    let (mut bytes, mut weight) = (0.0, 0.0);
+    let (pw, ph) = chunk::padded_size(&h);
+    let texels = (pw * ph) as f64;
+    let tile = h.tile_size as usize;
+    let per_tile = (tile / 8).pow(2);
+    let np = h.channels as usize;
+    let (mut bytes, mut frames_in_all) = (0.0, 0.0);
+    let mut tiles = None;
+    let mut q = Blocks::default();
+    let fail = |i: usize, e: &dyn std::fmt::Display| format!("{}: chunk {i}: {e}", path.display());
     for (i, e) in entries.iter().enumerate() {
-        if e.kind != ChunkKind::TileMap {
-            continue;
-        }
         let frames = (e.last_frame - e.first_frame) as f64;
-        let raw = r.read_chunk(i).map_err(|e| e.to_string())?;
-        let t = chunk::read_tilemap(&h, &raw, e.last_frame - e.first_frame)
-            .map_err(|e| format!("{}: chunk {i}: {e}", path.display()))?;
-        for p in 0..h.channels as usize {
-            for &d in t.degrees(p) {
-                // K_s and K_{s+1}, 16 bits each, and the tile's bubble terms.
-                bytes += frames * 2.0 * (2 + (d as usize).saturating_sub(1)) as f64;
-                weight += frames;
+        match e.kind {
+            ChunkKind::TileMap => {
+                let raw = r.read_chunk(i).map_err(|e| e.to_string())?;
+                tiles = Some(
+                    chunk::read_tilemap(&h, &raw, e.last_frame - e.first_frame)
+                        .map_err(|e| fail(i, &e))?,
+                );
             }
+            ChunkKind::Coefficients => {
+                let Some(t) = tiles.take() else { continue };
+                let stored = r.read_chunk(i).map_err(|e| e.to_string())?;
+                let c = CoeffReader::open(&h, &stored, &t).map_err(|e| fail(i, &e))?;
+                let raw = zstd::bulk::decompress(&stored, 1 << 31).map_err(|e| fail(i, &e))?;
+                // K_s and K_{s+1}, 16 bits each, the frame's write, and a block's 16 bytes
+                // per bubble layer up to each tile's degree.
+                let mut seg = texels * (8.0 + 4.0 * np as f64);
+                for p in 0..np {
+                    for &d in t.degrees(p) {
+                        let layers = (d as usize).saturating_sub(1);
+                        seg += (tile * tile) as f64 * layers as f64 * 0.25;
+                    }
+                }
+                let d = c.max_degree() as usize;
+                let mut at = 4 + 4 * (d.saturating_sub(1)) * np;
+                for k in 2..=d {
+                    for p in 0..np {
+                        let members = t.degrees(p).iter().filter(|&&x| x as usize >= k).count();
+                        let n = members * per_tile;
+                        read_blocks(&raw, &mut at, n, &mut q).map_err(|e| fail(i, &e))?;
+                        let rest: usize = (0..n).map(|b| q.nonzero(b).saturating_sub(1)).sum();
+                        seg += 4.0 * rest as f64;
+                    }
+                }
+                bytes += frames * seg;
+                frames_in_all += frames;
+            }
+            _ => {}
         }
     }
-    let tiles = weight / h.channels.max(1) as f64;
-    Ok((tiles > 0.0).then(|| bytes / tiles + 8.0))
+    Ok((frames_in_all > 0.0).then(|| bytes / (frames_in_all * texels)))
 }

@@ -126,7 +126,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         let (pm, p0, p1) = stats(&mut pairs_t);
         println!("full, to pairs  median {pm:.3} s (min {p0:.3}, max {p1:.3}) = {:.2}% of one core in real time (the decoder thread's work where the GPU parses pairs: a CPU adapter)", 100.0 * pm / duration);
     }
-    if let Some((adapter, mut times, boxes, passes, (names, samples))) = gpu {
+    if let Some((adapter, mut times, boxes, passes, (names, samples, key_add))) = gpu {
         let (gm, g0, g1) = stats(&mut times);
         println!(
             "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}",
@@ -150,7 +150,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
                 );
             }
             if a.fit {
-                super::fit::print(&names, &samples);
+                super::fit::print(&names, &samples, key_add);
             }
         }
     }
@@ -229,7 +229,7 @@ type GpuTimes = (
     Vec<f64>,
     usize,
     Vec<(&'static str, f64)>,
-    (Vec<&'static str>, Vec<super::fit::Sample>),
+    (Vec<&'static str>, Vec<super::fit::Sample>, u32),
 );
 
 /// The GPU decode of every segment of a stream, `runs` times.
@@ -293,7 +293,8 @@ fn gpu_decode(
     // Per segment, the mean over runs.
     let per = (runs.max(1) * boxes.max(1)) as f64;
     let passes = passes.into_iter().map(|(l, ns)| (l, ns / per)).collect();
-    Ok((adapter, times, boxes, passes, (names, samples)))
+    let key_add = shape.weights.key_add;
+    Ok((adapter, times, boxes, passes, (names, samples, key_add)))
 }
 
 /// Adds `ns` to `label`'s entry of `into` with `merge` (a sum, a maximum), or appends the
@@ -426,7 +427,7 @@ pub(super) fn bench_drift(a: BenchDriftArgs) -> Result<(), String> {
 }
 
 pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
-    use super::frame_gpu::{bytes_per_texel, mean_bytes_per_texel, FrameTimer};
+    use super::frame_gpu::{mean_bytes_per_texel, quarter_bytes_per_texel, FrameTimer};
     use vbim_player::{Player, PlayerConfig};
     let name = a.file.display().to_string();
     // Timestamps where the adapter has them (lavapipe does); the player asks for none.
@@ -649,16 +650,19 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             what.join(", ")
         );
     }
-    let (head, packed, blend) = bytes_per_texel(&h);
+    let (head, packed, blend) = quarter_bytes_per_texel(&h);
     println!(
-        "bytes per texel a frame touches at degree {}: {packed} (K_(s+1) packed), {head} (in the f32 head, until the next decode packs it), 0.47 in a tile it keeps (its state: 80 bytes read, 40 written per 16² texels); the blend {blend} ({:.2}×)",
+        "bytes per texel a frame touches at degree {}, besides the bubble terms after each block's first (4 bytes each): {:.2} (K_(s+1) packed), {:.2} (in the f32 head, until the next decode packs it), 0.47 in a tile it keeps (its state: 80 bytes read, 40 written per 16² texels); the blend {} ({:.2}×)",
         h.max_degree,
+        packed as f64 / 4.0,
+        head as f64 / 4.0,
+        blend / 4,
         packed as f64 / blend as f64
     );
     if let Some(mean) = mean_bytes_per_texel(&a.file)? {
         println!(
-            "  over this file's tiles, each read up to its own degree: {mean:.1} on average (K_(s+1) packed; {:.2}× the blend)",
-            mean / blend as f64
+            "  over this file's tiles, each read up to its own degree, and its bubble terms: {mean:.2} on average (K_(s+1) packed; {:.2}× the blend)",
+            mean / (blend / 4) as f64
         );
     }
     println!(

@@ -39,10 +39,19 @@ const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
 // The wide parse gives each of its 64 lanes a whole number of a piece's pairs.
 const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 
-/// Rows of texels each invocation of the bubble zero pass zeros (`ZERO_ROWS` in
-/// decode.wgsl).
-const ZERO_ROWS: u32 = 8;
-const _: () = assert!(SLICE_GROUPS.is_multiple_of(ZERO_ROWS));
+/// The work of a whole workgroup of the heaviest kind, in quarter-blocks: 64 blocks at
+/// the budget's unit (a block of 64 texel sums, 4). A cheaper pass's dispatches cover
+/// more workgroups, up to this much work each ([`Gpu::cheap_span`]).
+pub(crate) const FULL_GROUP: u64 = GROUP_BLOCKS as u64 * 4;
+
+/// A bound on the bytes of a segment's bubble terms after each block's first (what a
+/// bubble set's term buffer must hold for it): each plane's bound, four bytes a term.
+pub(crate) fn term_bytes(seg: &SegmentData) -> u64 {
+    seg.planes[seg.bubbles.min(seg.planes.len())..]
+        .iter()
+        .map(|p| p.terms as u64 * 4)
+        .sum()
+}
 
 /// Where a segment's decode puts what it builds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -71,26 +80,49 @@ impl Gpu {
         };
     }
 
-    /// Whether a segment's coefficients fit one storage binding of this device.
+    /// Whether a segment's coefficients, and the bubble terms they may hold, each fit one
+    /// storage binding of this device.
     pub fn fits(&self, seg: &SegmentData) -> Result<(), String> {
         let limit = self.device.limits().max_storage_buffer_binding_size;
-        let need = seg.bytes();
-        if need > limit {
-            return Err(format!(
-                "segment {}: {need} bytes of coefficients, more than one storage binding holds ({limit})",
-                seg.index
-            ));
+        for (need, what) in [
+            (seg.bytes(), "of coefficients"),
+            (term_bytes(seg), "of bubble terms at most"),
+        ] {
+            if need > limit {
+                return Err(format!(
+                    "segment {}: {need} bytes {what}, more than one storage binding holds ({limit})",
+                    seg.index
+                ));
+            }
         }
         Ok(())
+    }
+
+    /// Makes bubble set `set`'s term buffer hold at least `bytes` (its blocks' terms after
+    /// the first), and its bind groups bind it. Only a set the display does not read is
+    /// decoded into, so the new buffer needs nothing of the old.
+    fn hold_terms(&mut self, set: u32, bytes: u64) {
+        let s = set as usize;
+        if bytes <= self.terms[s].size() {
+            return;
+        }
+        self.terms[s] = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vbim bubble terms"),
+            size: grown(bytes),
+            // (COPY_SRC: tests read it back.)
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        self.bind_decode();
+        self.bind_reconstruct();
     }
 
     /// Plans the decode of `seg` into `target` (its jobs are written when its first op,
     /// the upload, is recorded). Fills `ops` with the ops, in the order they must be recorded, and
     /// returns the bytes the decode uploads (its streams and its jobs). Each keyframe plane is parsed into
-    /// the dense plane, part by part, and added onto the head; each bubble plane's bound
-    /// is found over every part before its blocks are written (parsed again if the plane
-    /// went in parts). Nothing else may use the dense plane or the stream buffer until
-    /// the last op is recorded.
+    /// the dense plane, part by part, and added onto the head; each bubble plane's is
+    /// parsed and its terms gathered per block into the set. Nothing else may use the
+    /// dense plane or the stream buffer until the last op is recorded.
     pub fn plan_decode(&mut self, seg: &SegmentData, target: Target, ops: &mut Vec<Op>) -> u64 {
         let ch = self.channels;
         let words = seg.bytes();
@@ -116,7 +148,7 @@ impl Gpu {
             let n = ops.len();
             let regions = rx * ry;
             let extents = Kind::Bounds {
-                offset: BOUND_BYTES,
+                offset: 0,
                 bytes: regions as u64 * 8 * ch as u64,
             };
             ops.push(Op::new(extents, 0, [0; 3], 0, 0));
@@ -124,7 +156,7 @@ impl Gpu {
                 let job = Job {
                     layer: slot * ch + p,
                     size: [pw, ph],
-                    base: (BOUND_BYTES / 4) as u32 + 2 * regions * p,
+                    base: 2 * regions * p,
                     ..gpu.base_job()
                 };
                 let groups = (regions * REGION).div_ceil(64);
@@ -159,65 +191,38 @@ impl Gpu {
             }
         }
         if let Some(set) = target.set {
-            let set_layers = self.set_layers;
-            let base = set * set_layers;
-            ops.push(Op::new(
-                Kind::Bounds {
-                    offset: base as u64 * 4,
-                    bytes: set_layers as u64 * 4,
-                },
-                0,
-                [0; 3],
-                0,
-                0,
-            ));
-            // The tiles' degrees found again (the reconstruction reads a tile's terms
-            // up to its degree only), and the layers zeroed.
-            let words = (ch * self.tile_count) as u64;
+            self.hold_terms(set, term_bytes(seg));
+            // The set's tile degrees and term counter cleared (the reconstruction reads a
+            // tile's layers up to its degree only, which the gathers mark).
+            let stride = degree_stride(self.plane, self.per * 8, ch);
             let degrees = Kind::Degrees {
-                offset: set as u64 * words * 4,
-                bytes: words * 4,
+                offset: (set * stride) as u64 * 4,
+                bytes: stride as u64 * 4,
             };
             ops.push(Op::new(degrees, 0, [0; 3], 0, 0));
-            let layers = (seg.layers.saturating_sub(2) as u32 * ch).min(set_layers);
-            if layers > 0 {
-                let zero = Job {
-                    base,
-                    size: [pw / 2, ph],
-                    ..self.base_job()
-                };
-                self.rows_sliced(ops, Kind::BubbleZero, zero, (0, layers));
-            }
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let n = (i - seg.bubbles) as u32;
-                let layer = base + n;
+                let layer = set * self.set_layers + n;
                 // Term k = n / channels + 2 of plane n % channels, whose tiles' degrees
                 // its jobs mark.
                 let (term, p) = (n / ch + 2, n % ch);
-                let base = (set * ch + p) * self.tile_count;
-                let marking = move |job: Job| Job { term, base, ..job };
-                let whole = parts(span.blocks, self.part) == 1;
-                // The bound first (over every part), then the blocks, parsed again if the
-                // plane went in parts.
-                for job in self.part_jobs(span, layer).map(marking) {
+                let base = set * stride + p * self.tile_count;
+                let counter = set * stride + ch * self.tile_count;
+                for job in self.part_jobs(span, layer) {
+                    let job = Job {
+                        term,
+                        base,
+                        counter,
+                        ..job
+                    };
                     let blocks = job.hi - job.lo.min(job.hi);
                     if blocks == 0 {
                         continue;
                     }
                     self.coef_ops(ops, (span, &seg.sections), job, blocks, 0);
                     let units = (blocks as u64, 64);
-                    self.sliced(ops, Kind::BubbleBound, job, blocks.div_ceil(64), 0, units);
-                    if whole {
-                        self.block_pass(ops, Kind::BubbleWrite, job, blocks, 0);
-                    }
-                }
-                if whole {
-                    continue;
-                }
-                for job in self.part_jobs(span, layer).map(marking) {
-                    let blocks = job.hi - job.lo.min(job.hi);
-                    self.coef_ops(ops, (span, &seg.sections), job, blocks, 0);
-                    self.block_pass(ops, Kind::BubbleWrite, job, blocks, 0);
+                    let groups = blocks.div_ceil(64);
+                    self.sliced(ops, Kind::BubbleGather, job, groups, set, units);
                 }
             }
         }
@@ -332,9 +337,10 @@ impl Gpu {
             Kind::KeyAdd => (&self.key_add, key),
             Kind::KeyRange => (&self.key_range, key),
             Kind::KeyPack => (&self.key_pack, key),
-            Kind::BubbleZero => (&self.bubble_zero, self.bubble_group.as_ref()),
-            Kind::BubbleBound => (&self.bubble_bound, self.bubble_group.as_ref()),
-            Kind::BubbleWrite => (&self.bubble_write, self.bubble_group.as_ref()),
+            Kind::BubbleGather => (
+                &self.bubble_gather,
+                self.bubble_groups.get(op.channel as usize),
+            ),
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
                 return
             }
@@ -424,7 +430,7 @@ impl Gpu {
         self.sliced_by(ops, kind, job, (groups, PARSE_SPAN), channel, units);
     }
 
-    /// A block pass (`key_add`, `bubble_write`) over `blocks` blocks of `job`: a workgroup
+    /// A block pass (`key_add`) over `blocks` blocks of `job`: a workgroup
     /// per group of [`GROUP_BLOCKS`], or [`DecodeShape::group_split`] workgroups per group.
     fn block_pass(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, blocks: u32, channel: u32) {
         // Split only as far as the pass needs to fill a large GPU: on an H100 splitting in
@@ -459,8 +465,8 @@ impl Gpu {
 
     /// [`Gpu::sliced`] with slices at least `span` times as long (slice k binds the
     /// slices buffer's entry k · its span · the slice span). A pass whose workgroups cost
-    /// less than `bubble_write`'s over a whole group gets slices as many times longer (up
-    /// to [`MAX_SLICE_GROUPS`]), so that each slice records about the same work: on a GPU
+    /// less than [`FULL_GROUP`] gets slices as many times longer (up to
+    /// [`MAX_SLICE_GROUPS`]), so that each slice records about the same work: on a GPU
     /// a step costs about 16 µs of latency whatever its work, and a 4096² segment's
     /// keyframe packs (a unit of work a sixteenth of a region) took 72 of its 240 steps.
     fn sliced_by(
@@ -484,52 +490,13 @@ impl Gpu {
     }
 
     /// How many slices one dispatch of `kind` may cover for its work to stay within a
-    /// slice of `bubble_write` over whole groups, when each workgroup records `per_group`
+    /// slice of workgroups of [`FULL_GROUP`] each, when each workgroup records `per_group`
     /// units; never so many that a dispatch covers more than [`MAX_SLICE_GROUPS`].
     fn cheap_span(&self, kind: Kind, per_group: u64) -> u32 {
         let w = &self.shape.weights;
-        let full = GROUP_BLOCKS as u64 * w.bubble_write as u64;
         let own = (per_group * kind.weight(w) as u64).max(1);
         let most = MAX_SLICE_GROUPS / (SLICE_GROUPS * self.slice_span);
-        (full / own).clamp(1, most.max(1) as u64) as u32
-    }
-
-    /// A zero pass over `job.size` texels of `layers` layers in 8 × 8 workgroups of
-    /// [`ZERO_ROWS`] texels each, in
-    /// slices of [`SLICE_GROUPS`] times the slice span rows of workgroups (the shader
-    /// starts the slice's first rows down), so that it spreads like the rest; a block per
-    /// 64 texels zeroed.
-    fn rows_sliced(
-        &mut self,
-        ops: &mut Vec<Op>,
-        kind: Kind,
-        job: Job,
-        (channel, layers): (u32, u32),
-    ) {
-        let [w, h] = job.size;
-        let tall = 8 * ZERO_ROWS;
-        let rows = h.div_ceil(tall);
-        // A slice's rows of workgroups: as many texels as a slice of one-row workgroups
-        // (slice k starts k · size rows down: the shader divides the slice's first
-        // workgroup by ZERO_ROWS). As many layers in one dispatch as one slice's rows
-        // hold: a slice stays the grain it is for every pass (the 4096² bubble layers
-        // zeroed in one dispatch made the largest step of a frame).
-        let size = SLICE_GROUPS * self.slice_span / ZERO_ROWS;
-        let depth = (size / rows).max(1);
-        for first in (0..layers).step_by(depth as usize) {
-            let d = depth.min(layers - first);
-            let at = self.push_job(Job {
-                base: job.base + first,
-                ..job
-            });
-            for k in 0..rows.div_ceil(size) {
-                let from = k * size;
-                let n = (rows - from).min(size);
-                let texels = w as u64 * (h.min((from + n) * tall) - from * tall) as u64 * d as u64;
-                let op = Op::new(kind, at, [w.div_ceil(8), n, d], channel, texels / 64);
-                ops.push(op.in_slice(k * self.slice_span));
-            }
-        }
+        (FULL_GROUP / own).clamp(1, most.max(1) as u64) as u32
     }
 
     /// A timestamp after what `pass` recorded so far (`vbim bench decode --gpu`), where

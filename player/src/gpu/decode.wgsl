@@ -1,6 +1,7 @@
 // Decodes a segment's coefficients on the GPU, one plane (a "job") at a time: parses the
 // plane's coefficient stream as the file codes it, then dequantises and inverse-transforms
-// its blocks into the resident textures.
+// a keyframe plane's blocks into the head, or gathers a bubble plane's terms per block
+// for the reconstruction to sum.
 //
 // The stream (docs/FORMAT.md, "Coefficient streams") is a sequence of (zero run, value)
 // pairs of LEB128 varints over the positions f · n + b (zig-zag index f of block b, n
@@ -16,25 +17,23 @@
 // shaders needed barriers, which cost lavapipe more). The passes after it visit only a
 // block's set bits, in increasing zig-zag order: each texel sums
 // (value · step · T[ky][y]) · T[kx][x] in that order, as the reference decoder's sparse
-// path does.
+// path does (`key_add` here, the reconstruction for the bubble terms).
 //
 // A plane of more blocks than one storage binding holds (8192² and up) goes in parts of
 // blocks [lo, hi): each part parses the whole stream and keeps the blocks in its range.
 
 // The DCT basis T[k][n] (row k, sample n) and the zig-zag order, from the reference
-// decoder's own tables, so that both use the same f32 values; and each basis row's
-// largest magnitude (the bubble bound's).
+// decoder's own tables, so that both use the same f32 values (reconstruct.wgsl declares
+// the same).
 struct Tables {
     basis: array<vec4<f32>, 16>,
     zigzag: array<vec4<u32>, 16>,
-    row_max: array<vec4<f32>, 2>,
 }
 
 @group(0) @binding(1) var<uniform> tables: Tables;
 // A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
-// 16-bit planes, two texels per R32Uint texel: the bubble planes (one layer per term and
-// plane) in the bubble passes, the previous keyframe's planes in `key_pack`.
+// The 16-bit keyframes, two texels per R32Uint texel (`key_pack`).
 @group(0) @binding(4) var planes16: texture_storage_2d_array<r32uint, write>;
 // The previous keyframe's range per region of REGION² texels and plane: (lowest value,
 // step), region (x, y) of plane p at (p · regions.y + y) · regions.x + x.
@@ -48,13 +47,20 @@ struct Tables {
 // a sparse predicted keyframe; so did sharing the check through workgroup memory, whose
 // barriers lavapipe pays for per workgroup.)
 @group(0) @binding(10) var<storage, read> groups: array<vec2<u32>>;
-// Per bubble layer, the largest |texel| / step of its blocks (f32 bits: for values ≥ 0
-// their order is the u32 order, so `atomicMax` takes the largest).
+// The extents of the regions of a keyframe plane being packed (`key_range`).
 @group(0) @binding(8) var<storage, read_write> bounds: array<atomic<u32>>;
-// Per bubble set, plane and tile (row-major), the tile's degree: the largest term k of
-// the set's bubble planes with a coefficient in the tile, 0 where none has
-// (`bubble_write`).
+// Per bubble set: per plane and tile (row-major), the tile's degree, the largest term k of
+// the set's bubble planes with a coefficient in the tile, 0 where none has; then the
+// set's term counter (`bubble_gather`).
 @group(0) @binding(9) var<storage, read_write> degrees: array<atomic<u32>>;
+// Per bubble layer (set · layers + (k − 2) · channels + plane) and block of 8 × 8 texels
+// of the plane: the block's 64-bit mask of coefficients, where its terms after the first
+// start in `terms`, and the first term (f32 bits, dequantised), as the reconstruction
+// reads them (`bubble_gather`).
+@group(0) @binding(12) var bubble_blocks: texture_storage_2d_array<rgba32uint, write>;
+// The set's terms after each block's first, dequantised (f32 bits), a block's together
+// in increasing zig-zag order.
+@group(0) @binding(13) var<storage, read_write> terms: array<u32>;
 
 // Blocks one workgroup of a block pass decodes, one after another: 64, one per
 // invocation to look at first.
@@ -67,10 +73,6 @@ fn basis(k: u32, n: u32) -> f32 {
 
 fn zigzag(i: u32) -> u32 {
     return tables.zigzag[i / 4u][i % 4u];
-}
-
-fn row_max(k: u32) -> f32 {
-    return tables.row_max[k / 4u][k % 4u];
 }
 
 
@@ -241,142 +243,87 @@ fn key_add(
     }
 }
 
-// The scale of a bubble plane whose texels are at most `bound` in magnitude: 16-bit
-// signed steps that reach just past it (sums in f32 may exceed the bound by a little).
-// reconstruct.wgsl computes the same.
-fn bubble_scale(bound: f32) -> f32 {
-    if (bound > 0.0 && bound <= 3.4e38) {
-        return bound * 1.001 / 32767.0;
-    }
-    return 1.0;
-}
+// A bubble plane's blocks, one invocation each, as the reconstruction reads them: each
+// block's mask, its first term and where the rest go in the set's `terms` (a workgroup's
+// blocks take one run of it, claimed with one atomic add on the set's counter; the order
+// of the runs does not matter). Every block of the plane's tiles is written, those with
+// nothing as zeros, so no pass clears the layer first: the reconstruction reads a tile's
+// layers only up to its degree in the set, which this pass marks (`degrees`, cleared
+// before the set's first plane) and which only a tile with a coefficient in this plane's
+// stream reaches. A bubble term stays in the transform domain because bubble planes are
+// sparse: at 2048² and 4096² three blocks in four hold one term or none, and the set takes
+// about 3 bytes per texel this way against 18 as 16-bit texels.
+var<workgroup> counts: array<u32, 64>;
+var<workgroup> run_start: u32;
 
-// A bubble plane's bound, one invocation per block: the block's columns of the inverse
-// transform (exact), then each row's largest possible value,
-// |Σ_kx col[kx][y] · T[kx][x]| ≤ Σ_kx |col[kx][y]| · max |T[kx]|, in units of the step.
-// With more than one part, `bubble_write` parses each part again once the bound is known.
 @compute @workgroup_size(64)
-fn bubble_bound(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
-    let b = job.lo + group_index(wg) * 64u + li;
-    if (b >= job.hi) {
+fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let first = job.lo + group_index(wg) * 64u;
+    let b = first + li;
+    let inside = b < job.hi;
+    var m = vec2<u32>(0u);
+    if (inside) {
+        m = mask(b - job.lo);
+    }
+    let n = countOneBits(m.x) + countOneBits(m.y);
+    counts[li] = n;
+    workgroupBarrier();
+    if (li == 0u) {
+        var total = 0u;
+        for (var i = 0u; i < 64u; i = i + 1u) {
+            total = total + max(counts[i], 1u) - 1u;
+        }
+        var at = 0u;
+        if (total > 0u) {
+            at = atomicAdd(&degrees[job.counter], total);
+        }
+        run_start = at;
+    }
+    workgroupBarrier();
+    if (!inside) {
         return;
     }
+    var at = run_start;
+    for (var i = 0u; i < li; i = i + 1u) {
+        at = at + max(counts[i], 1u) - 1u;
+    }
+    let start = at;
+    var first_term = 0u;
+    var terms_left = bits_of(m);
+    var k = 0u;
     let d = b - job.lo;
-    let m = mask(d);
-    if ((m.x | m.y) == 0u) {
-        return;
-    }
-    var col: array<f32, 64>;
-    var touched = 0u;
-    var terms = bits_of(m);
     loop {
-        let i = next_bit(&terms);
+        let i = next_bit(&terms_left);
         if (i == 64u) {
             break;
         }
-        let pos = zigzag(i);
-        let ky = pos / 8u;
-        let kx = pos % 8u;
-        touched = touched | (1u << kx);
-        let v = f32(coefs[d * 64u + i]);
-        for (var y = 0u; y < 8u; y = y + 1u) {
-            col[kx * 8u + y] = col[kx * 8u + y] + v * basis(ky, y);
+        let v = bitcast<u32>(f32(coefs[d * 64u + i]) * job.step);
+        if (k == 0u) {
+            first_term = v;
+        } else {
+            // (The decode sized `terms` for a bound on the segment's terms: a stream
+            // that breaks it loses terms, never writes out of bounds.)
+            if (at < arrayLength(&terms)) {
+                terms[at] = v;
+            }
+            at = at + 1u;
         }
+        k = k + 1u;
     }
-    var rows: array<f32, 8>;
-    while (touched != 0u) {
-        let kx = firstTrailingBit(touched);
-        touched = touched & (touched - 1u);
-        for (var y = 0u; y < 8u; y = y + 1u) {
-            rows[y] = rows[y] + abs(col[kx * 8u + y]) * row_max(kx);
+    var span = first_span(b);
+    let o = block_origin(b, &span) / 8u;
+    textureStore(bubble_blocks, o, job.layer, vec4<u32>(m.x, m.y, start, first_term));
+    // The tile's degree, once per tile (its blocks come together, a whole tile in one
+    // workgroup: per² divides 64), where any of its blocks has a coefficient.
+    let per2 = job.per * job.per;
+    if (li % per2 == 0u) {
+        var any = 0u;
+        for (var j = 0u; j < per2; j = j + 1u) {
+            any = any | counts[li + j];
         }
-    }
-    var peak = 0.0;
-    for (var y = 0u; y < 8u; y = y + 1u) {
-        peak = max(peak, rows[y]);
-    }
-    atomicMax(&bounds[job.layer], bitcast<u32>(peak));
-}
-
-fn quantize(x: f32, inv_scale: f32) -> u32 {
-    let q = i32(clamp(round(x * inv_scale), -32767.0, 32767.0));
-    return bitcast<u32>(q) & 0xFFFFu;
-}
-
-// A bubble plane's blocks, written whole (the zero pass cleared the rest): each of the
-// first four columns of invocations makes two horizontally adjacent texels, one R32Uint
-// texel of the layer. (Eight columns, half of them idle: with a workgroup of 4 × 8
-// lavapipe ran the loop over a workgroup's blocks once only. Idle lanes cost what working
-// ones do on a SIMD machine, so the work is the same as 64 invocations of one texel.)
-// Each block marks its tile's degree in the set with this plane's term (`degrees`,
-// cleared before the set's first plane): the reconstruction reads a tile's terms up to
-// the last with a coefficient in it, the layers beyond holding zeros there. (Writing every
-// block of a plane's tiles instead, zeros and all, so that no zero pass was needed, made a
-// 512² segment's `bubble_write` 2.7 times as long on lavapipe.)
-@compute @workgroup_size(8, 8)
-fn bubble_write(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(local_invocation_id) l: vec3<u32>,
-) {
-    let share = group_share(wg);
-    let first = job.lo + share.group * GROUP_BLOCKS;
-    var present = share.present;
-    if (l.x >= 4u) {
-        return;
-    }
-    let bound = bitcast<f32>(atomicLoad(&bounds[job.layer])) * job.step;
-    let inv_scale = 1.0 / bubble_scale(bound);
-    let x = 2u * l.x;
-    var span = first_span(first);
-    // The tile this workgroup marked last: a tile's blocks come one after another, so a
-    // tile is marked once per workgroup, not once per block (atomics cost lavapipe).
-    var marked = 0xFFFFFFFFu;
-    loop {
-        let j = next_bit(&present);
-        if (j == 64u) {
-            break;
-        }
-        let b = first + j;
-        let m = mask(b - job.lo);
-        let s = block_sum(b - job.lo, m, x, l.y, 0.0, true);
-        let o = block_origin(b, &span);
-        let at = vec2<u32>(o.x / 2u + l.x, o.y + l.y);
-        let packed = quantize(s.x, inv_scale) | (quantize(s.y, inv_scale) << 16u);
-        textureStore(planes16, at, job.layer, vec4<u32>(packed, 0u, 0u, 0u));
-        let rank = b / (job.per * job.per);
-        if (l.x == 0u && l.y == 0u && rank != marked) {
-            marked = rank;
-            let side = job.per * 8u;
-            let tile = (o.y / side) * job.tiles_x + o.x / side;
+        if (any != 0u) {
+            let tile = (o.y / job.per) * job.tiles_x + o.x / job.per;
             atomicMax(&degrees[job.base + tile], job.term);
-        }
-    }
-}
-
-// Rows each invocation of `bubble_zero` zeros, 8 apart (`ZERO_ROWS` in decode.rs): a
-// workgroup zeros 8 × 64 texels. With one texel per invocation the pass was a stream of
-// tiny workgroups, and an H100 stored 410 GB/s.
-const ZERO_ROWS: u32 = 8u;
-
-// Zeros layers `job.base` + z of the bubble planes (`job.size` R32Uint texels each; one
-// dispatch for a slice's worth of layers, whose latency is most of its cost on a GPU),
-// `slice.x` rows of workgroups down (a slice of rows).
-@compute @workgroup_size(8, 8)
-fn bubble_zero(
-    @builtin(global_invocation_id) id: vec3<u32>,
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(local_invocation_id) l: vec3<u32>,
-) {
-    if (id.x >= job.size.x) {
-        return;
-    }
-    // (A slice starts slice.x / ZERO_ROWS rows of workgroups down: decode.rs sizes
-    // slices of this pass by the texels, not the workgroups.)
-    let top = (wg.y + slice.x / ZERO_ROWS) * 8u * ZERO_ROWS + l.y;
-    for (var r = 0u; r < ZERO_ROWS; r = r + 1u) {
-        let y = top + r * 8u;
-        if (y < job.size.y) {
-            textureStore(planes16, vec2<u32>(id.x, y), job.base + id.z, vec4<u32>(0u));
         }
     }
 }

@@ -68,17 +68,23 @@ uniform_struct! {
     tiles_x: u32 => "u32",
     /// Texels of the plane (pack passes).
     size: [u32; 2] => "vec2<u32>",
-    /// `bubble_write`: the first word of the plane's tile degrees in the degrees buffer;
+    /// `bubble_gather`: the first word of the plane's tile degrees in the degrees buffer;
     /// pack passes: the first word of the regions' extents in the bounds buffer.
     base: u32 => "u32",
-    /// Block passes (`key_add`, `bubble_write`): workgroups per group of 64 blocks, each
-    /// visiting its share of them (1, 2, 4 … 64).
+    /// `key_add`: workgroups per group of 64 blocks, each visiting its share of them
+    /// (1, 2, 4 … 64).
     split: u32 => "u32",
     /// `key_add`: 1 for an intra keyframe (its blocks written over the plane, those
     /// without a coefficient as zeros), 0 for a predicted one (added onto it).
     intra: u32 => "u32",
-    /// `bubble_write`: the plane's term k (2 …), which marks its tiles' degrees.
+    /// `bubble_gather`: the plane's term k (2 …), which marks its tiles' degrees.
     term: u32 => "u32",
+    /// `bubble_gather`: the word of the degrees buffer that counts the set's terms.
+    counter: u32 => "u32",
+    /// (A uniform struct's size is a multiple of 16 bytes.)
+    pad0: u32 => "u32",
+    pad1: u32 => "u32",
+    pad2: u32 => "u32",
 }
 
 /// Bytes between two jobs in the jobs buffer: WebGPU's default

@@ -1,21 +1,24 @@
 //! The GPU side: what stays resident — the chain's head keyframe (R32Float, one layer
 //! per plane), two slots of 16-bit keyframes (16-bit steps of a range per 32² region, two
-//! to an R32Uint texel), two sets of bubble planes (16-bit signed integers with a scale
-//! per plane, two to an R32Uint texel), the display texture the renderer samples and a
-//! held copy for catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that
-//! fill them: the segment decode of `decode.wgsl` (parsing the coefficient streams,
-//! dequantisation, inverse DCT, predicted keyframes) and the per-frame reconstruction of
-//! `reconstruct.wgsl`. The segment on screen reads one slot (K_s), the head or the other
-//! slot (K_{s+1}) and one bubble set; the next segment decodes into the rest, a slice at
-//! a time, while it plays (`decode.rs`). The decode parses each plane into a dense plane of i32
-//! coefficients with a 64-bit mask per block (4 bytes per texel of one plane, reused
-//! plane after plane), which the passes after it read and put back to zero.
+//! to an R32Uint texel), two sets of bubble terms kept as DCT coefficients (per block and
+//! layer its mask, first term and where the rest are, in an Rgba32Uint texel; the rest in
+//! a buffer per set), the display texture the renderer samples and a held copy for
+//! catch-up blending (RGB9E5 in an R32Uint texel) — and the passes that fill them: the
+//! segment decode of `decode.wgsl` (parsing the coefficient streams, dequantisation,
+//! inverse DCT and predicted keyframes for the keyframes, a gather of each block's terms
+//! for the bubble planes) and the per-frame reconstruction of `reconstruct.wgsl`, which
+//! sums a block's bubble terms itself. The segment on screen reads one slot (K_s), the
+//! head or the other slot (K_{s+1}) and one bubble set; the next segment decodes into the
+//! rest, a slice at a time, while it plays (`decode.rs`). The decode parses each plane
+//! into a dense plane of i32 coefficients with a 64-bit mask per block (4 bytes per texel
+//! of one plane, reused plane after plane), which the passes after it read.
 //!
 //! The head stays f32: the next predicted keyframe is built on it, and a 16-bit head
 //! would add its rounding at every step of the chain (docs/FORMAT.md, "What the GPU
 //! decoder guarantees"). The 16-bit keyframes are only displayed, each packed once from
-//! the f32 head, so each carries one rounding, like the bubble planes, which are rebuilt
-//! for every segment from their coefficients.
+//! the f32 head, so each carries one rounding. Bubble terms are sparse (most blocks of a
+//! bubble plane hold one coefficient or none), so a set kept as coefficients takes about
+//! 3 bytes per texel where 16-bit texels took 18, and the reconstruction reads less.
 //!
 //! By concern: `device` (opening one headless), `plan` (what the state holds, in bytes, before
 //! it exists), `resources` (creating it), `job` (a decode pass's parameters, as the shader
@@ -70,9 +73,7 @@ pub(crate) struct Gpu {
     key_add: wgpu::ComputePipeline,
     key_range: wgpu::ComputePipeline,
     key_pack: wgpu::ComputePipeline,
-    bubble_zero: wgpu::ComputePipeline,
-    bubble_bound: wgpu::ComputePipeline,
-    bubble_write: wgpu::ComputePipeline,
+    bubble_gather: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,
     bubble_layout: wgpu::BindGroupLayout,
     parse_layout: wgpu::BindGroupLayout,
@@ -90,7 +91,7 @@ pub(crate) struct Gpu {
     coefs: wgpu::Buffer,
     masks: wgpu::Buffer,
     part: u32,
-    /// Each bubble layer's bound (f32 bits), for the decode and the reconstruction.
+    /// The extents of the regions of a keyframe being packed into 16 bits.
     bounds: wgpu::Buffer,
     /// Each reconstruction tile's generation and weights, in two copies, and its bounds
     /// (reconstruct.wgsl).
@@ -111,23 +112,30 @@ pub(crate) struct Gpu {
     packed_view: wgpu::TextureView,
     ranges: wgpu::Buffer,
     regions: [u32; 2],
-    bubbles: wgpu::Texture,
+    /// The bubble sets' blocks: per block of 8 × 8 texels and layer (set · `set_layers` +
+    /// (k − 2) · channels + plane), its mask, where its terms after the first start in the
+    /// set's `terms`, and the first (`bubble_gather` in decode.wgsl).
+    bubble_blocks: wgpu::Texture,
     bubble_view: wgpu::TextureView,
+    /// Each bubble set's terms after each block's first (f32, dequantised); grows with
+    /// the segments' terms.
+    terms: [wgpu::Buffer; BUBBLE_SETS as usize],
     display: wgpu::Texture,
     pub display_view: wgpu::TextureView,
     held: wgpu::Texture,
-    bind_group: wgpu::BindGroup,
+    /// The reconstruction's bind group for each bubble set.
+    bind_groups: Vec<wgpu::BindGroup>,
     /// The reconstruction's layout and inputs, for a bind group over a caller's texture.
     reconstruct_layout: wgpu::BindGroupLayout,
     keys_view: wgpu::TextureView,
     held_view: wgpu::TextureView,
     /// A texture of the caller's that the reconstruction writes instead of `display`, with
-    /// the reconstruction's and the hold pass's bind groups over it.
-    output: Option<(wgpu::Texture, wgpu::BindGroup, wgpu::BindGroup)>,
-    /// Decode bind groups (per keyframe layer, and the bubbles'): remade when `words` or
-    /// `jobs` grow.
+    /// the reconstruction's (per bubble set) and the hold pass's bind groups over it.
+    output: Option<(wgpu::Texture, Vec<wgpu::BindGroup>, wgpu::BindGroup)>,
+    /// Decode bind groups (per keyframe layer, and per bubble set): remade when `words`,
+    /// `jobs` or a set's `terms` grow.
     key_groups: Vec<wgpu::BindGroup>,
-    bubble_group: Option<wgpu::BindGroup>,
+    bubble_groups: Vec<wgpu::BindGroup>,
     parse_group: Option<wgpu::BindGroup>,
     /// Scratch for the jobs of one segment (kept: no allocation per segment).
     job_bytes: Vec<u8>,

@@ -22,19 +22,18 @@ pub(super) enum Kind {
     KeyAdd,
     KeyRange,
     KeyPack,
-    /// A bubble set's bounds cleared.
+    /// The extents of the regions of a keyframe being packed cleared.
     Bounds {
         offset: u64,
         bytes: u64,
     },
-    /// A bubble set's tile degrees cleared.
+    /// A bubble set's tile degrees and term counter cleared.
     Degrees {
         offset: u64,
         bytes: u64,
     },
-    BubbleZero,
-    BubbleBound,
-    BubbleWrite,
+    /// A bubble plane's blocks gathered into its set.
+    BubbleGather,
     /// A pass of a version 2 plane's decode (`lanes.wgsl`).
     Lane(LanePass),
 }
@@ -49,12 +48,13 @@ pub(crate) struct Op {
     /// workgroup, k · [`SLICE_GROUPS`]).
     pub(super) slice: u32,
     pub(super) groups: [u32; 3],
-    /// A keyframe pass's plane (which view of the head it binds).
+    /// A keyframe pass's plane (which view of the head it binds); a gather's bubble set
+    /// (which term buffer it binds).
     pub(super) channel: u32,
-    /// The work it records, in blocks: the time of 8×8 texels of one plane through
-    /// `bubble_write`, the other passes' units weighted by their measured cost
-    /// ([`DecodeShape::weights`]; a parse's unit is an entry point, a zero pass's 64
-    /// texels, a pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its
+    /// The work it records, in blocks (the time of a block's 64 texel sums of one term),
+    /// each pass's units weighted by their measured cost
+    /// ([`DecodeShape::weights`]; a parse's unit is an entry point, a gather's a block, a
+    /// pack's 1/16 of a 32² region), plus on a GPU a fixed cost per step for its
     /// latency ([`DecodeShape::step_cost`]). What [`PlayerConfig::decode_budget`] counts.
     ///
     /// [`PlayerConfig::decode_budget`]: crate::PlayerConfig::decode_budget
@@ -82,9 +82,7 @@ impl Kind {
             Kind::KeyAdd => "key_add",
             Kind::KeyRange => "key_range",
             Kind::KeyPack => "key_pack",
-            Kind::BubbleZero => "bubble_zero",
-            Kind::BubbleBound => "bubble_bound",
-            Kind::BubbleWrite => "bubble_write",
+            Kind::BubbleGather => "bubble_gather",
             Kind::Lane(p) => p.label(),
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
                 return None
@@ -92,16 +90,14 @@ impl Kind {
         })
     }
 
-    /// What one unit of the pass costs, in quarters of a block through `bubble_write`.
+    /// What one unit of the pass costs, in quarters of a block ([`PassWeights`]).
     pub(super) fn weight(self, w: &PassWeights) -> u32 {
         match self {
             Kind::Parse | Kind::ParseWide => w.parse,
             Kind::KeyAdd => w.key_add,
             Kind::KeyRange => w.key_range,
             Kind::KeyPack => w.key_pack,
-            Kind::BubbleZero => w.bubble_zero,
-            Kind::BubbleBound => w.bubble_bound,
-            Kind::BubbleWrite => w.bubble_write,
+            Kind::BubbleGather => w.bubble_gather,
             Kind::Lane(LanePass::Middle | LanePass::Blocks) => w.lane_word,
             Kind::Lane(_) => w.lane_block,
             Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => 0,

@@ -3,7 +3,6 @@
 //! dense plane and its masks.
 
 use super::Gpu;
-use crate::slots::MAX_BUBBLE_PLANES;
 
 /// Parts a plane of `blocks` blocks is decoded in, `part` blocks at most each (at least
 /// one, so that an empty plane still has its job).
@@ -128,9 +127,11 @@ pub(crate) fn set_layers(max_degree: u32, channels: u32) -> u32 {
 
 /// The textures [`Gpu::new`] creates for a stream of `width × height` texels coded on
 /// planes of `plane` texels with bubble terms up to `max_degree`: the head keyframe
-/// (f32), the 16-bit keyframes ([`KEY_SLOTS`] slots) and bubble planes ([`BUBBLE_SETS`]
-/// sets) in 16-bit pairs, the lightmap (Rgba16Float) and its held copy (RGB9E5 packed
-/// into R32Uint). Array textures have at least `min_layers` layers ([`min_array_layers`]).
+/// (f32), the 16-bit keyframes ([`KEY_SLOTS`] slots) in 16-bit pairs, the bubble blocks
+/// ([`BUBBLE_SETS`] sets: per block of 8 × 8 texels and bubble layer, its coefficients'
+/// mask, where its terms after the first start, and the first, in an `Rgba32Uint`
+/// texel), the lightmap (Rgba16Float) and its held copy (RGB9E5 packed into R32Uint).
+/// Array textures have at least `min_layers` layers ([`min_array_layers`]).
 pub(super) fn texture_plans(
     (width, height): (u32, u32),
     plane: [u32; 2],
@@ -157,9 +158,9 @@ pub(super) fn texture_plans(
             U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
         ),
         texture_descriptor(
-            "vbim bubbles",
-            (plane[0] / 2, plane[1], bubble_layers),
-            wgpu::TextureFormat::R32Uint,
+            "vbim bubble blocks",
+            (plane[0] / 8, plane[1] / 8, bubble_layers),
+            wgpu::TextureFormat::Rgba32Uint,
             // (COPY_SRC: tests read it back.)
             U::TEXTURE_BINDING | U::STORAGE_BINDING | U::COPY_SRC,
         ),
@@ -177,12 +178,22 @@ pub(super) fn texture_plans(
     ]
 }
 
-/// Bytes of the tiles' degrees: a u32 per tile of `tile`² texels, plane and bubble set
-/// (`degrees` in decode.wgsl), at least one word.
-pub(super) fn degree_bytes(plane: [u32; 2], tile: u32, channels: u32) -> u64 {
-    let [tx, ty] = plane.map(|n| (n / tile.max(1)) as u64);
-    (tx * ty * channels as u64 * BUBBLE_SETS as u64 * 4).max(4)
+/// Words of one bubble set in the degrees buffer: a u32 per tile of `tile`² texels and
+/// plane (`degrees` in decode.wgsl), then the set's term counter (where the next block's
+/// terms go in the set's term buffer).
+pub(super) fn degree_stride(plane: [u32; 2], tile: u32, channels: u32) -> u32 {
+    let [tx, ty] = plane.map(|n| n / tile.max(1));
+    tx * ty * channels + 1
 }
+
+/// Bytes of the tiles' degrees and the sets' term counters ([`degree_stride`] words per
+/// set).
+pub(super) fn degree_bytes(plane: [u32; 2], tile: u32, channels: u32) -> u64 {
+    degree_stride(plane, tile, channels) as u64 * BUBBLE_SETS as u64 * 4
+}
+
+/// Bytes each bubble set's term buffer starts with (it grows with the segments' terms).
+pub(super) const FIRST_TERM_BYTES: u64 = 1 << 16;
 
 /// Bytes of the textures, the range buffer and the dense plane [`Gpu::new`] creates for a
 /// stream ([`texture_plans`]'s) of tiles of `tile`² texels, known before creating them, so
@@ -202,6 +213,7 @@ pub(crate) fn planned_texture_bytes(
         + part_blocks(plane) as u64 * 256
         + mask_bytes(part_blocks(plane))
         + bound_bytes(plane, channels)
+        + BUBBLE_SETS as u64 * FIRST_TERM_BYTES
         + tile_bytes(size).0
         + tile_bytes(size).1
         + degree_bytes(plane, tile, channels)
@@ -218,16 +230,13 @@ pub(super) fn tile_bytes(size: (u32, u32)) -> (u64, u64) {
     (tile_count(size) * 2 * 10 * 4, tile_count(size) * 9 * 4)
 }
 
-/// Bytes of the bubble bounds: one u32 per bubble plane of each set.
-pub(super) const BOUND_BYTES: u64 = BUBBLE_SETS as u64 * MAX_BUBBLE_PLANES as u64 * 4;
-
-/// Bytes of the bounds buffer for `channels` planes of `plane` texels: the bubble bounds,
-/// then the extent (lowest and highest value, two u32) of each region of each plane being
-/// packed into a 16-bit keyframe (`key_range` in decode.wgsl); a plane's extents follow
-/// the one before, so that one clear serves a whole pack.
+/// Bytes of the bounds buffer for `channels` planes of `plane` texels: the extent
+/// (lowest and highest value, two u32) of each region of each plane being packed into a
+/// 16-bit keyframe (`key_range` in decode.wgsl); a plane's extents follow the one before,
+/// so that one clear serves a whole pack.
 pub(super) fn bound_bytes(plane: [u32; 2], channels: u32) -> u64 {
     let [rx, ry] = regions(plane);
-    BOUND_BYTES + rx as u64 * ry as u64 * 8 * channels as u64
+    (rx as u64 * ry as u64 * 8 * channels as u64).max(8)
 }
 
 /// Bytes a texture holds (one mip level, every layer).
@@ -247,7 +256,7 @@ impl Gpu {
         [
             &self.keys,
             &self.packed,
-            &self.bubbles,
+            &self.bubble_blocks,
             &self.display,
             &self.held,
         ]
@@ -266,6 +275,7 @@ impl Gpu {
             + self.tiles.size()
             + self.peaks.size()
             + self.degrees.size()
+            + self.terms.iter().map(|t| t.size()).sum::<u64>()
             + self.lanes.as_ref().map_or(0, |l| l.bytes())
     }
 }

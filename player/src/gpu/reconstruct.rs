@@ -2,9 +2,9 @@
 //! resident keyframes and bubble planes into the lightmap, the hold pass that keeps what is
 //! on screen for catch-up blending, and the caller's output texture.
 
-use super::resources::{hold_group, reconstruct_group};
+use super::plan::degree_stride;
+use super::resources::hold_group;
 use super::Gpu;
-use crate::slots::MAX_BUBBLE_PLANES;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -21,10 +21,7 @@ pub(crate) struct Params {
     pub regions: [u32; 2],
     /// The first layer of K_s and of K_{s+1} among the 16-bit keyframes.
     pub keys: [u32; 2],
-    /// Quantiser step of each bubble plane (its scale comes from its bound, which the
-    /// decode computed on the GPU).
-    pub steps: [f32; MAX_BUBBLE_PLANES],
-    /// The first layer of the segment's bubble set.
+    /// The first layer of the segment's bubble set among the bubble blocks.
     pub set_base: u32,
     /// 1 while K_{s+1} is read from the f32 head (not packed yet).
     pub head_f32: u32,
@@ -99,27 +96,9 @@ impl Gpu {
             });
         }
         let view = t.create_view(&Default::default());
-        let group = reconstruct_group(
-            &self.device,
-            &self.reconstruct_layout,
-            [
-                &self.keys_view,
-                &self.bubble_view,
-                &self.held_view,
-                &view,
-                &self.packed_view,
-            ],
-            [
-                &self.ranges,
-                &self.bounds,
-                &self.tiles,
-                &self.peaks,
-                &self.degrees,
-            ],
-            &self.params,
-        );
+        let groups = self.reconstruct_groups(&view);
         let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
-        self.output = Some((t.clone(), group, hold));
+        self.output = Some((t.clone(), groups, hold));
         Ok(())
     }
 
@@ -148,13 +127,14 @@ impl Gpu {
         hold_first: bool,
         fresh: bool,
     ) {
+        let set = params.set_base / self.set_layers.max(1);
         let mut params = Params {
             regions: self.regions,
             gen: self.gen,
             tile: self.per * 8,
             tiles_x: self.tiles_x,
             tiles: self.tile_count,
-            degrees: params.set_base / self.set_layers.max(1) * self.channels * self.tile_count,
+            degrees: set * degree_stride(self.plane, self.per * 8, self.channels),
             ..*params
         };
         // Anything but the weights changed: the tiles' bounds and images are another
@@ -190,8 +170,11 @@ impl Gpu {
             timestamp_writes: None,
         });
         pass.set_pipeline(pipeline);
-        let group = self.output.as_ref().map_or(&self.bind_group, |(_, g, _)| g);
-        pass.set_bind_group(0, group, &[]);
+        let groups = self
+            .output
+            .as_ref()
+            .map_or(&self.bind_groups, |(_, g, _)| g);
+        pass.set_bind_group(0, &groups[set as usize], &[]);
         // A workgroup is 8 × 8 invocations of a 2 × 2 quad each, a tile of 16² texels
         // (reconstruct.wgsl; `tile_bytes` counts its state).
         pass.dispatch_workgroups(self.width.div_ceil(16), self.height.div_ceil(16), 1);

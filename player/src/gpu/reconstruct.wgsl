@@ -26,9 +26,8 @@ struct Params {
     regions: vec2<u32>,
     // The first layer of K_s and of K_{s+1} among the 16-bit keyframes (slot · channels).
     keys: vec2<u32>,
-    // Quantiser step of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
-    steps: array<vec4<f32>, 6>,
-    // The first layer of the segment's bubble set (its bounds start there too).
+    // The first layer of the segment's bubble set among the bubble blocks (term k ≥ 2,
+    // plane p: layer set_base + (k − 2)·channels + p).
     set_base: u32,
     // 1: K_{s+1} is read from the f32 head (it is not packed yet); 0: from `keys.y`.
     head_f32: u32,
@@ -52,21 +51,28 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
+// The DCT basis T[k][n] (row k, sample n) and the zig-zag order (decode.wgsl's).
+struct Tables {
+    basis: array<vec4<f32>, 16>,
+    zigzag: array<vec4<u32>, 16>,
+}
+@group(0) @binding(13) var<uniform> tables: Tables;
 // The head keyframe K_{s+1} (`channels` R32Float layers), read until the decode of the next
-// segment has packed it into 16 bits, and the bubble sets: the segment's terms (term k ≥ 2
-// at layers set_base + (k − 2)·channels …), 16-bit signed integers times the layer's
-// scale, two to an R32Uint texel.
+// segment has packed it into 16 bits, and the bubble sets' blocks: per block of 8 × 8
+// texels and layer, the block's 64-bit mask of DCT coefficients, where its terms after
+// the first are in `terms`, and the first (f32 bits, dequantised), from decode.wgsl's
+// `bubble_gather`.
 @group(0) @binding(1) var head: texture_2d_array<f32>;
-@group(0) @binding(2) var bubbles: texture_2d_array<u32>;
+@group(0) @binding(2) var bubble_blocks: texture_2d_array<u32>;
 @group(0) @binding(3) var held: texture_2d<u32>;
 @group(0) @binding(4) var out_tex: texture_storage_2d<rgba16float, write>;
 // The 16-bit keyframes, two slots: K_s, and K_{s+1} once packed: steps of their region's
 // range (lowest value, step), two to an R32Uint texel, one layer per slot and plane.
 @group(0) @binding(5) var packed: texture_2d_array<u32>;
 @group(0) @binding(6) var<storage, read> ranges: array<vec2<f32>>;
-// Each bubble layer's bound in units of its step (f32 bits), found by the decode
-// (decode.wgsl, bubble_bound).
-@group(0) @binding(9) var<storage, read> bounds: array<u32>;
+// The segment's bubble set's terms after each block's first, a block's in increasing
+// zig-zag order.
+@group(0) @binding(9) var<storage, read> terms: array<f32>;
 // Per tile (row-major, workgroups across), in two copies (a frame reads one and writes the
 // other, so that no invocation sees its own workgroup's update): the generation it was
 // evaluated under and the nine weights it was evaluated with.
@@ -78,18 +84,9 @@ const STATE_WORDS: u32 = 10u;
 @group(0) @binding(12) var<storage, read_write> peaks: array<atomic<u32>>;
 const PEAK_WORDS: u32 = 9u;
 // Per bubble set, plane and tile (row-major), the tile's degree: the last term k with a
-// coefficient in the tile (decode.wgsl, `bubble_write`); the layers beyond hold zeros
-// there, so a tile reads no further.
+// coefficient in the tile (decode.wgsl, `bubble_gather`); the layers beyond are not this
+// segment's there, and a tile reads no further.
 @group(0) @binding(11) var<storage, read> degrees: array<u32>;
-
-// A bubble layer's scale, as decode.wgsl's `bubble_write` computes it from the same bound.
-fn bubble_scale(layer: u32) -> f32 {
-    let bound = bitcast<f32>(bounds[p.set_base + layer]) * p.steps[layer / 4u][layer % 4u];
-    if (bound > 0.0 && bound <= 3.4e38) {
-        return bound * 1.001 / 32767.0;
-    }
-    return 1.0;
-}
 
 // An invocation reconstructs a quad of 2 × 2 texels: the two texels across share a 32-bit
 // word of every 16-bit plane, so each word is read once, and a region's range and a
@@ -148,11 +145,56 @@ fn next_plane(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec
     return head_plane(xy, plane);
 }
 
-fn bubble_plane(w: vec2<i32>, layer: u32) -> vec4<f32> {
-    let h = halves(bubbles, w, p.set_base + layer);
-    // Sign-extend the 16-bit integers.
-    let q = bitcast<vec4<i32>>(h << vec4<u32>(16u)) >> vec4<u32>(16u);
-    return vec4<f32>(q) * bubble_scale(layer);
+fn basis(k: u32, n: u32) -> f32 {
+    let i = k * 8u + n;
+    return tables.basis[i / 4u][i % 4u];
+}
+
+fn zigzag(i: u32) -> u32 {
+    return tables.zigzag[i / 4u][i % 4u];
+}
+
+// Bubble layer `layer` of the segment at the quad whose top-left texel is `xy`: its block's
+// terms summed at each texel, (c · T[ky][y]) · T[kx][x] in increasing zig-zag order, as the
+// reference decoder sums a block of few terms. A quad lies in one block; a block with no
+// term costs one load, one with a single term (three in four of the non-empty blocks of
+// the benchmark days' bubble planes at 2048² and 4096²) no more.
+fn bubble_plane(xy: vec2<i32>, layer: u32) -> vec4<f32> {
+    let b = textureLoad(bubble_blocks, xy / 8, i32(p.set_base + layer), 0);
+    var low = b.x;
+    var high = b.y;
+    var base = 0u;
+    var next = b.z;
+    var c = bitcast<f32>(b.w);
+    let x = u32(xy.x) % 8u;
+    let y = u32(xy.y) % 8u;
+    var s = vec4<f32>(0.0);
+    var first = true;
+    loop {
+        if (low == 0u) {
+            if (high == 0u) {
+                break;
+            }
+            low = high;
+            high = 0u;
+            base = 32u;
+        }
+        let pos = zigzag(base + firstTrailingBit(low));
+        low = low & (low - 1u);
+        if (!first) {
+            c = terms[next];
+            next = next + 1u;
+        }
+        first = false;
+        let ky = pos / 8u;
+        let kx = pos % 8u;
+        let r0 = c * basis(ky, y);
+        let r1 = c * basis(ky, y + 1u);
+        let c0 = basis(kx, x);
+        let c1 = basis(kx, x + 1u);
+        s = s + vec4<f32>(r0 * c0, r0 * c1, r1 * c0, r1 * c1);
+    }
+    return s;
 }
 
 fn max4(v: vec4<f32>) -> f32 {
@@ -175,7 +217,7 @@ fn plane_value(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> ve
         + weight(1u) * next_plane(xy, w, region, plane);
     let end = terms_end(xy, plane);
     for (var k = 2u; k < end; k = k + 1u) {
-        c = c + weight(k) * bubble_plane(w, (k - 2u) * p.channels + plane);
+        c = c + weight(k) * bubble_plane(xy, (k - 2u) * p.channels + plane);
     }
     return c;
 }
@@ -196,7 +238,7 @@ fn plane_peaks(
     (*peak)[1] += max4(abs(k0));
     let end = terms_end(xy, plane);
     for (var k = 2u; k < end; k = k + 1u) {
-        let term = bubble_plane(w, (k - 2u) * p.channels + plane);
+        let term = bubble_plane(xy, (k - 2u) * p.channels + plane);
         c = c + weight(k) * term;
         (*peak)[k] += max4(abs(term));
     }

@@ -9,13 +9,12 @@ use super::plan::*;
 use super::reconstruct::Params;
 use super::Gpu;
 
-/// The DCT basis and zig-zag order (`Tables` in decode.wgsl).
+/// The DCT basis and zig-zag order (`Tables` in decode.wgsl and reconstruct.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Tables {
     basis: [f32; 64],
     zigzag: [u32; 64],
-    row_max: [f32; 8],
 }
 
 impl Gpu {
@@ -66,7 +65,7 @@ impl Gpu {
         channels: u32,
         tile_size: u32,
     ) -> Gpu {
-        let [keys, packed, bubbles, display, held] = texture_plans(
+        let [keys, packed, bubble_blocks, display, held] = texture_plans(
             (width, height),
             plane,
             max_degree,
@@ -83,7 +82,7 @@ impl Gpu {
             })
         };
         let keys_view = array_view(&keys);
-        let bubble_view = array_view(&bubbles);
+        let bubble_view = array_view(&bubble_blocks);
         let packed_view = array_view(&packed);
         let ranges = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vbim 16-bit keyframe ranges"),
@@ -147,11 +146,12 @@ impl Gpu {
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
         let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
-        let bubble_zero = pipeline_for("vbim bubble_zero", decode, &bubble_layout, "bubble_zero");
-        let bubble_bound =
-            pipeline_for("vbim bubble_bound", decode, &bubble_layout, "bubble_bound");
-        let bubble_write =
-            pipeline_for("vbim bubble_write", decode, &bubble_layout, "bubble_write");
+        let bubble_gather = pipeline_for(
+            "vbim bubble_gather",
+            decode,
+            &bubble_layout,
+            "bubble_gather",
+        );
         let buffer = |label: &str, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -175,7 +175,7 @@ impl Gpu {
         );
         // (COPY_SRC: tests read it back.)
         let bounds = buffer(
-            "vbim bubble bounds and region extents",
+            "vbim region extents",
             bound_bytes(plane, channels),
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
@@ -196,19 +196,14 @@ impl Gpu {
             degree_bytes(plane, tile_size, channels),
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
-        let bind_group = reconstruct_group(
-            device,
-            &bgl,
-            [
-                &keys_view,
-                &bubble_view,
-                &held_view,
-                &display_view,
-                &packed_view,
-            ],
-            [&ranges, &bounds, &tiles, &peaks, &degrees],
-            &params,
-        );
+        // (COPY_SRC: tests read them back.)
+        let terms = [0; BUBBLE_SETS as usize].map(|_| {
+            buffer(
+                "vbim bubble terms",
+                FIRST_TERM_BYTES,
+                B::STORAGE | B::COPY_SRC,
+            )
+        });
         let jobs = buffer(
             "vbim decode jobs",
             64 * JOB_STRIDE,
@@ -230,9 +225,7 @@ impl Gpu {
             key_add,
             key_range,
             key_pack,
-            bubble_zero,
-            bubble_bound,
-            bubble_write,
+            bubble_gather,
             key_layout,
             bubble_layout,
             parse_layout,
@@ -256,18 +249,19 @@ impl Gpu {
             packed_view,
             ranges,
             regions: regions(plane),
-            bubbles,
+            bubble_blocks,
             bubble_view,
+            terms,
             display,
             display_view,
             held,
-            bind_group,
+            bind_groups: Vec::new(),
             reconstruct_layout: bgl,
             keys_view,
             held_view,
             output: None,
             key_groups: Vec::new(),
-            bubble_group: None,
+            bubble_groups: Vec::new(),
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
             // (Set from the adapter below.)
@@ -288,8 +282,43 @@ impl Gpu {
             planned_section: None,
         };
         gpu.bind_decode();
+        gpu.bind_reconstruct();
         gpu.set_decode_shape(crate::DecodeShape::for_adapter(&device.adapter_info()));
         gpu
+    }
+
+    /// (Re)makes the reconstruction's bind groups, one per bubble set, over the player's
+    /// lightmap and, where one is set, the caller's output.
+    pub(super) fn bind_reconstruct(&mut self) {
+        self.bind_groups = self.reconstruct_groups(&self.display_view);
+        if let Some((texture, ..)) = self.output.take() {
+            let view = texture.create_view(&Default::default());
+            let groups = self.reconstruct_groups(&view);
+            let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
+            self.output = Some((texture, groups, hold));
+        }
+    }
+
+    /// The reconstruction's bind group for each bubble set, writing `output`.
+    pub(super) fn reconstruct_groups(&self, output: &wgpu::TextureView) -> Vec<wgpu::BindGroup> {
+        self.terms
+            .iter()
+            .map(|terms| {
+                reconstruct_group(
+                    &self.device,
+                    &self.reconstruct_layout,
+                    [
+                        &self.keys_view,
+                        &self.bubble_view,
+                        &self.held_view,
+                        output,
+                        &self.packed_view,
+                    ],
+                    [&self.ranges, terms, &self.tiles, &self.peaks, &self.degrees],
+                    [&self.params, &self.tables],
+                )
+            })
+            .collect()
     }
 
     /// (Re)makes the decode passes' bind groups over the current `jobs` and `words`.
@@ -384,10 +413,20 @@ impl Gpu {
             binding: 9,
             resource: self.degrees.as_entire_binding(),
         };
-        self.bubble_group = Some(group(
-            &self.bubble_layout,
-            &[tables.clone(), view(4, &self.bubble_view), bounds, degrees],
-        ));
+        self.bubble_groups = self
+            .terms
+            .iter()
+            .map(|terms| {
+                let terms = wgpu::BindGroupEntry {
+                    binding: 13,
+                    resource: terms.as_entire_binding(),
+                };
+                group(
+                    &self.bubble_layout,
+                    &[view(12, &self.bubble_view), degrees.clone(), terms],
+                )
+            })
+            .collect();
         if let Some(mut lanes) = self.lanes.take() {
             let dense = (&self.coefs, &self.masks);
             lanes.bind(&self.device, &self.jobs, &self.words, dense);
@@ -396,20 +435,26 @@ impl Gpu {
     }
 }
 
-/// The reconstruction's bind group: its parameters, then the head keyframe, bubble
-/// planes, held image, output and 16-bit keyframe views, the 16-bit keyframes' ranges,
-/// the bubble planes' bounds, the tiles' state and the tiles' degrees.
+/// The reconstruction's bind group: its parameters and the DCT tables, then the head
+/// keyframe, bubble blocks, held image, output and 16-bit keyframe views, the 16-bit
+/// keyframes' ranges, a bubble set's terms, the tiles' state and the tiles' degrees.
 pub(super) fn reconstruct_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     views: [&wgpu::TextureView; 5],
-    [ranges, bounds, tiles, peaks, degrees]: [&wgpu::Buffer; 5],
-    params: &wgpu::Buffer,
+    [ranges, terms, tiles, peaks, degrees]: [&wgpu::Buffer; 5],
+    [params, tables]: [&wgpu::Buffer; 2],
 ) -> wgpu::BindGroup {
-    let mut entries = vec![wgpu::BindGroupEntry {
-        binding: 0,
-        resource: params.as_entire_binding(),
-    }];
+    let mut entries = vec![
+        wgpu::BindGroupEntry {
+            binding: 0,
+            resource: params.as_entire_binding(),
+        },
+        wgpu::BindGroupEntry {
+            binding: 13,
+            resource: tables.as_entire_binding(),
+        },
+    ];
     for (i, v) in views.into_iter().enumerate() {
         entries.push(wgpu::BindGroupEntry {
             binding: i as u32 + 1,
@@ -418,7 +463,7 @@ pub(super) fn reconstruct_group(
     }
     for (binding, buffer) in [
         (6, ranges),
-        (9, bounds),
+        (9, terms),
         (10, tiles),
         (12, peaks),
         (11, degrees),
@@ -474,22 +519,18 @@ pub(super) fn slice_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
     })
 }
 
-/// The DCT basis, the zig-zag order and each basis row's largest magnitude, from the
-/// reference decoder's own tables (`Tables` in decode.wgsl), in a uniform buffer.
+/// The DCT basis and the zig-zag order, from the reference decoder's own tables
+/// (`Tables` in decode.wgsl and reconstruct.wgsl), in a uniform buffer.
 fn dct_tables(device: &wgpu::Device) -> wgpu::Buffer {
     let mut t = Tables {
         basis: [0.0; 64],
         zigzag: [0; 64],
-        row_max: [0.0; 8],
     };
     for (k, row) in vbim_format::dct::basis().iter().enumerate() {
         t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
     }
     for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
         t.zigzag[i] = z as u32;
-    }
-    for (m, row) in t.row_max.iter_mut().zip(vbim_format::dct::basis()) {
-        *m = row.iter().fold(0f32, |m, &v| m.max(v.abs()));
     }
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("vbim dct tables"),
@@ -558,6 +599,7 @@ fn layouts(device: &wgpu::Device) -> Layouts {
             entry(10, storage(false)),
             entry(12, storage(false)),
             entry(11, storage(true)),
+            entry(13, uniform(false)),
         ],
     });
     let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -614,14 +656,20 @@ fn layouts(device: &wgpu::Device) -> Layouts {
         entries: &[
             entry(0, uniform(true)),
             entry(11, uniform(true)),
-            entry(1, uniform(false)),
             words_entry,
-            planes16,
             entry(6, storage(true)),
             entry(7, storage(true)),
-            entry(8, storage(false)),
             entry(9, storage(false)),
             entry(10, storage(true)),
+            entry(
+                12,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::Rgba32Uint,
+                    view_dimension: wgpu::TextureViewDimension::D2Array,
+                },
+            ),
+            entry(13, storage(false)),
         ],
     });
     let parse_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
