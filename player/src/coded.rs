@@ -24,7 +24,7 @@
 //! member spans as above. The file's own histograms go to the GPU once, when the stream
 //! opens.
 
-use vbim_format::chunk::{spans, Scanned};
+use vbim_format::chunk::{spans, Scanned, ENTRY_PAIRS};
 use vbim_format::plane2::{Section, SectionPlane, FAMILIES};
 
 /// Blocks the GPU's dense plane holds for planes of `plane` texels: a whole plane, or as
@@ -107,13 +107,20 @@ pub(crate) struct PlaneSpan {
     pub lanes: Option<LanePlane>,
     /// A bound on its non-zero coefficients beyond each block's first (what a bubble set
     /// holds of it apart from its blocks): each such term is an AC coefficient, so at most
-    /// the stream's pairs (its entry points times [`ENTRY_PAIRS`], each piece at most that
-    /// many) or, for lanes, their symbols (at most [`MAX_LANE_SYMBOLS`] each); and at most
-    /// 63 a block.
+    /// the stream's AC pairs (the pieces from the last that starts among the DC on, times
+    /// [`ENTRY_PAIRS`], each piece at most that many) or, for lanes, their symbols (at
+    /// most [`MAX_LANE_SYMBOLS`] each); and at most 63 a block.
     ///
-    /// [`ENTRY_PAIRS`]: vbim_format::chunk::ENTRY_PAIRS
     /// [`MAX_LANE_SYMBOLS`]: vbim_format::plane2::MAX_LANE_SYMBOLS
     pub terms: u32,
+}
+
+/// The pieces of a stream of `blocks` blocks that may hold AC pairs: from the last that
+/// starts in the DC range (the first `blocks` positions) on. (On a smooth plane most
+/// pieces are DC: at 4096² a third of the pieces of a segment's bubble planes hold AC.)
+fn ac_pieces(entries: &[vbim_format::chunk::EntryPoint], blocks: usize) -> usize {
+    let first_ac = entries.partition_point(|e| (e.position as usize) < blocks);
+    entries.len() - first_ac.saturating_sub(1)
 }
 
 /// [`PlaneSpan::terms`] for a plane of `blocks` blocks from `pieces` pieces of at most
@@ -197,7 +204,7 @@ impl Coded {
             members: at,
             member_count,
             lanes: None,
-            terms: term_bound(s.entries.len(), vbim_format::chunk::ENTRY_PAIRS, s.blocks),
+            terms: term_bound(ac_pieces(s.entries, s.blocks), ENTRY_PAIRS, s.blocks),
         }
     }
 

@@ -127,14 +127,15 @@ impl PassWeights {
     /// Measured on lavapipe from the frames of `vbim bench render --csv` (the extra time
     /// of each frame against the work of each kind it recorded): an entry point reads 128
     /// pairs in sequence, a keyframe block's inverse transform reads every coefficient of
-    /// a dense keyframe where a bubble term's are few, zeroing and packing touch a texel
-    /// once.
+    /// a dense keyframe, packing touches a texel once. A bubble block's gather, 0.13 µs
+    /// against `key_add`'s 0.58 µs a block on the 2048² benchmark day (`vbim bench decode
+    /// --gpu`), is 3.
     pub const LAVAPIPE: PassWeights = PassWeights {
         parse: 55,
         key_add: 12,
         key_range: 1,
         key_pack: 1,
-        bubble_gather: 2,
+        bubble_gather: 3,
         // 13.5 µs a word of the longest lane (`bench decode --gpu --lanes true --fit` on
         // the demo in 2.0): llvmpipe runs a workgroup's lanes in lockstep, so the other
         // lanes' symbols add to the longest's.
@@ -145,9 +146,10 @@ impl PassWeights {
     /// Fitted on an H100 from each pass's GPU time per 4096² segment (`vbim bench decode
     /// --gpu`, timestamps between passes), less 20 µs per dispatch (the step cost): a
     /// block of the budget's unit about 0.58 ns there. Arithmetic is cheap on a GPU
-    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12); zeroing,
-    /// eight rows per invocation, stores at about 2.5 TB/s (`--fit`: 0.4–0.5, so 1); a
-    /// parse's entry point, 3.5–10 ns of work beside its dispatch's latency, 40.
+    /// (a keyframe block's transform 3 quarter-blocks, against lavapipe's 12); a parse's
+    /// entry point, 3.5–10 ns of work beside its dispatch's latency, 40. A bubble block's
+    /// gather (a mask, a 16-byte store and its few terms) is not measured there yet: 1,
+    /// what zeroing a block's texels weighed.
     pub const H100: PassWeights = PassWeights {
         parse: 40,
         key_add: 3,

@@ -179,13 +179,24 @@ pub(super) fn quarter_bytes_per_texel(h: &vbim_format::Header) -> (u64, u64, u64
     (head, packed, 4 * (16 + 8))
 }
 
+/// What a file's frames touch, over its segments ([`mean_bytes_per_texel`]).
+pub(super) struct Touched {
+    /// Bytes per texel a frame reads and writes, K_{s+1} packed.
+    pub bytes: f64,
+    /// Of the bubble planes' coded blocks: the share with no term, with one, and the
+    /// mean number of terms.
+    pub empty: f64,
+    pub one: f64,
+    pub terms: f64,
+}
+
 /// The bytes per texel a frame touches (K_{s+1} packed) over the file at `path`: each tile
 /// reads its keyframes (2 bytes a plane each) and its bubble layers up to its own degree
 /// (a block's 16 bytes per 64 texels), and the frame the terms beyond each block's first
 /// (4 bytes each), counted from the file's coefficient streams; each segment weighted by
 /// its frames. `None` for a file without tile map chunks (format 2 keeps them in its
 /// sections).
-pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<f64>, String> {
+pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<Touched>, String> {
     use vbim_format::chunk::{self, CoeffReader};
     use vbim_format::plane::{read_blocks, Blocks};
     use vbim_format::{ChunkKind, Reader};
@@ -199,6 +210,8 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<f64>
     let per_tile = (tile / 8).pow(2);
     let np = h.channels as usize;
     let (mut bytes, mut frames_in_all) = (0.0, 0.0);
+    // Coded bubble blocks: with no term, with one, all, and their terms.
+    let mut blocks = [0usize; 4];
     let mut tiles = None;
     let mut q = Blocks::default();
     let fail = |i: usize, e: &dyn std::fmt::Display| format!("{}: chunk {i}: {e}", path.display());
@@ -233,7 +246,13 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<f64>
                         let members = t.degrees(p).iter().filter(|&&x| x as usize >= k).count();
                         let n = members * per_tile;
                         read_blocks(&raw, &mut at, n, &mut q).map_err(|e| fail(i, &e))?;
-                        let rest: usize = (0..n).map(|b| q.nonzero(b).saturating_sub(1)).sum();
+                        let mut rest = 0;
+                        for b in 0..n {
+                            let terms = q.nonzero(b);
+                            rest += terms.saturating_sub(1);
+                            blocks[terms.min(2)] += 1;
+                            blocks[3] += terms;
+                        }
                         seg += 4.0 * rest as f64;
                     }
                 }
@@ -243,5 +262,11 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<f64>
             _ => {}
         }
     }
-    Ok((frames_in_all > 0.0).then(|| bytes / (frames_in_all * texels)))
+    let coded = (blocks[0] + blocks[1] + blocks[2]).max(1) as f64;
+    Ok((frames_in_all > 0.0).then(|| Touched {
+        bytes: bytes / (frames_in_all * texels),
+        empty: blocks[0] as f64 / coded,
+        one: blocks[1] as f64 / coded,
+        terms: blocks[3] as f64 / coded,
+    }))
 }

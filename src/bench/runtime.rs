@@ -659,10 +659,14 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         blend / 4,
         packed as f64 / blend as f64
     );
-    if let Some(mean) = mean_bytes_per_texel(&a.file)? {
+    if let Some(t) = mean_bytes_per_texel(&a.file)? {
         println!(
-            "  over this file's tiles, each read up to its own degree, and its bubble terms: {mean:.2} on average (K_(s+1) packed; {:.2}× the blend)",
-            mean / (blend / 4) as f64
+            "  over this file's tiles, each read up to its own degree, and its bubble terms: {:.2} on average (K_(s+1) packed; {:.2}× the blend); of its bubble planes' coded blocks {:.0}% hold no term, {:.0}% one, {:.2} on average",
+            t.bytes,
+            t.bytes / (blend / 4) as f64,
+            100.0 * t.empty,
+            100.0 * t.one,
+            t.terms
         );
     }
     println!(

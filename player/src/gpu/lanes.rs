@@ -269,7 +269,7 @@ impl LanesGpu {
             .iter()
             .map(|&p| {
                 let layout = &layouts[(p == LanePass::Slots) as usize];
-                super::resources::compute_pipeline(device, "vbim lanes", &source, layout, p.entry())
+                super::layouts::compute_pipeline(device, "vbim lanes", &source, layout, p.entry())
             })
             .collect();
         let buffer = |label, words: u64| {

@@ -21,7 +21,7 @@
 //! 3 bytes per texel where 16-bit texels took 18, and the reconstruction reads less.
 //!
 //! By concern: `device` (opening one headless), `plan` (what the state holds, in bytes, before
-//! it exists), `resources` (creating it), `job` (a decode pass's parameters, as the shader
+//! it exists), `resources` (creating it), `layouts` (the passes' bind group layouts and pipelines), `job` (a decode pass's parameters, as the shader
 //! declares them), `decode` (recording a segment's decode), `reconstruct` (recording a
 //! frame's reconstruction and the hold pass), `bench` (the decode alone, timed), `ops`
 //! (one step of a decode and its cost), `lanes` (version 2's sections decoded as coded,
@@ -35,6 +35,7 @@ mod job;
 mod lanes;
 #[cfg(test)]
 mod lanes_tests;
+mod layouts;
 mod ops;
 mod plan;
 mod reconstruct;

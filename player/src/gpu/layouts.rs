@@ -1,0 +1,182 @@
+//! The bind group layouts of the GPU state's passes (which binding of which shader is
+//! what) and the compute pipelines over them.
+
+/// The bind group layouts of the reconstruction, the hold pass and the decode passes
+/// (keyframe, bubble, parse): which binding of which shader is what.
+pub(super) struct Layouts {
+    pub reconstruct: wgpu::BindGroupLayout,
+    pub hold: wgpu::BindGroupLayout,
+    pub key: wgpu::BindGroupLayout,
+    pub bubble: wgpu::BindGroupLayout,
+    pub parse: wgpu::BindGroupLayout,
+}
+
+pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
+    let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty,
+        count: None,
+    };
+    let uniform = |dynamic| wgpu::BindingType::Buffer {
+        ty: wgpu::BufferBindingType::Uniform,
+        has_dynamic_offset: dynamic,
+        min_binding_size: None,
+    };
+    let storage = |read_only| wgpu::BindingType::Buffer {
+        ty: wgpu::BufferBindingType::Storage { read_only },
+        has_dynamic_offset: false,
+        min_binding_size: None,
+    };
+    use wgpu::TextureViewDimension::{D2Array, D2};
+    let sampled = |sample_type, view_dimension| wgpu::BindingType::Texture {
+        sample_type,
+        view_dimension,
+        multisampled: false,
+    };
+    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim reconstruct"),
+        entries: &[
+            entry(0, uniform(false)),
+            entry(
+                1,
+                sampled(
+                    wgpu::TextureSampleType::Float { filterable: false },
+                    D2Array,
+                ),
+            ),
+            entry(2, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+            entry(3, sampled(wgpu::TextureSampleType::Uint, D2)),
+            entry(
+                4,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::Rgba16Float,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+            ),
+            entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
+            entry(6, storage(true)),
+            entry(9, storage(true)),
+            entry(10, storage(false)),
+            entry(12, storage(false)),
+            entry(11, storage(true)),
+            entry(13, uniform(false)),
+        ],
+    });
+    let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim hold"),
+        entries: &[
+            entry(
+                7,
+                sampled(wgpu::TextureSampleType::Float { filterable: false }, D2),
+            ),
+            entry(
+                8,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::R32Uint,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+            ),
+        ],
+    });
+    let words_entry = entry(2, storage(true));
+    let planes16 = entry(
+        4,
+        wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::R32Uint,
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+        },
+    );
+    let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim keyframe decode"),
+        entries: &[
+            entry(0, uniform(true)),
+            entry(11, uniform(true)),
+            entry(1, uniform(false)),
+            words_entry,
+            entry(
+                3,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::ReadWrite,
+                    format: wgpu::TextureFormat::R32Float,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+            ),
+            planes16,
+            entry(5, storage(false)),
+            entry(6, storage(true)),
+            entry(7, storage(true)),
+            entry(8, storage(false)),
+            entry(10, storage(true)),
+        ],
+    });
+    let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim bubble decode"),
+        entries: &[
+            entry(0, uniform(true)),
+            entry(11, uniform(true)),
+            words_entry,
+            entry(6, storage(true)),
+            entry(7, storage(true)),
+            entry(9, storage(false)),
+            entry(10, storage(true)),
+            entry(
+                12,
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::Rgba32Uint,
+                    view_dimension: wgpu::TextureViewDimension::D2Array,
+                },
+            ),
+            entry(13, storage(false)),
+        ],
+    });
+    let parse_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim parse"),
+        entries: &[
+            entry(0, uniform(true)),
+            entry(11, uniform(true)),
+            words_entry,
+            entry(6, storage(false)),
+            entry(7, storage(false)),
+            entry(10, storage(false)),
+        ],
+    });
+    Layouts {
+        reconstruct: bgl,
+        hold: hold_layout,
+        key: key_layout,
+        bubble: bubble_layout,
+        parse: parse_layout,
+    }
+}
+
+/// A compute pipeline running `entry` of the WGSL `source` over bind group 0 of `layout`.
+pub(super) fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    layout: &wgpu::BindGroupLayout,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
