@@ -13,7 +13,7 @@ pub struct DecodeShape {
     /// segment's decode is recorded over frames. Rounded up to a multiple of 32, at most
     /// 16 384 (a parse dispatch then stays within WebGPU's 65 535 workgroups). A pass whose
     /// workgroups cost less than 64 blocks of the budget's unit (by
-    /// [`DecodeShape::weights`]: the keyframe's range and pack, the bubble gather, a split
+    /// [`DecodeShape::weights`]: the keyframe's pack, the bubble gather, a split
     /// group) covers as many more, up to 16 384, so that its dispatches record the same work in
     /// fewer steps. A slice is
     /// the smallest piece of work a frame records: with a
@@ -107,9 +107,7 @@ pub struct PassWeights {
     pub parse: u32,
     /// A block of a keyframe plane added onto the head.
     pub key_add: u32,
-    /// 1/16 of a 32² region of the head measured, before the pack.
-    pub key_range: u32,
-    /// 1/16 of a 32² region of the head packed into 16 bits.
+    /// 1/16 of a 32² region of the head measured and packed into 16 bits.
     pub key_pack: u32,
     /// A block of a bubble plane gathered into its set: its mask, first term and the
     /// rest's place written.
@@ -133,8 +131,7 @@ impl PassWeights {
     pub const LAVAPIPE: PassWeights = PassWeights {
         parse: 55,
         key_add: 12,
-        key_range: 1,
-        key_pack: 1,
+        key_pack: 2,
         bubble_gather: 3,
         // 13.5 µs a word of the longest lane (`bench decode --gpu --lanes true --fit` on
         // the demo in 2.0): llvmpipe runs a workgroup's lanes in lockstep, so the other
@@ -153,8 +150,7 @@ impl PassWeights {
     pub const H100: PassWeights = PassWeights {
         parse: 40,
         key_add: 3,
-        key_range: 1,
-        key_pack: 1,
+        key_pack: 2,
         bubble_gather: 1,
         // 5–14 µs a word of the longest lane (`bench decode --gpu --lanes true` on the
         // benchmark streams in 2.0, a lane to a workgroup: 12–22 symbols a word,

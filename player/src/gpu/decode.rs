@@ -142,26 +142,19 @@ impl Gpu {
         ops.push(Op::new(Kind::Upload, 0, [0; 3], 0, 0));
         let [rx, ry] = self.regions;
         let pack = |gpu: &mut Gpu, ops: &mut Vec<Op>, slot: u32| {
-            // Every plane's regions' extents cleared (one step), then per plane found and
-            // its texels packed: an invocation per row of a region, 64 per workgroup; a
-            // pass costs 8 units (1/16 of a region each) per region.
+            // Per plane, each region's range found and its texels packed in one pass: an
+            // invocation per row of a region, 64 per workgroup; 8 units (1/16 of a
+            // region each) per region.
             let n = ops.len();
             let regions = rx * ry;
-            let extents = Kind::Bounds {
-                offset: 0,
-                bytes: regions as u64 * 8 * ch as u64,
-            };
-            ops.push(Op::new(extents, 0, [0; 3], 0, 0));
             for p in 0..ch {
                 let job = Job {
                     layer: slot * ch + p,
                     size: [pw, ph],
-                    base: 2 * regions * p,
                     ..gpu.base_job()
                 };
                 let groups = (regions * REGION).div_ceil(64);
                 let units = (regions as u64 * 8, 16);
-                gpu.sliced(ops, Kind::KeyRange, job, groups, p, units);
                 gpu.sliced(ops, Kind::KeyPack, job, groups, p, units);
             }
             for op in &mut ops[n..] {
@@ -268,9 +261,6 @@ impl Gpu {
                     self.upload(enc, seg);
                 }
                 Kind::Clear { bytes } => enc.clear_buffer(&self.masks, 0, Some(bytes)),
-                Kind::Bounds { offset, bytes } => {
-                    enc.clear_buffer(&self.bounds, offset, Some(bytes))
-                }
                 Kind::Degrees { offset, bytes } => {
                     enc.clear_buffer(&self.degrees, offset, Some(bytes))
                 }
@@ -335,15 +325,12 @@ impl Gpu {
             Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref()),
             Kind::Parse => (&self.parse, self.parse_group.as_ref()),
             Kind::KeyAdd => (&self.key_add, key),
-            Kind::KeyRange => (&self.key_range, key),
             Kind::KeyPack => (&self.key_pack, key),
             Kind::BubbleGather => (
                 &self.bubble_gather,
                 self.bubble_groups.get(op.channel as usize),
             ),
-            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
-                return
-            }
+            Kind::Upload | Kind::Clear { .. } | Kind::Degrees { .. } => return,
         };
         let Some(label) = op.kind.label() else {
             return;

@@ -47,8 +47,6 @@ struct Tables {
 // a sparse predicted keyframe; so did sharing the check through workgroup memory, whose
 // barriers lavapipe pays for per workgroup.)
 @group(0) @binding(10) var<storage, read> groups: array<vec2<u32>>;
-// The extents of the regions of a keyframe plane being packed (`key_range`).
-@group(0) @binding(8) var<storage, read_write> bounds: array<atomic<u32>>;
 // Per bubble set: per plane and tile (row-major), the tile's degree, the largest term k of
 // the set's bubble planes with a coefficient in the tile, 0 where none has; then the
 // set's term counter (`bubble_gather`).
@@ -334,14 +332,14 @@ fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
 const REGION: u32 = 32u;
 
 // A plane of the head keyframe packed into layer `job.layer` of the 16-bit keyframes
-// (slot · channels + plane) in two passes, one invocation per row of a region each, so
-// that a plane is spread over 32 invocations per region (one invocation per region
-// reading it whole, twice, left an H100 waiting on 2048 loads in a row). `key_range`
-// finds each region's range: a row's lowest and highest value, merged by `atomicMax`
-// into the region's extent, words `job.base` + 2 · region (the bounds buffer, cleared
-// before: an extent of zeros is empty). `key_pack` then rounds each pair of texels of
-// the row to 16-bit steps of the range, and the row 0 invocation writes the region's
-// (lowest value, step). The head is only read: the next keyframe is added onto it
+// (slot · channels + plane) in one pass, one invocation per row of a region, two regions
+// to a workgroup, so that a plane is spread over 32 invocations per region (one
+// invocation per region reading it whole, twice, left an H100 waiting on 2048 loads in a
+// row). Each row's lowest and highest value are merged by `atomicMax` into its region's
+// extent in workgroup memory; after a barrier each row rounds its pairs of texels to
+// 16-bit steps of that range, and row 0 writes the region's (lowest value, step). (Two
+// passes, the extents in a storage buffer cleared before them, cost a GPU two more steps
+// and a clear per plane.) The head is only read: the next keyframe is added onto it
 // afterwards.
 
 // f32 bits in an order that `atomicMax` on u32 keeps: larger values larger, and (for
@@ -368,45 +366,37 @@ fn region_row(wg: vec3<u32>, li: u32) -> vec2<u32> {
     return vec2<u32>(i / REGION, i % REGION);
 }
 
-@compute @workgroup_size(64)
-fn key_range(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
-    let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
-    let rr = region_row(wg, li);
-    if (rr.x >= regions.x * regions.y) {
-        return;
-    }
-    let origin = vec2<u32>(rr.x % regions.x, rr.x / regions.x) * REGION;
-    let y = origin.y + rr.y;
-    if (y >= job.size.y) {
-        return;
-    }
-    let end = min(origin.x + REGION, job.size.x);
-    var lo = 3.4e38;
-    var hi = -3.4e38;
-    for (var x = origin.x; x < end; x = x + 1u) {
-        let v = textureLoad(key_plane, vec2<u32>(x, y)).x;
-        lo = min(lo, v);
-        hi = max(hi, v);
-    }
-    atomicMax(&bounds[job.base + 2u * rr.x], ~ordered(lo));
-    atomicMax(&bounds[job.base + 2u * rr.x + 1u], ordered(hi));
-}
+// The extents of the workgroup's two regions: (lowest, stored complemented; highest),
+// in `ordered` form (zero: empty).
+var<workgroup> extents: array<atomic<u32>, 4>;
 
 @compute @workgroup_size(64)
 fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
     let rr = region_row(wg, li);
-    if (rr.x >= regions.x * regions.y) {
-        return;
-    }
     let region = vec2<u32>(rr.x % regions.x, rr.x / regions.x);
     let origin = region * REGION;
     let y = origin.y + rr.y;
-    if (y >= job.size.y) {
+    let live = rr.x < regions.x * regions.y && y < job.size.y;
+    let end = min(origin.x + REGION, job.size.x);
+    let side = 2u * (li / REGION);
+    if (live) {
+        var lo = 3.4e38;
+        var hi = -3.4e38;
+        for (var x = origin.x; x < end; x = x + 1u) {
+            let v = textureLoad(key_plane, vec2<u32>(x, y)).x;
+            lo = min(lo, v);
+            hi = max(hi, v);
+        }
+        atomicMax(&extents[side], ~ordered(lo));
+        atomicMax(&extents[side + 1u], ordered(hi));
+    }
+    workgroupBarrier();
+    if (!live) {
         return;
     }
-    let lo = unordered(~atomicLoad(&bounds[job.base + 2u * rr.x]));
-    let hi = unordered(atomicLoad(&bounds[job.base + 2u * rr.x + 1u]));
+    let lo = unordered(~atomicLoad(&extents[side]));
+    let hi = unordered(atomicLoad(&extents[side + 1u]));
     let step = (hi - lo) / 65535.0;
     var inv = 0.0;
     if (step > 0.0) {
@@ -416,7 +406,6 @@ fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_inde
         ranges[(job.layer * regions.y + region.y) * regions.x + region.x] = vec2<f32>(lo, step);
     }
     // Planes are whole tiles, so a region's width is even: texels go in pairs.
-    let end = min(origin.x + REGION, job.size.x);
     for (var x = origin.x; x < end; x = x + 2u) {
         let a = textureLoad(key_plane, vec2<u32>(x, y)).x;
         let b = textureLoad(key_plane, vec2<u32>(x + 1u, y)).x;

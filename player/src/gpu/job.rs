@@ -68,8 +68,7 @@ uniform_struct! {
     tiles_x: u32 => "u32",
     /// Texels of the plane (pack passes).
     size: [u32; 2] => "vec2<u32>",
-    /// `bubble_gather`: the first word of the plane's tile degrees in the degrees buffer;
-    /// pack passes: the first word of the regions' extents in the bounds buffer.
+    /// `bubble_gather`: the first word of the plane's tile degrees in the degrees buffer.
     base: u32 => "u32",
     /// `key_add`: workgroups per group of 64 blocks, each visiting its share of them
     /// (1, 2, 4 … 64).

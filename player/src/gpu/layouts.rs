@@ -109,7 +109,6 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
             entry(5, storage(false)),
             entry(6, storage(true)),
             entry(7, storage(true)),
-            entry(8, storage(false)),
             entry(10, storage(true)),
         ],
     });

@@ -72,7 +72,6 @@ pub(crate) struct Gpu {
     /// The parse with a workgroup per piece (`parse_wide` in parse.wgsl).
     parse_wide: wgpu::ComputePipeline,
     key_add: wgpu::ComputePipeline,
-    key_range: wgpu::ComputePipeline,
     key_pack: wgpu::ComputePipeline,
     bubble_gather: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,
@@ -92,8 +91,6 @@ pub(crate) struct Gpu {
     coefs: wgpu::Buffer,
     masks: wgpu::Buffer,
     part: u32,
-    /// The extents of the regions of a keyframe being packed into 16 bits.
-    bounds: wgpu::Buffer,
     /// Each reconstruction tile's generation and weights, in two copies, and its bounds
     /// (reconstruct.wgsl).
     tiles: wgpu::Buffer,

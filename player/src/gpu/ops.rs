@@ -20,13 +20,7 @@ pub(super) enum Kind {
     /// A workgroup per piece.
     ParseWide,
     KeyAdd,
-    KeyRange,
     KeyPack,
-    /// The extents of the regions of a keyframe being packed cleared.
-    Bounds {
-        offset: u64,
-        bytes: u64,
-    },
     /// A bubble set's tile degrees and term counter cleared.
     Degrees {
         offset: u64,
@@ -80,13 +74,10 @@ impl Kind {
         Some(match self {
             Kind::Parse | Kind::ParseWide => "parse",
             Kind::KeyAdd => "key_add",
-            Kind::KeyRange => "key_range",
             Kind::KeyPack => "key_pack",
             Kind::BubbleGather => "bubble_gather",
             Kind::Lane(p) => p.label(),
-            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => {
-                return None
-            }
+            Kind::Upload | Kind::Clear { .. } | Kind::Degrees { .. } => return None,
         })
     }
 
@@ -95,12 +86,11 @@ impl Kind {
         match self {
             Kind::Parse | Kind::ParseWide => w.parse,
             Kind::KeyAdd => w.key_add,
-            Kind::KeyRange => w.key_range,
             Kind::KeyPack => w.key_pack,
             Kind::BubbleGather => w.bubble_gather,
             Kind::Lane(LanePass::Middle | LanePass::Blocks) => w.lane_word,
             Kind::Lane(_) => w.lane_block,
-            Kind::Upload | Kind::Clear { .. } | Kind::Bounds { .. } | Kind::Degrees { .. } => 0,
+            Kind::Upload | Kind::Clear { .. } | Kind::Degrees { .. } => 0,
         }
     }
 }

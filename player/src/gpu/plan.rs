@@ -212,7 +212,6 @@ pub(crate) fn planned_texture_bytes(
         + range_bytes(plane, channels)
         + part_blocks(plane) as u64 * 256
         + mask_bytes(part_blocks(plane))
-        + bound_bytes(plane, channels)
         + BUBBLE_SETS as u64 * FIRST_TERM_BYTES
         + tile_bytes(size).0
         + tile_bytes(size).1
@@ -228,15 +227,6 @@ pub(super) fn tile_count((w, h): (u32, u32)) -> u64 {
 /// words, and 9 words, per tile (reconstruct.wgsl, `STATE_WORDS`, `PEAK_WORDS`).
 pub(super) fn tile_bytes(size: (u32, u32)) -> (u64, u64) {
     (tile_count(size) * 2 * 10 * 4, tile_count(size) * 9 * 4)
-}
-
-/// Bytes of the bounds buffer for `channels` planes of `plane` texels: the extent
-/// (lowest and highest value, two u32) of each region of each plane being packed into a
-/// 16-bit keyframe (`key_range` in decode.wgsl); a plane's extents follow the one before,
-/// so that one clear serves a whole pack.
-pub(super) fn bound_bytes(plane: [u32; 2], channels: u32) -> u64 {
-    let [rx, ry] = regions(plane);
-    (rx as u64 * ry as u64 * 8 * channels as u64).max(8)
 }
 
 /// Bytes a texture holds (one mip level, every layer).
@@ -271,7 +261,6 @@ impl Gpu {
             + self.slices.size()
             + self.coefs.size()
             + self.masks.size()
-            + self.bounds.size()
             + self.tiles.size()
             + self.peaks.size()
             + self.degrees.size()

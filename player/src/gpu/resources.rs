@@ -145,7 +145,6 @@ impl Gpu {
         let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
         let parse_wide = pipeline_for("vbim parse_wide", parse_source, &parse_layout, "parse_wide");
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
-        let key_range = pipeline_for("vbim key_range", decode, &key_layout, "key_range");
         let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
         let bubble_gather = pipeline_for(
             "vbim bubble_gather",
@@ -172,12 +171,6 @@ impl Gpu {
         let masks = buffer(
             "vbim coefficient masks and sets",
             mask_bytes(part),
-            B::STORAGE | B::COPY_DST | B::COPY_SRC,
-        );
-        // (COPY_SRC: tests read it back.)
-        let bounds = buffer(
-            "vbim region extents",
-            bound_bytes(plane, channels),
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
         // Zeroed at creation: generation 0, which no frame has.
@@ -224,7 +217,6 @@ impl Gpu {
             parse,
             parse_wide,
             key_add,
-            key_range,
             key_pack,
             bubble_gather,
             key_layout,
@@ -238,7 +230,6 @@ impl Gpu {
             coefs,
             masks,
             part,
-            bounds,
             tiles,
             peaks,
             gen: 0,
@@ -386,10 +377,6 @@ impl Gpu {
             resource: self.tables.as_entire_binding(),
         };
         self.parse_group = Some(group(&self.parse_layout, &[]));
-        let bounds = wgpu::BindGroupEntry {
-            binding: 8,
-            resource: self.bounds.as_entire_binding(),
-        };
         self.key_groups = self
             .key_views
             .iter()
@@ -405,7 +392,6 @@ impl Gpu {
                         view(3, v),
                         view(4, &self.packed_view),
                         ranges,
-                        bounds.clone(),
                     ],
                 )
             })
