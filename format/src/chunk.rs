@@ -10,7 +10,7 @@ use crate::payload2;
 pub use crate::payload2::Payload;
 use crate::plane::{self, Onto, Plane};
 use crate::scan;
-pub use crate::scan::{scan, EntryPoint, ENTRY_PAIRS, FILL_BLOCKS};
+pub use crate::scan::{scan, AcTerms, EntryPoint, ENTRY_PAIRS, FILL_BLOCKS};
 use crate::{FormatError, Result};
 
 thread_local! {
@@ -318,6 +318,8 @@ pub struct Scanned<'a> {
     pub entries: &'a [scan::EntryPoint],
     /// Its number of blocks.
     pub blocks: usize,
+    /// What the scan saw of its AC coefficients.
+    pub ac: scan::AcTerms,
 }
 
 /// Scans the stream of `n` blocks at `raw[*pos..]`, moves past it and hands it to `each`.
@@ -325,11 +327,12 @@ fn scanned(raw: &[u8], pos: &mut usize, n: usize, each: impl FnOnce(Scanned<'_>)
     ENTRIES.with_borrow_mut(|entries| {
         entries.clear();
         let start = *pos;
-        scan::scan(raw, pos, n, entries)?;
+        let ac = scan::scan(raw, pos, n, entries)?;
         each(Scanned {
             stream: &raw[start..*pos],
             entries,
             blocks: n,
+            ac,
         });
         Ok(())
     })

@@ -50,10 +50,21 @@ pub struct EntryPoint {
     pub from: u32,
 }
 
+/// What a scan saw of a stream's AC coefficients (the positions past the DC range): what
+/// a decoder that keeps a block's terms sparse must make room for.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AcTerms {
+    /// Pairs whose value lies past the DC range: at least the non-zero AC coefficients.
+    pub pairs: u64,
+    /// Whether any of their values lies outside `i16`.
+    pub wide: bool,
+}
+
 /// Scans the stream of `n` blocks at `buf[*pos..]`, pushing an entry point onto `out` for
 /// every [`ENTRY_PAIRS`] pairs (the first at the stream's start), and moves `*pos` past
-/// the stream. Fails where [`crate::plane::read_blocks`] fails.
-pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) -> Result<()> {
+/// the stream; returns what it saw of the AC coefficients. Fails where
+/// [`crate::plane::read_blocks`] fails.
+pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) -> Result<AcTerms> {
     let total = n as u64 * (N * N) as u64;
     // Positions and byte offsets are u32 on the GPU: a stream of more blocks than one
     // chunk can decode to is refused anyway (`read_blocks`).
@@ -68,6 +79,7 @@ pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) ->
     let start = *pos;
     let (mut at, mut p, mut dc) = (start, 0u64, 0i32);
     let mut pairs = 0usize;
+    let mut ac = AcTerms::default();
     // DC blocks the current piece writes.
     let mut fill = 0u64;
     let entry = |at: usize, p: u64, dc: i32, from: u64| -> Result<EntryPoint> {
@@ -108,6 +120,9 @@ pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) ->
         let v = varint::get_i32(buf, &mut at)?;
         if p < n as u64 {
             dc = dc.wrapping_add(v);
+        } else {
+            ac.pairs += 1;
+            ac.wide |= i16::try_from(v).is_err();
         }
         p += 1;
     }
@@ -117,7 +132,7 @@ pub fn scan(buf: &[u8], pos: &mut usize, n: usize, out: &mut Vec<EntryPoint>) ->
         )));
     }
     *pos = at;
-    Ok(())
+    Ok(ac)
 }
 
 #[cfg(test)]
@@ -191,6 +206,29 @@ mod tests {
             assert!(filled <= FILL_BLOCKS, "entry {i} wrote {filled} DCs");
         }
         got
+    }
+
+    /// The scan counts the AC coefficients (its pairs past the DC range: one per non-zero
+    /// coefficient, as the encoder writes them) and says whether one needs more than 16
+    /// bits; DC values, however large, count for neither.
+    #[test]
+    fn the_scan_counts_ac_terms_and_sees_a_wide_one() {
+        let mut q = blocks(600, 7);
+        let count = |q: &[[i32; 64]]| q.iter().flat_map(|b| &b[1..]).filter(|&&v| v != 0).count();
+        let scanned = |q: &[[i32; 64]]| {
+            let mut buf = Vec::new();
+            write_coefficients(q, &mut buf);
+            scan(&buf, &mut 0, q.len(), &mut Vec::new()).unwrap()
+        };
+        let ac = scanned(&q);
+        assert_eq!(ac.pairs, count(&q) as u64);
+        assert!(!ac.wide, "{ac:?}");
+        q[5][0] = 1 << 20;
+        assert!(!scanned(&q).wide);
+        q[9][17] = -32_769;
+        let ac = scanned(&q);
+        assert!(ac.wide, "{ac:?}");
+        assert_eq!(ac.pairs, count(&q) as u64);
     }
 
     #[test]

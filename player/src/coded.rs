@@ -24,7 +24,7 @@
 //! member spans as above. The file's own histograms go to the GPU once, when the stream
 //! opens.
 
-use vbim_format::chunk::{spans, Scanned, ENTRY_PAIRS};
+use vbim_format::chunk::{spans, Scanned};
 use vbim_format::plane2::{Section, SectionPlane, FAMILIES};
 
 /// Blocks the GPU's dense plane holds for planes of `plane` texels: a whole plane, or as
@@ -105,26 +105,30 @@ pub(crate) struct PlaneSpan {
     pub member_count: u32,
     /// A version 2 plane's lanes (its stream and entry points are then unused).
     pub lanes: Option<LanePlane>,
-    /// A bound on its non-zero coefficients beyond each block's first (what a bubble set
-    /// holds of it apart from its blocks): each such term is an AC coefficient, so at most
-    /// the stream's AC pairs (the pieces from the last that starts among the DC on, times
-    /// [`ENTRY_PAIRS`], each piece at most that many) or, for lanes, their symbols (at
-    /// most [`MAX_LANE_SYMBOLS`] each); and at most 63 a block.
+    /// A bound on the words a bubble set holds for it apart from its blocks (its terms
+    /// beyond each block's first, 16 bits each where they fit): each such term is an AC
+    /// coefficient, so at most the stream's AC pairs, which the scan counts, or, for
+    /// lanes, their symbols (at most [`MAX_LANE_SYMBOLS`] each, a word each); and at most
+    /// 63 a block.
     ///
     /// [`MAX_LANE_SYMBOLS`]: vbim_format::plane2::MAX_LANE_SYMBOLS
     pub terms: u32,
 }
 
-/// The pieces of a stream of `blocks` blocks that may hold AC pairs: from the last that
-/// starts in the DC range (the first `blocks` positions) on. (On a smooth plane most
-/// pieces are DC: at 4096² a third of the pieces of a segment's bubble planes hold AC.)
-fn ac_pieces(entries: &[vbim_format::chunk::EntryPoint], blocks: usize) -> usize {
-    let first_ac = entries.partition_point(|e| (e.position as usize) < blocks);
-    entries.len() - first_ac.saturating_sub(1)
+/// [`PlaneSpan::terms`] for a stream of `blocks` blocks whose scan saw `ac`: a word per AC
+/// pair where one of them needs more than 16 bits; otherwise two terms to a word, a block
+/// of r terms after its first taking ⌈r / 2⌉ words, at most (pairs + blocks with any) / 2
+/// in all.
+fn pair_words(ac: vbim_format::chunk::AcTerms, blocks: usize) -> u32 {
+    let words = match ac.wide {
+        true => ac.pairs,
+        false => (ac.pairs + ac.pairs.min(blocks as u64)).div_ceil(2),
+    };
+    words.min(blocks as u64 * 63).min(u32::MAX as u64) as u32
 }
 
-/// [`PlaneSpan::terms`] for a plane of `blocks` blocks from `pieces` pieces of at most
-/// `each` symbols or pairs.
+/// [`PlaneSpan::terms`] for a version 2 plane of `blocks` blocks in `pieces` lanes of at
+/// most `each` symbols.
 fn term_bound(pieces: usize, each: usize, blocks: usize) -> u32 {
     let ac = (pieces as u64).saturating_mul(each as u64);
     ac.min(blocks as u64 * 63).min(u32::MAX as u64) as u32
@@ -204,7 +208,7 @@ impl Coded {
             members: at,
             member_count,
             lanes: None,
-            terms: term_bound(ac_pieces(s.entries, s.blocks), ENTRY_PAIRS, s.blocks),
+            terms: pair_words(s.ac, s.blocks),
         }
     }
 
@@ -388,6 +392,7 @@ mod tests {
             stream: &stream,
             entries: &entries,
             blocks: 12,
+            ac: Default::default(),
         };
         let mut c = Coded::default();
         c.words.push(77); // something before it

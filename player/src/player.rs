@@ -524,6 +524,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             params.keys = [r.slot0 * ch, packed.unwrap_or(0) * ch];
             params.head_f32 = packed.is_none() as u32;
             params.set_base = r.set * self.gpu.set_layers;
+            params.steps = r.steps;
             params.alpha = alpha;
             params.blend = (state == FrameState::CatchingUp || hold_first) as u32;
             if hold_first {

@@ -16,7 +16,7 @@ use crate::decoder::KeyStep;
 use crate::time::{MediaTime, ONE_FRAME};
 
 /// Largest number of bubble planes (7 terms of 3 planes: `reconstruct.wgsl` holds 9
-/// weights, two keyframes' and 7 bubble terms').
+/// weights, two keyframes' and 7 bubble terms', and their steps in 6 vec4s).
 pub(crate) const MAX_BUBBLE_PLANES: usize = 24;
 
 /// The resident keyframes: the chain's head (f32, built in place) and the 16-bit slots.
@@ -84,6 +84,9 @@ pub(crate) struct Resident {
     pub start: MediaTime,
     pub end: MediaTime,
     pub layers: usize,
+    /// Quantiser step of each bubble plane (the reconstruction scales a block's 16-bit
+    /// terms by it).
+    pub steps: [f32; MAX_BUBBLE_PLANES],
 }
 
 /// What to do with an arrived segment.
@@ -141,6 +144,7 @@ mod tests {
             start: s * 10 * F,
             end: (s + 1) * 10 * F,
             layers: 4,
+            steps: [0.0; MAX_BUBBLE_PLANES],
         }
     }
 

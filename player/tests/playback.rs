@@ -183,7 +183,7 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
         // of bubble blocks (16 bytes per 8 × 8 texels), over the padded planes (48 × 32,
         // whole 16-texel tiles), the lightmap (Rgba16Float) and its held copy (RGB9E5, 4
         // bytes); then the buffers: the 16-bit keyframes' ranges (2 × 1 regions of 32² per
-        // plane and slot, 8 bytes each), the 144-byte uniform of the reconstruction, the
+        // plane and slot, 8 bytes each), the 240-byte uniform of the reconstruction, the
         // 512-byte DCT tables, and the decode jobs and coefficients and each set's bubble
         // terms, at least 16, 64 and 2 × 64 KiB.
         let (planes, d) = (48 * 32u64, player.header().max_degree as u64);
@@ -192,7 +192,7 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
             + planes / 64 * 16 * 2 * set
             + (w * h) as u64 * (8 + 4);
         let ranges = 2 * 2 * ch as u64 * 8;
-        let buffers = player.gpu_bytes() - textures - ranges - 144 - 512;
+        let buffers = player.gpu_bytes() - textures - ranges - 240 - 512;
         assert!(
             ((16 << 10) + (64 << 10) + (128 << 10)..1 << 20).contains(&buffers),
             "degree {d}, {ch} channel(s): {} bytes, {buffers} in decode buffers",

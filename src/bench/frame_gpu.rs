@@ -168,7 +168,7 @@ impl FrameTimer {
 /// highest degree, with K_{s+1} in the f32 head (before the next decode packs it) and in
 /// 16 bits (after), and the reference blend's: two Rgba16Float reads and one write. A
 /// bubble layer reads its block's 16 bytes per 64 texels here; the terms beyond a block's
-/// first (4 bytes each) depend on the content ([`mean_bytes_per_texel`] counts them), so
+/// first (2 bytes each where they fit in 16 bits) depend on the content ([`mean_bytes_per_texel`] counts them), so
 /// these are in quarter bytes: (head, packed, blend) × 4.
 pub(super) fn quarter_bytes_per_texel(h: &vbim_format::Header) -> (u64, u64, u64) {
     let ch = h.channels as u64;
@@ -193,7 +193,8 @@ pub(super) struct Touched {
 /// The bytes per texel a frame touches (K_{s+1} packed) over the file at `path`: each tile
 /// reads its keyframes (2 bytes a plane each) and its bubble layers up to its own degree
 /// (a block's 16 bytes per 64 texels), and the frame the terms beyond each block's first
-/// (4 bytes each), counted from the file's coefficient streams; each segment weighted by
+/// (two to a 4-byte word where they fit in 16 bits, a word each otherwise), counted from
+/// the file's coefficient streams; each segment weighted by
 /// its frames. `None` for a file without tile map chunks (format 2 keeps them in its
 /// sections).
 pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<Touched>, String> {
@@ -246,14 +247,18 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<Touc
                         let members = t.degrees(p).iter().filter(|&&x| x as usize >= k).count();
                         let n = members * per_tile;
                         read_blocks(&raw, &mut at, n, &mut q).map_err(|e| fail(i, &e))?;
-                        let mut rest = 0;
+                        let mut words = 0;
                         for b in 0..n {
                             let terms = q.nonzero(b);
-                            rest += terms.saturating_sub(1);
                             blocks[terms.min(2)] += 1;
                             blocks[3] += terms;
+                            // After the first, two 16-bit terms to a word where they all
+                            // fit, one word each otherwise (`bubble_gather`).
+                            let rest = terms.saturating_sub(1);
+                            let wide = q.terms(b).skip(1).any(|(_, v)| i16::try_from(v).is_err());
+                            words += if wide { rest } else { rest.div_ceil(2) };
                         }
-                        seg += 4.0 * rest as f64;
+                        seg += 4.0 * words as f64;
                     }
                 }
                 bytes += frames * seg;

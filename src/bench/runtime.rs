@@ -652,7 +652,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     }
     let (head, packed, blend) = quarter_bytes_per_texel(&h);
     println!(
-        "bytes per texel a frame touches at degree {}, besides the bubble terms after each block's first (4 bytes each): {:.2} (K_(s+1) packed), {:.2} (in the f32 head, until the next decode packs it), 0.47 in a tile it keeps (its state: 80 bytes read, 40 written per 16² texels); the blend {} ({:.2}×)",
+        "bytes per texel a frame touches at degree {}, besides the bubble terms after each block's first (2 bytes each where they fit in 16 bits, 4 otherwise): {:.2} (K_(s+1) packed), {:.2} (in the f32 head, until the next decode packs it), 0.47 in a tile it keeps (its state: 80 bytes read, 40 written per 16² texels); the blend {} ({:.2}×)",
         h.max_degree,
         packed as f64 / 4.0,
         head as f64 / 4.0,

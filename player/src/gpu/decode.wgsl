@@ -56,8 +56,8 @@ struct Tables {
 // start in `terms`, and the first term (f32 bits, dequantised), as the reconstruction
 // reads them (`bubble_gather`).
 @group(0) @binding(12) var bubble_blocks: texture_storage_2d_array<rgba32uint, write>;
-// The set's terms after each block's first, dequantised (f32 bits), a block's together
-// in increasing zig-zag order.
+// The set's terms after each block's first, a block's together in increasing zig-zag
+// order (`bubble_gather` says how).
 @group(0) @binding(13) var<storage, read_write> terms: array<u32>;
 
 // Blocks one workgroup of a block pass decodes, one after another: 64, one per
@@ -242,16 +242,20 @@ fn key_add(
 }
 
 // A bubble plane's blocks, one invocation each, as the reconstruction reads them: each
-// block's mask, its first term and where the rest go in the set's `terms` (a workgroup's
-// blocks take one run of it, claimed with one atomic add on the set's counter; the order
-// of the runs does not matter). Every block of the plane's tiles is written, those with
+// block's mask, its first term (dequantised, f32) and where the rest go in the set's
+// `terms`: two to a word as 16-bit integers (the reconstruction scales them by the
+// plane's step, as the reference dequantises), or, where one of them does not fit in 16
+// bits, one dequantised f32 each, the top bit of the start saying so. A workgroup's blocks
+// take one run of `terms`, claimed with one atomic add on the set's counter (the order of
+// the runs does not matter). Every block of the plane's tiles is written, those with
 // nothing as zeros, so no pass clears the layer first: the reconstruction reads a tile's
 // layers only up to its degree in the set, which this pass marks (`degrees`, cleared
 // before the set's first plane) and which only a tile with a coefficient in this plane's
 // stream reaches. A bubble term stays in the transform domain because bubble planes are
-// sparse: at 2048² and 4096² three blocks in four hold one term or none, and the set takes
-// about 3 bytes per texel this way against 18 as 16-bit texels.
-var<workgroup> counts: array<u32, 64>;
+// sparse: at 2048² and 4096² three blocks in four hold one term or none, and a set takes
+// 2–3 bytes per texel this way against 18 as 16-bit texels.
+var<workgroup> words_of: array<u32, 64>;
+var<workgroup> terms_of: array<u32, 64>;
 var<workgroup> run_start: u32;
 
 @compute @workgroup_size(64)
@@ -263,13 +267,34 @@ fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
     if (inside) {
         m = mask(b - job.lo);
     }
+    let d = b - job.lo;
+    // The terms after the first: their count, and whether each fits in 16 bits.
+    var rest = bits_of(m);
     let n = countOneBits(m.x) + countOneBits(m.y);
-    counts[li] = n;
+    var wide = false;
+    if (n > 1u) {
+        _ = next_bit(&rest);
+        loop {
+            let i = next_bit(&rest);
+            if (i == 64u) {
+                break;
+            }
+            let v = coefs[d * 64u + i];
+            wide = wide || v < -32768 || v > 32767;
+        }
+    }
+    let others = max(n, 1u) - 1u;
+    var words = (others + 1u) / 2u;
+    if (wide) {
+        words = others;
+    }
+    words_of[li] = words;
+    terms_of[li] = n;
     workgroupBarrier();
     if (li == 0u) {
         var total = 0u;
         for (var i = 0u; i < 64u; i = i + 1u) {
-            total = total + max(counts[i], 1u) - 1u;
+            total = total + words_of[i];
         }
         var at = 0u;
         if (total > 0u) {
@@ -283,46 +308,60 @@ fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
     }
     var at = run_start;
     for (var i = 0u; i < li; i = i + 1u) {
-        at = at + max(counts[i], 1u) - 1u;
+        at = at + words_of[i];
     }
     let start = at;
     var first_term = 0u;
-    var terms_left = bits_of(m);
+    var left = bits_of(m);
     var k = 0u;
-    let d = b - job.lo;
+    var pending = 0u;
     loop {
-        let i = next_bit(&terms_left);
+        let i = next_bit(&left);
         if (i == 64u) {
             break;
         }
-        let v = bitcast<u32>(f32(coefs[d * 64u + i]) * job.step);
+        let v = coefs[d * 64u + i];
         if (k == 0u) {
-            first_term = v;
+            first_term = bitcast<u32>(f32(v) * job.step);
+        } else if (wide) {
+            put_term(at, bitcast<u32>(f32(v) * job.step));
+            at = at + 1u;
+        } else if (k % 2u == 1u) {
+            pending = bitcast<u32>(v) & 0xFFFFu;
         } else {
-            // (The decode sized `terms` for a bound on the segment's terms: a stream
-            // that breaks it loses terms, never writes out of bounds.)
-            if (at < arrayLength(&terms)) {
-                terms[at] = v;
-            }
+            put_term(at, pending | (bitcast<u32>(v) << 16u));
             at = at + 1u;
         }
         k = k + 1u;
     }
+    if (!wide && k > 1u && k % 2u == 0u) {
+        // An odd number of terms after the first: the last word holds one.
+        put_term(at, pending);
+    }
     var span = first_span(b);
     let o = block_origin(b, &span) / 8u;
-    textureStore(bubble_blocks, o, job.layer, vec4<u32>(m.x, m.y, start, first_term));
+    let flag = select(0u, 0x80000000u, wide);
+    textureStore(bubble_blocks, o, job.layer, vec4<u32>(m.x, m.y, start | flag, first_term));
     // The tile's degree, once per tile (its blocks come together, a whole tile in one
     // workgroup: per² divides 64), where any of its blocks has a coefficient.
     let per2 = job.per * job.per;
     if (li % per2 == 0u) {
         var any = 0u;
         for (var j = 0u; j < per2; j = j + 1u) {
-            any = any | counts[li + j];
+            any = any | terms_of[li + j];
         }
         if (any != 0u) {
             let tile = (o.y / job.per) * job.tiles_x + o.x / job.per;
             atomicMax(&degrees[job.base + tile], job.term);
         }
+    }
+}
+
+// Word `at` of the set's terms. (The decode sized `terms` for a bound on the segment's
+// terms, one word each: a stream that breaks it loses terms, never writes out of bounds.)
+fn put_term(at: u32, w: u32) {
+    if (at < arrayLength(&terms)) {
+        terms[at] = w;
     }
 }
 

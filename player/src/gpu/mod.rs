@@ -115,8 +115,8 @@ pub(crate) struct Gpu {
     /// set's `terms`, and the first (`bubble_gather` in decode.wgsl).
     bubble_blocks: wgpu::Texture,
     bubble_view: wgpu::TextureView,
-    /// Each bubble set's terms after each block's first (f32, dequantised); grows with
-    /// the segments' terms.
+    /// Each bubble set's terms after each block's first (16-bit integers two to a word, or
+    /// dequantised f32 where one does not fit); grows with the segments' terms.
     terms: [wgpu::Buffer; BUBBLE_SETS as usize],
     display: wgpu::Texture,
     pub display_view: wgpu::TextureView,

@@ -5,6 +5,7 @@
 use super::plan::degree_stride;
 use super::resources::hold_group;
 use super::Gpu;
+use crate::slots::MAX_BUBBLE_PLANES;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -21,6 +22,9 @@ pub(crate) struct Params {
     pub regions: [u32; 2],
     /// The first layer of K_s and of K_{s+1} among the 16-bit keyframes.
     pub keys: [u32; 2],
+    /// Quantiser step of each bubble plane (a block's terms after its first are stored as
+    /// 16-bit integers where they fit).
+    pub steps: [f32; MAX_BUBBLE_PLANES],
     /// The first layer of the segment's bubble set among the bubble blocks.
     pub set_base: u32,
     /// 1 while K_{s+1} is read from the f32 head (not packed yet).

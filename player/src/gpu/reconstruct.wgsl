@@ -26,8 +26,10 @@ struct Params {
     regions: vec2<u32>,
     // The first layer of K_s and of K_{s+1} among the 16-bit keyframes (slot · channels).
     keys: vec2<u32>,
-    // The first layer of the segment's bubble set among the bubble blocks (term k ≥ 2,
-    // plane p: layer set_base + (k − 2)·channels + p).
+    // Quantiser step of each bubble layer (term k ≥ 2, plane p: layer (k − 2)·channels + p).
+    steps: array<vec4<f32>, 6>,
+    // The first layer of the segment's bubble set among the bubble blocks (layer
+    // set_base + (k − 2)·channels + p).
     set_base: u32,
     // 1: K_{s+1} is read from the f32 head (it is not packed yet); 0: from `keys.y`.
     head_f32: u32,
@@ -71,8 +73,10 @@ struct Tables {
 @group(0) @binding(5) var packed: texture_2d_array<u32>;
 @group(0) @binding(6) var<storage, read> ranges: array<vec2<f32>>;
 // The segment's bubble set's terms after each block's first, a block's in increasing
-// zig-zag order.
-@group(0) @binding(9) var<storage, read> terms: array<f32>;
+// zig-zag order: two 16-bit integers to a word (the low half first), times the layer's
+// step; or, for a block whose `terms` start has its top bit set, one dequantised f32 each
+// (decode.wgsl, `bubble_gather`).
+@group(0) @binding(9) var<storage, read> terms: array<u32>;
 // Per tile (row-major, workgroups across), in two copies (a frame reads one and writes the
 // other, so that no invocation sees its own workgroup's update): the generation it was
 // evaluated under and the nine weights it was evaluated with.
@@ -164,7 +168,10 @@ fn bubble_plane(xy: vec2<i32>, layer: u32) -> vec4<f32> {
     var low = b.x;
     var high = b.y;
     var base = 0u;
-    var next = b.z;
+    let wide = (b.z & 0x80000000u) != 0u;
+    let start = b.z & 0x7FFFFFFFu;
+    let step = p.steps[layer / 4u][layer % 4u];
+    var j = 0u;
     var c = bitcast<f32>(b.w);
     let x = u32(xy.x) % 8u;
     let y = u32(xy.y) % 8u;
@@ -182,8 +189,15 @@ fn bubble_plane(xy: vec2<i32>, layer: u32) -> vec4<f32> {
         let pos = zigzag(base + firstTrailingBit(low));
         low = low & (low - 1u);
         if (!first) {
-            c = terms[next];
-            next = next + 1u;
+            if (wide) {
+                c = bitcast<f32>(terms[start + j]);
+            } else {
+                // The half's 16 bits, sign-extended: the same f32(value) · step the
+                // reference dequantises with.
+                let w = terms[start + j / 2u] >> (16u * (j % 2u));
+                c = f32(bitcast<i32>(w << 16u) >> 16u) * step;
+            }
+            j = j + 1u;
         }
         first = false;
         let ky = pos / 8u;

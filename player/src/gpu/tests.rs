@@ -48,11 +48,12 @@ pub(super) fn coded_plane(
     let mut raw = Vec::new();
     plane::write_coefficients(blocks, &mut raw);
     let mut entries = Vec::new();
-    vbim_format::chunk::scan(&raw, &mut 0, blocks.len(), &mut entries).unwrap();
+    let ac = vbim_format::chunk::scan(&raw, &mut 0, blocks.len(), &mut entries).unwrap();
     let s = Scanned {
         stream: &raw,
         entries: &entries,
         blocks: blocks.len(),
+        ac,
     };
     let mut parsed = Blocks::default();
     plane::read_blocks(&raw, &mut 0, blocks.len(), &mut parsed).unwrap();
@@ -304,25 +305,32 @@ fn keyframe_passes_match_the_reference_kernel() {
     }
 }
 
-/// Layer `layer` of bubble set 0 as the reconstruction sums it (reconstruct.wgsl,
-/// `bubble_plane`): each block's mask, first term and the rest from the set's terms,
-/// (c · T[ky][y]) · T[kx][x] in increasing zig-zag order, over a plane of `pw × ph`.
-fn summed_bubble_layer(gpu: &Gpu, layer: u32, (pw, ph): (u32, u32)) -> Vec<f32> {
+/// Layer `layer` of bubble set 0, of quantiser step `step`, as the reconstruction sums it
+/// (reconstruct.wgsl, `bubble_plane`): each block's mask, first term and the rest from
+/// the set's terms (16-bit integers two to a word times the step, or f32 where the start's
+/// top bit says so), (c · T[ky][y]) · T[kx][x] in increasing zig-zag order, over a plane
+/// of `pw × ph`.
+fn summed_bubble_layer(gpu: &Gpu, layer: u32, (pw, ph): (u32, u32), step: f32) -> Vec<f32> {
     let raw = read_texture_layer(&gpu.device, &gpu.queue, &gpu.bubble_blocks, 16, layer);
     let blocks: &[[u32; 4]] = bytemuck::cast_slice(&raw);
     let terms = read_buffer(&gpu.device, &gpu.queue, &gpu.terms[0]);
-    let terms: &[f32] = bytemuck::cast_slice(&terms);
+    let terms: &[u32] = bytemuck::cast_slice(&terms);
     let (t, zz) = (vbim_format::dct::basis(), vbim_format::dct::zigzag());
     let mut out = vec![0f32; (pw * ph) as usize];
     for (i, out) in out.iter_mut().enumerate() {
         let (x, y) = (i % pw as usize, i / pw as usize);
         let [lo, hi, rest, first] = blocks[(y / 8) * (pw as usize / 8) + x / 8];
+        let (wide, start) = (rest >> 31 == 1, (rest & 0x7FFF_FFFF) as usize);
         let bits = (0..64).filter(|&b| (lo as u64 | (hi as u64) << 32) >> b & 1 == 1);
         let mut sum = 0f32;
         for (j, b) in bits.enumerate() {
-            let c = match j {
-                0 => f32::from_bits(first),
-                _ => terms[rest as usize + j - 1],
+            let c = match (j, wide) {
+                (0, _) => f32::from_bits(first),
+                (j, true) => f32::from_bits(terms[start + j - 1]),
+                (j, false) => {
+                    let w = terms[start + (j - 1) / 2] >> (16 * ((j - 1) % 2));
+                    (w as u16 as i16) as f32 * step
+                }
             };
             let pos = zz[b];
             sum += (c * t[pos / 8][y % 8]) * t[pos % 8][x % 8];
@@ -364,7 +372,7 @@ fn bubble_blocks_sum_to_the_reference_plane() {
         let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, &member)));
         let want = bubble_reference(&parsed, &member, (pw, ph, ts), step);
         decode_bubble_plane(&mut gpu, c, span);
-        let got = summed_bubble_layer(&gpu, 0, (pw, ph));
+        let got = summed_bubble_layer(&gpu, 0, (pw, ph), step);
         let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
         for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
             let (x, y) = (i % pw as usize, i / pw as usize);
@@ -419,7 +427,7 @@ fn tile_degrees_and_bubble_blocks_follow_each_segment() {
                 });
                 assert_eq!(d, 2 * any as u32, "GPU shape {wide}, seed {seed}, tile {t}");
             }
-            let got = summed_bubble_layer(&gpu, 0, (pw, ph));
+            let got = summed_bubble_layer(&gpu, 0, (pw, ph), step);
             let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
             for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
                 let (x, y) = (i % pw as usize, i / pw as usize);

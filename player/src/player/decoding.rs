@@ -7,7 +7,7 @@ use std::io::{Read, Seek};
 use super::Player;
 use crate::decoder::SegmentData;
 use crate::gpu::{Op, Target, BUBBLE_SETS, KEY_SLOTS};
-use crate::slots::{place, Placement, Resident};
+use crate::slots::{place, Placement, Resident, MAX_BUBBLE_PLANES};
 use crate::time::MediaTime;
 
 /// A segment being decoded into the GPU's spare slot and set, a slice at a time.
@@ -121,6 +121,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let mut key_steps = std::mem::take(&mut self.spare.1);
         key_steps.clear();
         key_steps.extend_from_slice(&b.steps);
+        let mut steps = [0f32; MAX_BUBBLE_PLANES];
+        for (s, p) in steps.iter_mut().zip(&b.planes[b.bubbles..]) {
+            *s = p.step;
+        }
         let shows = show.then_some(Resident {
             index: b.index,
             keys: b.keys,
@@ -129,6 +133,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             start: range.0,
             end: range.1,
             layers: b.layers,
+            steps,
         });
         let early =
             place(self.resident.as_ref(), range, pos, n, self.header.looping) == Placement::NotYet;
