@@ -124,14 +124,19 @@ fn pair_words(ac: vbim_format::chunk::AcTerms, blocks: usize) -> u32 {
         true => ac.pairs,
         false => (ac.pairs + ac.pairs.min(blocks as u64)).div_ceil(2),
     };
-    words.min(blocks as u64 * 63).min(u32::MAX as u64) as u32
+    at_most_63_a_block(words, blocks)
 }
 
-/// [`PlaneSpan::terms`] for a version 2 plane of `blocks` blocks in `pieces` lanes of at
-/// most `each` symbols.
-fn term_bound(pieces: usize, each: usize, blocks: usize) -> u32 {
-    let ac = (pieces as u64).saturating_mul(each as u64);
-    ac.min(blocks as u64 * 63).min(u32::MAX as u64) as u32
+/// [`PlaneSpan::terms`] for a version 2 plane of `blocks` blocks in `lanes` lanes of at
+/// most [`MAX_LANE_SYMBOLS`](vbim_format::plane2::MAX_LANE_SYMBOLS) symbols each.
+fn lane_words(lanes: usize, blocks: usize) -> u32 {
+    let symbols = (lanes as u64).saturating_mul(vbim_format::plane2::MAX_LANE_SYMBOLS as u64);
+    at_most_63_a_block(symbols, blocks)
+}
+
+/// `words`, but no more than a word for each of 63 terms of every block (and a u32).
+fn at_most_63_a_block(words: u64, blocks: usize) -> u32 {
+    words.min(blocks as u64 * 63).min(u32::MAX as u64) as u32
 }
 
 /// Streams, entry points and member spans of several planes, appended one after another.
@@ -298,11 +303,7 @@ impl Coded {
                 longest: sp.lanes.iter().map(|l| l.3 - l.2).max().unwrap_or(0) as u32,
                 tiled: members.is_some(),
             }),
-            terms: term_bound(
-                sp.lanes.len(),
-                vbim_format::plane2::MAX_LANE_SYMBOLS,
-                blocks,
-            ),
+            terms: lane_words(sp.lanes.len(), blocks),
             ..PlaneSpan::default()
         }
     }

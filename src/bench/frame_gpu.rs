@@ -207,8 +207,6 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<Touc
     let entries = r.entries().to_vec();
     let (pw, ph) = chunk::padded_size(&h);
     let texels = (pw * ph) as f64;
-    let tile = h.tile_size as usize;
-    let per_tile = (tile / 8).pow(2);
     let np = h.channels as usize;
     let (mut bytes, mut frames_in_all) = (0.0, 0.0);
     // Coded bubble blocks: with no term, with one, all, and their terms.
@@ -229,26 +227,21 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<Touc
             ChunkKind::Coefficients => {
                 let Some(t) = tiles.take() else { continue };
                 let stored = r.read_chunk(i).map_err(|e| e.to_string())?;
-                let c = CoeffReader::open(&h, &stored, &t).map_err(|e| fail(i, &e))?;
-                let raw = zstd::bulk::decompress(&stored, 1 << 31).map_err(|e| fail(i, &e))?;
-                // K_s and K_{s+1}, 16 bits each, the frame's write, and a block's 16 bytes
-                // per bubble layer up to each tile's degree.
+                let mut c = CoeffReader::open(&h, &stored, &t).map_err(|e| fail(i, &e))?;
+                // K_s and K_{s+1}, 16 bits each, and the frame's write; then each bubble
+                // plane's blocks (those of the tiles whose degree reaches its term), 16
+                // bytes each, and their words of terms.
                 let mut seg = texels * (8.0 + 4.0 * np as f64);
-                for p in 0..np {
-                    for &d in t.degrees(p) {
-                        let layers = (d as usize).saturating_sub(1);
-                        seg += (tile * tile) as f64 * layers as f64 * 0.25;
-                    }
-                }
-                let d = c.max_degree() as usize;
-                let mut at = 4 + 4 * (d.saturating_sub(1)) * np;
-                for k in 2..=d {
+                for k in 2..=c.max_degree() {
                     for p in 0..np {
-                        let members = t.degrees(p).iter().filter(|&&x| x as usize >= k).count();
-                        let n = members * per_tile;
-                        read_blocks(&raw, &mut at, n, &mut q).map_err(|e| fail(i, &e))?;
+                        let mut read = Ok(());
+                        c.scan_plane(k, p, |_, s| {
+                            read = read_blocks(s.stream, &mut 0, s.blocks, &mut q);
+                        })
+                        .map_err(|e| fail(i, &e))?;
+                        read.map_err(|e| fail(i, &e))?;
                         let mut words = 0;
-                        for b in 0..n {
+                        for b in 0..q.len() {
                             let terms = q.nonzero(b);
                             blocks[terms.min(2)] += 1;
                             blocks[3] += terms;
@@ -258,7 +251,7 @@ pub(super) fn mean_bytes_per_texel(path: &std::path::Path) -> Result<Option<Touc
                             let wide = q.terms(b).skip(1).any(|(_, v)| i16::try_from(v).is_err());
                             words += if wide { rest } else { rest.div_ceil(2) };
                         }
-                        seg += 4.0 * words as f64;
+                        seg += 16.0 * q.len() as f64 + 4.0 * words as f64;
                     }
                 }
                 bytes += frames * seg;

@@ -45,7 +45,8 @@ const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 pub(crate) const FULL_GROUP: u64 = GROUP_BLOCKS as u64 * 4;
 
 /// A bound on the bytes of a segment's bubble terms after each block's first (what a
-/// bubble set's term buffer must hold for it): each plane's bound, four bytes a term.
+/// bubble set's term buffer must hold for it): each plane's bound in words, four bytes a
+/// word.
 pub(crate) fn term_bytes(seg: &SegmentData) -> u64 {
     seg.planes[seg.bubbles.min(seg.planes.len())..]
         .iter()
@@ -179,7 +180,7 @@ impl Gpu {
                     // A predicted keyframe is added onto the head (the keyframe it
                     // follows); an intra one is written over it, zeros and all.
                     let intra = st.intra as u32;
-                    self.block_pass(ops, Kind::KeyAdd, Job { intra, ..job }, blocks, p);
+                    self.key_add_pass(ops, Job { intra, ..job }, blocks, p);
                 }
             }
         }
@@ -417,9 +418,9 @@ impl Gpu {
         self.sliced_by(ops, kind, job, (groups, PARSE_SPAN), channel, units);
     }
 
-    /// A block pass (`key_add`) over `blocks` blocks of `job`: a workgroup
-    /// per group of [`GROUP_BLOCKS`], or [`DecodeShape::group_split`] workgroups per group.
-    fn block_pass(&mut self, ops: &mut Vec<Op>, kind: Kind, job: Job, blocks: u32, channel: u32) {
+    /// The keyframe block pass (`key_add`) over `blocks` blocks of `job`: a workgroup per
+    /// group of [`GROUP_BLOCKS`], or [`DecodeShape::group_split`] workgroups per group.
+    fn key_add_pass(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
         // Split only as far as the pass needs to fill a large GPU: on an H100 splitting in
         // 8 took a 512² segment's `key_add` from 0.33 to 0.09 ms, and a 4096² one's from
         // 0.45 to 0.97 ms, where 4096 groups of 64 blocks already fill it.
@@ -430,7 +431,7 @@ impl Gpu {
             .min(self.shape.group_split);
         let job = Job { split, ..job };
         let units = (blocks as u64, (GROUP_BLOCKS / split) as u64);
-        self.sliced(ops, kind, job, whole * split, channel, units);
+        self.sliced(ops, Kind::KeyAdd, job, whole * split, channel, units);
     }
 
     /// `groups` workgroups of a pass over `job`, in slices of [`SLICE_GROUPS`] times the

@@ -22,14 +22,7 @@
 // A plane of more blocks than one storage binding holds (8192² and up) goes in parts of
 // blocks [lo, hi): each part parses the whole stream and keeps the blocks in its range.
 
-// The DCT basis T[k][n] (row k, sample n) and the zig-zag order, from the reference
-// decoder's own tables, so that both use the same f32 values (reconstruct.wgsl declares
-// the same).
-struct Tables {
-    basis: array<vec4<f32>, 16>,
-    zigzag: array<vec4<u32>, 16>,
-}
-
+// The DCT tables (blocks.wgsl).
 @group(0) @binding(1) var<uniform> tables: Tables;
 // A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
@@ -63,16 +56,6 @@ struct Tables {
 // Blocks one workgroup of a block pass decodes, one after another: 64, one per
 // invocation to look at first.
 const GROUP_BLOCKS: u32 = 64u;
-
-fn basis(k: u32, n: u32) -> f32 {
-    let i = k * 8u + n;
-    return tables.basis[i / 4u][i % 4u];
-}
-
-fn zigzag(i: u32) -> u32 {
-    return tables.zigzag[i / 4u][i % 4u];
-}
-
 
 // The member span that holds the tile of rank r: the last whose first rank is at most r
 // (a binary search, once per workgroup).
@@ -121,32 +104,6 @@ fn first_span(first: u32) -> u32 {
 // Block d's mask (in the part).
 fn mask(d: u32) -> vec2<u32> {
     return masks[d];
-}
-
-// A 64-bit set being visited in increasing order: the word still to visit, the high word
-// after it, and the first bit's number in `bits` (0 or 32). One loop over the 64 bits:
-// two nested loops, one per word, cost lavapipe more.
-struct Bits {
-    bits: u32,
-    high: u32,
-    base: u32,
-}
-
-fn bits_of(m: vec2<u32>) -> Bits {
-    return Bits(m.x, m.y, 0u);
-}
-
-// The next set bit of `*s`, taken out of it; 64 when none is left.
-fn next_bit(s: ptr<function, Bits>) -> u32 {
-    if ((*s).bits == 0u) {
-        if ((*s).high == 0u) {
-            return 64u;
-        }
-        *s = Bits((*s).high, 0u, 32u);
-    }
-    let i = (*s).base + firstTrailingBit((*s).bits);
-    (*s).bits = (*s).bits & ((*s).bits - 1u);
-    return i;
 }
 
 // The sums at texels (x, y) and, with `pair`, (x + 1, y) of block d (in the part) onto

@@ -28,11 +28,18 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
         has_dynamic_offset: false,
         min_binding_size: None,
     };
+    use wgpu::StorageTextureAccess as Access;
+    use wgpu::TextureFormat as Format;
     use wgpu::TextureViewDimension::{D2Array, D2};
     let sampled = |sample_type, view_dimension| wgpu::BindingType::Texture {
         sample_type,
         view_dimension,
         multisampled: false,
+    };
+    let storage_texture = |access, format, view_dimension| wgpu::BindingType::StorageTexture {
+        access,
+        format,
+        view_dimension,
     };
     let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("vbim reconstruct"),
@@ -49,11 +56,7 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
             entry(3, sampled(wgpu::TextureSampleType::Uint, D2)),
             entry(
                 4,
-                wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: wgpu::TextureFormat::Rgba16Float,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                },
+                storage_texture(Access::WriteOnly, Format::Rgba16Float, D2),
             ),
             entry(5, sampled(wgpu::TextureSampleType::Uint, D2Array)),
             entry(6, storage(true)),
@@ -71,24 +74,13 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
                 7,
                 sampled(wgpu::TextureSampleType::Float { filterable: false }, D2),
             ),
-            entry(
-                8,
-                wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: wgpu::TextureFormat::R32Uint,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                },
-            ),
+            entry(8, storage_texture(Access::WriteOnly, Format::R32Uint, D2)),
         ],
     });
     let words_entry = entry(2, storage(true));
     let planes16 = entry(
         4,
-        wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format: wgpu::TextureFormat::R32Uint,
-            view_dimension: wgpu::TextureViewDimension::D2Array,
-        },
+        storage_texture(Access::WriteOnly, Format::R32Uint, D2Array),
     );
     let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("vbim keyframe decode"),
@@ -97,14 +89,7 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
             entry(11, uniform(true)),
             entry(1, uniform(false)),
             words_entry,
-            entry(
-                3,
-                wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::ReadWrite,
-                    format: wgpu::TextureFormat::R32Float,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                },
-            ),
+            entry(3, storage_texture(Access::ReadWrite, Format::R32Float, D2)),
             planes16,
             entry(5, storage(false)),
             entry(6, storage(true)),
@@ -124,11 +109,7 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
             entry(10, storage(true)),
             entry(
                 12,
-                wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: wgpu::TextureFormat::Rgba32Uint,
-                    view_dimension: wgpu::TextureViewDimension::D2Array,
-                },
+                storage_texture(Access::WriteOnly, Format::Rgba32Uint, D2Array),
             ),
             entry(13, storage(false)),
         ],

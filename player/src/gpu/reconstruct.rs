@@ -3,7 +3,6 @@
 //! on screen for catch-up blending, and the caller's output texture.
 
 use super::plan::degree_stride;
-use super::resources::hold_group;
 use super::Gpu;
 use crate::slots::MAX_BUBBLE_PLANES;
 
@@ -99,10 +98,7 @@ impl Gpu {
                 usage: t.usage(),
             });
         }
-        let view = t.create_view(&Default::default());
-        let groups = self.reconstruct_groups(&view);
-        let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
-        self.output = Some((t.clone(), groups, hold));
+        self.output = Some(self.output_groups(t.clone()));
         Ok(())
     }
 

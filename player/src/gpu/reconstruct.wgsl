@@ -53,11 +53,7 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-// The DCT basis T[k][n] (row k, sample n) and the zig-zag order (decode.wgsl's).
-struct Tables {
-    basis: array<vec4<f32>, 16>,
-    zigzag: array<vec4<u32>, 16>,
-}
+// The DCT tables (blocks.wgsl).
 @group(0) @binding(13) var<uniform> tables: Tables;
 // The head keyframe K_{s+1} (`channels` R32Float layers), read until the decode of the next
 // segment has packed it into 16 bits, and the bubble sets' blocks: per block of 8 × 8
@@ -149,15 +145,6 @@ fn next_plane(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec
     return head_plane(xy, plane);
 }
 
-fn basis(k: u32, n: u32) -> f32 {
-    let i = k * 8u + n;
-    return tables.basis[i / 4u][i % 4u];
-}
-
-fn zigzag(i: u32) -> u32 {
-    return tables.zigzag[i / 4u][i % 4u];
-}
-
 // Bubble layer `layer` of the segment at the quad whose top-left texel is `xy`: its block's
 // terms summed at each texel, (c · T[ky][y]) · T[kx][x] in increasing zig-zag order, as the
 // reference decoder sums a block of few terms. A quad lies in one block; a block with no
@@ -165,41 +152,34 @@ fn zigzag(i: u32) -> u32 {
 // the benchmark days' bubble planes at 2048² and 4096²) no more.
 fn bubble_plane(xy: vec2<i32>, layer: u32) -> vec4<f32> {
     let b = textureLoad(bubble_blocks, xy / 8, i32(p.set_base + layer), 0);
-    var low = b.x;
-    var high = b.y;
-    var base = 0u;
     let wide = (b.z & 0x80000000u) != 0u;
     let start = b.z & 0x7FFFFFFFu;
     let step = p.steps[layer / 4u][layer % 4u];
-    var j = 0u;
-    var c = bitcast<f32>(b.w);
     let x = u32(xy.x) % 8u;
     let y = u32(xy.y) % 8u;
     var s = vec4<f32>(0.0);
-    var first = true;
+    var c = bitcast<f32>(b.w);
+    // Terms visited so far: the first is in the block's texel, the rest in `terms`.
+    var j = 0u;
+    var left = bits_of(b.xy);
     loop {
-        if (low == 0u) {
-            if (high == 0u) {
-                break;
-            }
-            low = high;
-            high = 0u;
-            base = 32u;
+        let i = next_bit(&left);
+        if (i == 64u) {
+            break;
         }
-        let pos = zigzag(base + firstTrailingBit(low));
-        low = low & (low - 1u);
-        if (!first) {
+        if (j > 0u) {
+            let r = j - 1u;
             if (wide) {
-                c = bitcast<f32>(terms[start + j]);
+                c = bitcast<f32>(terms[start + r]);
             } else {
                 // The half's 16 bits, sign-extended: the same f32(value) · step the
                 // reference dequantises with.
-                let w = terms[start + j / 2u] >> (16u * (j % 2u));
+                let w = terms[start + r / 2u] >> (16u * (r % 2u));
                 c = f32(bitcast<i32>(w << 16u) >> 16u) * step;
             }
-            j = j + 1u;
         }
-        first = false;
+        j = j + 1u;
+        let pos = zigzag(i);
         let ky = pos / 8u;
         let kx = pos % 8u;
         let r0 = c * basis(ky, y);

@@ -10,7 +10,11 @@ use super::plan::*;
 use super::reconstruct::Params;
 use super::Gpu;
 
-/// The DCT basis and zig-zag order (`Tables` in decode.wgsl and reconstruct.wgsl).
+/// What decode.wgsl and reconstruct.wgsl share: the DCT tables and a block's set of
+/// coefficients visited in order.
+const BLOCKS_WGSL: &str = include_str!("blocks.wgsl");
+
+/// The DCT basis and zig-zag order (`Tables` in blocks.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Tables {
@@ -116,31 +120,22 @@ impl Gpu {
         } = layouts(device);
         let pipeline_for =
             |label, source, layout, entry| compute_pipeline(device, label, source, layout, entry);
-        let decode = &decode_source(include_str!("decode.wgsl"));
+        let decode = &decode_source(&format!("{BLOCKS_WGSL}{}", include_str!("decode.wgsl")));
+        let reconstruct = &format!("{BLOCKS_WGSL}{}", include_str!("reconstruct.wgsl"));
         let parse_source = &decode_source(&format!(
             "const PIECE_PAIRS: u32 = {}u;\nconst FILL_BLOCKS: u32 = {}u;\n{}",
             vbim_format::chunk::ENTRY_PAIRS,
             vbim_format::chunk::FILL_BLOCKS,
             include_str!("parse.wgsl")
         ));
-        let pipeline = pipeline_for(
-            "vbim reconstruct",
-            include_str!("reconstruct.wgsl"),
-            &bgl,
-            "main",
-        );
+        let pipeline = pipeline_for("vbim reconstruct", reconstruct, &bgl, "main");
         let pipeline_fresh = pipeline_for(
             "vbim reconstruct, first of a generation",
-            include_str!("reconstruct.wgsl"),
+            reconstruct,
             &bgl,
             "main_fresh",
         );
-        let hold = pipeline_for(
-            "vbim hold",
-            include_str!("reconstruct.wgsl"),
-            &hold_layout,
-            "hold",
-        );
+        let hold = pipeline_for("vbim hold", reconstruct, &hold_layout, "hold");
         let hold_group = hold_group(device, &hold_layout, &display_view, &held_view);
         let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
         let parse_wide = pipeline_for("vbim parse_wide", parse_source, &parse_layout, "parse_wide");
@@ -284,11 +279,20 @@ impl Gpu {
     pub(super) fn bind_reconstruct(&mut self) {
         self.bind_groups = self.reconstruct_groups(&self.display_view);
         if let Some((texture, ..)) = self.output.take() {
-            let view = texture.create_view(&Default::default());
-            let groups = self.reconstruct_groups(&view);
-            let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
-            self.output = Some((texture, groups, hold));
+            self.output = Some(self.output_groups(texture));
         }
+    }
+
+    /// The caller's `texture` as the reconstruction's output: with the reconstruction's
+    /// bind groups (one per bubble set) and the hold pass's over it.
+    pub(super) fn output_groups(
+        &self,
+        texture: wgpu::Texture,
+    ) -> (wgpu::Texture, Vec<wgpu::BindGroup>, wgpu::BindGroup) {
+        let view = texture.create_view(&Default::default());
+        let groups = self.reconstruct_groups(&view);
+        let hold = hold_group(&self.device, &self.hold_layout, &view, &self.held_view);
+        (texture, groups, hold)
     }
 
     /// The reconstruction's bind group for each bubble set, writing `output`.
@@ -507,7 +511,7 @@ pub(super) fn slice_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
 }
 
 /// The DCT basis and the zig-zag order, from the reference decoder's own tables
-/// (`Tables` in decode.wgsl and reconstruct.wgsl), in a uniform buffer.
+/// (`Tables` in blocks.wgsl), in a uniform buffer.
 fn dct_tables(device: &wgpu::Device) -> wgpu::Buffer {
     let mut t = Tables {
         basis: [0.0; 64],
