@@ -202,11 +202,17 @@ pub fn encode(
     Ok(out)
 }
 
-/// A version 2 payload's lanes' symbols, plane by plane ([`plane2::lane_symbols`]).
-pub fn lane_symbols(h: &Header, what: Payload, bytes: &[u8]) -> Result<Vec<Vec<u64>>> {
+/// A version 2 payload's lanes' serial steps with `states` a lane, plane by plane
+/// ([`plane2::lane_symbols`]; one state: its symbols).
+pub fn lane_symbols(
+    h: &Header,
+    what: Payload,
+    bytes: &[u8],
+    states: plane2::Interleave,
+) -> Result<Vec<Vec<(u64, usize)>>> {
     let (maps, head, shapes) = coded(h, what, bytes)?;
     let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
-    plane2::lane_symbols(&bytes[head..], &geometries, maps)
+    plane2::lane_symbols(&bytes[head..], &geometries, maps, states)
 }
 
 /// What decoding a version 2 payload's section needs: the file's context maps, the head's

@@ -180,6 +180,12 @@ fn bits_for(clusters: u8) -> u32 {
 /// given, the decoder ignores it and returns the one it decodes.
 trait Coder {
     fn code(&mut self, lane: usize, ctx: usize, value: u32) -> Result<u32>;
+    /// A group's flag (passes 0 and 1) or a block (passes 2 and 3) of `lane` begins:
+    /// the unit a decoder with several states per lane would hand to its next state.
+    /// `place` is the group's place in region-major order (16 a region), times 16, plus
+    /// the block's place in its group for a block.
+    #[inline(always)]
+    fn item(&mut self, _lane: usize, _pass: usize, _place: usize) {}
 }
 
 /// 0, −1, 1, −2, … → 0, 1, 2, 3, … (zig-zag, without overflow at `i32::MIN`).
@@ -368,6 +374,8 @@ fn walk(
                     } else {
                         0
                     };
+                    let local = (gy - ry) * per + gx - rx;
+                    coder.item(lane_of(region), parity, (region * per * per + local) * 16);
                     let v = coder.code(lane_of(region), FLAG + ctx, full[g] as u32)?;
                     if v > 1 {
                         return Err(FormatError::Invalid(format!("group flag {v}")));
@@ -392,6 +400,9 @@ fn walk(
                     };
                     debug_assert_eq!(region_of(x, y), region);
                     let lane = lane_of(region);
+                    let local = (y - ry) / GROUP * (REGION / GROUP) + (x - rx) / GROUP;
+                    let within = (y % GROUP) * GROUP + x % GROUP;
+                    coder.item(lane, 2 + parity, (region * 16 + local) * 16 + within);
                     let mut four_at = [0usize; 4];
                     let mut len = 0;
                     for &(dx, dy) in &FOUR {
@@ -726,9 +737,70 @@ struct Lanes<'a, 'h> {
     decoders: Vec<ans::Decoder<'a>>,
     /// The histogram of each context (`None`: the chunk sent none).
     of: Vec<Option<&'h Histogram>>,
-    /// Each lane's symbols so far: the length of the serial chain a lane's decoder walks
-    /// ([`lane_symbols`]).
+    /// Each lane's serial steps so far with its states taking its items (groups' flags,
+    /// blocks) as [`Interleave`] says, stepping together ([`lane_symbols`]): with one
+    /// state, its symbols.
     symbols: Vec<u64>,
+    assign: Assign,
+    /// Per lane: the pass under way, the state of the item under way, items begun in the
+    /// pass, the lane's first group, and each state's symbols in the pass.
+    pass: Vec<(usize, usize, usize, usize, Vec<u64>)>,
+}
+
+impl Lanes<'_, '_> {
+    /// Ends every lane's pass: its chain grows by its busiest state's symbols.
+    fn end_passes(&mut self) {
+        for (l, (_, _, items, _, per)) in self.pass.iter_mut().enumerate() {
+            self.symbols[l] += per.iter().copied().max().unwrap_or(0);
+            per.iter_mut().for_each(|s| *s = 0);
+            *items = 0;
+        }
+    }
+}
+
+/// How many rANS states a lane would have, and how they would share its items: what
+/// [`lane_symbols`] counts the serial steps of (a study for a coding whose lanes decode
+/// several symbols at once; version 2 has one state a lane).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interleave {
+    /// States a lane, at most.
+    pub states: usize,
+    /// 0: every lane has `states`; otherwise one state per this many of the lane's
+    /// symbols (at least one, at most `states`), as an encoder would choose.
+    pub symbols_per_state: u64,
+    /// How states take a lane's items.
+    pub assign: Assign,
+}
+
+/// How the states of a lane ([`Interleave`]) take its items.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Assign {
+    /// Items in turn: the k-th group flag or coded block of a pass to state k mod the
+    /// states (a decoder must rank them).
+    Turn,
+    /// Groups by place: group k of the lane's regions (16 a region) to state k mod the
+    /// states, with all its blocks.
+    Group,
+    /// Blocks by place: block k of the lane's regions (256 a region, a group's 16 in a
+    /// row) to state k mod the states; a group's flag as its first block.
+    Block,
+}
+
+impl Interleave {
+    /// One state a lane: version 2 as it is.
+    pub const ONE: Interleave = Interleave {
+        states: 1,
+        symbols_per_state: 0,
+        assign: Assign::Turn,
+    };
+
+    /// The states of a lane of `symbols`.
+    pub fn of(&self, symbols: u64) -> usize {
+        match self.symbols_per_state {
+            0 => self.states.max(1),
+            s => (symbols.div_ceil(s) as usize).clamp(1, self.states.max(1)),
+        }
+    }
 }
 
 impl Coder for Lanes<'_, '_> {
@@ -740,10 +812,31 @@ impl Coder for Lanes<'_, '_> {
             )));
         };
         let d = &mut self.decoders[lane];
-        self.symbols[lane] += 1;
+        let (_, state, _, _, per) = &mut self.pass[lane];
+        per[*state] += 1;
         let t = d.token(h)?;
         let raw = d.raw(ans::raw_bits_of(t))?;
         Ok(ans::hybrid_value(t, raw))
+    }
+
+    #[inline(always)]
+    fn item(&mut self, lane: usize, pass: usize, place: usize) {
+        if self.pass[lane].0 != pass {
+            self.end_passes();
+            self.pass.iter_mut().for_each(|p| p.0 = pass);
+        }
+        let p = &mut self.pass[lane];
+        if p.3 == usize::MAX {
+            p.3 = place / 256 * 256;
+        }
+        let width = p.4.len();
+        let at = place - p.3.min(place);
+        p.1 = match self.assign {
+            Assign::Turn => p.2 % width,
+            Assign::Group => at / 16 % width,
+            Assign::Block => at % width,
+        };
+        p.2 += 1;
     }
 }
 
@@ -922,29 +1015,51 @@ pub fn decode_each(
     maps: &[ContextMap],
     mut each: impl FnMut(usize, &Decoded) -> Result<()>,
 ) -> Result<()> {
-    decode_counted(bytes, planes, maps, |i, blocks, _| each(i, blocks))
+    decode_counted(bytes, planes, maps, Interleave::ONE, &mut |i, blocks, _| {
+        each(i, blocks)
+    })
 }
 
 /// Each plane's lanes' symbols (a token and its raw bits are one), plane by plane: the
 /// serial chains a decoder of one state per lane walks, whatever the words they take (a
-/// likely zero costs a fraction of a bit, and a step all the same). Decodes the section.
-pub fn lane_symbols(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Vec<Vec<u64>>> {
+/// likely zero costs a fraction of a bit, and a step all the same); with several states a
+/// lane ([`Interleave`]), its steps: per pass, its busiest state's symbols. Each lane's
+/// steps and states. Decodes the section.
+pub fn lane_symbols(
+    bytes: &[u8],
+    planes: &[Plane],
+    maps: &[ContextMap],
+    states: Interleave,
+) -> Result<Vec<Vec<(u64, usize)>>> {
     let mut out = Vec::with_capacity(planes.len());
-    decode_counted(bytes, planes, maps, |_, _, symbols| {
+    decode_counted(bytes, planes, maps, states, &mut |_, _, symbols| {
         out.push(symbols.to_vec());
         Ok(())
     })?;
     Ok(out)
 }
 
+/// What [`decode_counted`] hands each plane to: its index, blocks, and each lane's steps
+/// and states.
+type PlaneDone<'a> = dyn FnMut(usize, &Decoded, &[(u64, usize)]) -> Result<()> + 'a;
+
 /// [`decode_each`], handing on each lane's symbols too.
 fn decode_counted(
     bytes: &[u8],
     planes: &[Plane],
     maps: &[ContextMap],
-    mut each: impl FnMut(usize, &Decoded, &[u64]) -> Result<()>,
+    states: Interleave,
+    each: &mut PlaneDone,
 ) -> Result<()> {
     let section = Section::parse(bytes, planes, maps)?;
+    // States chosen by the lanes' symbols: count them first.
+    let mut symbols = Vec::new();
+    if states.symbols_per_state > 0 {
+        decode_counted(bytes, planes, maps, Interleave::ONE, &mut |_, _, lanes| {
+            symbols.push(lanes.iter().map(|l| l.0).collect::<Vec<u64>>());
+            Ok(())
+        })?;
+    }
     for (i, (p, sp)) in planes.iter().zip(&section.planes).enumerate() {
         let mut decoders = Vec::with_capacity(sp.lanes.len());
         let mut lane_of = Vec::new();
@@ -954,16 +1069,27 @@ fn decode_counted(
         }
         let mut lanes = Lanes {
             symbols: vec![0; decoders.len()],
+            assign: states.assign,
+            pass: (0..sp.lanes.len())
+                .map(|l| {
+                    let n = symbols.get(i).map_or(0, |s: &Vec<u64>| s[l]);
+                    (0, 0, 0, usize::MAX, vec![0; states.of(n)])
+                })
+                .collect(),
             decoders,
             of: (sp.histogram_of.iter())
                 .map(|&h| section.histograms.get(h as usize))
                 .collect(),
         };
         let blocks = walk(&p.geometry, None, &|region| lane_of[region], &mut lanes)?;
+        lanes.end_passes();
         for d in &lanes.decoders {
             d.finish()?;
         }
-        each(i, &blocks, &lanes.symbols)?;
+        let counted: Vec<(u64, usize)> = (lanes.symbols.iter().zip(&lanes.pass))
+            .map(|(&n, p)| (n, p.4.len()))
+            .collect();
+        each(i, &blocks, &counted)?;
     }
     Ok(())
 }
@@ -1103,13 +1229,29 @@ mod tests {
                 }
             }
             // Every symbol the encoder coded is one step of one lane's chain.
-            let symbols = lane_symbols(&bytes, &shapes, &maps).unwrap();
+            let symbols = lane_symbols(&bytes, &shapes, &maps, Interleave::ONE).unwrap();
+            // With states taking items in turn, a lane's chain is no longer than its
+            // symbols and no shorter than their share.
+            let eight = Interleave {
+                states: 8,
+                ..Interleave::ONE
+            };
+            let wide = lane_symbols(&bytes, &shapes, &maps, eight).unwrap();
+            for (&(one, _), &(eight, w)) in symbols.iter().flatten().zip(wide.iter().flatten()) {
+                assert!(
+                    w == 8 && eight <= one && eight >= one.div_ceil(8),
+                    "{eight} of {one}"
+                );
+            }
             for ((p, source), (lanes, sp)) in planes.iter().zip(symbols.iter().zip(&full.planes)) {
                 let mut record = Record(Vec::new());
                 walk(&p.geometry, Some(source), &|_| 0, &mut record).unwrap();
-                assert_eq!(lanes.iter().sum::<u64>(), record.0.len() as u64);
+                assert_eq!(
+                    lanes.iter().map(|l| l.0).sum::<u64>(),
+                    record.0.len() as u64
+                );
                 assert_eq!(lanes.len(), sp.lanes.len());
-                assert!(lanes.len() > 1 && lanes.iter().all(|&n| n > 0));
+                assert!(lanes.len() > 1 && lanes.iter().all(|&(n, w)| n > 0 && w == 1));
             }
             let one = round_trip(&planes, &maps, usize::MAX);
             let many = round_trip(&planes, &maps, 64);
