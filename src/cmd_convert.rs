@@ -1,4 +1,4 @@
-//! `vbim convert FILE -o OUT [--format-version 1|2]`: a stream rewritten in another format
+//! `vbim convert FILE -o OUT [--format-version 1|2|3]`: a stream rewritten in another format
 //! version, decoding to the same frames bit for bit (`vbim_encoder::convert`).
 
 use std::io::BufReader;
@@ -11,9 +11,10 @@ use crate::progress::Stages;
 pub fn run(a: ConvertArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
     let f = crate::sequence::open_input(&a.file)?;
-    let version = match a.format_version {
-        1 => FormatVersion::V1,
-        _ => FormatVersion::V2,
+    let version: FormatVersion = crate::cli::format_version(a.format_version);
+    let lanes = vbim_encoder::Lanes {
+        bytes: a.lane_bytes,
+        symbols_per_state: a.symbols_per_state,
     };
     let stages = Stages::new();
     let progress = |stage: &str, done: u64, total: u64| stages.report(stage, done, total);
@@ -28,7 +29,7 @@ pub fn run(a: ConvertArgs) -> Result<(), String> {
                 BufReader::new(f),
                 &mut out,
                 version,
-                (a.zstd_level, a.lane_bytes),
+                (a.zstd_level, lanes),
                 &progress,
             )
             .map_err(|e| e.to_string())?;

@@ -61,13 +61,11 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
     if let Some(z) = a.zstd_level {
         cfg.zstd_level = z;
     }
-    if let Some(l) = a.lane_bytes {
-        cfg.lane_bytes = l;
-    }
-    cfg.format = match a.format_version {
-        1 => vbim_encoder::FormatVersion::V1,
-        _ => vbim_encoder::FormatVersion::V2,
+    cfg.lanes = vbim_encoder::Lanes {
+        bytes: a.lane_bytes,
+        symbols_per_state: a.symbols_per_state,
     };
+    cfg.format = crate::cli::format_version(a.format_version);
     if let Some(i) = a.intra_interval {
         cfg.intra_interval_s = i;
     }

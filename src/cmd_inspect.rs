@@ -346,6 +346,11 @@ fn known(k: ChunkKind) -> bool {
 fn coding_name(h: &vbim_format::Header) -> &'static str {
     match h.coding {
         vbim_format::Coding::Pairs => "zero-run pairs through zstd",
-        vbim_format::Coding::Lanes(_) => "rANS lanes (context maps in the header)",
+        vbim_format::Coding::Lanes(_, vbim_format::plane2::Layout::OneState) => {
+            "rANS lanes (context maps in the header)"
+        }
+        vbim_format::Coding::Lanes(_, vbim_format::plane2::Layout::States) => {
+            "rANS lanes of several states (context maps in the header)"
+        }
     }
 }

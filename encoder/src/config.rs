@@ -46,20 +46,22 @@ pub struct EncoderConfig {
     pub max_degree: usize,
     /// How segment boundaries are chosen.
     pub segment: SegmentMode,
-    /// The format version written: version 1 (the default, every player reads it) or
+    /// The format version written: version 1 (the default, every player reads it),
     /// version 2 (0.69–0.90× the bytes; the player's decoder thread decodes its sections
-    /// to version 1's pairs at 13–29× version 1's CPU time).
+    /// to version 1's pairs at 13–29× version 1's CPU time) or version 3 (version 2 with
+    /// several rANS states a lane, for a GPU decoder; about 2% more bytes than 2).
     pub format: FormatVersion,
     /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
     /// payloads (1 to 22).
     pub zstd_level: i32,
-    /// Version 2: the coded size at which a rANS lane is cut ([`LANE_BYTES`] by default;
-    /// any value is valid, 0 a lane per region of 16 × 16 blocks). Every lane is a serial
+    /// Versions 2 and 3: where rANS lanes are cut and, in version 3, how many states
+    /// they have ([`Lanes`]: any values are valid). In version 2 every lane is a serial
     /// chain of symbols that a GPU decodes in one invocation: shorter lanes shorten the
-    /// longest chain of a plane, for a few bytes each (BENCHMARKS.md, "Lanes").
+    /// longest chain of a plane, for a few bytes each (BENCHMARKS.md, "Lanes"); in
+    /// version 3 a lane's states share its symbols.
     ///
-    /// [`LANE_BYTES`]: crate::LANE_BYTES
-    pub lane_bytes: usize,
+    /// [`Lanes`]: crate::Lanes
+    pub lanes: crate::Lanes,
     /// Worker threads (0 = one per core). The output does not depend on it.
     pub threads: usize,
     /// Largest distance between independently decodable keyframes, in media seconds.
@@ -109,7 +111,7 @@ impl EncoderConfig {
             // 10–18× the pairs' GPU time (BENCHMARKS.md, "Format 2 on the GPU").
             format: FormatVersion::V1,
             zstd_level: 9,
-            lane_bytes: crate::LANE_BYTES,
+            lanes: crate::Lanes::default(),
             threads: 0,
             intra_interval_s: 4.0,
             tile_size: 16,

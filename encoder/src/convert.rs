@@ -11,15 +11,15 @@ use crate::output::{write_chunks, PendingChunk};
 use crate::{EncodeError, FormatVersion, Progress};
 
 /// Reads the stream `src` (named `name` in errors) and writes it to `out` in `version`
-/// (`zstd_level` for version 1's payloads, lanes cut at `lane_bytes` in version 2's:
-/// `EncoderConfig::lane_bytes`). Returns the header written. The output decodes
+/// (`zstd_level` for version 1's payloads, `lanes` for version 2's and 3's:
+/// `EncoderConfig::lanes`). Returns the header written. The output decodes
 /// to the same planes as the input, bit for bit.
 pub fn convert<R: Read + Seek, W: Write + Seek>(
     name: &str,
     src: R,
     out: W,
     version: FormatVersion,
-    (zstd_level, lane_bytes): (i32, usize),
+    (zstd_level, lanes): (i32, crate::Lanes),
     progress: Progress,
 ) -> Result<Header, EncodeError> {
     let verify = |source| EncodeError::Verify {
@@ -91,7 +91,7 @@ pub fn convert<R: Read + Seek, W: Write + Seek>(
         &mut chunks,
         &tiles,
         version,
-        (zstd_level, lane_bytes),
+        (zstd_level, lanes),
         progress,
     )?;
     write_chunks(out, header, &chunks)

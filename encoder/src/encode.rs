@@ -243,7 +243,7 @@ pub(crate) fn code_sequence(
         &mut chunks,
         &tilemaps,
         cfg.format,
-        (cfg.zstd_level, cfg.lane_bytes),
+        (cfg.zstd_level, cfg.lanes),
         progress,
     )?;
     Ok(Coded {

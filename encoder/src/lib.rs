@@ -47,7 +47,7 @@ pub use config::{
 };
 pub use convert::convert;
 pub use input::{Frame, FrameSet, FrameSource, InputKind, MemorySource, SourceInfo};
-pub use payloads::LANE_BYTES;
+pub use payloads::{Lanes, LANE_BYTES, LANE_BYTES_3, SYMBOLS_PER_STATE};
 pub use report::{lossless_baseline, EncodeReport, Measured};
 pub use run::{encode, encode_file};
 /// Progress callback: (stage, done, total) — the bake's, so one bar serves both.

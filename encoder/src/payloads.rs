@@ -23,6 +23,34 @@ pub const HISTOGRAMS: usize = 16;
 /// where a region of 16 × 16 blocks often holds more than that and lanes cannot be cut
 /// finer).
 pub const LANE_BYTES: usize = 512;
+/// Version 3's default: a lane's states, not its length, shorten its chains, and each
+/// lane costs its lengths; lanes also end at 16,384 symbols, which binds first on most
+/// planes.
+pub const LANE_BYTES_3: usize = 16_384;
+/// Version 3: a lane of n symbols has ⌈n / this⌉ rANS states by default
+/// (`Lanes::symbols_per_state`).
+pub const SYMBOLS_PER_STATE: u64 = 1024;
+
+/// How versions 2 and 3 cut their lanes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Lanes {
+    /// The coded size at which a lane is cut (0: a lane per region of 16 × 16 blocks);
+    /// `None`: the version's default, [`LANE_BYTES`] or [`LANE_BYTES_3`].
+    pub bytes: Option<usize>,
+    /// Version 3: a lane of n symbols has ⌈n / this⌉ states (1 to 64), decoded side by
+    /// side; fewer symbols a state shorten a GPU's serial chains for 4–6 bytes a state
+    /// (BENCHMARKS.md, "Several rANS states a lane").
+    pub symbols_per_state: u64,
+}
+
+impl Default for Lanes {
+    fn default() -> Lanes {
+        Lanes {
+            bytes: None,
+            symbols_per_state: SYMBOLS_PER_STATE,
+        }
+    }
+}
 
 /// Which version of the format to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -34,6 +62,28 @@ pub enum FormatVersion {
     /// decoder thread decodes its sections to pairs, 13–29× the time of version 1's zstd
     /// (the GPU can decode them as coded, `DecodeShape::lanes`, off by default).
     V2,
+    /// Version 3 (3.0): version 2's coding with several rANS states a lane, each taking
+    /// the lane's groups by place, so that a GPU decodes a lane's symbols several at a
+    /// time. Players before version 3 refuse it; this player decodes its sections to
+    /// pairs on the decoder thread.
+    V3,
+}
+
+impl FormatVersion {
+    /// The lane shape of this version with `lanes` (`None`: version 1 has no lanes).
+    pub fn lane_shape(self, lanes: Lanes) -> Option<vbim_format::plane2::LaneShape> {
+        match self {
+            FormatVersion::V1 => None,
+            FormatVersion::V2 => Some(vbim_format::plane2::LaneShape {
+                bytes: lanes.bytes.unwrap_or(LANE_BYTES),
+                symbols_per_state: None,
+            }),
+            FormatVersion::V3 => Some(vbim_format::plane2::LaneShape {
+                bytes: lanes.bytes.unwrap_or(LANE_BYTES_3),
+                symbols_per_state: Some(lanes.symbols_per_state.max(1)),
+            }),
+        }
+    }
 }
 
 /// Codes every pending payload (`raw`) for `version`, and sets the header's coding.
@@ -43,7 +93,7 @@ pub(crate) fn code(
     chunks: &mut [PendingChunk],
     tiles: &[TileMap],
     version: FormatVersion,
-    (zstd_level, lane_bytes): (i32, usize),
+    (zstd_level, lanes): (i32, Lanes),
     progress: Progress,
 ) -> Result<(), EncodeError> {
     let what = |c: &PendingChunk| -> Result<Payload, EncodeError> {
@@ -61,8 +111,8 @@ pub(crate) fn code(
         let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         progress(stage, d, n);
     };
-    match version {
-        FormatVersion::V1 => {
+    match version.lane_shape(lanes) {
+        None => {
             header.coding = Coding::Pairs;
             chunks.par_iter_mut().filter(|c| c.raw).for_each(|c| {
                 c.bytes = zstd::bulk::compress(&c.bytes, zstd_level).expect("zstd");
@@ -70,7 +120,7 @@ pub(crate) fn code(
                 tick("compress");
             });
         }
-        FormatVersion::V2 => {
+        Some(shape) => {
             let counts = chunks
                 .par_iter()
                 .filter(|c| c.raw)
@@ -89,11 +139,11 @@ pub(crate) fn code(
                     },
                 )?;
             let maps: Vec<ContextMap> = counts.par_iter().map(|f| map_of(f)).collect();
-            header.coding = Coding::Lanes(maps.clone());
+            header.coding = Coding::Lanes(maps.clone(), shape.layout());
             done.store(0, std::sync::atomic::Ordering::Relaxed);
             let h = &*header;
             chunks.par_iter_mut().filter(|c| c.raw).try_for_each(|c| {
-                c.bytes = payload2::encode(h, what(c)?, &c.bytes, &maps, lane_bytes)?;
+                c.bytes = payload2::encode(h, what(c)?, &c.bytes, &maps, shape)?;
                 c.raw = false;
                 tick("entropy code");
                 Ok::<_, EncodeError>(())

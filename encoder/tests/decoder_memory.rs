@@ -50,12 +50,13 @@ fn day(w: usize, h: usize, n: usize) -> MemorySource {
     MemorySource::new("day", w, h, 3, InputKind::Hdr, frames)
 }
 
-/// Both format versions, one after the other: the counter sees every thread of the
+/// Every format version, one after the other: the counter sees every thread of the
 /// process, so this binary holds one test.
 #[test]
 fn the_decoder_holds_no_more_than_its_limit_check_counts() {
     holds_no_more_than_counted(FormatVersion::V1);
     holds_no_more_than_counted(FormatVersion::V2);
+    holds_no_more_than_counted(FormatVersion::V3);
 }
 
 fn holds_no_more_than_counted(format: FormatVersion) {

@@ -78,7 +78,7 @@ fn converted(bytes: &[u8], to: FormatVersion) -> Vec<u8> {
         to,
         (
             EncoderConfig::preset(Preset::Default).zstd_level,
-            vbim_encoder::LANE_BYTES,
+            vbim_encoder::Lanes::default(),
         ),
         &|_, _, _| {},
     )
@@ -87,20 +87,26 @@ fn converted(bytes: &[u8], to: FormatVersion) -> Vec<u8> {
 }
 
 #[test]
-fn version_2_decodes_as_version_1_in_fewer_bytes_and_converts_both_ways() {
+fn versions_2_and_3_decode_as_version_1_in_fewer_bytes_and_convert_every_way() {
     let v1 = encoded(FormatVersion::V1);
     let v2 = encoded(FormatVersion::V2);
+    let v3 = encoded(FormatVersion::V3);
     let major = |b: &[u8]| {
         Reader::open(Cursor::new(b))
             .unwrap()
             .header()
             .version_major()
     };
-    assert_eq!((major(&v1), major(&v2)), (1, 2));
+    assert_eq!((major(&v1), major(&v2), major(&v3)), (1, 2, 3));
     assert_eq!(frames(&v1), frames(&v2), "the same planes, bit for bit");
-    let (p1, p2) = (payload_bytes(&v1), payload_bytes(&v2));
+    assert_eq!(frames(&v1), frames(&v3), "the same planes, bit for bit");
+    let (p1, p2, p3) = (payload_bytes(&v1), payload_bytes(&v2), payload_bytes(&v3));
     assert!(p2 < p1, "version 2's payloads {p2} B, version 1's {p1} B");
+    // Version 3's states cost their final values and lengths.
+    assert!(p3 < p1 && p3 >= p2, "version 3's payloads {p3} B, 2's {p2} B, 1's {p1} B");
     // The same payloads learn the same maps: converting is encoding in the other version.
     assert_eq!(converted(&v1, FormatVersion::V2), v2);
     assert_eq!(converted(&v2, FormatVersion::V1), v1);
+    assert_eq!(converted(&v2, FormatVersion::V3), v3);
+    assert_eq!(converted(&v3, FormatVersion::V2), v2);
 }

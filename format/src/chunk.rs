@@ -88,7 +88,7 @@ pub fn payload_limit(h: &Header, blocks: usize, steps: usize, stored: usize) -> 
 pub fn payload(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
     match h.coding {
         Coding::Pairs => decompress(bytes, limit),
-        Coding::Lanes(_) => payload2::to_pairs(h, what, bytes, limit),
+        Coding::Lanes(..) => payload2::to_pairs(h, what, bytes, limit),
     }
 }
 

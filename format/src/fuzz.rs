@@ -108,12 +108,15 @@ pub fn chunks(data: &[u8]) {
     if let Ok(z) = zstd::bulk::compress(payload, 1) {
         payloads(&h, &z, d);
     }
-    payloads(&small_header_2(a, b, c, d), payload, d);
+    for layout in [plane2::Layout::OneState, plane2::Layout::States] {
+        payloads(&small_header_2(a, b, c, d, layout), payload, d);
+    }
 }
 
-/// [`chunks`]' version 2 header: [`small_header`]'s, with context maps of 1 to 3 clusters
-/// a family that `d` picks, the even clusters with a file-wide table of small tokens.
-pub fn small_header_2(a: u8, b: u8, c: u8, d: u8) -> Header {
+/// [`chunks`]' version 2 or 3 header (as `layout` says): [`small_header`]'s, with context
+/// maps of 1 to 3 clusters a family that `d` picks, the even clusters with a file-wide
+/// table of small tokens.
+pub fn small_header_2(a: u8, b: u8, c: u8, d: u8, layout: plane2::Layout) -> Header {
     let table = crate::ans::Histogram::from_counts(&[30, 20, 10, 5, 2, 1]);
     let maps = (0..plane2::FAMILIES)
         .map(|f| {
@@ -130,7 +133,7 @@ pub fn small_header_2(a: u8, b: u8, c: u8, d: u8) -> Header {
         })
         .collect();
     Header {
-        coding: crate::Coding::Lanes(maps),
+        coding: crate::Coding::Lanes(maps, layout),
         ..small_header(a, b, c, d)
     }
 }
@@ -220,10 +223,11 @@ fn small_header(a: u8, b: u8, c: u8, d: u8) -> Header {
     }
 }
 
-/// Arbitrary bytes as a format 2 coefficient section ([`crate::plane2`]). The first four
-/// bytes pick a plane of at most 40 × 40 blocks (a keyframe's, or a bubble plane's member
-/// tiles of 4 × 4 blocks) and a context map of 1 to 8 histograms; the rest is the section.
-/// What decodes must code again to the same blocks.
+/// Arbitrary bytes as a format 2 or 3 coefficient section ([`crate::plane2`]). The first
+/// four bytes pick a plane of at most 40 × 40 blocks (a keyframe's, or a bubble plane's
+/// member tiles of 4 × 4 blocks), a context map of 1 to 8 histograms and the lanes'
+/// layout (the top bit of the third: version 3's states); the rest is the section. What
+/// decodes must code again to the same blocks.
 pub fn plane2(data: &[u8]) {
     let Some((&[a, b, c, d], section)) = data.split_first_chunk::<4>() else {
         return;
@@ -237,10 +241,15 @@ pub fn plane2(data: &[u8]) {
         },
     };
     let maps = [map];
-    if let Ok(blocks) = plane2::decode(section, &[plane], &maps) {
-        let again = plane2::encode(&[(plane, &blocks[0][..])], &maps, 64)
+    let shape = plane2::LaneShape {
+        bytes: 64,
+        symbols_per_state: (c & 0x80 != 0).then_some(16),
+    };
+    let layout = shape.layout();
+    if let Ok(blocks) = plane2::decode(section, &[plane], &maps, layout) {
+        let again = plane2::encode(&[(plane, &blocks[0][..])], &maps, shape)
             .expect("decoded blocks code again");
-        let back = plane2::decode(&again, &[plane], &maps).expect("and decode");
+        let back = plane2::decode(&again, &[plane], &maps, layout).expect("and decode");
         assert!(
             back == blocks,
             "a section's blocks did not survive coding again"

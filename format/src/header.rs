@@ -5,7 +5,7 @@ use crate::checksum::xxh3;
 use crate::limits::{
     MAX_CHUNKS, MAX_DEGREE, MAX_DIMENSION, MAX_FPS, MAX_FRAMES, MAX_LOG_TOE, MIN_FPS,
 };
-use crate::plane2::{ContextMap, FAMILIES};
+use crate::plane2::{ContextMap, Layout, FAMILIES};
 use crate::{FormatError, Result};
 
 /// Bytes of one index entry (the index, which follows the header, is `chunk_count` of them).
@@ -14,18 +14,18 @@ pub const ENTRY_SIZE: usize = 40;
 /// `«VBIM»\r\n`: a non-ASCII first byte catches 7-bit transfers, CR LF catches newline
 /// conversion (the same trick as PNG and KTX2).
 pub const MAGIC: [u8; 8] = [0xAB, b'V', b'B', b'I', b'M', 0xBB, 0x0D, 0x0A];
-/// The newest major version this crate reads and writes. It reads versions 1 and 2 and
-/// refuses any other; they differ in how keyframe and coefficient chunks are coded
+/// The newest major version this crate reads and writes. It reads versions 1, 2 and 3
+/// and refuses any other; they differ in how keyframe and coefficient chunks are coded
 /// ([`Coding`]).
-pub const VERSION_MAJOR: u16 = 2;
-/// The minor version this crate writes with major version 2: a reader accepts any (they
-/// only append header fields and add optional chunks). Version 1 files are written as 1.1,
-/// which appended [`Header::largest_payload`] to 1.0.
+pub const VERSION_MAJOR: u16 = 3;
+/// The minor version this crate writes with major versions 2 and 3: a reader accepts any
+/// (they only append header fields and add optional chunks). Version 1 files are written
+/// as 1.1, which appended [`Header::largest_payload`] to 1.0.
 pub const VERSION_MINOR: u16 = 0;
 /// Bytes of a version 1.0 header: the shortest a reader accepts. Later minor versions
 /// append fields before the header's checksum; readers skip what they do not know.
 pub const HEADER_SIZE: usize = 192;
-/// Bytes of a version 1.1 header; a version 2.0 header appends its context maps.
+/// Bytes of a version 1.1 header; a version 2.0 or 3.0 header appends its context maps.
 pub const HEADER_SIZE_1_1: usize = 200;
 /// The most bytes of context maps a header may hold: six families of 502 contexts take at
 /// most 2.3 kB, and each cluster's file-wide histogram at most 200 bytes (the encoder's 16
@@ -75,9 +75,10 @@ pub enum Coding {
     /// Version 1: each plane's blocks as (zero run, value) pairs, the payload compressed
     /// by zstd ([`crate::plane`]).
     Pairs,
-    /// Version 2: each payload's planes in rANS lanes ([`crate::plane2`]), coded with the
-    /// file's context maps (one per family, [`FAMILIES`]), which the header carries.
-    Lanes(Vec<ContextMap>),
+    /// Versions 2 and 3: each payload's planes in rANS lanes ([`crate::plane2`]), coded
+    /// with the file's context maps (one per family, [`FAMILIES`]), which the header
+    /// carries; one state a lane in version 2, several in version 3 (the layout).
+    Lanes(Vec<ContextMap>, Layout),
 }
 
 /// The file header: what the stream is (size, channels, frame rate, model) and where its parts are. `docs/FORMAT.md` gives the byte layout.
@@ -86,7 +87,7 @@ pub enum Coding {
 pub struct Header {
     /// Minor version of the writer.
     pub version_minor: u16,
-    /// How keyframes and coefficients are coded: the major version (1 or 2).
+    /// How keyframes and coefficients are coded: the major version (1, 2 or 3).
     pub coding: Coding,
     /// Lightmap width, texels.
     pub width: u32,
@@ -166,37 +167,47 @@ impl Header {
             .copied()
     }
 
-    /// The major version: 1 for zero-run pairs through zstd, 2 for rANS lanes.
+    /// The major version: 1 for zero-run pairs through zstd, 2 for rANS lanes of one
+    /// state, 3 for lanes of several.
     pub fn version_major(&self) -> u16 {
         match self.coding {
             Coding::Pairs => 1,
-            Coding::Lanes(_) => 2,
+            Coding::Lanes(_, Layout::OneState) => 2,
+            Coding::Lanes(_, Layout::States) => 3,
         }
     }
 
-    /// The file's context maps (version 2), one per family.
+    /// The file's context maps (versions 2 and 3), one per family.
     pub fn context_maps(&self) -> Option<&[ContextMap]> {
         match &self.coding {
             Coding::Pairs => None,
-            Coding::Lanes(maps) => Some(maps),
+            Coding::Lanes(maps, _) => Some(maps),
         }
     }
 
-    /// Bytes of this header as stored: 2.0's with its context maps; for version 1, 1.1's
+    /// How the file's sections lay out their lanes (versions 2 and 3).
+    pub fn lane_layout(&self) -> Option<Layout> {
+        match &self.coding {
+            Coding::Pairs => None,
+            Coding::Lanes(_, layout) => Some(*layout),
+        }
+    }
+
+    /// Bytes of this header as stored: 2.0 and 3.0 with their context maps; for version 1, 1.1's
     /// when it states the largest payload, else 1.0's.
     pub fn header_size(&self) -> usize {
         match &self.coding {
-            Coding::Lanes(_) => HEADER_SIZE_1_1 + 4 + self.context_maps_size(),
+            Coding::Lanes(..) => HEADER_SIZE_1_1 + 4 + self.context_maps_size(),
             Coding::Pairs if self.largest_payload.is_some() => HEADER_SIZE_1_1,
             Coding::Pairs => HEADER_SIZE,
         }
     }
 
-    /// Bytes of a 2.0 header's context maps as stored, after their length (0 for
+    /// Bytes of a 2.0 or 3.0 header's context maps as stored, after their length (0 for
     /// version 1).
     pub fn context_maps_size(&self) -> usize {
         match &self.coding {
-            Coding::Lanes(maps) => maps_bytes(maps).len(),
+            Coding::Lanes(maps, _) => maps_bytes(maps).len(),
             Coding::Pairs => 0,
         }
     }
@@ -246,7 +257,7 @@ impl Header {
             // Version 2 states it always (a header without it is refused on reading).
             w.put(&0u64.to_le_bytes());
         }
-        if let Coding::Lanes(maps) = &self.coding {
+        if let Coding::Lanes(maps, _) = &self.coding {
             let m = maps_bytes(maps);
             w.put(&(m.len() as u32).to_le_bytes());
             w.put(&m);
@@ -340,7 +351,7 @@ impl Header {
             p.preroll_ns = r.u64();
         }
         let index_checksum = r.u64();
-        // 1.1 appends the largest payload, 2.0 always has it. A header too short to hold it
+        // 1.1 appends the largest payload, 2.0 and 3.0 always have it. A header too short to hold it
         // is damaged.
         let largest_payload = match (major, version_minor, header_size) {
             (1, 0, _) => None,
@@ -354,7 +365,7 @@ impl Header {
         let coding = match major {
             1 => Coding::Pairs,
             _ => {
-                // 2.0 appends the context maps: their length, then the maps.
+                // 2.0 and 3.0 append the context maps: their length, then the maps.
                 let room = header_size - 8 - r.pos;
                 let len = if room >= 4 {
                     r.u32() as usize
@@ -366,7 +377,11 @@ impl Header {
                         "context maps of {len} bytes in a {header_size}-byte header"
                     )));
                 }
-                Coding::Lanes(read_maps(r.take(len))?)
+                let layout = match major {
+                    2 => Layout::OneState,
+                    _ => Layout::States,
+                };
+                Coding::Lanes(read_maps(r.take(len))?, layout)
             }
         };
         let h = Header {

@@ -181,63 +181,60 @@ pub fn context_counts(h: &Header, what: Payload, raw: &[u8]) -> Result<Vec<Vec<u
     plane2::context_counts(&input, plane2::FAMILIES)
 }
 
-/// Codes a version 1 payload before zstd as a version 2 payload with `maps`, cutting lanes
-/// where their coded size reaches `lane_bytes`.
+/// Codes a version 1 payload before zstd as a version 2 or 3 payload with `maps`, its
+/// lanes cut and given states as `shape` says (its layout: the version's).
 pub fn encode(
     h: &Header,
     what: Payload,
     raw: &[u8],
     maps: &[ContextMap],
-    lane_bytes: usize,
+    shape: plane2::LaneShape,
 ) -> Result<Vec<u8>> {
     let (head, planes) = planes(h, what, raw)?;
     let input: Vec<(plane2::Plane, &[[i32; N * N]])> = planes
         .iter()
         .map(|(s, b)| (geometry(h, s), &b[..]))
         .collect();
-    let section = plane2::encode(&input, maps, lane_bytes)?;
+    let section = plane2::encode(&input, maps, shape)?;
     let mut out = Vec::with_capacity(head + section.len());
     out.extend_from_slice(&raw[..head]);
     out.extend_from_slice(&section);
     Ok(out)
 }
 
-/// A version 2 payload's lanes' serial steps with `states` a lane, plane by plane
-/// ([`plane2::lane_symbols`]; one state: its symbols).
-pub fn lane_symbols(
-    h: &Header,
-    what: Payload,
-    bytes: &[u8],
-    states: plane2::Interleave,
-) -> Result<Vec<Vec<(u64, usize)>>> {
-    let (maps, head, shapes) = coded(h, what, bytes)?;
+/// A version 2 or 3 payload's lanes' steps and states, plane by plane
+/// ([`plane2::lane_symbols`]).
+pub fn lane_symbols(h: &Header, what: Payload, bytes: &[u8]) -> Result<Vec<Vec<(u64, usize)>>> {
+    let (maps, layout, head, shapes) = coded(h, what, bytes)?;
     let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
-    plane2::lane_symbols(&bytes[head..], &geometries, maps, states)
+    plane2::lane_symbols(&bytes[head..], &geometries, maps, layout)
 }
 
-/// What decoding a version 2 payload's section needs: the file's context maps, the head's
-/// length (within `bytes`: [`section_planes`] refuses a payload shorter than its head) and
-/// the planes' shapes.
+/// What decoding a version 2 or 3 payload's section needs: the file's context maps, its
+/// lanes' layout, the head's length (within `bytes`: [`section_planes`] refuses a payload
+/// shorter than its head) and the planes' shapes.
 fn coded<'h>(
     h: &'h Header,
     what: Payload,
     bytes: &[u8],
-) -> Result<(&'h [ContextMap], usize, Vec<Shape>)> {
-    let maps = h.context_maps().ok_or_else(|| {
-        FormatError::Invalid("a version 1 file has no coefficient sections".into())
-    })?;
+) -> Result<(&'h [ContextMap], plane2::Layout, usize, Vec<Shape>)> {
+    let (Some(maps), Some(layout)) = (h.context_maps(), h.lane_layout()) else {
+        return Err(FormatError::Invalid(
+            "a version 1 file has no coefficient sections".into(),
+        ));
+    };
     let (head, shapes) = shapes(h, what, bytes)?;
-    Ok((maps, head, shapes))
+    Ok((maps, layout, head, shapes))
 }
 
 /// A version 2 payload (`h` holds its file's context maps) as version 1's payload before
 /// zstd: the same head, then each plane's blocks as zero-run pairs. Refuses a payload
 /// whose pairs would pass `limit` bytes.
 pub fn to_pairs(h: &Header, what: Payload, bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
-    let (maps, head, shapes) = coded(h, what, bytes)?;
+    let (maps, layout, head, shapes) = coded(h, what, bytes)?;
     let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
     let mut out = bytes[..head].to_vec();
-    plane2::decode_each(&bytes[head..], &geometries, maps, |_, blocks| {
+    plane2::decode_each(&bytes[head..], &geometries, maps, layout, |_, blocks| {
         write_pairs(blocks, &mut out);
         if out.len() > limit {
             return Err(FormatError::Invalid(format!(
@@ -265,7 +262,10 @@ mod tests {
     fn section_planes_are_the_shapes_without_their_blocks() {
         let h = Header {
             version_minor: 0,
-            coding: crate::Coding::Lanes(vec![ContextMap::single(); plane2::FAMILIES]),
+            coding: crate::Coding::Lanes(
+                vec![ContextMap::single(); plane2::FAMILIES],
+                plane2::Layout::States,
+            ),
             width: 41,
             height: 23,
             channels: 3,

@@ -38,6 +38,8 @@
 //! and its words (LEB128 varints). Then every lane's words (16-bit, little-endian), plane
 //! after plane.
 
+use std::ops::Range;
+
 use crate::ans::{self, BitReader, BitWriter, Histogram, Symbol, TOKENS};
 use crate::dct::N;
 use crate::{varint, FormatError, Result};
@@ -53,6 +55,52 @@ pub const GROUP: usize = 4;
 pub const MAX_LANE_SYMBOLS: usize = 16_384;
 /// See [`MAX_LANE_SYMBOLS`].
 pub const MAX_LANE_REGIONS: usize = 1024;
+/// Groups in a region.
+pub const GROUPS: usize = (REGION / GROUP) * (REGION / GROUP);
+/// A version 3 lane's rANS states, at most (a GPU decoder runs them side by side, one
+/// invocation each, in one workgroup).
+pub const MAX_STATES: usize = 64;
+
+/// How a section lays out a plane's lanes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// Version 2: one rANS state a lane; per lane its regions and its words.
+    OneState,
+    /// Version 3: per lane its regions, its states s (1 to [`MAX_STATES`]) and each
+    /// state's words; group k of the lane (16 a region, in raster order within each of its
+    /// regions in turn) is coded by state k mod s, its flag and its blocks alike, so a lane
+    /// decodes s symbols at a time.
+    States,
+}
+
+/// Where an encoder cuts a plane's lanes and how many states it gives them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LaneShape {
+    /// A lane ends once its coded size reaches this (or it holds [`MAX_LANE_SYMBOLS`]
+    /// symbols or [`MAX_LANE_REGIONS`] regions).
+    pub bytes: usize,
+    /// `None`: version 2's layout, one state a lane. Otherwise version 3's: a lane of n
+    /// symbols has ⌈n / this⌉ states (1 to [`MAX_STATES`]).
+    pub symbols_per_state: Option<u64>,
+}
+
+impl LaneShape {
+    /// The layout a section coded in this shape has.
+    pub fn layout(&self) -> Layout {
+        match self.symbols_per_state {
+            None => Layout::OneState,
+            Some(_) => Layout::States,
+        }
+    }
+
+    /// The states of a lane of `symbols`.
+    pub fn states(&self, symbols: usize) -> usize {
+        match self.symbols_per_state {
+            None => 1,
+            Some(per) => (symbols as u64).div_ceil(per.max(1)).clamp(1, MAX_STATES as u64) as usize,
+        }
+    }
+}
 
 // Contexts, per family.
 const FLAG: usize = 0; // 6: even groups; odd groups by their empty neighbours (1 + 0–4)
@@ -179,13 +227,10 @@ fn bits_for(clusters: u8) -> u32 {
 /// What a walk over a plane's symbols does with each: the encoder records the value it is
 /// given, the decoder ignores it and returns the one it decodes.
 trait Coder {
-    fn code(&mut self, lane: usize, ctx: usize, value: u32) -> Result<u32>;
-    /// A group's flag (passes 0 and 1) or a block (passes 2 and 3) of `lane` begins:
-    /// the unit a decoder with several states per lane would hand to its next state.
-    /// `place` is the group's place in region-major order (16 a region), times 16, plus
-    /// the block's place in its group for a block.
+    fn code(&mut self, stream: usize, ctx: usize, value: u32) -> Result<u32>;
+    /// Pass `pass` (0–3) begins.
     #[inline(always)]
-    fn item(&mut self, _lane: usize, _pass: usize, _place: usize) {}
+    fn pass(&mut self, _pass: usize) {}
 }
 
 /// 0, −1, 1, −2, … → 0, 1, 2, 3, … (zig-zag, without overflow at `i32::MIN`).
@@ -294,12 +339,13 @@ fn grid_index(geo: &Geometry) -> Result<Vec<u32>> {
 }
 
 /// Walks a plane's four passes, coding every symbol through `coder`; `source` gives the
-/// blocks to code (the encoder), or nothing (the decoder). `lane_of` gives each region's
-/// lane. Returns the blocks, their DC restored, sparse.
+/// blocks to code (the encoder), or nothing (the decoder). `stream_of(region, group)`
+/// gives the rANS stream of a group (0–15, in raster order within its region). Returns
+/// the blocks, their DC restored, sparse.
 fn walk(
     geo: &Geometry,
     source: Option<&[[i32; N * N]]>,
-    lane_of: &impl Fn(usize) -> usize,
+    stream_of: &impl Fn(usize, usize) -> usize,
     coder: &mut impl Coder,
 ) -> Result<Decoded> {
     let (bw, bh) = geo.grid;
@@ -349,6 +395,7 @@ fn walk(
     let regions = rw * bh.div_ceil(REGION);
     let per = REGION / GROUP;
     for parity in 0..2 {
+        coder.pass(parity);
         for region in 0..regions {
             let (rx, ry) = ((region % rw) * per, (region / rw) * per);
             for gy in ry..(ry + per).min(gh) {
@@ -374,9 +421,8 @@ fn walk(
                     } else {
                         0
                     };
-                    let local = (gy - ry) * per + gx - rx;
-                    coder.item(lane_of(region), parity, (region * per * per + local) * 16);
-                    let v = coder.code(lane_of(region), FLAG + ctx, full[g] as u32)?;
+                    let stream = stream_of(region, (gy - ry) * per + gx - rx);
+                    let v = coder.code(stream, FLAG + ctx, full[g] as u32)?;
                     if v > 1 {
                         return Err(FormatError::Invalid(format!("group flag {v}")));
                     }
@@ -387,6 +433,7 @@ fn walk(
     }
     // Passes 3 and 4: the blocks of the groups with something.
     for parity in 0..2 {
+        coder.pass(2 + parity);
         for region in 0..regions {
             let (rx, ry) = ((region % rw) * REGION, (region / rw) * REGION);
             for y in ry..(ry + REGION).min(bh) {
@@ -399,10 +446,7 @@ fn walk(
                         continue;
                     };
                     debug_assert_eq!(region_of(x, y), region);
-                    let lane = lane_of(region);
-                    let local = (y - ry) / GROUP * (REGION / GROUP) + (x - rx) / GROUP;
-                    let within = (y % GROUP) * GROUP + x % GROUP;
-                    coder.item(lane, 2 + parity, (region * 16 + local) * 16 + within);
+                    let stream = stream_of(region, (y - ry) / GROUP * per + (x - rx) / GROUP);
                     let mut four_at = [0usize; 4];
                     let mut len = 0;
                     for &(dx, dy) in &FOUR {
@@ -424,14 +468,14 @@ fn walk(
                     };
                     let want = source.map(|s| &s[b]);
                     let r = unpack(coder.code(
-                        lane,
+                        stream,
                         DC + dc_ctx,
                         src_residual.as_ref().map_or(0, |r| pack(r[b])),
                     )?);
                     residual[b] = r;
                     let count_ctx = if odd { count_ctx } else { size_class(r) };
                     let nz = want.map_or(0, |q| q[1..].iter().filter(|&&v| v != 0).count());
-                    let nz = coder.code(lane, COUNT + count_ctx, nz as u32)? as usize;
+                    let nz = coder.code(stream, COUNT + count_ctx, nz as u32)? as usize;
                     if nz >= N * N {
                         return Err(FormatError::Invalid(format!(
                             "block ({x}, {y}): {nz} coefficients"
@@ -454,7 +498,7 @@ fn walk(
                         } else {
                             AC_EVEN + ctx
                         };
-                        let v = unpack(coder.code(lane, ctx, want.map_or(0, |q| pack(q[i])))?);
+                        let v = unpack(coder.code(stream, ctx, want.map_or(0, |q| pack(q[i])))?);
                         if v != 0 {
                             mask[b] |= 1 << i;
                             out.terms.push((i as u8, v));
@@ -540,8 +584,8 @@ impl Decoded {
 struct Record(Vec<(usize, usize, u32)>);
 
 impl Coder for Record {
-    fn code(&mut self, lane: usize, ctx: usize, value: u32) -> Result<u32> {
-        self.0.push((lane, ctx, value));
+    fn code(&mut self, stream: usize, ctx: usize, value: u32) -> Result<u32> {
+        self.0.push((stream, ctx, value));
         Ok(value)
     }
 }
@@ -560,7 +604,7 @@ pub fn context_counts(
             ));
         }
         let mut rec = Record(Vec::new());
-        walk(&p.geometry, Some(blocks), &|_| 0, &mut rec)?;
+        walk(&p.geometry, Some(blocks), &|_, _| 0, &mut rec)?;
         for (_, ctx, v) in rec.0 {
             counts[p.family][ctx * TOKENS + ans::hybrid_uint(v).0] += 1;
         }
@@ -568,14 +612,15 @@ pub fn context_counts(
     Ok(counts)
 }
 
-/// Codes a chunk's `planes` of `blocks` with `maps` (one per family), cutting lanes where
-/// their coded size reaches `lane_bytes`. Returns the coefficient section.
+/// Codes a chunk's `planes` of `blocks` with `maps` (one per family), in lanes cut and
+/// given states as `shape` says. Returns the coefficient section.
 pub fn encode(
     planes: &[(Plane, &[[i32; N * N]])],
     maps: &[ContextMap],
-    lane_bytes: usize,
+    shape: LaneShape,
 ) -> Result<Vec<u8>> {
-    // Every symbol, by plane, each with its region for now.
+    // Every symbol, by plane, each with its group's place for now: its region × 16 + its
+    // place in the region.
     let mut records = Vec::with_capacity(planes.len());
     for (p, blocks) in planes {
         if blocks.len() != p.geometry.order.len() {
@@ -584,7 +629,8 @@ pub fn encode(
             ));
         }
         let mut rec = Record(Vec::new());
-        walk(&p.geometry, Some(blocks), &|region| region, &mut rec)?;
+        let place = |region: usize, group: usize| region * GROUPS + group;
+        walk(&p.geometry, Some(blocks), &place, &mut rec)?;
         records.push(rec.0);
     }
     // The chunk's histograms: per family used, per cluster.
@@ -641,11 +687,11 @@ pub fn encode(
         }
     }
     let mut out = bits.finish();
-    // Lanes: runs of regions cut by size.
+    // Lanes: runs of regions cut by size; then, in version 3, states by symbols.
     let mut words = Vec::new();
     for ((p, _), rec) in planes.iter().zip(&records) {
         let map = &maps[p.family];
-        let symbols = |(_, ctx, v): (usize, usize, u32)| {
+        let symbols = |ctx: usize, v: u32| {
             let (t, n, raw) = ans::hybrid_uint(v);
             let histogram = place[p.family][map.of[ctx] as usize];
             [
@@ -663,9 +709,10 @@ pub fn encode(
         let regions = bw.div_ceil(REGION) * bh.div_ceil(REGION);
         let mut cost = vec![0.0f64; regions];
         let mut count = vec![0usize; regions];
-        for &(region, ctx, v) in rec {
+        for &(at, ctx, v) in rec {
+            let region = at / GROUPS;
             count[region] += 1;
-            for s in symbols((region, ctx, v)).into_iter().flatten() {
+            for s in symbols(ctx, v).into_iter().flatten() {
                 cost[region] += match s {
                     Symbol::Token { histogram, token } => {
                         list[histogram as usize].cost(token as usize)
@@ -674,40 +721,52 @@ pub fn encode(
                 };
             }
         }
-        let mut lanes: Vec<usize> = Vec::new(); // regions per lane
+        let mut lanes: Vec<(usize, usize)> = Vec::new(); // (regions, symbols) per lane
         let (mut run, mut bits, mut symbols_in) = (0usize, 0.0f64, 0usize);
         for (c, n) in cost.iter().zip(&count) {
             run += 1;
             bits += c;
             symbols_in += n;
-            if bits >= 8.0 * lane_bytes as f64
+            if bits >= 8.0 * shape.bytes as f64
                 || symbols_in >= MAX_LANE_SYMBOLS
                 || run == MAX_LANE_REGIONS
             {
-                lanes.push(run);
+                lanes.push((run, symbols_in));
                 (run, bits, symbols_in) = (0, 0.0, 0);
             }
         }
         if run > 0 || lanes.is_empty() {
-            lanes.push(run);
+            lanes.push((run, symbols_in));
         }
-        let mut lane_of = vec![0usize; regions];
-        let mut r = 0;
-        for (l, &n) in lanes.iter().enumerate() {
-            lane_of[r..r + n].fill(l);
-            r += n;
+        // Each region's lane, first region and first stream; each lane's states.
+        let mut of_region = vec![(0usize, 0usize, 0usize); regions];
+        let mut states = Vec::with_capacity(lanes.len());
+        let (mut r, mut streams) = (0, 0);
+        for &(n, symbols_in) in &lanes {
+            let k = shape.states(symbols_in);
+            of_region[r..r + n].fill((r, streams, k));
+            states.push(k);
+            (r, streams) = (r + n, streams + k);
+        }
+        let mut coded: Vec<Vec<Symbol>> = vec![Vec::new(); streams];
+        for &(at, ctx, v) in rec {
+            let (r0, s0, k) = of_region[at / GROUPS];
+            let stream = s0 + (at - r0 * GROUPS) % k;
+            coded[stream].extend(symbols(ctx, v).into_iter().flatten());
         }
         varint::put_u32(&mut out, lanes.len() as u32);
-        for (l, &n) in lanes.iter().enumerate() {
-            let coded: Vec<Symbol> = rec
-                .iter()
-                .filter(|s| lane_of[s.0] == l)
-                .flat_map(|&s| symbols(s).into_iter().flatten())
-                .collect();
-            let w = ans::encode(&coded, &list);
+        let mut next = 0;
+        for (&(n, _), &k) in lanes.iter().zip(&states) {
             varint::put_u32(&mut out, n as u32);
-            varint::put_u32(&mut out, w.len() as u32);
-            words.push(w);
+            if shape.symbols_per_state.is_some() {
+                varint::put_u32(&mut out, k as u32);
+            }
+            for stream in &coded[next..next + k] {
+                let w = ans::encode(stream, &list);
+                varint::put_u32(&mut out, w.len() as u32);
+                words.push(w);
+            }
+            next += k;
         }
     }
     for w in words.iter().flatten() {
@@ -732,111 +791,45 @@ fn used_families<'a>(
     Ok(used)
 }
 
-/// The decoder's lanes, one per lane of the plane being decoded.
-struct Lanes<'a, 'h> {
+/// The decoder's streams, those of every lane of the plane being decoded.
+struct Streams<'a, 'h> {
     decoders: Vec<ans::Decoder<'a>>,
     /// The histogram of each context (`None`: the chunk sent none).
     of: Vec<Option<&'h Histogram>>,
-    /// Each lane's serial steps so far with its states taking its items (groups' flags,
-    /// blocks) as [`Interleave`] says, stepping together ([`lane_symbols`]): with one
-    /// state, its symbols.
+    /// Each stream's symbols in the pass under way.
     symbols: Vec<u64>,
-    assign: Assign,
-    /// Per lane: the pass under way, the state of the item under way, items begun in the
-    /// pass, the lane's first group, and each state's symbols in the pass.
-    pass: Vec<(usize, usize, usize, usize, Vec<u64>)>,
+    /// Each lane's streams, and its steps so far ([`lane_symbols`]): per pass, its
+    /// busiest stream's symbols.
+    lanes: Vec<(Range<usize>, u64)>,
 }
 
-impl Lanes<'_, '_> {
-    /// Ends every lane's pass: its chain grows by its busiest state's symbols.
-    fn end_passes(&mut self) {
-        for (l, (_, _, items, _, per)) in self.pass.iter_mut().enumerate() {
-            self.symbols[l] += per.iter().copied().max().unwrap_or(0);
-            per.iter_mut().for_each(|s| *s = 0);
-            *items = 0;
+impl Streams<'_, '_> {
+    /// Ends a pass: each lane's steps grow by its busiest stream's symbols in it.
+    fn end_pass(&mut self) {
+        for (streams, steps) in &mut self.lanes {
+            *steps += self.symbols[streams.clone()].iter().max().copied().unwrap_or(0);
+            self.symbols[streams.clone()].fill(0);
         }
     }
 }
 
-/// How many rANS states a lane would have, and how they would share its items: what
-/// [`lane_symbols`] counts the serial steps of (a study for a coding whose lanes decode
-/// several symbols at once; version 2 has one state a lane).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Interleave {
-    /// States a lane, at most.
-    pub states: usize,
-    /// 0: every lane has `states`; otherwise one state per this many of the lane's
-    /// symbols (at least one, at most `states`), as an encoder would choose.
-    pub symbols_per_state: u64,
-    /// How states take a lane's items.
-    pub assign: Assign,
-}
-
-/// How the states of a lane ([`Interleave`]) take its items.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Assign {
-    /// Items in turn: the k-th group flag or coded block of a pass to state k mod the
-    /// states (a decoder must rank them).
-    Turn,
-    /// Groups by place: group k of the lane's regions (16 a region) to state k mod the
-    /// states, with all its blocks.
-    Group,
-    /// Blocks by place: block k of the lane's regions (256 a region, a group's 16 in a
-    /// row) to state k mod the states; a group's flag as its first block.
-    Block,
-}
-
-impl Interleave {
-    /// One state a lane: version 2 as it is.
-    pub const ONE: Interleave = Interleave {
-        states: 1,
-        symbols_per_state: 0,
-        assign: Assign::Turn,
-    };
-
-    /// The states of a lane of `symbols`.
-    pub fn of(&self, symbols: u64) -> usize {
-        match self.symbols_per_state {
-            0 => self.states.max(1),
-            s => (symbols.div_ceil(s) as usize).clamp(1, self.states.max(1)),
-        }
-    }
-}
-
-impl Coder for Lanes<'_, '_> {
+impl Coder for Streams<'_, '_> {
     #[inline(always)]
-    fn code(&mut self, lane: usize, ctx: usize, _: u32) -> Result<u32> {
+    fn code(&mut self, stream: usize, ctx: usize, _: u32) -> Result<u32> {
         let Some(h) = self.of[ctx] else {
             return Err(FormatError::Invalid(format!(
                 "context {ctx} coded without a histogram"
             )));
         };
-        let d = &mut self.decoders[lane];
-        let (_, state, _, _, per) = &mut self.pass[lane];
-        per[*state] += 1;
+        let d = &mut self.decoders[stream];
+        self.symbols[stream] += 1;
         let t = d.token(h)?;
         let raw = d.raw(ans::raw_bits_of(t))?;
         Ok(ans::hybrid_value(t, raw))
     }
 
-    #[inline(always)]
-    fn item(&mut self, lane: usize, pass: usize, place: usize) {
-        if self.pass[lane].0 != pass {
-            self.end_passes();
-            self.pass.iter_mut().for_each(|p| p.0 = pass);
-        }
-        let p = &mut self.pass[lane];
-        if p.3 == usize::MAX {
-            p.3 = place / 256 * 256;
-        }
-        let width = p.4.len();
-        let at = place - p.3.min(place);
-        p.1 = match self.assign {
-            Assign::Turn => p.2 % width,
-            Assign::Group => at / 16 % width,
-            Assign::Block => at % width,
-        };
-        p.2 += 1;
+    fn pass(&mut self, _: usize) {
+        self.end_pass();
     }
 }
 
@@ -873,16 +866,25 @@ pub fn file_histograms(maps: &[ContextMap]) -> impl Iterator<Item = (usize, usiz
 /// One plane of a [`Section`].
 #[derive(Clone, Debug)]
 pub struct SectionPlane {
-    /// Each lane's (first region, end region, first word, end word).
+    /// Each lane's (first region, end region, first stream, end stream): its regions and
+    /// its states' word runs in `streams` (one in version 2).
     pub lanes: Vec<(usize, usize, usize, usize)>,
+    /// Each stream's (first word, end word) in the section's words.
+    pub streams: Vec<(usize, usize)>,
     /// The histogram of each of the [`CONTEXTS`] contexts.
     pub histogram_of: Vec<u16>,
 }
 
 impl Section {
-    /// Parses a coefficient section [`encode`] wrote for `planes` with the file's `maps`.
-    pub fn parse(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Section> {
-        let mut s = Section::parse_layout(bytes, planes, maps)?;
+    /// Parses a coefficient section [`encode`] wrote for `planes` with the file's `maps`,
+    /// its lanes laid out as `layout`.
+    pub fn parse(
+        bytes: &[u8],
+        planes: &[Plane],
+        maps: &[ContextMap],
+        layout: Layout,
+    ) -> Result<Section> {
+        let mut s = Section::parse_layout(bytes, planes, maps, layout)?;
         s.words = bytes[s.words_at..]
             .chunks_exact(2)
             .map(|b| u16::from_le_bytes([b[0], b[1]]))
@@ -893,7 +895,12 @@ impl Section {
     /// [`Section::parse`] without copying the lanes' words out (`words` stays empty): a
     /// GPU decoder uploads them from `bytes[words_at..]` as they are. Only the planes'
     /// families and grids are read, not their blocks' places.
-    pub fn parse_layout(bytes: &[u8], planes: &[Plane], maps: &[ContextMap]) -> Result<Section> {
+    pub fn parse_layout(
+        bytes: &[u8],
+        planes: &[Plane],
+        maps: &[ContextMap],
+        layout: Layout,
+    ) -> Result<Section> {
         let used = used_families(planes.iter(), maps.len())?;
         let mut r = BitReader::new(bytes);
         let mut place = vec![Vec::new(); maps.len()];
@@ -944,21 +951,36 @@ impl Section {
                 )));
             }
             let mut lanes = Vec::with_capacity(count);
+            let mut streams = Vec::with_capacity(count);
             let mut covered = 0usize;
             for _ in 0..count {
                 let n = varint::get_u32(bytes, &mut at)? as usize;
-                let w = varint::get_u32(bytes, &mut at)? as usize;
-                // What a GPU decoder's lane may loop over (the encoder's caps), and a
-                // state to start from.
-                if n > MAX_LANE_REGIONS || w < 2 {
+                let k = match layout {
+                    Layout::OneState => 1,
+                    Layout::States => varint::get_u32(bytes, &mut at)? as usize,
+                };
+                // What a GPU decoder's lane may loop over (the encoder's caps).
+                if n > MAX_LANE_REGIONS || k == 0 || k > MAX_STATES {
                     return Err(FormatError::Invalid(format!(
-                        "a lane of {n} regions and {w} words (at most {MAX_LANE_REGIONS} regions, at least 2 words)"
+                        "a lane of {n} regions and {k} states (at most {MAX_LANE_REGIONS} regions, 1 to {MAX_STATES} states)"
                     )));
                 }
+                let first = streams.len();
+                for _ in 0..k {
+                    let w = varint::get_u32(bytes, &mut at)? as usize;
+                    // A state to start from.
+                    if w < 2 {
+                        return Err(FormatError::Invalid(format!(
+                            "a lane's stream of {w} words (at least 2, its state)"
+                        )));
+                    }
+                    let words_end = total_words.saturating_add(w);
+                    streams.push((total_words, words_end));
+                    total_words = words_end;
+                }
                 let end = covered.saturating_add(n);
-                let words_end = total_words.saturating_add(w);
-                lanes.push((covered, end, total_words, words_end));
-                (covered, total_words) = (end, words_end);
+                lanes.push((covered, end, first, streams.len()));
+                covered = end;
             }
             if covered != regions {
                 return Err(FormatError::Invalid(format!(
@@ -968,6 +990,7 @@ impl Section {
             let map = &maps[p.family];
             out.push(SectionPlane {
                 lanes,
+                streams,
                 histogram_of: map
                     .of
                     .iter()
@@ -992,15 +1015,16 @@ impl Section {
     }
 }
 
-/// Decodes a coefficient section [`encode`] wrote for `planes`, with the file's `maps`.
-/// Returns each plane's blocks in its places' order.
+/// Decodes a coefficient section [`encode`] wrote for `planes`, with the file's `maps`,
+/// its lanes laid out as `layout`. Returns each plane's blocks in its places' order.
 pub fn decode(
     bytes: &[u8],
     planes: &[Plane],
     maps: &[ContextMap],
+    layout: Layout,
 ) -> Result<Vec<Vec<[i32; N * N]>>> {
     let mut out = Vec::with_capacity(planes.len());
-    decode_each(bytes, planes, maps, |_, blocks| {
+    decode_each(bytes, planes, maps, layout, |_, blocks| {
         out.push(blocks.dense());
         Ok(())
     })?;
@@ -1013,81 +1037,71 @@ pub fn decode_each(
     bytes: &[u8],
     planes: &[Plane],
     maps: &[ContextMap],
+    layout: Layout,
     mut each: impl FnMut(usize, &Decoded) -> Result<()>,
 ) -> Result<()> {
-    decode_counted(bytes, planes, maps, Interleave::ONE, &mut |i, blocks, _| {
-        each(i, blocks)
-    })
+    decode_counted(bytes, planes, maps, layout, |i, blocks, _| each(i, blocks))
 }
 
-/// Each plane's lanes' symbols (a token and its raw bits are one), plane by plane: the
-/// serial chains a decoder of one state per lane walks, whatever the words they take (a
-/// likely zero costs a fraction of a bit, and a step all the same); with several states a
-/// lane ([`Interleave`]), its steps: per pass, its busiest state's symbols. Each lane's
-/// steps and states. Decodes the section.
+/// Each plane's lanes' serial steps, plane by plane: with one state a lane, its symbols
+/// (a token and its raw bits are one), whatever the words they take (a likely zero costs
+/// a fraction of a bit, and a step all the same); with several, per pass, its busiest
+/// state's symbols, since its states decode side by side. Each lane's steps and states.
+/// Decodes the section.
 pub fn lane_symbols(
     bytes: &[u8],
     planes: &[Plane],
     maps: &[ContextMap],
-    states: Interleave,
+    layout: Layout,
 ) -> Result<Vec<Vec<(u64, usize)>>> {
     let mut out = Vec::with_capacity(planes.len());
-    decode_counted(bytes, planes, maps, states, &mut |_, _, symbols| {
-        out.push(symbols.to_vec());
+    decode_counted(bytes, planes, maps, layout, |_, _, lanes| {
+        out.push(lanes.to_vec());
         Ok(())
     })?;
     Ok(out)
 }
 
-/// What [`decode_counted`] hands each plane to: its index, blocks, and each lane's steps
-/// and states.
-type PlaneDone<'a> = dyn FnMut(usize, &Decoded, &[(u64, usize)]) -> Result<()> + 'a;
-
-/// [`decode_each`], handing on each lane's symbols too.
+/// [`decode_each`], handing on each lane's steps and states too.
 fn decode_counted(
     bytes: &[u8],
     planes: &[Plane],
     maps: &[ContextMap],
-    states: Interleave,
-    each: &mut PlaneDone,
+    layout: Layout,
+    mut each: impl FnMut(usize, &Decoded, &[(u64, usize)]) -> Result<()>,
 ) -> Result<()> {
-    let section = Section::parse(bytes, planes, maps)?;
-    // States chosen by the lanes' symbols: count them first.
-    let mut symbols = Vec::new();
-    if states.symbols_per_state > 0 {
-        decode_counted(bytes, planes, maps, Interleave::ONE, &mut |_, _, lanes| {
-            symbols.push(lanes.iter().map(|l| l.0).collect::<Vec<u64>>());
-            Ok(())
-        })?;
-    }
+    let section = Section::parse(bytes, planes, maps, layout)?;
     for (i, (p, sp)) in planes.iter().zip(&section.planes).enumerate() {
-        let mut decoders = Vec::with_capacity(sp.lanes.len());
-        let mut lane_of = Vec::new();
-        for (l, &(r0, r1, w0, w1)) in sp.lanes.iter().enumerate() {
+        let mut decoders = Vec::with_capacity(sp.streams.len());
+        for &(w0, w1) in &sp.streams {
             decoders.push(ans::Decoder::new(&section.words[w0..w1])?);
-            lane_of.extend(std::iter::repeat_n(l, r1 - r0));
         }
-        let mut lanes = Lanes {
+        // Each region's lane: its first region, first stream and states.
+        let mut of_region = Vec::new();
+        for &(r0, r1, s0, s1) in &sp.lanes {
+            of_region.extend(std::iter::repeat_n((r0, s0, s1 - s0), r1 - r0));
+        }
+        let stream_of = |region: usize, group: usize| {
+            let (r0, s0, k) = of_region[region];
+            s0 + ((region - r0) * GROUPS + group) % k
+        };
+        let mut streams = Streams {
             symbols: vec![0; decoders.len()],
-            assign: states.assign,
-            pass: (0..sp.lanes.len())
-                .map(|l| {
-                    let n = symbols.get(i).map_or(0, |s: &Vec<u64>| s[l]);
-                    (0, 0, 0, usize::MAX, vec![0; states.of(n)])
-                })
+            lanes: (sp.lanes.iter())
+                .map(|&(_, _, s0, s1)| (s0..s1, 0))
                 .collect(),
             decoders,
             of: (sp.histogram_of.iter())
                 .map(|&h| section.histograms.get(h as usize))
                 .collect(),
         };
-        let blocks = walk(&p.geometry, None, &|region| lane_of[region], &mut lanes)?;
-        lanes.end_passes();
-        for d in &lanes.decoders {
+        let blocks = walk(&p.geometry, None, &stream_of, &mut streams)?;
+        streams.end_pass();
+        for d in &streams.decoders {
             d.finish()?;
         }
-        let counted: Vec<(u64, usize)> = (lanes.symbols.iter().zip(&lanes.pass))
-            .map(|(&n, p)| (n, p.4.len()))
+        let counted: Vec<(u64, usize)> = (streams.lanes.iter())
+            .map(|(r, steps)| (*steps, r.len()))
             .collect();
         each(i, &blocks, &counted)?;
     }
@@ -1134,14 +1148,22 @@ mod tests {
             .collect()
     }
 
+    /// Lanes cut at `bytes`: version 2's layout, or with `states`, version 3's.
+    fn shape(bytes: usize, states: Option<u64>) -> LaneShape {
+        LaneShape {
+            bytes,
+            symbols_per_state: states,
+        }
+    }
+
     fn round_trip(
         planes: &[(Plane, &[[i32; N * N]])],
         maps: &[ContextMap],
-        lane_bytes: usize,
+        shape: LaneShape,
     ) -> usize {
-        let bytes = encode(planes, maps, lane_bytes).unwrap();
+        let bytes = encode(planes, maps, shape).unwrap();
         let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
-        let got = decode(&bytes, &shapes, maps).unwrap();
+        let got = decode(&bytes, &shapes, maps, shape.layout()).unwrap();
         for ((_, want), got) in planes.iter().zip(&got) {
             assert_eq!(*want, &got[..]);
         }
@@ -1210,53 +1232,51 @@ mod tests {
                 })
                 .collect(),
         };
-        for maps in [
+        let maps_tried = [
             vec![ContextMap::single(), ContextMap::single()],
             vec![spread.clone(), ContextMap::single()],
-        ] {
+        ];
+        for (maps, states) in maps_tried.iter().flat_map(|m| [(m, None), (m, Some(16))]) {
             // A GPU decoder's view: the file's histograms by their place among the
             // file's, the words where they lie.
-            let bytes = encode(&planes, &maps, 64).unwrap();
+            let shape = shape(64, states);
+            let bytes = encode(&planes, maps, shape).unwrap();
             let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
-            let layout = Section::parse_layout(&bytes, &shapes, &maps).unwrap();
-            let full = Section::parse(&bytes, &shapes, &maps).unwrap();
+            let layout = Section::parse_layout(&bytes, &shapes, maps, shape.layout()).unwrap();
+            let full = Section::parse(&bytes, &shapes, maps, shape.layout()).unwrap();
             assert!(layout.words.is_empty());
             assert_eq!(bytes.len() - layout.words_at, 2 * full.words.len());
-            let file: Vec<&Histogram> = file_histograms(&maps).map(|(_, _, h)| h).collect();
+            let file: Vec<&Histogram> = file_histograms(maps).map(|(_, _, h)| h).collect();
             for (h, g) in full.histograms.iter().zip(&full.file) {
                 if let Some(g) = g {
                     assert_eq!(file[*g as usize], h);
                 }
             }
-            // Every symbol the encoder coded is one step of one lane's chain.
-            let symbols = lane_symbols(&bytes, &shapes, &maps, Interleave::ONE).unwrap();
-            // With states taking items in turn, a lane's chain is no longer than its
-            // symbols and no shorter than their share.
-            let eight = Interleave {
-                states: 8,
-                ..Interleave::ONE
-            };
-            let wide = lane_symbols(&bytes, &shapes, &maps, eight).unwrap();
-            for (&(one, _), &(eight, w)) in symbols.iter().flatten().zip(wide.iter().flatten()) {
-                assert!(
-                    w == 8 && eight <= one && eight >= one.div_ceil(8),
-                    "{eight} of {one}"
-                );
-            }
-            for ((p, source), (lanes, sp)) in planes.iter().zip(symbols.iter().zip(&full.planes)) {
+            // With one state a lane, every symbol the encoder coded is one step of one
+            // lane's chain; with several, a lane's states share its symbols (a state per
+            // 16 of them here), and its chain is its busiest state's in each pass.
+            let steps = lane_symbols(&bytes, &shapes, maps, shape.layout()).unwrap();
+            for ((p, source), (lanes, sp)) in planes.iter().zip(steps.iter().zip(&full.planes)) {
                 let mut record = Record(Vec::new());
-                walk(&p.geometry, Some(source), &|_| 0, &mut record).unwrap();
-                assert_eq!(
-                    lanes.iter().map(|l| l.0).sum::<u64>(),
-                    record.0.len() as u64
-                );
+                walk(&p.geometry, Some(source), &|_, _| 0, &mut record).unwrap();
+                let symbols = record.0.len() as u64;
+                let (chains, streams) = lanes.iter().fold((0, 0), |a, l| (a.0 + l.0, a.1 + l.1));
                 assert_eq!(lanes.len(), sp.lanes.len());
-                assert!(lanes.len() > 1 && lanes.iter().all(|&(n, w)| n > 0 && w == 1));
+                assert_eq!(streams, sp.streams.len());
+                assert!(lanes.len() > 1 && lanes.iter().all(|&(n, _)| n > 0));
+                match states {
+                    None => assert_eq!((chains, streams), (symbols, lanes.len())),
+                    Some(_) => assert!(
+                        streams > 2 * lanes.len() && chains < symbols / 2,
+                        "{chains} steps of {symbols} symbols in {streams} states"
+                    ),
+                }
             }
-            let one = round_trip(&planes, &maps, usize::MAX);
-            let many = round_trip(&planes, &maps, 64);
-            // Lanes cost their states and lengths, a few bytes each.
-            assert!(many > one && many < one + one / 4, "{many} against {one}");
+            let one = round_trip(&planes, maps, LaneShape { bytes: usize::MAX, ..shape });
+            let many = round_trip(&planes, maps, shape);
+            // Lanes and states cost their final states and lengths, a few bytes each.
+            let streams: usize = full.planes.iter().map(|p| p.streams.len()).sum();
+            assert!(many > one && many < one + 7 * streams, "{many} against {one}");
         }
         // An empty plane, and a plane whose blocks are all zero.
         let zeros = vec![[0i32; N * N]; key.len()];
@@ -1285,9 +1305,11 @@ mod tests {
                 &[][..],
             ),
         ];
-        let bytes = round_trip(&planes, &[ContextMap::single()], 4096);
-        // All zero: a flag per group at a near-certain probability.
-        assert!(bytes < 40, "{bytes} bytes for nothing");
+        for states in [None, Some(1024)] {
+            let bytes = round_trip(&planes, &[ContextMap::single()], shape(4096, states));
+            // All zero: a flag per group at a near-certain probability.
+            assert!(bytes < 40, "{bytes} bytes for nothing");
+        }
     }
 
     #[test]
@@ -1317,20 +1339,35 @@ mod tests {
             },
         };
         let maps = [ContextMap::single()];
-        let good = encode(&[(plane, &q[..])], &maps, 256).unwrap();
-        // Any single byte changed or cut: an error or other blocks, never a panic.
-        for i in 0..good.len() {
-            for flip in [1u8, 0x80] {
-                let mut bad = good.clone();
-                bad[i] ^= flip;
-                if let Ok(got) = decode(&bad, &[plane], &maps) {
-                    assert_eq!(got[0].len(), q.len());
+        for shape in [shape(256, None), shape(256, Some(64))] {
+            let layout = shape.layout();
+            let good = encode(&[(plane, &q[..])], &maps, shape).unwrap();
+            // Any single byte changed or cut: an error or other blocks, never a panic.
+            for i in 0..good.len() {
+                for flip in [1u8, 0x80] {
+                    let mut bad = good.clone();
+                    bad[i] ^= flip;
+                    if let Ok(got) = decode(&bad, &[plane], &maps, layout) {
+                        assert_eq!(got[0].len(), q.len());
+                    }
                 }
+                assert!(decode(&good[..i], &[plane], &maps, layout).is_err());
             }
-            assert!(decode(&good[..i], &[plane], &maps).is_err());
+            // A plane of a family without a map.
+            let other = Plane { family: 1, ..plane };
+            assert!(encode(&[(other, &q[..])], &maps, shape).is_err());
         }
-        // A plane of a family without a map.
-        let other = Plane { family: 1, ..plane };
-        assert!(encode(&[(other, &q[..])], &maps, 256).is_err());
+        // A version 2 section read as version 3, or the other way: refused or other
+        // blocks, never a panic.
+        for shape in [shape(256, None), shape(256, Some(64))] {
+            let good = encode(&[(plane, &q[..])], &maps, shape).unwrap();
+            let other = match shape.layout() {
+                Layout::OneState => Layout::States,
+                Layout::States => Layout::OneState,
+            };
+            if let Ok(got) = decode(&good, &[plane], &maps, other) {
+                assert_eq!(got[0].len(), q.len());
+            }
+        }
     }
 }

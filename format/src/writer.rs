@@ -26,7 +26,7 @@ pub struct Writer<W> {
 fn written_size(h: &Header) -> usize {
     match h.coding {
         Coding::Pairs => HEADER_SIZE_1_1,
-        Coding::Lanes(_) => h.header_size(),
+        Coding::Lanes(..) => h.header_size(),
     }
 }
 
@@ -68,17 +68,17 @@ impl<W: Write + Seek> Writer<W> {
             (Coding::Pairs, ChunkKind::Keyframe | ChunkKind::Coefficients) => {
                 Some(decompressed_size(bytes)?)
             }
-            (Coding::Lanes(_), ChunkKind::TileMap) => {
+            (Coding::Lanes(..), ChunkKind::TileMap) => {
                 let len = frames.1.saturating_sub(frames.0);
                 self.tiles = Some(chunk::read_tilemap(&self.header, bytes, len)?);
                 None
             }
             // Version 2's payloads are measured as a reader will decode them, which also
             // checks that they do.
-            (Coding::Lanes(_), ChunkKind::Keyframe) => {
+            (Coding::Lanes(..), ChunkKind::Keyframe) => {
                 Some(decoded_size(&self.header, Payload::Keyframe, bytes)?)
             }
-            (Coding::Lanes(_), ChunkKind::Coefficients) => {
+            (Coding::Lanes(..), ChunkKind::Coefficients) => {
                 let tiles = self.tiles.as_ref().ok_or_else(|| {
                     FormatError::Invalid("coefficients before their tile map".into())
                 })?;
@@ -125,7 +125,7 @@ impl<W: Write + Seek> Writer<W> {
         let h = &mut self.header;
         h.version_minor = match h.coding {
             Coding::Pairs => 1,
-            Coding::Lanes(_) => VERSION_MINOR,
+            Coding::Lanes(..) => VERSION_MINOR,
         };
         h.largest_payload = Some(self.largest_payload.max(1));
         let size = h.header_size() as u64;

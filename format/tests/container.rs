@@ -369,10 +369,10 @@ fn hostile_index_entries_are_refused() {
 
 /// `v1` (a version 1 stream) with its keyframes and coefficients coded as version 2's
 /// sections, with `maps`; every other chunk as it was.
-fn as_version_2(v1: &[u8], maps: Vec<ContextMap>) -> Vec<u8> {
+fn as_version_2(v1: &[u8], maps: Vec<ContextMap>, shape: plane2::LaneShape) -> Vec<u8> {
     let mut r = Reader::open(Cursor::new(v1)).unwrap();
     let mut h = r.header().clone();
-    h.coding = Coding::Lanes(maps.clone());
+    h.coding = Coding::Lanes(maps.clone(), shape.layout());
     let old = r.header().clone();
     let entries = r.entries().to_vec();
     let mut w = Writer::new(Cursor::new(Vec::new()), h.clone()).unwrap();
@@ -392,7 +392,7 @@ fn as_version_2(v1: &[u8], maps: Vec<ContextMap>) -> Vec<u8> {
         let bytes = match what {
             Some(what) => {
                 let raw = chunk::payload(&old, what, &bytes, usize::MAX / 4).unwrap();
-                payload2::encode(&h, what, &raw, &maps, 64).unwrap()
+                payload2::encode(&h, what, &raw, &maps, shape).unwrap()
             }
             None => bytes,
         };
@@ -423,14 +423,23 @@ fn two_cluster_maps() -> Vec<ContextMap> {
 #[test]
 fn version_2_decodes_to_the_same_frames_as_version_1() {
     let v1 = sample_file();
-    for maps in [
+    let shapes = [None, Some(32)].map(|states| plane2::LaneShape {
+        bytes: 64,
+        symbols_per_state: states,
+    });
+    let maps_tried = [
         vec![ContextMap::single(); plane2::FAMILIES],
         two_cluster_maps(),
-    ] {
-        let v2 = as_version_2(&v1, maps.clone());
+    ];
+    for (maps, shape) in maps_tried.iter().flat_map(|m| shapes.map(|s| (m.clone(), s))) {
+        let v2 = as_version_2(&v1, maps.clone(), shape);
         let r = Reader::open(Cursor::new(&v2)).unwrap();
         let h = r.header();
-        assert_eq!((h.version_major(), h.version_minor), (2, 0));
+        let major = match shape.symbols_per_state {
+            None => 2,
+            Some(_) => 3,
+        };
+        assert_eq!((h.version_major(), h.version_minor), (major, 0));
         assert_eq!(h.context_maps(), Some(&maps[..]));
         assert_eq!(h.header_size() as u64, h.index_offset);
         // The largest payload is what the pairs of version 1 took before zstd.
@@ -442,7 +451,11 @@ fn version_2_decodes_to_the_same_frames_as_version_1() {
 
 #[test]
 fn version_2_damage_is_refused_with_the_chunk_named() {
-    let v2 = as_version_2(&sample_file(), two_cluster_maps());
+    let v3 = plane2::LaneShape {
+        bytes: 64,
+        symbols_per_state: Some(32),
+    };
+    let v2 = as_version_2(&sample_file(), two_cluster_maps(), v3);
     let r = Reader::open(Cursor::new(&v2)).unwrap();
     let h = r.header().clone();
     // Each keyframe and coefficient payload, cut short or with a flipped bit (checksums
@@ -478,9 +491,9 @@ fn version_2_damage_is_refused_with_the_chunk_named() {
 #[test]
 fn unknown_major_version_and_bad_magic() {
     let mut bytes = sample_file();
-    bytes[8] = 3;
+    bytes[8] = 4;
     match Reader::open(Cursor::new(&bytes)) {
-        Err(FormatError::UnsupportedVersion { found: 3, .. }) => {}
+        Err(FormatError::UnsupportedVersion { found: 4, .. }) => {}
         other => panic!("{other:?}"),
     }
     bytes[0] = b'X';

@@ -41,6 +41,10 @@ pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
 /// other stream, whose planes go to the GPU as pairs.
 pub(crate) fn decodes_lanes(h: &vbim_format::Header) -> Option<u32> {
     let maps = h.context_maps()?;
+    // The shader decodes version 2's lanes, one state each; version 3's go as pairs.
+    if h.lane_layout() != Some(vbim_format::plane2::Layout::OneState) {
+        return None;
+    }
     let (pw, ph) = vbim_format::chunk::padded_size(h);
     fits_dense_plane([pw as u32, ph as u32])
         .then(|| vbim_format::plane2::file_histograms(maps).count() as u32)
@@ -282,11 +286,14 @@ impl Coded {
         blocks: usize,
         members: Option<(usize, &dyn Fn(usize) -> bool)>,
     ) -> PlaneSpan {
+        // Version 2's layout: a lane is one stream, the lane's words.
+        debug_assert_eq!(sp.streams.len(), sp.lanes.len());
         let table = self.words.len() as u32;
-        for &(r0, _, w0, _) in &sp.lanes {
+        for (&(r0, ..), &(w0, _)) in sp.lanes.iter().zip(&sp.streams) {
             self.words.extend([r0 as u32, w0 as u32]);
         }
-        let &(_, r1, _, w1) = sp.lanes.last().expect("a plane has a lane");
+        let &(_, r1, ..) = sp.lanes.last().expect("a plane has a lane");
+        let (w_first, w1) = (sp.streams[0].0, sp.streams[sp.streams.len() - 1].1);
         self.words.extend([r1 as u32, w1 as u32]);
         let (at, member_count) = members.map_or((0, 0), |m| self.push_members(m));
         PlaneSpan {
@@ -299,8 +306,8 @@ impl Coded {
                 family: family as u32,
                 table,
                 count: sp.lanes.len() as u32,
-                words: (w1 - sp.lanes[0].2) as u32,
-                longest: sp.lanes.iter().map(|l| l.3 - l.2).max().unwrap_or(0) as u32,
+                words: (w1 - w_first) as u32,
+                longest: sp.streams.iter().map(|l| l.1 - l.0).max().unwrap_or(0) as u32,
                 tiled: members.is_some(),
             }),
             terms: lane_words(sp.lanes.len(), blocks),

@@ -152,7 +152,7 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
         _ => n,
     };
     // RGB (YCoCg planes) in both domains, and a one-channel HDR sequence (Y alone), in
-    // format 1; RGB HDR in format 2 too. Odd sizes: the reconstruction's last 2 × 2 quads
+    // format 1; RGB HDR in formats 2 and 3 too. Odd sizes: the reconstruction's last 2 × 2 quads
     // and workgroups are partly outside.
     let (w, h) = (41, 23);
     for (kind, ch, format) in [
@@ -160,6 +160,7 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
         (InputKind::Srgb8, 3, FormatVersion::V1),
         (InputKind::Hdr, 1, FormatVersion::V1),
         (InputKind::Hdr, 3, FormatVersion::V2),
+        (InputKind::Hdr, 3, FormatVersion::V3),
     ] {
         let mut src = sequence(w, h, 30, kind);
         if ch == 1 {

@@ -385,9 +385,13 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
             .zip(&planes)
             .map(|(s, p)| (*s, &p.blocks[..]))
             .collect();
-        let section = plane2::encode(&input, &maps, LANE_BYTES)
+        let shape = plane2::LaneShape {
+            bytes: LANE_BYTES,
+            symbols_per_state: None,
+        };
+        let section = plane2::encode(&input, &maps, shape)
             .map_err(|e| format!("{name}: chunk {i}: plane2: {e}"))?;
-        let back = plane2::decode(&section, &shapes, &maps)
+        let back = plane2::decode(&section, &shapes, &maps, shape.layout())
             .map_err(|e| format!("{name}: chunk {i}: plane2 decode: {e}"))?;
         for (p, got) in planes.iter().zip(&back) {
             if p.blocks != *got {

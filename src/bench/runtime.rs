@@ -48,7 +48,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         // the GPU (scanned streams; the GPU does the rest).
         // Format 2: with its sections as coded (for a GPU), and decoded to pairs (for a
         // CPU adapter, `DecodeShape::lanes`).
-        let lanes = matches!(h.coding, vbim_format::Coding::Lanes(_));
+        let lanes = matches!(h.coding, vbim_format::Coding::Lanes(..));
         for (as_coded, times) in [(true, &mut full_t), (false, &mut pairs_t)] {
             if !as_coded && !lanes {
                 continue;
@@ -87,7 +87,7 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     );
     let entropy = match h.coding {
         vbim_format::Coding::Pairs => "zstd alone     ",
-        vbim_format::Coding::Lanes(_) => "rANS to pairs  ",
+        vbim_format::Coding::Lanes(..) => "rANS to pairs  ",
     };
     println!(
         "{entropy} median {:.3} s (min {z0:.3}, max {z1:.3}) = {:.2}% of one core in real time",
@@ -115,44 +115,16 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
             chains.2 as f64 / n,
             chains.1 as f64 / n
         );
-        use vbim_format::plane2::{Assign, Interleave};
-        let one = lane_symbols(&h, &entries, &chunks, Interleave::ONE)?;
+    }
+    if h.context_maps().is_some() {
+        let n = h.segment_count.max(1) as f64;
+        let c = lane_symbols(&h, &entries, &chunks)?;
         println!(
-            "                and {:.0} symbols in all; the longest lane of each plane, summed: {:.0} symbols (the serial chains a GPU decodes, one after another)",
-            one.all as f64 / n,
-            one.longest as f64 / n
+            "lanes           per segment {:.0} rANS states; the longest lane of each plane, summed: {:.0} steps (the serial chains a GPU decodes plane after plane: with one state a lane, its symbols; with several, per pass its busiest state's); a chunk's planes side by side: {:.0} steps",
+            c.states as f64 / n,
+            c.longest as f64 / n,
+            c.shared as f64 / n,
         );
-        // A study of lanes of several rANS states (not a format): their serial steps.
-        println!("                with several states a lane (each state's final value 4 more bytes), the longest lanes' steps, summed over planes / over chunks (a chunk's planes side by side):");
-        for (states, symbols_per_state) in
-            [(8, 0), (32, 0), (64, 0), (64, 512), (64, 1024), (64, 2048)]
-        {
-            for assign in [Assign::Turn, Assign::Group, Assign::Block] {
-                let how = Interleave {
-                    states,
-                    symbols_per_state,
-                    assign,
-                };
-                let c = lane_symbols(&h, &entries, &chunks, how)?;
-                let per = match symbols_per_state {
-                    0 => format!("{states} a lane"),
-                    s => format!("one per {s} symbols, ≤ {states}"),
-                };
-                let turn = match assign {
-                    Assign::Turn => "items in turn",
-                    Assign::Group => "groups by place",
-                    Assign::Block => "blocks by place",
-                };
-                println!(
-                    "                  {per:>20}, {turn:<15}: +{:.2}% bytes, {:.0} / {:.0} steps ({:.1}× / {:.1}× fewer than one state's)",
-                    100.0 * (4 * c.extra_states) as f64 / bytes.len() as f64,
-                    c.longest as f64 / n,
-                    c.shared as f64 / n,
-                    one.longest as f64 / c.longest.max(1) as f64,
-                    one.longest as f64 / c.shared.max(1) as f64,
-                );
-            }
-        }
     }
     if !pairs_t.is_empty() {
         let (pm, p0, p1) = stats(&mut pairs_t);
@@ -189,42 +161,37 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
     Ok(())
 }
 
-/// A version 2 file's lanes, counted ([`lane_symbols`]).
+/// A version 2 or 3 file's lanes, counted ([`lane_symbols`]).
 struct Chains {
-    /// Symbols (tokens with their raw bits), or steps with several states a lane.
-    all: u64,
-    /// The sum over planes of each plane's longest lane: the serial chains of a decoder
-    /// that runs a plane's lanes side by side (a likely zero lengthens them as much as a
-    /// rare value).
+    /// rANS states (one a lane in version 2).
+    states: u64,
+    /// The sum over planes of each plane's longest lane in steps: the serial chains of a
+    /// decoder that runs a plane's lanes side by side, plane after plane (a likely zero
+    /// lengthens them as much as a rare value).
     longest: u64,
     /// The sum over chunks of each one's longest lane (a chunk's planes side by side).
     shared: u64,
-    /// States beyond the first, over all lanes.
-    extra_states: u64,
 }
 
-/// A version 2 file's lanes' serial chains with `states` a lane
+/// A version 2 or 3 file's lanes' serial chains
 /// ([`vbim_format::plane2::lane_symbols`]).
 fn lane_symbols(
     h: &vbim_format::Header,
     entries: &[vbim_format::IndexEntry],
     chunks: &[&[u8]],
-    states: vbim_format::plane2::Interleave,
 ) -> Result<Chains, String> {
     let mut c = Chains {
-        all: 0,
+        states: 0,
         longest: 0,
         shared: 0,
-        extra_states: 0,
     };
     each_payload(h, entries, chunks, |what, bytes| {
-        let planes = vbim_format::payload2::lane_symbols(h, what, bytes, states)
+        let planes = vbim_format::payload2::lane_symbols(h, what, bytes)
             .map_err(|e| e.to_string())?;
         c.shared += planes.iter().flatten().map(|l| l.0).max().unwrap_or(0);
         for lanes in planes {
-            c.all += lanes.iter().map(|l| l.0).sum::<u64>();
             c.longest += lanes.iter().map(|l| l.0).max().unwrap_or(0);
-            c.extra_states += lanes.iter().map(|l| l.1 as u64 - 1).sum::<u64>();
+            c.states += lanes.iter().map(|l| l.1 as u64).sum::<u64>();
         }
         Ok(())
     })?;

@@ -4,7 +4,9 @@
 //! damaged words raise the fault flag, never a hang.
 
 use vbim_format::dct::N;
-use vbim_format::plane2::{self, ContextMap, Geometry, Plane, Section, CONTEXTS};
+use vbim_format::plane2::{
+    self, ContextMap, Geometry, LaneShape, Layout, Plane, Section, CONTEXTS,
+};
 
 use super::plan::groups_offset;
 use super::tests::{coded_plane, decode_bubble_plane, decode_key_step, shape};
@@ -74,7 +76,7 @@ fn lane_segment(
     p: usize,
     bubble: Option<(usize, &dyn Fn(usize) -> bool)>,
 ) -> SegmentData {
-    let section = Section::parse_layout(bytes, shapes, maps).unwrap();
+    let section = Section::parse_layout(bytes, shapes, maps, Layout::OneState).unwrap();
     let file_count = plane2::file_histograms(maps).count() as u32;
     let mut data = Coded::default();
     let span = data.push_section(bytes, &section, file_count);
@@ -115,6 +117,14 @@ fn decode(gpu: &mut Gpu, seg: &SegmentData, bubbles: bool) {
 type PlaneBlocks<'a> = (Plane<'a>, &'a [[i32; N * N]]);
 
 /// Codes `planes` (a keyframe plane, then a bubble plane of `ts`-block tiles) with
+/// Version 2's lanes (the layout `lanes.wgsl` decodes), cut at `bytes`.
+fn version_2(bytes: usize) -> LaneShape {
+    LaneShape {
+        bytes,
+        symbols_per_state: None,
+    }
+}
+
 /// `maps` in lanes of `lane_bytes`, decodes each on the GPU as coded and as pairs, and
 /// checks the dense planes are the same; then damages the words.
 fn lanes_match_pairs(
@@ -123,7 +133,7 @@ fn lanes_match_pairs(
     lane_bytes: usize,
     members: &dyn Fn(usize) -> bool,
 ) {
-    let bytes = plane2::encode(planes, maps, lane_bytes).unwrap();
+    let bytes = plane2::encode(planes, maps, version_2(lane_bytes)).unwrap();
     let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
     let tiles = |p: &Plane| {
         let ts = p.geometry.tile.unwrap_or(1);
@@ -153,7 +163,7 @@ fn lanes_match_pairs(
         }
         // Damaged words: the fault flag, never a hang.
         let mut bad = bytes.clone();
-        let words_at = Section::parse_layout(&bytes, &shapes, maps)
+        let words_at = Section::parse_layout(&bytes, &shapes, maps, Layout::OneState)
             .unwrap()
             .words_at;
         for b in bad.iter_mut().skip(words_at + 7).step_by(13) {
@@ -287,8 +297,8 @@ fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
         let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
         gpu.decode_lanes(&maps);
-        let bytes = plane2::encode(&[(plane, &q[..])], &maps, usize::MAX).unwrap();
-        let lanes = Section::parse_layout(&bytes, &[plane], &maps)
+        let bytes = plane2::encode(&[(plane, &q[..])], &maps, version_2(usize::MAX)).unwrap();
+        let lanes = Section::parse_layout(&bytes, &[plane], &maps, Layout::OneState)
             .unwrap()
             .planes[0]
             .lanes
