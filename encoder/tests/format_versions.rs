@@ -103,7 +103,10 @@ fn versions_2_and_3_decode_as_version_1_in_fewer_bytes_and_convert_every_way() {
     let (p1, p2, p3) = (payload_bytes(&v1), payload_bytes(&v2), payload_bytes(&v3));
     assert!(p2 < p1, "version 2's payloads {p2} B, version 1's {p1} B");
     // Version 3's states cost their final values and lengths.
-    assert!(p3 < p1 && p3 >= p2, "version 3's payloads {p3} B, 2's {p2} B, 1's {p1} B");
+    assert!(
+        p3 < p1 && p3 >= p2,
+        "version 3's payloads {p3} B, 2's {p2} B, 1's {p1} B"
+    );
     // The same payloads learn the same maps: converting is encoding in the other version.
     assert_eq!(converted(&v1, FormatVersion::V2), v2);
     assert_eq!(converted(&v2, FormatVersion::V1), v1);

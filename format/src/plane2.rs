@@ -97,7 +97,9 @@ impl LaneShape {
     pub fn states(&self, symbols: usize) -> usize {
         match self.symbols_per_state {
             None => 1,
-            Some(per) => (symbols as u64).div_ceil(per.max(1)).clamp(1, MAX_STATES as u64) as usize,
+            Some(per) => (symbols as u64)
+                .div_ceil(per.max(1))
+                .clamp(1, MAX_STATES as u64) as usize,
         }
     }
 }
@@ -807,7 +809,11 @@ impl Streams<'_, '_> {
     /// Ends a pass: each lane's steps grow by its busiest stream's symbols in it.
     fn end_pass(&mut self) {
         for (streams, steps) in &mut self.lanes {
-            *steps += self.symbols[streams.clone()].iter().max().copied().unwrap_or(0);
+            *steps += self.symbols[streams.clone()]
+                .iter()
+                .max()
+                .copied()
+                .unwrap_or(0);
             self.symbols[streams.clone()].fill(0);
         }
     }
@@ -1272,11 +1278,21 @@ mod tests {
                     ),
                 }
             }
-            let one = round_trip(&planes, maps, LaneShape { bytes: usize::MAX, ..shape });
+            let one = round_trip(
+                &planes,
+                maps,
+                LaneShape {
+                    bytes: usize::MAX,
+                    ..shape
+                },
+            );
             let many = round_trip(&planes, maps, shape);
             // Lanes and states cost their final states and lengths, a few bytes each.
             let streams: usize = full.planes.iter().map(|p| p.streams.len()).sum();
-            assert!(many > one && many < one + 7 * streams, "{many} against {one}");
+            assert!(
+                many > one && many < one + 7 * streams,
+                "{many} against {one}"
+            );
         }
         // An empty plane, and a plane whose blocks are all zero.
         let zeros = vec![[0i32; N * N]; key.len()];

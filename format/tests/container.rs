@@ -431,7 +431,10 @@ fn version_2_decodes_to_the_same_frames_as_version_1() {
         vec![ContextMap::single(); plane2::FAMILIES],
         two_cluster_maps(),
     ];
-    for (maps, shape) in maps_tried.iter().flat_map(|m| shapes.map(|s| (m.clone(), s))) {
+    for (maps, shape) in maps_tried
+        .iter()
+        .flat_map(|m| shapes.map(|s| (m.clone(), s)))
+    {
         let v2 = as_version_2(&v1, maps.clone(), shape);
         let r = Reader::open(Cursor::new(&v2)).unwrap();
         let h = r.header();

@@ -15,13 +15,14 @@
 //! This is what makes the upload follow the file: a smooth plane whose zstd'd stream is a
 //! fraction of a byte per block uploads about twice that, not a record per block.
 //!
-//! A version 2 file's planes come as coded (`lanes.wgsl` decodes them): per section (a
+//! A version 2 or 3 file's planes come as coded (`lanes.wgsl` decodes them): per section (a
 //! chunk's planes) its lanes' words as stored (16-bit, two to a word, the first in the low
 //! half), the frequencies of the histograms the chunk sent itself (16-bit, up to each
 //! one's last used token), and per family it uses the histogram of each cluster of the family
-//! ([`SectionSpan`]); per plane, its lanes (two words each: first region, first word
-//! from the section's first) and a final pair (regions, words), then a bubble plane's
-//! member spans as above. The file's own histograms go to the GPU once, when the stream
+//! ([`SectionSpan`]); per plane, its streams (a lane's states: one a lane in version 2),
+//! four words each (the lane's first and end region, the stream's first word from the
+//! section's first, its place among the lane's states | their number << 8) and the end
+//! of the words, then a bubble plane's member spans as above. The file's own histograms go to the GPU once, when the stream
 //! opens.
 
 use vbim_format::chunk::{spans, Scanned};
@@ -35,16 +36,12 @@ pub(crate) fn part_blocks(plane: [u32; 2]) -> u32 {
     whole.min(binding as u32).max(1)
 }
 
-/// For a version 2 stream whose planes fit the dense plane whole (what `lanes.wgsl`
+/// For a version 2 or 3 stream whose planes fit the dense plane whole (what `lanes.wgsl`
 /// needs: an odd block's contexts read its neighbours anywhere in the plane), how many
 /// histograms its file carries (a section's own are numbered after them); `None` for any
 /// other stream, whose planes go to the GPU as pairs.
 pub(crate) fn decodes_lanes(h: &vbim_format::Header) -> Option<u32> {
     let maps = h.context_maps()?;
-    // The shader decodes version 2's lanes, one state each; version 3's go as pairs.
-    if h.lane_layout() != Some(vbim_format::plane2::Layout::OneState) {
-        return None;
-    }
     let (pw, ph) = vbim_format::chunk::padded_size(h);
     fits_dense_plane([pw as u32, ph as u32])
         .then(|| vbim_format::plane2::file_histograms(maps).count() as u32)
@@ -286,15 +283,17 @@ impl Coded {
         blocks: usize,
         members: Option<(usize, &dyn Fn(usize) -> bool)>,
     ) -> PlaneSpan {
-        // Version 2's layout: a lane is one stream, the lane's words.
-        debug_assert_eq!(sp.streams.len(), sp.lanes.len());
+        // Per stream (a lane's state): its lane's regions, its first word, its place
+        // among the lane's states and their number; then the end of the words.
         let table = self.words.len() as u32;
-        for (&(r0, ..), &(w0, _)) in sp.lanes.iter().zip(&sp.streams) {
-            self.words.extend([r0 as u32, w0 as u32]);
+        for &(r0, r1, s0, s1) in &sp.lanes {
+            for (k, &(w0, _)) in sp.streams[s0..s1].iter().enumerate() {
+                let place = k as u32 | ((s1 - s0) as u32) << 8;
+                self.words.extend([r0 as u32, r1 as u32, w0 as u32, place]);
+            }
         }
-        let &(_, r1, ..) = sp.lanes.last().expect("a plane has a lane");
         let (w_first, w1) = (sp.streams[0].0, sp.streams[sp.streams.len() - 1].1);
-        self.words.extend([r1 as u32, w1 as u32]);
+        self.words.push(w1 as u32);
         let (at, member_count) = members.map_or((0, 0), |m| self.push_members(m));
         PlaneSpan {
             step,
@@ -305,12 +304,12 @@ impl Coded {
                 section,
                 family: family as u32,
                 table,
-                count: sp.lanes.len() as u32,
+                count: sp.streams.len() as u32,
                 words: (w1 - w_first) as u32,
                 longest: sp.streams.iter().map(|l| l.1 - l.0).max().unwrap_or(0) as u32,
                 tiled: members.is_some(),
             }),
-            terms: lane_words(sp.lanes.len(), blocks),
+            terms: lane_words(sp.streams.len(), blocks),
             ..PlaneSpan::default()
         }
     }

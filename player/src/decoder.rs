@@ -587,7 +587,9 @@ fn push_lanes(
         vbim_format::FormatError::Invalid("a version 1 file has no coefficient sections".into())
     })?;
     let (head, shapes) = section_planes(h, what, bytes)?;
-    let layout = h.lane_layout().unwrap_or(vbim_format::plane2::Layout::OneState);
+    let layout = h
+        .lane_layout()
+        .unwrap_or(vbim_format::plane2::Layout::OneState);
     let section = Section::parse_layout(&bytes[head..], &shapes, maps, layout)?;
     let index = sections.len() as u32;
     sections.push(data.push_section(&bytes[head..], &section, file_count));

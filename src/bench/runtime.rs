@@ -186,8 +186,8 @@ fn lane_symbols(
         shared: 0,
     };
     each_payload(h, entries, chunks, |what, bytes| {
-        let planes = vbim_format::payload2::lane_symbols(h, what, bytes)
-            .map_err(|e| e.to_string())?;
+        let planes =
+            vbim_format::payload2::lane_symbols(h, what, bytes).map_err(|e| e.to_string())?;
         c.shared += planes.iter().flatten().map(|l| l.0).max().unwrap_or(0);
         for lanes in planes {
             c.longest += lanes.iter().map(|l| l.0).max().unwrap_or(0);

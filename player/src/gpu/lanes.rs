@@ -1,4 +1,4 @@
-//! Format 2's coefficient sections decoded on the GPU as the file codes them
+//! Format 2's and 3's coefficient sections decoded on the GPU as the file codes them
 //! (`lanes.wgsl`): the decoder thread hands each section's words on as they are
 //! (`coded.rs`), and per plane five or six dispatches decode them into the dense plane that the
 //! keyframe and bubble passes read, as a parse of version 1's pairs leaves it. Once per
@@ -11,7 +11,9 @@
 //! thread ([`decodes_lanes`]).
 
 use vbim_format::ans::Histogram;
-use vbim_format::plane2::{file_histograms, ContextMap, CONTEXTS, FAMILIES, GROUP, REGION};
+use vbim_format::plane2::{
+    file_histograms, ContextMap, CONTEXTS, FAMILIES, GROUP, MAX_STATES, REGION,
+};
 use vbim_format::Header;
 
 use super::ops::Op;
@@ -123,13 +125,14 @@ impl Scratch {
         let ts = (tile as u64).max(1);
         let tiles = (pw as u64 / ts) * (ph as u64 / ts);
         let groups = (bw.div_ceil(GROUP as u64)) * bh.div_ceil(GROUP as u64);
-        let lanes = bw.div_ceil(REGION as u64) * bh.div_ceil(REGION as u64);
+        // Version 3's lanes have up to MAX_STATES streams each (version 2's one).
+        let streams = bw.div_ceil(REGION as u64) * bh.div_ceil(REGION as u64) * MAX_STATES as u64;
         let histograms = file + own;
         let slots = 2 * (FAMILIES * CONTEXTS) as u64;
         let tables = slots + histograms * 4096;
         let info = groups + tiles;
         let lane_states = info + 2 * bw * bh;
-        let fault = lane_states + 4 * lanes;
+        let fault = lane_states + 4 * streams;
         Some(Scratch {
             slots,
             tables,
@@ -195,14 +198,15 @@ super::job::uniform_struct! {
     /// Blocks across a tile for a bubble plane (its DC prediction stays in the tile); 0
     /// for a keyframe plane.
     tile: u32 => "u32",
-    /// The plane's lanes.
+    /// The plane's streams (its lanes' states: one a lane in version 2).
     lanes: u32 => "u32",
     /// (Padding.)
     _pad0: u32 => "u32",
     /// The section's lanes' words: first word in the segment's words.
     words: u32 => "u32",
-    /// The plane's lanes: two words each (first region, first word from the section's
-    /// first), then the end of both.
+    /// The plane's streams: four words each (its lane's first and end region, its first
+    /// word from the section's first, its place among its lane's states | their number
+    /// << 8), then the end of the words.
     table: u32 => "u32",
     /// Its family (which context map codes it).
     family: u32 => "u32",

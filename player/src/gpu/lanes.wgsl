@@ -1,5 +1,7 @@
-// Format 2's coefficient sections decoded on the GPU, straight into the dense plane the
-// decode passes read (decode.wgsl): one invocation per rANS lane, the passes of
+// Format 2's and 3's coefficient sections decoded on the GPU, straight into the dense plane
+// the decode passes read (decode.wgsl): one invocation per rANS stream (a lane in version
+// 2; one of a lane's states in version 3, which takes the lane's groups k, k + s, … of
+// its regions, 16 a region), the passes of
 // `vbim_format::plane2`, whose module documentation is the specification; this follows it
 // step for step. Dispatches (player/src/gpu/lanes.rs): `slots` once per section (each
 // family's histogram of each context, and the slot tables of the histograms the chunk
@@ -7,8 +9,8 @@
 // (lanes' states, each tile's rank, each group's flags, the blocks' residuals and the
 // dense plane's masks cleared), `flags` (the even groups), `middle` (the odd groups, then
 // the even blocks), `blocks` (the odd blocks), and the DC: `dc_tiles` for a bubble plane,
-// `dc_rows` then `dc_cols` for a keyframe plane. Each lane keeps its state in the scratch
-// buffer between dispatches.
+// `dc_rows` then `dc_cols` for a keyframe plane. Each stream keeps its state in the
+// scratch buffer between dispatches.
 //
 // llvmpipe (lavapipe) ends every loop of an invocation once its loops have run 65,535
 // iterations in all: so no loop per symbol here (a slot table finds the token, raw bits
@@ -75,6 +77,10 @@ var<private> x: u32;
 var<private> at: u32;
 var<private> end: u32;
 var<private> failed: u32;
+// The stream's place among its lane's states, and their number: it codes the lane's
+// groups whose place in the lane (16 a region) is `pick` modulo `picks`.
+var<private> pick: u32;
+var<private> picks: u32;
 
 fn fail() {
     failed = 1u;
@@ -311,8 +317,9 @@ fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
 fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if (i < prm.lanes) {
-        let w0 = seg[prm.table + 2u * i + 1u];
-        let w1 = seg[prm.table + 2u * i + 3u];
+        // A stream's words end where the next one's start, the last at the table's end.
+        let w0 = seg[prm.table + 4u * i + 2u];
+        let w1 = seg[prm.table + 4u * (i + 1u) + select(0u, 2u, i + 1u < prm.lanes)];
         var state = vec4<u32>(0u, w0 + 2u, w1, 1u);
         if (w1 >= w0 + 2u) {
             state.x = (word(w0) << 16u) | word(w0 + 1u);
@@ -360,14 +367,24 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     scratch[GROUPS + i] = has;
 }
 
-// Lane `lane`'s state into the private variables; returns its regions [first, end).
+// Stream `lane`'s state into the private variables; returns its lane's regions [first,
+// end).
 fn load(lane: u32) -> vec2<u32> {
     let s = LANE_STATES + 4u * lane;
     x = scratch[s];
     at = scratch[s + 1u];
     end = scratch[s + 2u];
     failed = scratch[s + 3u];
-    return vec2<u32>(seg[prm.table + 2u * lane], seg[prm.table + 2u * lane + 2u]);
+    let place = seg[prm.table + 4u * lane + 3u];
+    pick = place & 0xFFu;
+    picks = max(place >> 8u, 1u);
+    return vec2<u32>(seg[prm.table + 4u * lane], seg[prm.table + 4u * lane + 1u]);
+}
+
+// Whether this stream codes group `local` (0–15, raster order) of region `region` of its
+// lane, whose first region is `first`.
+fn mine(region: u32, first: u32, local: u32) -> bool {
+    return ((region - first) * 16u + local) % picks == pick;
 }
 
 fn save(lane: u32) {
@@ -398,7 +415,9 @@ fn flags_of(span: vec2<u32>, parity: u32) {
         for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
             for (var gx = rx; gx < min(rx + per, prm.gw); gx = gx + 1u) {
                 let g = GROUPS + gy * prm.gw + gx;
-                if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != parity) {
+                let local = (gy - ry) * per + gx - rx;
+                if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != parity
+                    || !mine(region, span.x, local)) {
                     continue;
                 }
                 var ctx = 0u;
@@ -568,11 +587,16 @@ fn blocks_of(span: vec2<u32>, parity: u32) {
         // loop iterations), not one per block row.
         for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
             let row = GROUPS + gy * prm.gw;
+            let local = (gy - ry) * per;
             var full = 0u;
-            if (rx < prm.gw && (scratch[row + rx] & 2u) != 0u) { full |= 1u; }
-            if (rx + 1u < prm.gw && (scratch[row + rx + 1u] & 2u) != 0u) { full |= 2u; }
-            if (rx + 2u < prm.gw && (scratch[row + rx + 2u] & 2u) != 0u) { full |= 4u; }
-            if (rx + 3u < prm.gw && (scratch[row + rx + 3u] & 2u) != 0u) { full |= 8u; }
+            if (rx < prm.gw && (scratch[row + rx] & 2u) != 0u
+                && mine(region, span.x, local)) { full |= 1u; }
+            if (rx + 1u < prm.gw && (scratch[row + rx + 1u] & 2u) != 0u
+                && mine(region, span.x, local + 1u)) { full |= 2u; }
+            if (rx + 2u < prm.gw && (scratch[row + rx + 2u] & 2u) != 0u
+                && mine(region, span.x, local + 2u)) { full |= 4u; }
+            if (rx + 3u < prm.gw && (scratch[row + rx + 3u] & 2u) != 0u
+                && mine(region, span.x, local + 3u)) { full |= 8u; }
             if (full == 0u) {
                 continue;
             }

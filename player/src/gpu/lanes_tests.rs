@@ -72,11 +72,11 @@ fn dense_plane(gpu: &Gpu, n: usize) -> (Vec<u32>, Vec<u32>, Vec<i32>) {
 /// `p` as a keyframe step, or with `tile` blocks across a tile as a bubble plane whose
 /// member tiles `member` says.
 fn lane_segment(
-    (bytes, shapes, maps): (&[u8], &[Plane], &[ContextMap]),
+    (bytes, shapes, maps, layout): (&[u8], &[Plane], &[ContextMap], Layout),
     p: usize,
     bubble: Option<(usize, &dyn Fn(usize) -> bool)>,
 ) -> SegmentData {
-    let section = Section::parse_layout(bytes, shapes, maps, Layout::OneState).unwrap();
+    let section = Section::parse_layout(bytes, shapes, maps, layout).unwrap();
     let file_count = plane2::file_histograms(maps).count() as u32;
     let mut data = Coded::default();
     let span = data.push_section(bytes, &section, file_count);
@@ -117,7 +117,7 @@ fn decode(gpu: &mut Gpu, seg: &SegmentData, bubbles: bool) {
 type PlaneBlocks<'a> = (Plane<'a>, &'a [[i32; N * N]]);
 
 /// Codes `planes` (a keyframe plane, then a bubble plane of `ts`-block tiles) with
-/// Version 2's lanes (the layout `lanes.wgsl` decodes), cut at `bytes`.
+/// Version 2's lanes, cut at `bytes`.
 fn version_2(bytes: usize) -> LaneShape {
     LaneShape {
         bytes,
@@ -125,15 +125,16 @@ fn version_2(bytes: usize) -> LaneShape {
     }
 }
 
-/// `maps` in lanes of `lane_bytes`, decodes each on the GPU as coded and as pairs, and
+/// `maps` in lanes `lanes` shapes, decodes each on the GPU as coded and as pairs, and
 /// checks the dense planes are the same; then damages the words.
 fn lanes_match_pairs(
     gpu: &mut Gpu,
     (planes, maps): (&[PlaneBlocks], &[ContextMap]),
-    lane_bytes: usize,
+    lanes: LaneShape,
     members: &dyn Fn(usize) -> bool,
 ) {
-    let bytes = plane2::encode(planes, maps, version_2(lane_bytes)).unwrap();
+    let bytes = plane2::encode(planes, maps, lanes).unwrap();
+    let layout = lanes.layout();
     let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
     let tiles = |p: &Plane| {
         let ts = p.geometry.tile.unwrap_or(1);
@@ -142,7 +143,7 @@ fn lanes_match_pairs(
     for (p, (shape, q)) in planes.iter().enumerate() {
         let n = q.len();
         let bubble = shape.geometry.tile.map(|_| (tiles(shape), members));
-        let what = format!("plane {p}, lanes of {lane_bytes} B");
+        let what = format!("plane {p}, lanes {lanes:?}");
         // As pairs.
         let mut c = Coded::default();
         let (span, _) = coded_plane(&mut c, 0.01, q, bubble);
@@ -152,7 +153,7 @@ fn lanes_match_pairs(
         }
         let want = dense_plane(gpu, n);
         // As coded.
-        let seg = lane_segment((&bytes, &shapes, maps), p, bubble);
+        let seg = lane_segment((&bytes, &shapes, maps, layout), p, bubble);
         decode(gpu, &seg, bubble.is_some());
         assert!(!gpu.lanes_faulted(), "{what}: a lane faulted");
         let got = dense_plane(gpu, n);
@@ -163,7 +164,7 @@ fn lanes_match_pairs(
         }
         // Damaged words: the fault flag, never a hang.
         let mut bad = bytes.clone();
-        let words_at = Section::parse_layout(&bytes, &shapes, maps, Layout::OneState)
+        let words_at = Section::parse_layout(&bytes, &shapes, maps, layout)
             .unwrap()
             .words_at;
         for b in bad.iter_mut().skip(words_at + 7).step_by(13) {
@@ -171,7 +172,7 @@ fn lanes_match_pairs(
         }
         decode(
             gpu,
-            &lane_segment((&bad, &shapes, maps), p, bubble),
+            &lane_segment((&bad, &shapes, maps, layout), p, bubble),
             bubble.is_some(),
         );
         assert!(
@@ -249,8 +250,17 @@ fn keyframe_and_bubble_planes_decode_as_coded_to_the_dense_plane_their_pairs_giv
         let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 8 * ts as u32);
         gpu.set_decode_shape(shape(wide));
         gpu.decode_lanes(&maps);
+        // Version 2's lanes, and version 3's of several states (a state per 16 or 200
+        // symbols: 2 to 64 a lane).
         for lane_bytes in [usize::MAX, 200, 16] {
-            lanes_match_pairs(&mut gpu, (&planes, &maps), lane_bytes, &member);
+            lanes_match_pairs(&mut gpu, (&planes, &maps), version_2(lane_bytes), &member);
+        }
+        for (bytes, per) in [(usize::MAX, 16), (200, 16), (usize::MAX, 200)] {
+            let v3 = LaneShape {
+                bytes,
+                symbols_per_state: Some(per),
+            };
+            lanes_match_pairs(&mut gpu, (&planes, &maps), v3, &member);
         }
     }
 }
@@ -304,6 +314,7 @@ fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
             .lanes
             .len();
         assert!(bw == 256 || lanes >= 6, "{lanes} lanes");
-        lanes_match_pairs(&mut gpu, (&[(plane, &q[..])], &maps), usize::MAX, &|_| true);
+        let whole = version_2(usize::MAX);
+        lanes_match_pairs(&mut gpu, (&[(plane, &q[..])], &maps), whole, &|_| true);
     }
 }
