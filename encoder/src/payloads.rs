@@ -125,7 +125,8 @@ pub(crate) fn code(
                 .par_iter()
                 .filter(|c| c.raw)
                 .map(|c| {
-                    let counts = payload2::context_counts(header, what(c)?, &c.bytes)?;
+                    let counts =
+                        payload2::context_counts(header, what(c)?, &c.bytes, shape.layout())?;
                     tick("model contexts");
                     Ok::<_, EncodeError>(counts)
                 })

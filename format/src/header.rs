@@ -207,7 +207,7 @@ impl Header {
     /// version 1).
     pub fn context_maps_size(&self) -> usize {
         match &self.coding {
-            Coding::Lanes(maps, _) => maps_bytes(maps).len(),
+            Coding::Lanes(maps, layout) => maps_bytes(maps, *layout).len(),
             Coding::Pairs => 0,
         }
     }
@@ -257,8 +257,8 @@ impl Header {
             // Version 2 states it always (a header without it is refused on reading).
             w.put(&0u64.to_le_bytes());
         }
-        if let Coding::Lanes(maps, _) = &self.coding {
-            let m = maps_bytes(maps);
+        if let Coding::Lanes(maps, layout) = &self.coding {
+            let m = maps_bytes(maps, *layout);
             w.put(&(m.len() as u32).to_le_bytes());
             w.put(&m);
         }
@@ -381,7 +381,7 @@ impl Header {
                     2 => Layout::OneState,
                     _ => Layout::States,
                 };
-                Coding::Lanes(read_maps(r.take(len))?, layout)
+                Coding::Lanes(read_maps(r.take(len), layout)?, layout)
             }
         };
         let h = Header {
@@ -530,15 +530,15 @@ impl Header {
 
 /// The context maps as a header stores them: the number of families (8 bits), then each
 /// map ([`ContextMap::write`]), zero bits to the byte.
-fn maps_bytes(maps: &[ContextMap]) -> Vec<u8> {
+fn maps_bytes(maps: &[ContextMap], layout: Layout) -> Vec<u8> {
     let mut w = BitWriter::default();
     w.put(maps.len() as u32, 8);
-    maps.iter().for_each(|m| m.write(&mut w));
+    maps.iter().for_each(|m| m.write(&mut w, layout));
     w.finish()
 }
 
 /// Reads what [`maps_bytes`] wrote: exactly [`FAMILIES`] maps, and nothing after them.
-fn read_maps(bytes: &[u8]) -> Result<Vec<ContextMap>> {
+fn read_maps(bytes: &[u8], layout: Layout) -> Result<Vec<ContextMap>> {
     let bad = |m: String| FormatError::InvalidHeader(format!("context maps: {m}"));
     let mut r = BitReader::new(bytes);
     let n = r.get(8).map_err(|e| bad(e.to_string()))? as usize;
@@ -546,7 +546,7 @@ fn read_maps(bytes: &[u8]) -> Result<Vec<ContextMap>> {
         return Err(bad(format!("{n} families (the format has {FAMILIES})")));
     }
     let maps = (0..n)
-        .map(|_| ContextMap::read(&mut r).map_err(|e| bad(e.to_string())))
+        .map(|_| ContextMap::read(&mut r, layout).map_err(|e| bad(e.to_string())))
         .collect::<Result<Vec<_>>>()?;
     if r.position().div_ceil(8) != bytes.len() {
         return Err(bad(format!(

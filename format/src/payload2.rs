@@ -170,15 +170,21 @@ fn geometry<'a>(h: &Header, s: &'a Shape) -> plane2::Plane<'a> {
     }
 }
 
-/// The counts of each family's contexts' tokens in a version 1 payload before zstd: what
-/// an encoder learns a file's context maps from (`plane2::context_counts`).
-pub fn context_counts(h: &Header, what: Payload, raw: &[u8]) -> Result<Vec<Vec<u64>>> {
+/// The counts of each family's contexts' tokens in a version 1 payload before zstd, coded
+/// as `layout`'s version codes them: what an encoder learns a file's context maps from
+/// (`plane2::context_counts`).
+pub fn context_counts(
+    h: &Header,
+    what: Payload,
+    raw: &[u8],
+    layout: plane2::Layout,
+) -> Result<Vec<Vec<u64>>> {
     let (_, planes) = planes(h, what, raw)?;
     let input: Vec<(plane2::Plane, &[[i32; N * N]])> = planes
         .iter()
         .map(|(s, b)| (geometry(h, s), &b[..]))
         .collect();
-    plane2::context_counts(&input, plane2::FAMILIES)
+    plane2::context_counts(&input, plane2::FAMILIES, layout)
 }
 
 /// Codes a version 1 payload before zstd as a version 2 or 3 payload with `maps`, its

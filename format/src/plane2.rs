@@ -110,8 +110,24 @@ const DC: usize = FLAG + 6; // 5: even blocks; odd blocks by the neighbours' res
 const COUNT: usize = DC + 5; // 11: even by the residual's size (3); odd by the mean count (8)
 const AC_EVEN: usize = COUNT + 11; // 10 × 12: coefficients left × band
 const AC_ODD: usize = AC_EVEN + 120; // 3 × 10 × 12: × how many neighbours have one there
-/// Contexts of one family.
-pub const CONTEXTS: usize = AC_ODD + 360;
+                                     // Version 3 codes a block's residual and whether it has a coefficient as one symbol, in DC's
+                                     // contexts where no neighbour has a coefficient, and these where one has.
+const JOINT_BUSY: usize = AC_ODD + 360; // 5
+/// Version 3's joint symbol holds folded residuals below this; a larger one is this, then
+/// the rest.
+const ESCAPE: u32 = u32::MAX >> 1;
+/// Contexts of one family (version 3's; version 2 has the first 502, [`contexts`]).
+pub const CONTEXTS: usize = JOINT_BUSY + 5;
+
+/// Contexts of one family in a file of `layout`: version 2's 502, version 3's 507 (its
+/// joint symbols' contexts after them). A [`ContextMap`] holds [`CONTEXTS`] whatever the
+/// version; a version 2 header stores the first 502.
+pub fn contexts(layout: Layout) -> usize {
+    match layout {
+        Layout::OneState => JOINT_BUSY,
+        Layout::States => CONTEXTS,
+    }
+}
 
 /// Families of planes, each coded with its own [`ContextMap`]: intra keyframes, predicted
 /// keyframes and bubble terms, each luma then chroma ([`family`]).
@@ -173,13 +189,13 @@ impl ContextMap {
         }
     }
 
-    /// Appends the map: the cluster count (8 bits), each context's cluster in as few bits
-    /// as the count needs, then per cluster a bit saying whether a file-wide histogram
-    /// follows, and the histogram.
-    pub fn write(&self, out: &mut BitWriter) {
+    /// Appends the map: the cluster count (8 bits), the cluster of each of the
+    /// [`contexts`] of `layout` in as few bits as the count needs, then per cluster a bit
+    /// saying whether a file-wide histogram follows, and the histogram.
+    pub fn write(&self, out: &mut BitWriter, layout: Layout) {
         out.put(self.clusters as u32, 8);
         let bits = bits_for(self.clusters);
-        for &k in &self.of {
+        for &k in &self.of[..contexts(layout)] {
             out.put(k as u32, bits);
         }
         for t in &self.tables {
@@ -190,14 +206,15 @@ impl ContextMap {
         }
     }
 
-    /// Reads a map [`ContextMap::write`] wrote.
-    pub fn read(r: &mut BitReader) -> Result<ContextMap> {
+    /// Reads a map [`ContextMap::write`] wrote for `layout` (contexts it does not have in
+    /// cluster 0).
+    pub fn read(r: &mut BitReader, layout: Layout) -> Result<ContextMap> {
         let clusters = r.get(8)? as u8;
         if clusters == 0 {
             return Err(FormatError::Invalid("context map of no cluster".into()));
         }
         let bits = bits_for(clusters);
-        let of = (0..CONTEXTS)
+        let mut of: Vec<u8> = (0..contexts(layout))
             .map(|_| {
                 let k = r.get(bits)?;
                 if k >= clusters as u32 {
@@ -208,6 +225,7 @@ impl ContextMap {
                 Ok(k as u8)
             })
             .collect::<Result<_>>()?;
+        of.resize(CONTEXTS, 0);
         let tables = (0..clusters)
             .map(|_| match r.get(1)? {
                 1 => Histogram::read(r).map(Some),
@@ -342,14 +360,17 @@ fn grid_index(geo: &Geometry) -> Result<Vec<u32>> {
 
 /// Walks a plane's four passes, coding every symbol through `coder`; `source` gives the
 /// blocks to code (the encoder), or nothing (the decoder). `stream_of(region, group)`
-/// gives the rANS stream of a group (0–15, in raster order within its region). Returns
-/// the blocks, their DC restored, sparse.
+/// gives the rANS stream of a group (0–15, in raster order within its region); `layout`
+/// picks version 2's symbols or version 3's (a block's residual and whether it has a
+/// coefficient in one). Returns the blocks, their DC restored, sparse.
 fn walk(
     geo: &Geometry,
     source: Option<&[[i32; N * N]]>,
     stream_of: &impl Fn(usize, usize) -> usize,
     coder: &mut impl Coder,
+    layout: Layout,
 ) -> Result<Decoded> {
+    let joint = layout == Layout::States;
     let (bw, bh) = geo.grid;
     let index = grid_index(geo)?;
     let n = geo.order.len();
@@ -469,15 +490,47 @@ fn walk(
                         (0, usize::MAX)
                     };
                     let want = source.map(|s| &s[b]);
-                    let r = unpack(coder.code(
-                        stream,
-                        DC + dc_ctx,
-                        src_residual.as_ref().map_or(0, |r| pack(r[b])),
-                    )?);
-                    residual[b] = r;
-                    let count_ctx = if odd { count_ctx } else { size_class(r) };
+                    let packed = src_residual.as_ref().map_or(0, |r| pack(r[b]));
                     let nz = want.map_or(0, |q| q[1..].iter().filter(|&&v| v != 0).count());
-                    let nz = coder.code(stream, COUNT + count_ctx, nz as u32)? as usize;
+                    let (r, nz) = if joint {
+                        // One symbol for the residual and whether any coefficient follows
+                        // (2 × the folded residual + 1 if one does), in a context of whether
+                        // a neighbour has one; then the count less one where there is any.
+                        // A folded residual of ESCAPE or more (beyond ±2^30) is ESCAPE in
+                        // the symbol, the rest in a second one of the same context.
+                        let busy = odd && four.iter().any(|&j| out.count[j] > 0);
+                        let ctx = if busy { JOINT_BUSY } else { DC } + dc_ctx;
+                        let head = packed.min(ESCAPE) << 1 | (nz > 0) as u32;
+                        let j = coder.code(stream, ctx, head)?;
+                        let mut folded = j >> 1;
+                        if folded == ESCAPE {
+                            let rest = coder.code(stream, ctx, packed.wrapping_sub(ESCAPE))?;
+                            folded = ESCAPE.checked_add(rest).ok_or_else(|| {
+                                FormatError::Invalid(format!(
+                                    "block ({x}, {y}): a DC residual beyond 32 bits"
+                                ))
+                            })?;
+                        }
+                        let r = unpack(folded);
+                        let count_ctx = if odd { count_ctx } else { size_class(r) };
+                        let nz = match j & 1 {
+                            0 => 0,
+                            _ => {
+                                let less = nz.saturating_sub(1) as u32;
+                                let n = coder.code(stream, COUNT + count_ctx, less)?;
+                                (n as usize).saturating_add(1)
+                            }
+                        };
+                        (r, nz)
+                    } else {
+                        let r = unpack(coder.code(stream, DC + dc_ctx, packed)?);
+                        let count_ctx = if odd { count_ctx } else { size_class(r) };
+                        (
+                            r,
+                            coder.code(stream, COUNT + count_ctx, nz as u32)? as usize,
+                        )
+                    };
+                    residual[b] = r;
                     if nz >= N * N {
                         return Err(FormatError::Invalid(format!(
                             "block ({x}, {y}): {nz} coefficients"
@@ -597,6 +650,7 @@ impl Coder for Record {
 pub fn context_counts(
     planes: &[(Plane, &[[i32; N * N]])],
     families: usize,
+    layout: Layout,
 ) -> Result<Vec<Vec<u64>>> {
     let mut counts = vec![vec![0u64; CONTEXTS * TOKENS]; families];
     for (p, blocks) in planes {
@@ -606,7 +660,7 @@ pub fn context_counts(
             ));
         }
         let mut rec = Record(Vec::new());
-        walk(&p.geometry, Some(blocks), &|_, _| 0, &mut rec)?;
+        walk(&p.geometry, Some(blocks), &|_, _| 0, &mut rec, layout)?;
         for (_, ctx, v) in rec.0 {
             counts[p.family][ctx * TOKENS + ans::hybrid_uint(v).0] += 1;
         }
@@ -632,7 +686,7 @@ pub fn encode(
         }
         let mut rec = Record(Vec::new());
         let place = |region: usize, group: usize| region * GROUPS + group;
-        walk(&p.geometry, Some(blocks), &place, &mut rec)?;
+        walk(&p.geometry, Some(blocks), &place, &mut rec, shape.layout())?;
         records.push(rec.0);
     }
     // The chunk's histograms: per family used, per cluster.
@@ -842,6 +896,8 @@ impl Coder for Streams<'_, '_> {
 /// A coefficient section's parts, parsed and checked: what a GPU decoder uploads.
 #[derive(Clone, Debug)]
 pub struct Section {
+    /// How its lanes are laid out and its blocks coded (the file's version).
+    pub layout: Layout,
     /// The chunk's histograms.
     pub histograms: Vec<Histogram>,
     /// For each of `histograms`, its place among the file's ([`file_histograms`]) where
@@ -1011,6 +1067,7 @@ impl Section {
             )));
         }
         Ok(Section {
+            layout,
             histograms,
             file,
             places: place,
@@ -1101,7 +1158,7 @@ fn decode_counted(
                 .map(|&h| section.histograms.get(h as usize))
                 .collect(),
         };
-        let blocks = walk(&p.geometry, None, &stream_of, &mut streams)?;
+        let blocks = walk(&p.geometry, None, &stream_of, &mut streams, layout)?;
         streams.end_pass();
         for d in &streams.decoders {
             d.finish()?;
@@ -1264,7 +1321,14 @@ mod tests {
             let steps = lane_symbols(&bytes, &shapes, maps, shape.layout()).unwrap();
             for ((p, source), (lanes, sp)) in planes.iter().zip(steps.iter().zip(&full.planes)) {
                 let mut record = Record(Vec::new());
-                walk(&p.geometry, Some(source), &|_, _| 0, &mut record).unwrap();
+                walk(
+                    &p.geometry,
+                    Some(source),
+                    &|_, _| 0,
+                    &mut record,
+                    shape.layout(),
+                )
+                .unwrap();
                 let symbols = record.0.len() as u64;
                 let (chains, streams) = lanes.iter().fold((0, 0), |a, l| (a.0 + l.0, a.1 + l.1));
                 assert_eq!(lanes.len(), sp.lanes.len());
@@ -1339,10 +1403,17 @@ mod tests {
                 .collect(),
         };
         let mut w = BitWriter::default();
-        map.write(&mut w);
+        map.write(&mut w, Layout::States);
         let bytes = w.finish();
-        assert_eq!(ContextMap::read(&mut BitReader::new(&bytes)).unwrap(), map);
-        assert!(ContextMap::read(&mut BitReader::new(&bytes[..bytes.len() - 1])).is_err());
+        let read = |b: &[u8], layout| ContextMap::read(&mut BitReader::new(b), layout);
+        assert_eq!(read(&bytes, Layout::States).unwrap(), map);
+        assert!(read(&bytes[..bytes.len() - 1], Layout::States).is_err());
+        // Version 2's maps stop at its contexts; the others read as cluster 0.
+        let mut w = BitWriter::default();
+        map.write(&mut w, Layout::OneState);
+        let mut two = map.clone();
+        two.of[contexts(Layout::OneState)..].fill(0);
+        assert_eq!(read(&w.finish(), Layout::OneState).unwrap(), two);
 
         let order: Vec<(usize, usize)> = (0..400).map(|b| (b % 20, b / 20)).collect();
         let q = blocks(order.len(), 5, &order);

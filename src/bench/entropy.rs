@@ -355,7 +355,8 @@ pub fn run(a: BenchEntropyArgs) -> Result<(), String> {
     // every chunk coded, decoded back and checked.
     let maps = study.maps(16);
     let mut map_bits = vbim_format::ans::BitWriter::default();
-    maps.iter().for_each(|m| m.write(&mut map_bits));
+    maps.iter()
+        .for_each(|m| m.write(&mut map_bits, plane2::Layout::OneState));
     let map_bytes = map_bits.finish().len() as u64;
     let (mut coded, mut stored) = (map_bytes, 0u64);
     let bh = chunk::padded_size(&h).1 / N;

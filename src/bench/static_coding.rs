@@ -610,7 +610,7 @@ impl Study {
     pub fn maps(&self, k: usize) -> Vec<plane2::ContextMap> {
         let (_, own) = DESIGNS[3];
         let contexts: Vec<usize> = own.iter().cloned().flatten().collect();
-        debug_assert_eq!(contexts.len(), plane2::CONTEXTS);
+        debug_assert_eq!(contexts.len(), plane2::contexts(plane2::Layout::OneState));
         (0..FAMILIES)
             .map(|family| {
                 let chunks: Vec<&ChunkCounts> = self

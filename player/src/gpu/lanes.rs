@@ -155,7 +155,7 @@ impl Scratch {
     /// coefficient start at byte `sets` of the mask buffer.
     fn constants(&self, sets: u64) -> String {
         format!(
-            "const SLOTS: u32 = {}u;\nconst GROUPS: u32 = {}u;\n\
+            "const CONTEXTS: u32 = {CONTEXTS}u;\nconst SLOTS: u32 = {}u;\nconst GROUPS: u32 = {}u;\n\
              const INFO: u32 = {}u;\nconst LANE_STATES: u32 = {}u;\nconst FAULT: u32 = {}u;\n\
              const HISTOGRAMS: u32 = {}u;\nconst FILE_HISTOGRAMS: u32 = {}u;\n\
              const SETS: u32 = {}u;\n",
@@ -200,8 +200,9 @@ super::job::uniform_struct! {
     tile: u32 => "u32",
     /// The plane's streams (its lanes' states: one a lane in version 2).
     lanes: u32 => "u32",
-    /// (Padding.)
-    _pad0: u32 => "u32",
+    /// 1 for version 3's blocks (a residual and whether a coefficient follows in one
+    /// symbol), 0 for version 2's.
+    joint: u32 => "u32",
     /// The section's lanes' words: first word in the segment's words.
     words: u32 => "u32",
     /// The plane's streams: four words each (its lane's first and end region, its first
@@ -454,7 +455,7 @@ impl Gpu {
             rw: bw.div_ceil(REGION as u32),
             tile: ts,
             lanes: lanes.count,
-            _pad0: 0,
+            joint: section.joint as u32,
             words: section.words,
             table: lanes.table,
             family: lanes.family,

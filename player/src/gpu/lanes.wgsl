@@ -55,7 +55,7 @@ const HIST_OF: u32 = MAPS + FAMILIES * CONTEXTS;
 // (GROUPS); per block its DC residual and coefficient count (INFO); per lane its state
 // (LANE_STATES); and FAULT, set by a lane that read past its words or decoded a symbol
 // out of range. (Declared before this file: SLOTS, GROUPS, INFO, LANE_STATES, FAULT,
-// HISTOGRAMS, FILE_HISTOGRAMS, SETS.)
+// HISTOGRAMS, FILE_HISTOGRAMS, SETS, and CONTEXTS, a family's: `vbim_format::plane2`'s.)
 
 const NONE: u32 = 0xFFFFFFFFu;
 // Lanes per workgroup of the lane passes (`flags`, `middle`, `blocks`): one. A lane is a
@@ -64,12 +64,15 @@ const NONE: u32 = 0xFFFFFFFFu;
 // against 31.5). (On lavapipe, where the lanes are off, one costs 1.3 times eight.)
 const LANE_GROUP: u32 = 1u;
 const FAMILIES: u32 = 6u;
-const CONTEXTS: u32 = 502u;
 const FLAG: u32 = 0u;
 const DC: u32 = 6u;
 const COUNT: u32 = 11u;
 const AC_EVEN: u32 = 22u;
 const AC_ODD: u32 = 142u;
+const JOINT_BUSY: u32 = 502u;
+// Version 3's joint symbol holds folded residuals below this; a larger one is this, then
+// the rest.
+const ESCAPE: u32 = 0x7FFFFFFFu;
 const REGION: u32 = 16u;
 const GROUP: u32 = 4u;
 
@@ -526,11 +529,41 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
         dc_ctx = 1u + min(2u * sizes / n4, 3u);
         count_ctx = 3u + count_bucket((counts + n4 / 2u) / n4);
     }
-    let r = unpack(symbol(DC + dc_ctx));
-    if (!odd) {
-        count_ctx = size_class(r);
+    var r = 0i;
+    var nz = 0u;
+    if (prm.joint == 0u) {
+        r = unpack(symbol(DC + dc_ctx));
+        if (!odd) {
+            count_ctx = size_class(r);
+        }
+        nz = symbol(COUNT + count_ctx);
+    } else {
+        // Version 3: the residual and whether a coefficient follows in one symbol, in a
+        // context of whether a neighbour has one; then the count less one.
+        // (Unrolled: lavapipe counts every loop iteration against its budget.)
+        var busy = false;
+        if (odd) {
+            busy = count(four[0]) > 0u || (n4 > 1u && count(four[1]) > 0u)
+                || (n4 > 2u && count(four[2]) > 0u) || (n4 > 3u && count(four[3]) > 0u);
+        }
+        let ctx = select(DC, JOINT_BUSY, busy) + dc_ctx;
+        let j = symbol(ctx);
+        var folded = j >> 1u;
+        if (folded == ESCAPE) {
+            let rest = symbol(ctx);
+            if (rest > 0xFFFFFFFFu - ESCAPE) {
+                fail();
+            }
+            folded = ESCAPE + rest;
+        }
+        r = unpack(folded);
+        if (!odd) {
+            count_ctx = size_class(r);
+        }
+        if ((j & 1u) == 1u) {
+            nz = min(symbol(COUNT + count_ctx), 63u) + 1u;
+        }
     }
-    var nz = symbol(COUNT + count_ctx);
     if (nz >= 64u) {
         fail();
         nz = 0u;

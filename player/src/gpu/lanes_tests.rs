@@ -232,7 +232,7 @@ fn keyframe_and_bubble_planes_decode_as_coded_to_the_dense_plane_their_pairs_giv
             ),
         ];
         // File-wide histograms for family 1, from its own symbols.
-        let counts = plane2::context_counts(&planes[1..], 2).unwrap();
+        let counts = plane2::context_counts(&planes[1..], 2, Layout::OneState).unwrap();
         let totals: Vec<u64> = (0..vbim_format::ans::TOKENS)
             .map(|t| {
                 (0..CONTEXTS)
