@@ -174,7 +174,11 @@ fn reconstruction_matches_the_reference(device: &wgpu::Device, queue: &wgpu::Que
             ..config(SegmentMode::Auto { max: 12 })
         };
         let bytes = encode_bytes(&src, &cfg);
-        let major = if format == FormatVersion::V1 { 1 } else { 2 };
+        let major = match format {
+            FormatVersion::V1 => 1,
+            FormatVersion::V2 => 2,
+            FormatVersion::V3 => 3,
+        };
         assert_eq!(header_of(&bytes).version_major(), major);
         let mut reference =
             Decoder::new(Reader::open(Cursor::new(bytes.clone())).unwrap()).unwrap();
@@ -1024,13 +1028,13 @@ fn every_frame_matches_the_reference_through_the_longest_chain_a_seek_and_the_lo
 /// workgroups; lavapipe, the tests' adapter, in `DecodeShape::CPU`): the same frames as a
 /// GPU decodes them, and in slices of 96 (several spans of 32, passes that end inside a
 /// slice); format 2's sections both as pairs (the shape's default) and decoded on the GPU
-/// as coded (`lanes`, `lanes.wgsl`).
+/// as coded (`lanes`, `lanes.wgsl`), and format 3's as coded.
 #[test]
 fn every_frame_matches_the_reference_as_a_gpu_decodes() {
     let (device, queue) = device();
     for (slice_groups, lanes, formats) in [
         (2048, false, &[V1, V2][..]),
-        (2048, true, &[V2][..]),
+        (2048, true, &[V2, V3][..]),
         (96, false, &[V1][..]),
     ] {
         let shape = DecodeShape {
@@ -1044,6 +1048,7 @@ fn every_frame_matches_the_reference_as_a_gpu_decodes() {
 
 const V1: FormatVersion = FormatVersion::V1;
 const V2: FormatVersion = FormatVersion::V2;
+const V3: FormatVersion = FormatVersion::V3;
 
 fn every_frame_matches_the_reference(
     device: &wgpu::Device,
