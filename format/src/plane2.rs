@@ -57,6 +57,31 @@ pub const MAX_LANE_SYMBOLS: usize = 16_384;
 pub const MAX_LANE_REGIONS: usize = 1024;
 /// Groups in a region.
 pub const GROUPS: usize = (REGION / GROUP) * (REGION / GROUP);
+
+/// A region's cells (x, y from its corner) in raster order: version 2's block order.
+const RASTER: [(u8, u8); REGION * REGION] = cell_order(false);
+/// A region's cells group by group (groups in raster order, each one's cells in raster
+/// order): version 3's block order.
+const BY_GROUP: [(u8, u8); REGION * REGION] = cell_order(true);
+
+const fn cell_order(by_group: bool) -> [(u8, u8); REGION * REGION] {
+    let mut out = [(0u8, 0u8); REGION * REGION];
+    let mut i = 0;
+    while i < REGION * REGION {
+        out[i] = if by_group {
+            let (g, c) = (i / (GROUP * GROUP), i % (GROUP * GROUP));
+            let per = REGION / GROUP;
+            (
+                (g % per * GROUP + c % GROUP) as u8,
+                (g / per * GROUP + c / GROUP) as u8,
+            )
+        } else {
+            ((i % REGION) as u8, (i / REGION) as u8)
+        };
+        i += 1;
+    }
+    out
+}
 /// A version 3 lane's rANS states, at most (a GPU decoder runs them side by side, one
 /// invocation each, in one workgroup).
 pub const MAX_STATES: usize = 64;
@@ -454,113 +479,122 @@ fn walk(
             }
         }
     }
-    // Passes 3 and 4: the blocks of the groups with something.
+    // Passes 3 and 4: the blocks of the groups with something, each region's in raster
+    // order (version 2) or group by group (version 3, so that a state visits only its own
+    // groups).
+    let cells = match layout {
+        Layout::OneState => &RASTER,
+        Layout::States => &BY_GROUP,
+    };
     for parity in 0..2 {
         coder.pass(2 + parity);
         for region in 0..regions {
             let (rx, ry) = ((region % rw) * REGION, (region / rw) * REGION);
-            for y in ry..(ry + REGION).min(bh) {
-                for x in rx..(rx + REGION).min(bw) {
-                    // Most groups of a day's planes are empty: their test comes first.
-                    if (x + y) % 2 != parity || !full[(y / GROUP) * gw + x / GROUP] {
-                        continue;
+            for &(dx, dy) in cells {
+                let (x, y) = (rx + dx as usize, ry + dy as usize);
+                // Most groups of a day's planes are empty: their test comes first.
+                if x >= bw
+                    || y >= bh
+                    || (x + y) % 2 != parity
+                    || !full[(y / GROUP) * gw + x / GROUP]
+                {
+                    continue;
+                }
+                let Some(b) = at(x as isize, y as isize) else {
+                    continue;
+                };
+                debug_assert_eq!(region_of(x, y), region);
+                let stream = stream_of(region, (y - ry) / GROUP * per + (x - rx) / GROUP);
+                let mut four_at = [0usize; 4];
+                let mut len = 0;
+                for &(dx, dy) in &FOUR {
+                    if let Some(j) = at(x as isize + dx, y as isize + dy) {
+                        four_at[len] = j;
+                        len += 1;
                     }
-                    let Some(b) = at(x as isize, y as isize) else {
-                        continue;
-                    };
-                    debug_assert_eq!(region_of(x, y), region);
-                    let stream = stream_of(region, (y - ry) / GROUP * per + (x - rx) / GROUP);
-                    let mut four_at = [0usize; 4];
-                    let mut len = 0;
-                    for &(dx, dy) in &FOUR {
-                        if let Some(j) = at(x as isize + dx, y as isize + dy) {
-                            four_at[len] = j;
-                            len += 1;
-                        }
+                }
+                let four = &four_at[..len];
+                let odd = parity == 1 && !four.is_empty();
+                let (dc_ctx, count_ctx) = if odd {
+                    let sizes: usize = four.iter().map(|&j| size_class(residual[j])).sum();
+                    let mean = (four.iter().map(|&j| out.count[j] as usize).sum::<usize>()
+                        + four.len() / 2)
+                        / four.len();
+                    (1 + (2 * sizes / four.len()).min(3), 3 + count_bucket(mean))
+                } else {
+                    (0, usize::MAX)
+                };
+                let want = source.map(|s| &s[b]);
+                let packed = src_residual.as_ref().map_or(0, |r| pack(r[b]));
+                let nz = want.map_or(0, |q| q[1..].iter().filter(|&&v| v != 0).count());
+                let (r, nz) = if joint {
+                    // One symbol for the residual and whether any coefficient follows
+                    // (2 × the folded residual + 1 if one does), in a context of whether
+                    // a neighbour has one; then the count less one where there is any.
+                    // A folded residual of ESCAPE or more (beyond ±2^30) is ESCAPE in
+                    // the symbol, the rest in a second one of the same context.
+                    let busy = odd && four.iter().any(|&j| out.count[j] > 0);
+                    let ctx = if busy { JOINT_BUSY } else { DC } + dc_ctx;
+                    let head = packed.min(ESCAPE) << 1 | (nz > 0) as u32;
+                    let j = coder.code(stream, ctx, head)?;
+                    let mut folded = j >> 1;
+                    if folded == ESCAPE {
+                        let rest = coder.code(stream, ctx, packed.wrapping_sub(ESCAPE))?;
+                        folded = ESCAPE.checked_add(rest).ok_or_else(|| {
+                            FormatError::Invalid(format!(
+                                "block ({x}, {y}): a DC residual beyond 32 bits"
+                            ))
+                        })?;
                     }
-                    let four = &four_at[..len];
-                    let odd = parity == 1 && !four.is_empty();
-                    let (dc_ctx, count_ctx) = if odd {
-                        let sizes: usize = four.iter().map(|&j| size_class(residual[j])).sum();
-                        let mean = (four.iter().map(|&j| out.count[j] as usize).sum::<usize>()
-                            + four.len() / 2)
-                            / four.len();
-                        (1 + (2 * sizes / four.len()).min(3), 3 + count_bucket(mean))
-                    } else {
-                        (0, usize::MAX)
-                    };
-                    let want = source.map(|s| &s[b]);
-                    let packed = src_residual.as_ref().map_or(0, |r| pack(r[b]));
-                    let nz = want.map_or(0, |q| q[1..].iter().filter(|&&v| v != 0).count());
-                    let (r, nz) = if joint {
-                        // One symbol for the residual and whether any coefficient follows
-                        // (2 × the folded residual + 1 if one does), in a context of whether
-                        // a neighbour has one; then the count less one where there is any.
-                        // A folded residual of ESCAPE or more (beyond ±2^30) is ESCAPE in
-                        // the symbol, the rest in a second one of the same context.
-                        let busy = odd && four.iter().any(|&j| out.count[j] > 0);
-                        let ctx = if busy { JOINT_BUSY } else { DC } + dc_ctx;
-                        let head = packed.min(ESCAPE) << 1 | (nz > 0) as u32;
-                        let j = coder.code(stream, ctx, head)?;
-                        let mut folded = j >> 1;
-                        if folded == ESCAPE {
-                            let rest = coder.code(stream, ctx, packed.wrapping_sub(ESCAPE))?;
-                            folded = ESCAPE.checked_add(rest).ok_or_else(|| {
-                                FormatError::Invalid(format!(
-                                    "block ({x}, {y}): a DC residual beyond 32 bits"
-                                ))
-                            })?;
+                    let r = unpack(folded);
+                    let count_ctx = if odd { count_ctx } else { size_class(r) };
+                    let nz = match j & 1 {
+                        0 => 0,
+                        _ => {
+                            let less = nz.saturating_sub(1) as u32;
+                            let n = coder.code(stream, COUNT + count_ctx, less)?;
+                            (n as usize).saturating_add(1)
                         }
-                        let r = unpack(folded);
-                        let count_ctx = if odd { count_ctx } else { size_class(r) };
-                        let nz = match j & 1 {
-                            0 => 0,
-                            _ => {
-                                let less = nz.saturating_sub(1) as u32;
-                                let n = coder.code(stream, COUNT + count_ctx, less)?;
-                                (n as usize).saturating_add(1)
-                            }
-                        };
-                        (r, nz)
-                    } else {
-                        let r = unpack(coder.code(stream, DC + dc_ctx, packed)?);
-                        let count_ctx = if odd { count_ctx } else { size_class(r) };
-                        (
-                            r,
-                            coder.code(stream, COUNT + count_ctx, nz as u32)? as usize,
-                        )
                     };
-                    residual[b] = r;
-                    if nz >= N * N {
+                    (r, nz)
+                } else {
+                    let r = unpack(coder.code(stream, DC + dc_ctx, packed)?);
+                    let count_ctx = if odd { count_ctx } else { size_class(r) };
+                    (
+                        r,
+                        coder.code(stream, COUNT + count_ctx, nz as u32)? as usize,
+                    )
+                };
+                residual[b] = r;
+                if nz >= N * N {
+                    return Err(FormatError::Invalid(format!(
+                        "block ({x}, {y}): {nz} coefficients"
+                    )));
+                }
+                out.count[b] = nz as u8;
+                out.first[b] = out.terms.len() as u32;
+                let mut left = nz;
+                let mut i = 1;
+                while left > 0 {
+                    if i == N * N {
                         return Err(FormatError::Invalid(format!(
-                            "block ({x}, {y}): {nz} coefficients"
+                            "block ({x}, {y}): {left} coefficients past the last position"
                         )));
                     }
-                    out.count[b] = nz as u8;
-                    out.first[b] = out.terms.len() as u32;
-                    let mut left = nz;
-                    let mut i = 1;
-                    while left > 0 {
-                        if i == N * N {
-                            return Err(FormatError::Invalid(format!(
-                                "block ({x}, {y}): {left} coefficients past the last position"
-                            )));
-                        }
-                        let ctx = left_bucket(left) * 12 + band(i);
-                        let ctx = if odd {
-                            let hits = four.iter().filter(|&&j| mask[j] >> i & 1 != 0).count();
-                            AC_ODD + (2 * hits).div_ceil(four.len()).min(2) * 120 + ctx
-                        } else {
-                            AC_EVEN + ctx
-                        };
-                        let v = unpack(coder.code(stream, ctx, want.map_or(0, |q| pack(q[i])))?);
-                        if v != 0 {
-                            mask[b] |= 1 << i;
-                            out.terms.push((i as u8, v));
-                            left -= 1;
-                        }
-                        i += 1;
+                    let ctx = left_bucket(left) * 12 + band(i);
+                    let ctx = if odd {
+                        let hits = four.iter().filter(|&&j| mask[j] >> i & 1 != 0).count();
+                        AC_ODD + (2 * hits).div_ceil(four.len()).min(2) * 120 + ctx
+                    } else {
+                        AC_EVEN + ctx
+                    };
+                    let v = unpack(coder.code(stream, ctx, want.map_or(0, |q| pack(q[i])))?);
+                    if v != 0 {
+                        mask[b] |= 1 << i;
+                        out.terms.push((i as u8, v));
+                        left -= 1;
                     }
+                    i += 1;
                 }
             }
         }

@@ -68,8 +68,9 @@ pub(crate) struct SectionSpan {
     /// histogram g as g, the section's own i as the file's count + i, [`NONE`]: none);
     /// [`NONE`] for a family it does not use.
     pub places: [u32; FAMILIES],
-    /// Version 3's blocks: a residual and whether a coefficient follows in one symbol.
-    pub joint: bool,
+    /// Version 3's blocks: a residual and whether a coefficient follows in one symbol,
+    /// group by group.
+    pub v3: bool,
 }
 
 /// A plane coded by rANS lanes (version 2): which section and family, and its lanes.
@@ -272,7 +273,7 @@ impl Coded {
             own,
             own_count,
             places,
-            joint: section.layout == vbim_format::plane2::Layout::States,
+            v3: section.layout == vbim_format::plane2::Layout::States,
         }
     }
 

@@ -201,8 +201,8 @@ super::job::uniform_struct! {
     /// The plane's streams (its lanes' states: one a lane in version 2).
     lanes: u32 => "u32",
     /// 1 for version 3's blocks (a residual and whether a coefficient follows in one
-    /// symbol), 0 for version 2's.
-    joint: u32 => "u32",
+    /// symbol; group by group), 0 for version 2's.
+    v3: u32 => "u32",
     /// The section's lanes' words: first word in the segment's words.
     words: u32 => "u32",
     /// The plane's streams: four words each (its lane's first and end region, its first
@@ -455,7 +455,7 @@ impl Gpu {
             rw: bw.div_ceil(REGION as u32),
             tile: ts,
             lanes: lanes.count,
-            joint: section.joint as u32,
+            v3: section.v3 as u32,
             words: section.words,
             table: lanes.table,
             family: lanes.family,

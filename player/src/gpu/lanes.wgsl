@@ -384,10 +384,13 @@ fn load(lane: u32) -> vec2<u32> {
     return vec2<u32>(seg[prm.table + 4u * lane], seg[prm.table + 4u * lane + 1u]);
 }
 
-// Whether this stream codes group `local` (0–15, raster order) of region `region` of its
-// lane, whose first region is `first`.
-fn mine(region: u32, first: u32, local: u32) -> bool {
-    return ((region - first) * 16u + local) % picks == pick;
+// Group `place` of the lane whose regions start at `first` (16 a region, in raster order
+// within it): its place on the group grid (beyond the grid at the plane's edges).
+fn group_at(first: u32, place: u32) -> vec2<u32> {
+    let per = REGION / GROUP;
+    let region = first + place / (per * per);
+    let local = place % (per * per);
+    return vec2<u32>((region % prm.rw) * per + local % per, (region / prm.rw) * per + local / per);
 }
 
 fn save(lane: u32) {
@@ -409,40 +412,39 @@ fn group_bits(gx: i32, gy: i32) -> u32 {
     return scratch[GROUPS + u32(gy) * prm.gw + u32(gx)];
 }
 
-// The groups' flags of parity `parity` in the lane's regions `span`.
+// The groups' flags of parity `parity` among the stream's groups of its lane's regions
+// `span`: places pick, pick + picks, … (every place in version 2).
 fn flags_of(span: vec2<u32>, parity: u32) {
-    let per = REGION / GROUP;
-    for (var region = span.x; region < span.y; region = region + 1u) {
-        let rx = (region % prm.rw) * per;
-        let ry = (region / prm.rw) * per;
-        for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
-            for (var gx = rx; gx < min(rx + per, prm.gw); gx = gx + 1u) {
-                let g = GROUPS + gy * prm.gw + gx;
-                let local = (gy - ry) * per + gx - rx;
-                if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != parity
-                    || !mine(region, span.x, local)) {
-                    continue;
-                }
-                var ctx = 0u;
-                if (parity == 1u) {
-                    // The neighbouring groups (even, decoded in the first pass).
-                    let l = group_bits(i32(gx) - 1, i32(gy));
-                    let r = group_bits(i32(gx) + 1, i32(gy));
-                    let u = group_bits(i32(gx), i32(gy) - 1);
-                    let d = group_bits(i32(gx), i32(gy) + 1);
-                    let around = (l & 1u) + (r & 1u) + (u & 1u) + (d & 1u);
-                    let full = (l >> 1u) + (r >> 1u) + (u >> 1u) + (d >> 1u);
-                    if (around > 0u) {
-                        ctx = 1u + around - full;
-                    }
-                }
-                let f = symbol(FLAG + ctx);
-                if (f > 1u) {
-                    fail();
-                }
-                scratch[g] = (scratch[g] & 1u) | select(0u, 2u, f == 1u);
+    let places = (span.y - span.x) * GROUP * GROUP;
+    for (var p = pick; p < places; p = p + picks) {
+        let cell = group_at(span.x, p);
+        let gx = cell.x;
+        let gy = cell.y;
+        if (gx >= prm.gw || gy >= prm.gh) {
+            continue;
+        }
+        let g = GROUPS + gy * prm.gw + gx;
+        if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != parity) {
+            continue;
+        }
+        var ctx = 0u;
+        if (parity == 1u) {
+            // The neighbouring groups (even, decoded in the first pass).
+            let l = group_bits(i32(gx) - 1, i32(gy));
+            let r = group_bits(i32(gx) + 1, i32(gy));
+            let u = group_bits(i32(gx), i32(gy) - 1);
+            let d = group_bits(i32(gx), i32(gy) + 1);
+            let around = (l & 1u) + (r & 1u) + (u & 1u) + (d & 1u);
+            let full = (l >> 1u) + (r >> 1u) + (u >> 1u) + (d >> 1u);
+            if (around > 0u) {
+                ctx = 1u + around - full;
             }
         }
+        let f = symbol(FLAG + ctx);
+        if (f > 1u) {
+            fail();
+        }
+        scratch[g] = (scratch[g] & 1u) | select(0u, 2u, f == 1u);
     }
 }
 
@@ -477,7 +479,7 @@ fn middle(
     }
     let span = load(lane);
     flags_of(span, 1u);
-    blocks_of(span, 0u);
+    blocks_in(span, 0u);
     save(lane);
 }
 
@@ -531,7 +533,7 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
     }
     var r = 0i;
     var nz = 0u;
-    if (prm.joint == 0u) {
+    if (prm.v3 == 0u) {
         r = unpack(symbol(DC + dc_ctx));
         if (!odd) {
             count_ctx = size_class(r);
@@ -609,7 +611,8 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
     atomicStore(&marks[2u * b + 1u], mask.y);
 }
 
-// The blocks of parity `parity` in the lane's regions `span`.
+// Version 2: the blocks of parity `parity` in the lane's regions `span`, each region's in
+// raster order.
 fn blocks_of(span: vec2<u32>, parity: u32) {
     let per = REGION / GROUP;
     for (var region = span.x; region < span.y; region = region + 1u) {
@@ -620,16 +623,11 @@ fn blocks_of(span: vec2<u32>, parity: u32) {
         // loop iterations), not one per block row.
         for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
             let row = GROUPS + gy * prm.gw;
-            let local = (gy - ry) * per;
             var full = 0u;
-            if (rx < prm.gw && (scratch[row + rx] & 2u) != 0u
-                && mine(region, span.x, local)) { full |= 1u; }
-            if (rx + 1u < prm.gw && (scratch[row + rx + 1u] & 2u) != 0u
-                && mine(region, span.x, local + 1u)) { full |= 2u; }
-            if (rx + 2u < prm.gw && (scratch[row + rx + 2u] & 2u) != 0u
-                && mine(region, span.x, local + 2u)) { full |= 4u; }
-            if (rx + 3u < prm.gw && (scratch[row + rx + 3u] & 2u) != 0u
-                && mine(region, span.x, local + 3u)) { full |= 8u; }
+            if (rx < prm.gw && (scratch[row + rx] & 2u) != 0u) { full |= 1u; }
+            if (rx + 1u < prm.gw && (scratch[row + rx + 1u] & 2u) != 0u) { full |= 2u; }
+            if (rx + 2u < prm.gw && (scratch[row + rx + 2u] & 2u) != 0u) { full |= 4u; }
+            if (rx + 3u < prm.gw && (scratch[row + rx + 3u] & 2u) != 0u) { full |= 8u; }
             if (full == 0u) {
                 continue;
             }
@@ -652,6 +650,39 @@ fn blocks_of(span: vec2<u32>, parity: u32) {
     }
 }
 
+// Version 3: the blocks of parity `parity` of the stream's groups (places pick, pick +
+// picks, … of its lane's regions `span`) that hold something, group by group, each
+// group's in raster order.
+fn blocks_by_group(span: vec2<u32>, parity: u32) {
+    let places = (span.y - span.x) * GROUP * GROUP;
+    for (var p = pick; p < places; p = p + picks) {
+        let cell = group_at(span.x, p);
+        if (cell.x >= prm.gw || cell.y >= prm.gh
+            || (scratch[GROUPS + cell.y * prm.gw + cell.x] & 2u) == 0u) {
+            continue;
+        }
+        for (var cy = cell.y * GROUP; cy < min((cell.y + 1u) * GROUP, prm.bh); cy = cy + 1u) {
+            let x0 = cell.x * GROUP + (cell.x * GROUP + cy + parity) % 2u;
+            for (var bx = x0; bx < min((cell.x + 1u) * GROUP, prm.bw); bx = bx + 2u) {
+                let b = block_at(i32(bx), i32(cy));
+                if (b != NONE) {
+                    block(b, bx, cy, parity);
+                }
+            }
+        }
+    }
+}
+
+// The blocks of parity `parity` of the stream (its lane's regions `span`), in its
+// version's order.
+fn blocks_in(span: vec2<u32>, parity: u32) {
+    if (prm.v3 == 1u) {
+        blocks_by_group(span, parity);
+    } else {
+        blocks_of(span, parity);
+    }
+}
+
 // Pass 4: the odd blocks, whose contexts read their even neighbours (decoded by the
 // dispatch before). The lane's last: it must end on every word read and the state it
 // started from, as the specification's decoder checks.
@@ -665,7 +696,7 @@ fn blocks(
     if (lane >= prm.lanes) {
         return;
     }
-    blocks_of(load(lane), 1u);
+    blocks_in(load(lane), 1u);
     if (at != end || x != 65536u) {
         fail();
     }
