@@ -20,9 +20,9 @@
 //! half), the frequencies of the histograms the chunk sent itself (16-bit, up to each
 //! one's last used token), and per family it uses the histogram of each cluster of the family
 //! ([`SectionSpan`]); per plane, its streams (a lane's states: one a lane in version 2),
-//! four words each (the lane's first and end region, the stream's first word from the
-//! section's first, its place among the lane's states | their number << 8) and the end
-//! of the words, then a bubble plane's member spans as above. The file's own histograms go to the GPU once, when the stream
+//! two words each (the lane's first region | the stream's place among the lane's states
+//! << 16 | their number less one << 22; the stream's first word from the section's
+//! first) and the end of the words, then a bubble plane's member spans as above. The file's own histograms go to the GPU once, when the stream
 //! opens.
 
 use vbim_format::chunk::{spans, Scanned};
@@ -287,13 +287,16 @@ impl Coded {
         blocks: usize,
         members: Option<(usize, &dyn Fn(usize) -> bool)>,
     ) -> PlaneSpan {
-        // Per stream (a lane's state): its lane's regions, its first word, its place
-        // among the lane's states and their number; then the end of the words.
+        // Per stream (a lane's state): its lane's first region | its place among the
+        // lane's states << 16 | their number less one << 22, and its first word; then the
+        // end of the words. (A lane ends where the next one starts.)
         let table = self.words.len() as u32;
-        for &(r0, r1, s0, s1) in &sp.lanes {
+        for &(r0, _, s0, s1) in &sp.lanes {
+            // (Planes of at most 16384² texels: 16,384 regions. States: at most 64.)
+            debug_assert!(r0 < 1 << 16 && s1 - s0 <= 64);
             for (k, &(w0, _)) in sp.streams[s0..s1].iter().enumerate() {
-                let place = k as u32 | ((s1 - s0) as u32) << 8;
-                self.words.extend([r0 as u32, r1 as u32, w0 as u32, place]);
+                let place = r0 as u32 | (k as u32) << 16 | ((s1 - s0 - 1) as u32) << 22;
+                self.words.extend([place, w0 as u32]);
             }
         }
         let (w_first, w1) = (sp.streams[0].0, sp.streams[sp.streams.len() - 1].1);

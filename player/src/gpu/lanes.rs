@@ -205,9 +205,9 @@ super::job::uniform_struct! {
     v3: u32 => "u32",
     /// The section's lanes' words: first word in the segment's words.
     words: u32 => "u32",
-    /// The plane's streams: four words each (its lane's first and end region, its first
-    /// word from the section's first, its place among its lane's states | their number
-    /// << 8), then the end of the words.
+    /// The plane's streams: two words each (its lane's first region | its place among
+    /// the lane's states << 16 | their number less one << 22; its first word from the
+    /// section's first), then the end of the words.
     table: u32 => "u32",
     /// Its family (which context map codes it).
     family: u32 => "u32",

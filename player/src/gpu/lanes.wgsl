@@ -321,8 +321,8 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if (i < prm.lanes) {
         // A stream's words end where the next one's start, the last at the table's end.
-        let w0 = seg[prm.table + 4u * i + 2u];
-        let w1 = seg[prm.table + 4u * (i + 1u) + select(0u, 2u, i + 1u < prm.lanes)];
+        let w0 = seg[prm.table + 2u * i + 1u];
+        let w1 = seg[prm.table + 2u * (i + 1u) + select(0u, 1u, i + 1u < prm.lanes)];
         var state = vec4<u32>(0u, w0 + 2u, w1, 1u);
         if (w1 >= w0 + 2u) {
             state.x = (word(w0) << 16u) | word(w0 + 1u);
@@ -378,10 +378,17 @@ fn load(lane: u32) -> vec2<u32> {
     at = scratch[s + 1u];
     end = scratch[s + 2u];
     failed = scratch[s + 3u];
-    let place = seg[prm.table + 4u * lane + 3u];
-    pick = place & 0xFFu;
-    picks = max(place >> 8u, 1u);
-    return vec2<u32>(seg[prm.table + 4u * lane], seg[prm.table + 4u * lane + 1u]);
+    let place = seg[prm.table + 2u * lane];
+    pick = (place >> 16u) & 63u;
+    picks = (place >> 22u) + 1u;
+    // The lane ends where the next one starts (its first stream's), the last at the
+    // plane's last region.
+    let next = lane + picks - pick;
+    var last = ((prm.bw + REGION - 1u) / REGION) * ((prm.bh + REGION - 1u) / REGION);
+    if (next < prm.lanes) {
+        last = seg[prm.table + 2u * next] & 0xFFFFu;
+    }
+    return vec2<u32>(place & 0xFFFFu, max(last, place & 0xFFFFu));
 }
 
 // Group `place` of the lane whose regions start at `first` (16 a region, in raster order
