@@ -55,6 +55,18 @@ pub const GROUP: usize = 4;
 pub const MAX_LANE_SYMBOLS: usize = 16_384;
 /// See [`MAX_LANE_SYMBOLS`].
 pub const MAX_LANE_REGIONS: usize = 1024;
+/// Version 3's lanes cover at most this many regions: a state walks its share of the
+/// lane's 16 group places a region in each of four passes, and a lane of one state (few
+/// symbols) over 1,024 regions would pass llvmpipe's 65,535 loop iterations.
+pub const MAX_LANE_REGIONS_3: usize = 512;
+
+/// The most regions a lane of `layout` covers.
+pub fn max_lane_regions(layout: Layout) -> usize {
+    match layout {
+        Layout::OneState => MAX_LANE_REGIONS,
+        Layout::States => MAX_LANE_REGIONS_3,
+    }
+}
 /// Groups in a region.
 pub const GROUPS: usize = (REGION / GROUP) * (REGION / GROUP);
 
@@ -102,7 +114,7 @@ pub enum Layout {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LaneShape {
     /// A lane ends once its coded size reaches this (or it holds [`MAX_LANE_SYMBOLS`]
-    /// symbols or [`MAX_LANE_REGIONS`] regions).
+    /// symbols or [`max_lane_regions`] regions).
     pub bytes: usize,
     /// `None`: version 2's layout, one state a lane. Otherwise version 3's: a lane of n
     /// symbols has ⌈n / this⌉ states (1 to [`MAX_STATES`]).
@@ -819,7 +831,7 @@ pub fn encode(
             symbols_in += n;
             if bits >= 8.0 * shape.bytes as f64
                 || symbols_in >= MAX_LANE_SYMBOLS
-                || run == MAX_LANE_REGIONS
+                || run == max_lane_regions(shape.layout())
             {
                 lanes.push((run, symbols_in));
                 (run, bits, symbols_in) = (0, 0.0, 0);
@@ -1056,9 +1068,10 @@ impl Section {
                     Layout::States => varint::get_u32(bytes, &mut at)? as usize,
                 };
                 // What a GPU decoder's lane may loop over (the encoder's caps).
-                if n > MAX_LANE_REGIONS || k == 0 || k > MAX_STATES {
+                let most = max_lane_regions(layout);
+                if n > most || k == 0 || k > MAX_STATES {
                     return Err(FormatError::Invalid(format!(
-                        "a lane of {n} regions and {k} states (at most {MAX_LANE_REGIONS} regions, 1 to {MAX_STATES} states)"
+                        "a lane of {n} regions and {k} states (at most {most} regions, 1 to {MAX_STATES} states)"
                     )));
                 }
                 let first = streams.len();

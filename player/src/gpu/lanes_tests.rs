@@ -317,4 +317,44 @@ fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
         let whole = version_2(usize::MAX);
         lanes_match_pairs(&mut gpu, (&[(plane, &q[..])], &maps), whole, &|_| true);
     }
+    // Version 3: a sparse plane of 512 regions (a few DC jumps) in one lane of one state,
+    // which visits every group place of its regions in each of the four passes.
+    let (bw, bh) = (512usize, 256usize);
+    let order: Vec<(usize, usize)> = (0..bw * bh).map(|b| (b % bw, b / bw)).collect();
+    let q: Vec<[i32; N * N]> = order
+        .iter()
+        .map(|_| {
+            let mut q = [0i32; N * N];
+            if lcg(&mut s).is_multiple_of(4001) {
+                q[0] = 300;
+            }
+            q
+        })
+        .collect();
+    let plane = Plane {
+        family: 0,
+        geometry: Geometry {
+            grid: (bw, bh),
+            order: &order,
+            tile: None,
+        },
+    };
+    let maps = [ContextMap::single()];
+    let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
+    let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
+    gpu.decode_lanes(&maps);
+    // (A state per 100,000 symbols: one for the lane's 8,192 group flags and few blocks.)
+    let v3 = LaneShape {
+        bytes: usize::MAX,
+        symbols_per_state: Some(100_000),
+    };
+    let bytes = plane2::encode(&[(plane, &q[..])], &maps, v3).unwrap();
+    let section = Section::parse_layout(&bytes, &[plane], &maps, Layout::States).unwrap();
+    let lane = section.planes[0].lanes[0];
+    assert_eq!(
+        (lane.1 - lane.0, lane.3 - lane.2),
+        (512, 1),
+        "one lane of one state"
+    );
+    lanes_match_pairs(&mut gpu, (&[(plane, &q[..])], &maps), v3, &|_| true);
 }
