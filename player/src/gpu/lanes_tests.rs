@@ -265,6 +265,31 @@ fn keyframe_and_bubble_planes_decode_as_coded_to_the_dense_plane_their_pairs_giv
     }
 }
 
+/// A keyframe plane of `grid` blocks whose blocks lie at `order`.
+fn keyframe_plane<'a>(grid: (usize, usize), order: &'a [(usize, usize)]) -> Plane<'a> {
+    Plane {
+        family: 0,
+        geometry: Geometry {
+            grid,
+            order,
+            tile: None,
+        },
+    }
+}
+
+/// GPU state for planes of `grid` blocks, decoding lanes coded with `maps`.
+fn lanes_gpu(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    (bw, bh): (usize, usize),
+    maps: &[ContextMap],
+) -> Gpu {
+    let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
+    let mut gpu = Gpu::new(device, queue, (pw, ph), [pw, ph], 2, 1, 16);
+    gpu.decode_lanes(maps);
+    gpu
+}
+
 /// 96 × 96 dense blocks: about 90,000 symbols, beyond the 65,535 loop iterations
 /// llvmpipe allows one invocation; however large a lane the caller asks for, the
 /// encoder's caps cut it. And a 256 × 256-block night keyframe (smooth DCs, a few jumps):
@@ -295,18 +320,9 @@ fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
                 q
             })
             .collect();
-        let plane = Plane {
-            family: 0,
-            geometry: Geometry {
-                grid: (bw, bh),
-                order: &order,
-                tile: None,
-            },
-        };
+        let plane = keyframe_plane((bw, bh), &order);
         let maps = [ContextMap::single()];
-        let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
-        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
-        gpu.decode_lanes(&maps);
+        let mut gpu = lanes_gpu(&device, &queue, (bw, bh), &maps);
         let bytes = plane2::encode(&[(plane, &q[..])], &maps, version_2(usize::MAX)).unwrap();
         let lanes = Section::parse_layout(&bytes, &[plane], &maps, Layout::OneState)
             .unwrap()
@@ -331,18 +347,9 @@ fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
             q
         })
         .collect();
-    let plane = Plane {
-        family: 0,
-        geometry: Geometry {
-            grid: (bw, bh),
-            order: &order,
-            tile: None,
-        },
-    };
+    let plane = keyframe_plane((bw, bh), &order);
     let maps = [ContextMap::single()];
-    let (pw, ph) = (8 * bw as u32, 8 * bh as u32);
-    let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 2, 1, 16);
-    gpu.decode_lanes(&maps);
+    let mut gpu = lanes_gpu(&device, &queue, (bw, bh), &maps);
     // (A state per 100,000 symbols: one for the lane's 8,192 group flags and few blocks.)
     let v3 = LaneShape {
         bytes: usize::MAX,
