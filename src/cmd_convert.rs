@@ -3,15 +3,13 @@
 
 use std::io::BufReader;
 
-use vbim_encoder::FormatVersion;
-
 use crate::cli::ConvertArgs;
 use crate::progress::Stages;
 
 pub fn run(a: ConvertArgs) -> Result<(), String> {
     let name = a.file.display().to_string();
     let f = crate::sequence::open_input(&a.file)?;
-    let version: FormatVersion = crate::cli::format_version(a.format_version);
+    let version = crate::cli::format_version(a.format_version);
     let lanes = vbim_encoder::Lanes {
         bytes: a.lane_bytes,
         symbols_per_state: a.symbols_per_state,

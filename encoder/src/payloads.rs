@@ -39,7 +39,7 @@ pub struct Lanes {
     pub bytes: Option<usize>,
     /// Version 3: a lane of n symbols has ⌈n / this⌉ states (1 to 64), decoded side by
     /// side; fewer symbols a state shorten a GPU's serial chains for 4–6 bytes a state
-    /// (BENCHMARKS.md, "Several rANS states a lane").
+    /// (BENCHMARKS.md, "Format 3: lanes of several states").
     pub symbols_per_state: u64,
 }
 
@@ -80,7 +80,7 @@ impl FormatVersion {
             }),
             FormatVersion::V3 => Some(vbim_format::plane2::LaneShape {
                 bytes: lanes.bytes.unwrap_or(LANE_BYTES_3),
-                symbols_per_state: Some(lanes.symbols_per_state.max(1)),
+                symbols_per_state: Some(lanes.symbols_per_state),
             }),
         }
     }

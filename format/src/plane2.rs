@@ -527,14 +527,16 @@ fn walk(
                 }
                 let four = &four_at[..len];
                 let odd = parity == 1 && !four.is_empty();
-                let (dc_ctx, count_ctx) = if odd {
+                // An odd block's contexts: its neighbours' residual sizes and counts (and in
+                // version 3 whether any of them has a coefficient).
+                let (dc_ctx, count_ctx, busy) = if odd {
                     let sizes: usize = four.iter().map(|&j| size_class(residual[j])).sum();
-                    let mean = (four.iter().map(|&j| out.count[j] as usize).sum::<usize>()
-                        + four.len() / 2)
-                        / four.len();
-                    (1 + (2 * sizes / four.len()).min(3), 3 + count_bucket(mean))
+                    let counts: usize = four.iter().map(|&j| out.count[j] as usize).sum();
+                    let mean = (counts + four.len() / 2) / four.len();
+                    let dc_ctx = 1 + (2 * sizes / four.len()).min(3);
+                    (dc_ctx, 3 + count_bucket(mean), counts > 0)
                 } else {
-                    (0, usize::MAX)
+                    (0, usize::MAX, false)
                 };
                 let want = source.map(|s| &s[b]);
                 let packed = src_residual.as_ref().map_or(0, |r| pack(r[b]));
@@ -545,7 +547,6 @@ fn walk(
                     // a neighbour has one; then the count less one where there is any.
                     // A folded residual of ESCAPE or more (beyond ±2^30) is ESCAPE in
                     // the symbol, the rest in a second one of the same context.
-                    let busy = odd && four.iter().any(|&j| out.count[j] > 0);
                     let ctx = if busy { JOINT_BUSY } else { DC } + dc_ctx;
                     let head = packed.min(ESCAPE) << 1 | (nz > 0) as u32;
                     let j = coder.code(stream, ctx, head)?;
@@ -953,8 +954,9 @@ pub struct Section {
     /// of its map's clusters; empty for a family the section does not use.
     pub places: Vec<Vec<u16>>,
     /// Per plane: each lane's regions (a run from the plane's first, in raster order of
-    /// regions) and words ([first, end) in `words`), and the histogram of each context
-    /// (an index into `histograms`, `u16::MAX` where the chunk sent none).
+    /// regions) and streams, each stream's words ([first, end) in `words`), and the
+    /// histogram of each context (an index into `histograms`, `u16::MAX` where the chunk
+    /// sent none).
     pub planes: Vec<SectionPlane>,
     /// Where the lanes' words start in the section's bytes (two bytes each, little-endian).
     pub words_at: usize,

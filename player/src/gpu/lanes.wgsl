@@ -384,7 +384,7 @@ fn load(lane: u32) -> vec2<u32> {
     // The lane ends where the next one starts (its first stream's), the last at the
     // plane's last region.
     let next = lane + picks - pick;
-    var last = ((prm.bw + REGION - 1u) / REGION) * ((prm.bh + REGION - 1u) / REGION);
+    var last = prm.rw * ((prm.bh + REGION - 1u) / REGION);
     if (next < prm.lanes) {
         last = seg[prm.table + 2u * next] & 0xFFFFu;
     }
@@ -528,6 +528,8 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
     let odd = parity == 1u && n4 > 0u;
     var dc_ctx = 0u;
     var count_ctx = 0u;
+    // (Version 3: whether a neighbour has a coefficient, from their counts.)
+    var busy = false;
     if (odd) {
         var sizes = 0u;
         var counts = 0u;
@@ -537,6 +539,7 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
         if (n4 > 3u) { sizes += size_class(residual(four[3])); counts += count(four[3]); }
         dc_ctx = 1u + min(2u * sizes / n4, 3u);
         count_ctx = 3u + count_bucket((counts + n4 / 2u) / n4);
+        busy = counts > 0u;
     }
     var r = 0i;
     var nz = 0u;
@@ -549,12 +552,6 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
     } else {
         // Version 3: the residual and whether a coefficient follows in one symbol, in a
         // context of whether a neighbour has one; then the count less one.
-        // (Unrolled: lavapipe counts every loop iteration against its budget.)
-        var busy = false;
-        if (odd) {
-            busy = count(four[0]) > 0u || (n4 > 1u && count(four[1]) > 0u)
-                || (n4 > 2u && count(four[2]) > 0u) || (n4 > 3u && count(four[3]) > 0u);
-        }
         let ctx = select(DC, JOINT_BUSY, busy) + dc_ctx;
         let j = symbol(ctx);
         var folded = j >> 1u;
