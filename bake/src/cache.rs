@@ -12,7 +12,7 @@ use crate::sky::{SkyVisibility, SECTORS};
 use crate::BakeError;
 
 /// Bump when the precomputation changes, so that stale caches are recomputed.
-const MAGIC: &[u8; 8] = b"VBIMPRE3";
+const MAGIC: &[u8; 8] = b"VBIMPRE4";
 
 fn fnv(h: &mut u64, bytes: &[u8]) {
     for &b in bytes {
@@ -73,6 +73,7 @@ pub fn store(dir: &Path, key: u64, pre: &Precomputed) -> std::io::Result<()> {
     put(&mut out, &pre.sky.coef)?;
     put(&mut out, &pre.sky.total)?;
     put(&mut out, &pre.obscurance)?;
+    out.write_all(&pre.sky.elevation)?;
     out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
     std::fs::rename(tmp, final_path)
 }
@@ -97,7 +98,7 @@ pub fn load(dir: &Path, key: u64, scene: &Scene) -> Option<Precomputed> {
     let cell_x = f64::from_le_bytes(head[40..48].try_into().unwrap());
     let cell_y = f64::from_le_bytes(head[48..56].try_into().unwrap());
     let t = w * h;
-    let need = 56 + 4 * (t + 3 * t + az * t + SECTORS * t + t + t) as u64;
+    let need = 56 + 4 * (t + 3 * t + az * t + SECTORS * t + t + t) as u64 + (SECTORS * t) as u64;
     if len != need {
         return None;
     }
@@ -124,6 +125,8 @@ pub fn load(dir: &Path, key: u64, scene: &Scene) -> Option<Precomputed> {
     let coef = take(SECTORS * t)?;
     let total = take(t)?;
     let obscurance = take(t)?;
+    let mut elevation = vec![0u8; SECTORS * t];
+    r.read_exact(&mut elevation).ok()?;
     let hf = crate::HeightField {
         w,
         h,
@@ -140,7 +143,11 @@ pub fn load(dir: &Path, key: u64, scene: &Scene) -> Option<Precomputed> {
             texels: t,
             angles,
         },
-        sky: SkyVisibility { coef, total },
+        sky: SkyVisibility {
+            coef,
+            total,
+            elevation,
+        },
         obscurance,
         clouds,
     })

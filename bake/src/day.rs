@@ -1,14 +1,16 @@
 //! A whole bake: the scene's terrain, its precomputed maps (cached between bakes), every
 //! frame of the day lit and written, then the manifest and the contact sheet.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use rayon::prelude::*;
 use vbim_format::curve::exposure_from_max_greens;
 
 use crate::error::out_err;
-use crate::{cache, detail, light, manifest, output, BakeError};
+use crate::light::WeatherLight;
+use crate::scene::WeatherParams;
+use crate::{cache, detail, light, manifest, output, sky_track, BakeError};
 use crate::{FrameFormat, FrameInfo, HeightField, Manifest, Precomputed, Progress, Scene};
 
 pub struct BakeOptions {
@@ -27,8 +29,21 @@ pub struct BakeSummary {
     pub cache_hit: bool,
     pub lighting_s: f64,
     pub writing_s: f64,
+    /// The day's manifest (the first weather's, for a scene with weathers).
     pub manifest: PathBuf,
     pub contact_sheet: PathBuf,
+    /// Each weather's day and sky track, in the scene's order (empty without weathers).
+    pub weathers: Vec<WeatherSummary>,
+}
+
+/// Where one weather's bake went.
+#[derive(Debug, Clone)]
+pub struct WeatherSummary {
+    pub name: String,
+    /// The weather's lightmap manifest (`OUT/NAME/manifest.json`).
+    pub manifest: PathBuf,
+    /// Its sky track's manifest (`OUT/NAME/sky/manifest.json`).
+    pub sky_manifest: PathBuf,
 }
 
 /// Loads the scene's height field and resamples it to the bake's resolution.
@@ -43,7 +58,9 @@ pub fn load_terrain(scene: &Scene) -> Result<HeightField, BakeError> {
     Ok(hf)
 }
 
-/// Bakes the scene's day into `opts.out`: frames, `manifest.json`, `contact_sheet.png`.
+/// Bakes the scene's day into `opts.out`: frames, `manifest.json` and a contact sheet —
+/// or, for a scene with weathers, one folder per weather holding those and the weather's
+/// sky track in `sky/` (`docs/BAKE.md`, "Weathers and the analytic sky").
 pub fn bake(
     scene: &Scene,
     opts: &BakeOptions,
@@ -77,11 +94,100 @@ pub fn bake(
     progress("precompute", 1, 1);
     let precompute_s = t0.elapsed().as_secs_f64();
 
+    let mut summary = BakeSummary {
+        frames: scene.frames,
+        size: scene.size,
+        precompute_s,
+        cache_hit,
+        lighting_s: 0.0,
+        writing_s: 0.0,
+        manifest: PathBuf::new(),
+        contact_sheet: PathBuf::new(),
+        weathers: Vec::new(),
+    };
+    if scene.weathers.is_empty() {
+        let day = bake_day(
+            &pre,
+            scene,
+            None,
+            &opts.out,
+            opts.format,
+            "frames",
+            progress,
+        )?;
+        summary.add(day);
+        return Ok(summary);
+    }
+    // The horizon, sky and obscurance maps are shared; each weather lights its own day.
+    for w in &scene.weathers {
+        let dir = opts.out.join(&w.name);
+        std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
+        let light = WeatherLight::new(&pre.hf, scene, w);
+        let stage = format!("{} frames", w.name);
+        let day = bake_day(
+            &pre,
+            scene,
+            Some((w, &light)),
+            &dir,
+            opts.format,
+            &stage,
+            progress,
+        )?;
+        let manifest = Manifest::read(&day.manifest).map_err(BakeError::Setting)?;
+        let sky = sky_track::write(
+            scene,
+            w,
+            &light,
+            &manifest,
+            &dir.join(sky_track::DIR),
+            progress,
+        )?;
+        summary.weathers.push(WeatherSummary {
+            name: w.name.clone(),
+            manifest: day.manifest.clone(),
+            sky_manifest: sky,
+        });
+        summary.add(day);
+    }
+    Ok(summary)
+}
+
+/// One lit day: where its manifest and contact sheet went, and its timings.
+struct Day {
+    manifest: PathBuf,
+    contact_sheet: PathBuf,
+    lighting_s: f64,
+    writing_s: f64,
+}
+
+impl BakeSummary {
+    fn add(&mut self, day: Day) {
+        if self.manifest.as_os_str().is_empty() {
+            self.manifest = day.manifest;
+            self.contact_sheet = day.contact_sheet;
+        }
+        self.lighting_s += day.lighting_s;
+        self.writing_s += day.writing_s;
+    }
+}
+
+/// Lights every frame of the day under `weather` (or the scene's sector sky) into `dir`,
+/// with its manifest and contact sheet.
+fn bake_day(
+    pre: &Precomputed,
+    scene: &Scene,
+    weather: Option<(&WeatherParams, &WeatherLight)>,
+    dir: &Path,
+    format: FrameFormat,
+    stage: &str,
+    progress: Progress,
+) -> Result<Day, BakeError> {
+    let light = weather.map(|w| w.1);
     let n = scene.frames;
     let texels = scene.size * scene.size;
     // The 8-bit export needs the exposure of the whole day before the first file: a first
     // pass lights every frame and keeps only its largest values.
-    let (exposure, max_value) = if opts.format == FrameFormat::Exr {
+    let (exposure, max_value) = if format == FrameFormat::Exr {
         (None, None)
     } else {
         let stats: Vec<(f32, f32)> = (0..n)
@@ -89,7 +195,7 @@ pub fn bake(
             .map_init(
                 || vec![0f32; texels * 3],
                 |buf, i| {
-                    light::light_frame(&pre, scene, i, buf);
+                    light::light_frame_in(pre, scene, light, i, buf);
                     (
                         buf.chunks_exact(3).map(|p| p[1]).fold(0.0, f32::max),
                         buf.iter().copied().fold(0.0, f32::max),
@@ -114,19 +220,19 @@ pub fn bake(
             || vec![0f32; texels * 3],
             |buf, i| {
                 let tl = Instant::now();
-                let info = light::light_frame(&pre, scene, i, buf);
+                let info = light::light_frame_in(pre, scene, light, i, buf);
                 lighting_ns.fetch_add(
                     tl.elapsed().as_nanos() as u64,
                     std::sync::atomic::Ordering::Relaxed,
                 );
                 let tw = Instant::now();
-                let path = opts.out.join(vbim_files::frame_name(i, opts.format));
+                let path = dir.join(vbim_files::frame_name(i, format));
                 output::write_frame(
                     &path,
                     scene.size,
                     scene.size,
                     buf,
-                    opts.format,
+                    format,
                     exposure,
                     png16_scale,
                 )?;
@@ -135,7 +241,7 @@ pub fn bake(
                     std::sync::atomic::Ordering::Relaxed,
                 );
                 let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                progress("frames", k, n as u64);
+                progress(stage, k, n as u64);
                 Ok(info)
             },
         )
@@ -144,25 +250,26 @@ pub fn bake(
     let greens: Vec<f32> = infos.iter().map(|f| f.max_green).collect();
     let exposure = exposure.unwrap_or_else(|| exposure_from_max_greens(&greens));
     let threads = rayon::current_num_threads() as f64;
-    let manifest = manifest::of_bake(scene, opts.format, exposure, png16_scale, &infos)
-        .write(&opts.out)
-        .map_err(|e| out_err(&opts.out.join(Manifest::FILE_NAME), e))?;
-    let contact_sheet = opts.out.join("contact_sheet.png");
+    let mut m = manifest::of_bake(scene, format, exposure, png16_scale, &infos);
+    if let Some((w, _)) = weather {
+        m.weather = Some(w.name.clone());
+        m.sky = Some(sky_track::DIR.into());
+    }
+    let manifest = m
+        .write(dir)
+        .map_err(|e| out_err(&dir.join(Manifest::FILE_NAME), e))?;
+    let contact_sheet = dir.join("contact_sheet.png");
     // The sheet is for people: expose so that the brightest frame's peak maps to x = 1
     // (mid-tone highlights), rather than the protocol's export exposure, which is set by the
     // median frame and whitens the whole day.
     let peak = greens.iter().copied().fold(0.0, f32::max);
     let sheet_exposure = if peak > 0.0 { 1.0 / peak } else { exposure };
-    output::contact_sheet(&pre, scene, sheet_exposure, &contact_sheet)?;
-    Ok(BakeSummary {
-        frames: n,
-        size: scene.size,
-        precompute_s,
-        cache_hit,
+    output::contact_sheet(pre, scene, light, sheet_exposure, &contact_sheet)?;
+    Ok(Day {
+        manifest,
+        contact_sheet,
         // Per-frame work summed over threads, divided by the threads: wall-clock equivalent.
         lighting_s: lighting_ns.into_inner() as f64 * 1e-9 / threads,
         writing_s: writing_ns.into_inner() as f64 * 1e-9 / threads,
-        manifest,
-        contact_sheet,
     })
 }

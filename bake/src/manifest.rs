@@ -27,5 +27,8 @@ pub fn of_bake(
         png16_scale,
         files: (0..scene.frames).map(|i| frame_name(i, format)).collect(),
         per_frame: per_frame.to_vec(),
+        track: None,
+        weather: None,
+        sky: None,
     }
 }

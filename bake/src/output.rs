@@ -96,6 +96,7 @@ pub fn write_frame(
 pub fn contact_sheet(
     pre: &Precomputed,
     scene: &Scene,
+    weather: Option<&light::WeatherLight>,
     exposure: f32,
     path: &Path,
 ) -> Result<(), BakeError> {
@@ -111,7 +112,7 @@ pub fn contact_sheet(
     let mut buf = vec![0f32; n * n * 3];
     for k in 0..12 {
         let i = (k * scene.frames) / 12;
-        light::light_frame(pre, scene, i, &mut buf);
+        light::light_frame_in(pre, scene, weather, i, &mut buf);
         let (ox, oy) = (
             gap + (k % cols) * (tile + gap),
             gap + (k / cols) * (tile + gap),

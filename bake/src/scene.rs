@@ -49,7 +49,34 @@ pub struct Scene {
     /// How `vbim play --scene` shows the terrain (not used by the bake).
     #[serde(default)]
     pub view: ViewParams,
+    /// The weathers of the day (`[[weather]]` tables). With none, the bake lights one day
+    /// under the sector sky of `[sky]` and the clouds of `[clouds]`; with some, it lights
+    /// the day once per weather under its analytic sky and writes that sky beside it.
+    #[serde(default, rename = "weather", skip_serializing_if = "Vec::is_empty")]
+    pub weathers: Vec<WeatherParams>,
 }
+
+/// One weather of the day: its analytic sky (`docs/BAKE.md`, "Weathers and the analytic
+/// sky").
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WeatherParams {
+    /// The weather's name: its folder in the bake's output, its track in a package.
+    pub name: String,
+    /// Cloud cover, 0 (clear, Preetham's sky) to 1 (overcast, the CIE overcast sky).
+    #[serde(default)]
+    pub cover: f64,
+    /// The clear sky's turbidity, 1.7 (very clear) to 10 (hazy).
+    #[serde(default = "d_turbidity")]
+    pub turbidity: f64,
+}
+
+fn d_turbidity() -> f64 {
+    2.5
+}
+
+/// The sky map's width, texels (its height is a quarter of it: 90° of elevation).
+pub const SKY_MAP_WIDTH: usize = 128;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -229,6 +256,35 @@ impl Scene {
                 "clouds.coverage = {} (0 to 0.95)",
                 self.clouds.coverage
             ));
+        }
+        for (i, w) in self.weathers.iter().enumerate() {
+            let ok_name = !w.name.is_empty()
+                && w.name.len() <= 64
+                && w.name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+            if !ok_name {
+                return Err(format!(
+                    "weather {}: name {:?} (1 to 64 letters, digits, '-' or '_': it names a folder)",
+                    i + 1,
+                    w.name
+                ));
+            }
+            if self.weathers[..i].iter().any(|o| o.name == w.name) {
+                return Err(format!("weather {:?} is named twice", w.name));
+            }
+            if !(0.0..=1.0).contains(&w.cover) {
+                return Err(format!(
+                    "weather {:?}: cover = {} (0 to 1)",
+                    w.name, w.cover
+                ));
+            }
+            if !(1.7..=10.0).contains(&w.turbidity) {
+                return Err(format!(
+                    "weather {:?}: turbidity = {} (1.7 to 10)",
+                    w.name, w.turbidity
+                ));
+            }
         }
         self.detail.validate()?;
         self.rate().map(|_| ())

@@ -42,6 +42,16 @@ pub struct Manifest {
     pub files: Vec<String>,
     /// Each frame's sun and sky.
     pub per_frame: Vec<FrameInfo>,
+    /// What the frames are: absent for a lightmap, `"sky"` for a sky track (the sky's
+    /// radiance over the upper hemisphere, `docs/BAKE.md`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub track: Option<String>,
+    /// The weather the frames belong to, for a bake with weathers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weather: Option<String>,
+    /// A lightmap's sky track: its folder, relative to this manifest's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sky: Option<String>,
 }
 
 impl Manifest {
