@@ -1,16 +1,100 @@
-//! `vbim encode INPUT --out FILE.vbim`
+//! `vbim encode INPUT --out FILE.vbim`, or a bake with weathers into a package:
+//! `vbim encode BAKE --out DAY.vbimpkg` (each weather's lightmap and sky track coded with
+//! the same settings into `DAY-NAME.vbim` and `DAY-NAME-sky.vbim` beside it).
+
+use std::path::{Path, PathBuf};
 
 use vbim_bake::Manifest;
 use vbim_encoder::{
     encode_file, encode_to_tolerance, ConfigError, EncoderConfig, FrameSet, Preset,
 };
 
+use vbim_format::package::{Package, WeatherTracks, PACKAGE_VERSION};
+
 use crate::cli::EncodeArgs;
 use crate::progress::Stages;
 use crate::units::parse_rate;
 
 pub fn run(a: EncodeArgs) -> Result<(), String> {
-    let frames = FrameSet::open(&a.input).map_err(|e| e.to_string())?;
+    let bake_package = Path::new(&a.input).join(vbim_bake::PACKAGE_FILE);
+    if bake_package.is_file() {
+        return encode_package(&a, &bake_package);
+    }
+    encode_one(&a, &a.input, &a.out)
+}
+
+/// Codes every track of a bake's package (folders of frames) and writes the package of
+/// files, last, so that it only ever names complete tracks.
+fn encode_package(a: &EncodeArgs, bake_package: &Path) -> Result<(), String> {
+    let text = std::fs::read_to_string(bake_package)
+        .map_err(|e| format!("{}: {e}", bake_package.display()))?;
+    let baked =
+        Package::parse(&text).map_err(|e| format!("{}: {e}", bake_package.display()))?;
+    if a.out.extension().and_then(|e| e.to_str()) != Some("vbimpkg") {
+        return Err(format!(
+            "{} is a bake with weathers: its package goes to a .vbimpkg file (--out DAY.vbimpkg)",
+            a.input
+        ));
+    }
+    if a.meta.is_some() || a.degree_map.is_some() || a.report.is_some() {
+        return Err(
+            "--meta, --degree-map and --report name one file: not with a bake of weathers \
+             (each track keeps its own manifest; encode a weather's folder alone for its map \
+             or report)"
+                .into(),
+        );
+    }
+    let stem = a
+        .out
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .ok_or_else(|| format!("{}: the package's name is not UTF-8", a.out.display()))?;
+    let dir = a.out.parent().unwrap_or(Path::new(""));
+    let base = bake_package.parent().unwrap_or(Path::new("."));
+    let mut package = Package {
+        vbim_package: PACKAGE_VERSION,
+        weathers: Vec::new(),
+    };
+    for w in &baked.weathers {
+        let mut tracks = WeatherTracks {
+            name: w.name.clone(),
+            lightmap: format!("{stem}-{}.vbim", w.name),
+            sky: None,
+        };
+        let input = |rel: &str| -> Result<String, String> {
+            base.join(rel)
+                .to_str()
+                .map(str::to_string)
+                .ok_or_else(|| format!("{}: not UTF-8", base.join(rel).display()))
+        };
+        encode_one(a, &input(&w.lightmap)?, &dir.join(&tracks.lightmap))?;
+        if let Some(sky) = &w.sky {
+            let name = format!("{stem}-{}-sky.vbim", w.name);
+            encode_one(a, &input(sky)?, &dir.join(&name))?;
+            tracks.sky = Some(name);
+        }
+        package.weathers.push(tracks);
+    }
+    vbim_files::write_text(&a.out, &package.to_json())
+        .map_err(|e| format!("{}: {e}", a.out.display()))?;
+    println!(
+        "package {}: {} weather(s), {}",
+        a.out.display(),
+        package.weathers.len(),
+        package
+            .weathers
+            .iter()
+            .map(|w| w.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+/// Codes the frames at `input` into `out`.
+fn encode_one(a: &EncodeArgs, input: &str, out: &Path) -> Result<(), String> {
+    let out: PathBuf = out.to_path_buf();
+    let frames = FrameSet::open(input).map_err(|e| e.to_string())?;
     for note in &frames.notes {
         eprintln!("note: {note}");
     }
@@ -91,11 +175,11 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
             .exit();
     }
     let rep = if a.exact {
-        encode_to_tolerance(&frames, &cfg, &a.out, &progress)
+        encode_to_tolerance(&frames, &cfg, &out, &progress)
     } else {
-        encode_file(&frames, &cfg, &a.out, &progress).and_then(|mut rep| {
+        encode_file(&frames, &cfg, &out, &progress).and_then(|mut rep| {
             if !a.no_verify {
-                rep.verify_file(&frames, &a.out, &progress)?;
+                rep.verify_file(&frames, &out, &progress)?;
             }
             Ok(rep)
         })
@@ -107,7 +191,7 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
         rep.frames,
         rep.width,
         rep.height,
-        a.out.display()
+        out.display()
     );
     println!("{rep}");
     if let Some(p) = &a.degree_map {

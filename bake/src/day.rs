@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 use vbim_format::curve::exposure_from_max_greens;
+use vbim_format::package::{Package, WeatherTracks, PACKAGE_VERSION};
 
 use crate::error::out_err;
 use crate::light::WeatherLight;
@@ -34,6 +35,9 @@ pub struct BakeSummary {
     pub contact_sheet: PathBuf,
     /// Each weather's day and sky track, in the scene's order (empty without weathers).
     pub weathers: Vec<WeatherSummary>,
+    /// For a scene with weathers, `OUT/package.json`: the weathers as a package whose
+    /// tracks are folders of frames (`vbim_format::package`).
+    pub package: Option<PathBuf>,
 }
 
 /// Where one weather's bake went.
@@ -104,6 +108,7 @@ pub fn bake(
         manifest: PathBuf::new(),
         contact_sheet: PathBuf::new(),
         weathers: Vec::new(),
+        package: None,
     };
     if scene.weathers.is_empty() {
         let day = bake_day(
@@ -149,8 +154,28 @@ pub fn bake(
         });
         summary.add(day);
     }
+    // The bake as a package whose tracks are folders of frames: `vbim encode OUT` codes
+    // each and writes the package of files. Written last: it names only complete days.
+    let package = Package {
+        vbim_package: PACKAGE_VERSION,
+        weathers: scene
+            .weathers
+            .iter()
+            .map(|w| WeatherTracks {
+                name: w.name.clone(),
+                lightmap: w.name.clone(),
+                sky: Some(format!("{}/{}", w.name, sky_track::DIR)),
+            })
+            .collect(),
+    };
+    let path = opts.out.join(PACKAGE_FILE);
+    output::write_text(&path, &package.to_json())?;
+    summary.package = Some(path);
     Ok(summary)
 }
+
+/// The bake's package of weathers, beside their folders.
+pub const PACKAGE_FILE: &str = "package.json";
 
 /// One lit day: where its manifest and contact sheet went, and its timings.
 struct Day {

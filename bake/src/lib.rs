@@ -37,7 +37,7 @@ mod sky_track;
 mod sun;
 
 pub use atmosphere::{direct_share, direction, SkyDome, SkyWeather, OVERCAST_SHARE};
-pub use day::{bake, load_terrain, BakeOptions, BakeSummary, WeatherSummary};
+pub use day::{bake, load_terrain, BakeOptions, BakeSummary, WeatherSummary, PACKAGE_FILE};
 pub use detail::DetailParams;
 pub use error::BakeError;
 pub use heightfield::{HeightField, Sidecar};

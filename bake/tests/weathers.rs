@@ -123,6 +123,10 @@ fn a_bake_with_weathers_writes_a_day_and_a_sky_per_weather() {
     };
     let s = bake(&scene, &opts, &|_, _, _| {}).unwrap();
     assert_eq!(s.weathers.len(), 2);
+    let package = std::fs::read_to_string(s.package.as_ref().unwrap()).unwrap();
+    let package = vbim_format::package::Package::parse(&package).unwrap();
+    assert_eq!(package.weathers[1].name, "overcast");
+    assert_eq!(package.weathers[1].sky.as_deref(), Some("overcast/sky"));
     for w in &s.weathers {
         let day = Manifest::read(&w.manifest).unwrap();
         let sky = Manifest::read(&w.sky_manifest).unwrap();

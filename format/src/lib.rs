@@ -14,6 +14,8 @@
 //!   buffer model ([`buffer_model`]), the format's bounds ([`limits`]), the error metrics
 //!   ([`metrics`]), and the CPU reference decoder ([`decode`]) that the GPU reconstruction
 //!   is tested against.
+//! - **Packages** ([`package`]): several files on one timeline (weathers, each a lightmap
+//!   and a sky track), tied by a small JSON file that this module parses and checks.
 //! - **Format 2's coefficient coding**, not yet used by any chunk: [`ans`] (rANS with
 //!   static 12-bit probabilities over 16-bit words, hybrid-uint tokens, histograms) and
 //!   [`plane2`] (a chunk's planes in rANS lanes and four passes a GPU can run).
@@ -45,6 +47,7 @@ pub mod index;
 pub mod limits;
 mod memory;
 pub mod metrics;
+pub mod package;
 pub mod payload2;
 pub mod plane;
 pub mod plane2;
