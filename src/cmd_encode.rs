@@ -28,8 +28,7 @@ pub fn run(a: EncodeArgs) -> Result<(), String> {
 fn encode_package(a: &EncodeArgs, bake_package: &Path) -> Result<(), String> {
     let text = std::fs::read_to_string(bake_package)
         .map_err(|e| format!("{}: {e}", bake_package.display()))?;
-    let baked =
-        Package::parse(&text).map_err(|e| format!("{}: {e}", bake_package.display()))?;
+    let baked = Package::parse(&text).map_err(|e| format!("{}: {e}", bake_package.display()))?;
     if a.out.extension().and_then(|e| e.to_str()) != Some("vbimpkg") {
         return Err(format!(
             "{} is a bake with weathers: its package goes to a .vbimpkg file (--out DAY.vbimpkg)",

@@ -201,7 +201,14 @@ mod tests {
         assert!(with(&|p| p.weathers.clear()).contains("0 weathers"));
         assert!(with(&|p| p.weathers[1].name = "clear".into()).contains("twice"));
         assert!(with(&|p| p.weathers[0].name = "a b".into()).contains("name"));
-        for bad in ["../x.vbim", "/etc/x.vbim", "a//b.vbim", "./x.vbim", "c:x.vbim", "a\\b"] {
+        for bad in [
+            "../x.vbim",
+            "/etc/x.vbim",
+            "a//b.vbim",
+            "./x.vbim",
+            "c:x.vbim",
+            "a\\b",
+        ] {
             let e = with(&|p| p.weathers[0].lightmap = bad.into());
             assert!(e.contains("track path"), "{bad}: {e}");
         }
@@ -209,8 +216,14 @@ mod tests {
         assert!(e.contains("track path"), "{e}");
         assert!(Package::parse("{\"vbim_package\": 1}").is_err());
         assert!(Package::parse("[1, 2]").is_err());
-        assert!(Package::parse(&" ".repeat(2 << 20)).unwrap_err().to_string().contains("bytes"));
+        assert!(Package::parse(&" ".repeat(2 << 20))
+            .unwrap_err()
+            .to_string()
+            .contains("bytes"));
         let extra = two().to_json().replacen('{', "{\"other\": 1,", 1);
-        assert!(Package::parse(&extra).is_err(), "unknown fields are refused");
+        assert!(
+            Package::parse(&extra).is_err(),
+            "unknown fields are refused"
+        );
     }
 }

@@ -97,6 +97,20 @@ impl Display {
         self.catch_start = None;
     }
 
+    /// Starts the clock now, without a pre-roll (a track joining a running timeline):
+    /// until its data is resident the display holds, under any policy but `wait`.
+    pub fn start_now(&mut self) {
+        self.started = true;
+    }
+
+    /// The playback position at clock `ticks`, ns (the clock less the start-up offset
+    /// and the pauses).
+    pub fn position(&self, ticks: u64) -> u64 {
+        ticks
+            .saturating_sub(self.startup)
+            .saturating_sub(self.paused)
+    }
+
     /// The media time shown last.
     pub fn last_shown(&self) -> MediaTime {
         self.last_shown

@@ -25,6 +25,10 @@
 //! `config`, `record` and `stats` are its inputs and outputs; `readback` reads GPU data
 //! back (tests, benchmarks, headless capture).
 //!
+//! A [`PackagePlayer`] plays a package of weathers (`vbim_format::package`): the shown
+//! weather's lightmap and sky tracks in step, each a [`Player`], into two textures of its
+//! own, and [`PackagePlayer::switch_weather`] cross-fades to another weather without a pop.
+//!
 //! Besides the player: [`headless_device`] opens a device where there is no window,
 //! [`lightmap_descriptor`] describes a texture the player can write into
 //! ([`Player::set_output`]), [`read_texture`] reads one back, and [`thread_cpu_ns`] is the
@@ -46,6 +50,7 @@ mod fuzz;
 mod gpu;
 #[cfg(feature = "bench")]
 mod marks;
+mod package;
 mod pipeline;
 mod player;
 mod readback;
@@ -63,6 +68,7 @@ pub use cpu_time::thread_cpu_ns;
 pub use gpu::{
     headless_device, headless_device_on, lightmap_descriptor, DeviceError, Headless, OutputError,
 };
+pub use package::{PackageFile, PackagePlayer, PackageRecord, SwitchRecord, TrackInfo, TrackKind};
 pub use player::Player;
 pub use readback::read_texture;
 pub use record::{Frame, FrameRecord, FrameState, Totals};
@@ -124,6 +130,22 @@ pub enum PlayerError {
     /// A texture given to [`Player::set_output`] does not fit the stream.
     #[error(transparent)]
     Output(#[from] OutputError),
+    /// A package file that cannot be played, or one of its tracks that cannot be opened.
+    #[error("{}: {reason}", path.display())]
+    Package {
+        /// The package or track file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A package's track that the player refuses.
+    #[error("{}: {source}", path.display())]
+    Track {
+        /// The track's file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: Box<PlayerError>,
+    },
     /// A player thread panicked (a bug).
     #[error("thread {thread} panicked")]
     Panicked {

@@ -619,9 +619,29 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Jumps playback to `ticks` ns (of the playback clock).
     pub fn set_time(&mut self, ticks: u64) {
         self.ticks = ticks;
+        // A jump is a re-synchronisation: the next frames, whose data is still coming,
+        // must not re-synchronise again (with nothing built yet they look far behind).
+        self.last_seek = ticks;
         let pos = ticks_to_media(ticks, self.header.rate_num, self.header.rate_den);
         self.display.restart_clock(pos);
         self.seek(pos);
+    }
+
+    /// Joins a running timeline at `ticks` ns of its playback position: a jump, as
+    /// [`Player::set_time`], but without a pre-roll. Until the data for that time is
+    /// resident the player reports [`FrameState::Held`] (its lightmap is not yet worth
+    /// showing), and its clock runs with the caller's from the first frame, so that once
+    /// the data is there it shows the very time its neighbours show. For a track that
+    /// starts beside others already playing: a weather switch's new tracks.
+    pub fn join(&mut self, ticks: u64) {
+        self.set_time(ticks);
+        self.display.start_now();
+    }
+
+    /// The playback position, ns: the clock less the pre-roll and the `wait` policy's
+    /// pauses (what [`Player::join`] takes to put another track at the same time).
+    pub fn position(&self) -> u64 {
+        self.display.position(self.ticks)
     }
 
     /// Stops the reader and decoder threads and waits for them (at most `deadline`).

@@ -135,7 +135,7 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
 }
 
 /// A compute pipeline running `entry` of the WGSL `source` over bind group 0 of `layout`.
-pub(super) fn compute_pipeline(
+pub(crate) fn compute_pipeline(
     device: &wgpu::Device,
     label: &str,
     source: &str,

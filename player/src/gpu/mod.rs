@@ -52,6 +52,7 @@ pub use decode::PASS_CHANGES;
 pub use device::timing_device;
 pub use device::{headless_device, headless_device_on, DeviceError, Headless};
 pub(crate) use lanes::lanes_bytes;
+pub(crate) use layouts::compute_pipeline;
 pub(crate) use ops::Op;
 pub use plan::lightmap_descriptor;
 pub(crate) use plan::{min_array_layers, planned_texture_bytes, BUBBLE_SETS, KEY_SLOTS};

@@ -1,0 +1,592 @@
+//! A package playing: the shown weather's lightmap and sky tracks in step, and weather
+//! switches that cross-fade without a pop (`docs/PLAYER.md`, "Packages and weather").
+//!
+//! Each track is a [`Player`] of its own (its reader, ring, decoder and stall policy),
+//! advanced with the same time step; the package owns the output textures a renderer
+//! binds once. Outside a switch only the shown weather's tracks are read and decoded, and
+//! they reconstruct straight into the outputs. A switch opens the new weather's tracks and
+//! joins them to the timeline at the shown position ([`Player::join`]); they read from
+//! their last intra keyframe at or before it while the shown weather goes on playing. When
+//! every new track shows that very time exactly, the fade starts: for its length both
+//! weathers reconstruct into their own textures and one pass a track mixes them into the
+//! outputs; then the new weather writes the outputs and the old one is closed.
+
+mod fade;
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use vbim_format::package::{Package, WeatherTracks, MAX_PACKAGE_BYTES};
+use vbim_format::{Header, Reader, MAGIC};
+
+use crate::{lightmap_descriptor, FrameRecord, FrameState, Player, PlayerConfig, PlayerError};
+use fade::{FadeJob, FadePass};
+
+/// What a track holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrackKind {
+    /// A lightmap sequence.
+    Lightmap,
+    /// The sky over the upper hemisphere (equirectangular, the zenith's row first).
+    Sky,
+}
+
+impl TrackKind {
+    /// The kind's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrackKind::Lightmap => "lightmap",
+            TrackKind::Sky => "sky",
+        }
+    }
+}
+
+/// One track of a package, as its file's header states it.
+#[derive(Clone, Debug)]
+pub struct TrackInfo {
+    /// Its weather.
+    pub weather: String,
+    /// What it holds.
+    pub kind: TrackKind,
+    /// Its file.
+    pub path: PathBuf,
+    /// Its header.
+    pub header: Header,
+    /// Its file's size, bytes.
+    pub bytes: u64,
+}
+
+/// A package on disk: its description and its tracks' headers, checked to share one
+/// timeline. [`PackageFile::open`] reads no more than the headers and indexes.
+#[derive(Clone, Debug)]
+pub struct PackageFile {
+    /// The package (for a plain `.vbim` file, a package of one weather).
+    pub package: Package,
+    /// Every track, weather by weather, the lightmap before the sky.
+    pub tracks: Vec<TrackInfo>,
+    /// The package file's path.
+    pub path: PathBuf,
+}
+
+fn package_error(path: &Path, reason: impl ToString) -> PlayerError {
+    PlayerError::Package {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    }
+}
+
+impl PackageFile {
+    /// Reads a package file, or a plain `.vbim` file as a package of one weather, and the
+    /// header of every track it names. Refuses tracks whose frame counts, rates or loops
+    /// differ, lightmaps (or skies) of different sizes, and a package where some weathers
+    /// have a sky and others not; every error names the file.
+    pub fn open(path: &Path) -> Result<PackageFile, PlayerError> {
+        let mut f = File::open(path).map_err(|e| package_error(path, e))?;
+        let mut head = Vec::new();
+        (&mut f)
+            .take(MAX_PACKAGE_BYTES + 1)
+            .read_to_end(&mut head)
+            .map_err(|e| package_error(path, e))?;
+        let package = if head.starts_with(&MAGIC) {
+            let name = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .ok_or_else(|| package_error(path, "the file name is not UTF-8"))?;
+            Package::single(name)
+        } else {
+            let text = std::str::from_utf8(&head)
+                .map_err(|_| package_error(path, "neither a .vbim file nor a package's JSON"))?;
+            Package::parse(text).map_err(|e| package_error(path, e))?
+        };
+        let base = path.parent().unwrap_or(Path::new(""));
+        let mut tracks = Vec::new();
+        for w in &package.weathers {
+            let kinds = [
+                (TrackKind::Lightmap, Some(&w.lightmap)),
+                (TrackKind::Sky, w.sky.as_ref()),
+            ];
+            for (kind, rel) in kinds {
+                let Some(rel) = rel else { continue };
+                let path = base.join(rel);
+                let file = File::open(&path).map_err(|e| package_error(&path, e))?;
+                let bytes = file.metadata().map_err(|e| package_error(&path, e))?.len();
+                let reader = Reader::open(file).map_err(|e| package_error(&path, e))?;
+                tracks.push(TrackInfo {
+                    weather: w.name.clone(),
+                    kind,
+                    path,
+                    header: reader.header().clone(),
+                    bytes,
+                });
+            }
+        }
+        let p = PackageFile {
+            package,
+            tracks,
+            path: path.to_path_buf(),
+        };
+        p.check()?;
+        Ok(p)
+    }
+
+    /// One timeline: the same frames, rate and loop in every track; one size per kind;
+    /// a sky in every weather or in none.
+    fn check(&self) -> Result<(), PlayerError> {
+        let first = &self.tracks[0];
+        let timing = |h: &Header| (h.frame_count, h.rate_num, h.rate_den, h.looping);
+        for t in &self.tracks {
+            if timing(&t.header) != timing(&first.header) {
+                return Err(package_error(
+                    &t.path,
+                    format!(
+                        "{} frames at {}/{} fps{}, but {} has {} at {}/{}{}: the tracks of a \
+                         package share one timeline",
+                        t.header.frame_count,
+                        t.header.rate_num,
+                        t.header.rate_den,
+                        if t.header.looping { ", looping" } else { "" },
+                        first.path.display(),
+                        first.header.frame_count,
+                        first.header.rate_num,
+                        first.header.rate_den,
+                        if first.header.looping {
+                            ", looping"
+                        } else {
+                            ""
+                        },
+                    ),
+                ));
+            }
+            let same_kind = self
+                .tracks
+                .iter()
+                .find(|o| o.kind == t.kind)
+                .expect("itself");
+            let size = |h: &Header| (h.width, h.height);
+            if size(&t.header) != size(&same_kind.header) {
+                return Err(package_error(
+                    &t.path,
+                    format!(
+                        "a {} track of {}×{}, but {} is {}×{}",
+                        t.kind.name(),
+                        t.header.width,
+                        t.header.height,
+                        same_kind.path.display(),
+                        same_kind.header.width,
+                        same_kind.header.height
+                    ),
+                ));
+            }
+        }
+        let skies = self
+            .package
+            .weathers
+            .iter()
+            .filter(|w| w.sky.is_some())
+            .count();
+        if skies != 0 && skies != self.package.weathers.len() {
+            return Err(package_error(
+                &self.path,
+                "some weathers have a sky track and others not: a switch would lose the sky",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The tracks of weather `name`.
+    pub fn weather(&self, name: &str) -> Result<&WeatherTracks, PlayerError> {
+        self.package.weather(name).ok_or_else(|| {
+            let names: Vec<&str> = self
+                .package
+                .weathers
+                .iter()
+                .map(|w| w.name.as_str())
+                .collect();
+            package_error(
+                &self.path,
+                format!("no weather {name:?} (it has {})", names.join(", ")),
+            )
+        })
+    }
+
+    /// A track's info.
+    fn track(&self, weather: &str, kind: TrackKind) -> Option<&TrackInfo> {
+        self.tracks
+            .iter()
+            .find(|t| t.weather == weather && t.kind == kind)
+    }
+}
+
+/// One weather's players.
+struct Tracks {
+    name: String,
+    lightmap: Player<File>,
+    sky: Option<Player<File>>,
+}
+
+impl Tracks {
+    fn players(&mut self) -> impl Iterator<Item = &mut Player<File>> {
+        std::iter::once(&mut self.lightmap).chain(self.sky.as_mut())
+    }
+}
+
+/// A switch in progress.
+struct Switch {
+    to: Tracks,
+    fade_ns: u64,
+    /// The package clock when it was asked for.
+    asked: u64,
+    /// Once every new track shows the shown time exactly: the clock the fade started at
+    /// and its passes.
+    fading: Option<(u64, FadeJob, Option<FadeJob>)>,
+}
+
+/// What a switch did this frame.
+#[derive(Clone, Debug)]
+pub struct SwitchRecord {
+    /// The weather switched to.
+    pub to: String,
+    /// The new weather's lightmap this frame (`Held` while its data is coming).
+    pub lightmap: FrameRecord,
+    /// Its sky.
+    pub sky: Option<FrameRecord>,
+    /// The fade's weight of the new weather (0 before the fade starts, 1 at its end).
+    pub weight: f32,
+    /// Playback time since the switch was asked for, ns.
+    pub since_ns: u64,
+}
+
+/// One displayed frame of a package.
+#[derive(Clone, Debug)]
+pub struct PackageRecord {
+    /// The shown weather's lightmap.
+    pub lightmap: FrameRecord,
+    /// The shown weather's sky.
+    pub sky: Option<FrameRecord>,
+    /// The switch in progress, if any.
+    pub switch: Option<SwitchRecord>,
+}
+
+/// A package playing into two textures the renderer binds once: the lightmap and the sky
+/// (see the module's documentation).
+pub struct PackagePlayer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    file: PackageFile,
+    cfg: PlayerConfig,
+    shown: Tracks,
+    switch: Option<Switch>,
+    /// A switch asked for during a fade: it starts when the fade ends.
+    pending: Option<(String, u64)>,
+    lightmap: (wgpu::Texture, wgpu::TextureView),
+    sky: Option<(wgpu::Texture, wgpu::TextureView)>,
+    fade: FadePass,
+    ticks: u64,
+}
+
+fn output(device: &wgpu::Device, h: &Header) -> (wgpu::Texture, wgpu::TextureView) {
+    use wgpu::TextureUsages as U;
+    let t = device.create_texture(&lightmap_descriptor(
+        h.width,
+        h.height,
+        U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
+    ));
+    let v = t.create_view(&Default::default());
+    (t, v)
+}
+
+impl PackagePlayer {
+    /// Opens the package (or plain `.vbim` file) at `path` and starts playing `weather`
+    /// (the package's first when `None`) at time 0. Every track uses `cfg`.
+    pub fn open(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        path: &Path,
+        weather: Option<&str>,
+        cfg: PlayerConfig,
+    ) -> Result<PackagePlayer, PlayerError> {
+        let file = PackageFile::open(path)?;
+        let name = weather
+            .unwrap_or(&file.package.weathers[0].name)
+            .to_string();
+        file.weather(&name)?;
+        let lightmap = output(
+            device,
+            &file
+                .track(&name, TrackKind::Lightmap)
+                .expect("checked")
+                .header,
+        );
+        let sky = file
+            .track(&name, TrackKind::Sky)
+            .map(|t| output(device, &t.header));
+        let mut shown = open_tracks(device, queue, &file, &name, &cfg)?;
+        shown.lightmap.set_output(Some(&lightmap.0))?;
+        if let (Some(p), Some(s)) = (shown.sky.as_mut(), &sky) {
+            p.set_output(Some(&s.0))?;
+        }
+        Ok(PackagePlayer {
+            device: device.clone(),
+            queue: queue.clone(),
+            fade: FadePass::new(device),
+            file,
+            cfg,
+            shown,
+            switch: None,
+            pending: None,
+            lightmap,
+            sky,
+            ticks: 0,
+        })
+    }
+
+    /// The package and its tracks.
+    pub fn file(&self) -> &PackageFile {
+        &self.file
+    }
+    /// The weather on screen (until a switch's fade ends, the one it started from).
+    pub fn weather(&self) -> &str {
+        &self.shown.name
+    }
+    /// The lightmap (linear RGB, `Rgba16Float`), the same texture for the whole playback.
+    pub fn lightmap_view(&self) -> &wgpu::TextureView {
+        &self.lightmap.1
+    }
+    /// The sky map (linear RGB, `Rgba16Float`, equirectangular over the upper hemisphere,
+    /// the zenith's row first), when the package has sky tracks.
+    pub fn sky_view(&self) -> Option<&wgpu::TextureView> {
+        self.sky.as_ref().map(|s| &s.1)
+    }
+    /// The lightmap texture (for readback).
+    pub fn lightmap_texture(&self) -> &wgpu::Texture {
+        &self.lightmap.0
+    }
+    /// The sky texture (for readback).
+    pub fn sky_texture(&self) -> Option<&wgpu::Texture> {
+        self.sky.as_ref().map(|s| &s.0)
+    }
+    /// Reads the lightmap back (RGBA, f32, row by row); blocks: for tests and captures.
+    pub fn read_lightmap(&self) -> Vec<f32> {
+        read_f16(&self.device, &self.queue, &self.lightmap.0)
+    }
+    /// Reads the sky map back, likewise.
+    pub fn read_sky(&self) -> Option<Vec<f32>> {
+        self.sky
+            .as_ref()
+            .map(|(t, _)| read_f16(&self.device, &self.queue, t))
+    }
+    /// The shown weather's lightmap player (its header, totals and policy).
+    pub fn lightmap_player(&self) -> &Player<File> {
+        &self.shown.lightmap
+    }
+    /// The shown weather's sky player.
+    pub fn sky_player(&self) -> Option<&Player<File>> {
+        self.shown.sky.as_ref()
+    }
+    /// Whether a switch is in progress (or waiting for a fade to end).
+    pub fn switching(&self) -> bool {
+        self.switch.is_some() || self.pending.is_some()
+    }
+    /// GPU memory of every open track and the outputs, bytes (both weathers during a
+    /// switch).
+    pub fn gpu_bytes(&self) -> u64 {
+        let tracks =
+            |t: &Tracks| t.lightmap.gpu_bytes() + t.sky.as_ref().map_or(0, |s| s.gpu_bytes());
+        let out =
+            |(t, _): &(wgpu::Texture, wgpu::TextureView)| t.width() as u64 * t.height() as u64 * 8;
+        tracks(&self.shown)
+            + self.switch.as_ref().map_or(0, |s| tracks(&s.to))
+            + out(&self.lightmap)
+            + self.sky.as_ref().map_or(0, out)
+    }
+
+    /// Switches to weather `name`, cross-fading over `fade_ns` of playback once the new
+    /// weather's tracks show the shown time (see the module's documentation). The shown
+    /// weather keeps playing meanwhile. Switching to the weather shown cancels a switch
+    /// that has not begun to fade; a switch asked for during a fade starts when it ends.
+    pub fn switch_weather(&mut self, name: &str, fade_ns: u64) -> Result<(), PlayerError> {
+        self.file.weather(name)?;
+        if self.switch.as_ref().is_some_and(|s| s.fading.is_some()) {
+            self.pending = Some((name.to_string(), fade_ns));
+            return Ok(());
+        }
+        self.pending = None;
+        if self.switch.as_ref().is_some_and(|s| s.to.name == name) {
+            return Ok(());
+        }
+        self.switch = None;
+        if name == self.shown.name {
+            return Ok(());
+        }
+        let mut join_cfg = self.cfg.clone();
+        // The new tracks follow the timeline: they never pause it while they load.
+        if join_cfg.policy == crate::Policy::Wait {
+            join_cfg.policy = crate::Policy::Interpolate;
+        }
+        let mut to = open_tracks(&self.device, &self.queue, &self.file, name, &join_cfg)?;
+        let at = self.shown.lightmap.position();
+        for p in to.players() {
+            p.join(at);
+        }
+        self.switch = Some(Switch {
+            to,
+            fade_ns,
+            asked: self.ticks,
+            fading: None,
+        });
+        Ok(())
+    }
+
+    /// Jumps every track to `ticks` ns of playback; a switch that has not begun to fade
+    /// goes on from there, one fading ends at once.
+    pub fn set_time(&mut self, ticks: u64) {
+        if self.switch.as_ref().is_some_and(|s| s.fading.is_some()) {
+            self.finish_switch();
+        }
+        self.ticks = ticks;
+        for p in self.shown.players() {
+            p.set_time(ticks);
+        }
+        if let Some(s) = self.switch.as_mut() {
+            for p in s.to.players() {
+                p.join(ticks);
+            }
+        }
+    }
+
+    /// Advances playback by `dt` ns: every open track, then the fade, in one submission.
+    pub fn advance(&mut self, dt: u64) -> PackageRecord {
+        self.ticks += dt;
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let lightmap = self.shown.lightmap.advance_into(dt, &mut enc);
+        let sky = self
+            .shown
+            .sky
+            .as_mut()
+            .map(|p| p.advance_into(dt, &mut enc));
+        let mut record = None;
+        let mut done = false;
+        if let Some(sw) = self.switch.as_mut() {
+            let to_lightmap = sw.to.lightmap.advance_into(dt, &mut enc);
+            let to_sky = sw.to.sky.as_mut().map(|p| p.advance_into(dt, &mut enc));
+            let mut weight = 0.0;
+            match &sw.fading {
+                None => {
+                    let exact = |r: &FrameRecord| r.state == FrameState::Exact;
+                    let same_time = (to_lightmap.shown - lightmap.shown).abs() < 1e-3;
+                    if exact(&to_lightmap) && to_sky.as_ref().is_none_or(exact) && same_time {
+                        // From the next frame on both weathers reconstruct into their own
+                        // textures (this frame's output already holds the shown one).
+                        self.shown
+                            .lightmap
+                            .set_output(None)
+                            .expect("none is always valid");
+                        if let Some(p) = self.shown.sky.as_mut() {
+                            p.set_output(None).expect("none is always valid");
+                        }
+                        let size = |t: &wgpu::Texture| (t.width(), t.height());
+                        let lm = self.fade.job(
+                            &self.device,
+                            self.shown.lightmap.view(),
+                            sw.to.lightmap.view(),
+                            &self.lightmap.1,
+                            size(&self.lightmap.0),
+                        );
+                        let sk = match (&self.shown.sky, &sw.to.sky, &self.sky) {
+                            (Some(a), Some(b), Some((t, v))) => {
+                                Some(self.fade.job(&self.device, a.view(), b.view(), v, size(t)))
+                            }
+                            _ => None,
+                        };
+                        sw.fading = Some((self.ticks, lm, sk));
+                    }
+                }
+                Some((start, lm, sk)) => {
+                    weight =
+                        ((self.ticks - start) as f64 / sw.fade_ns.max(1) as f64).min(1.0) as f32;
+                    self.fade.record(&self.queue, &mut enc, lm, weight);
+                    if let Some(sk) = sk {
+                        self.fade.record(&self.queue, &mut enc, sk, weight);
+                    }
+                    done = weight >= 1.0;
+                }
+            }
+            record = Some(SwitchRecord {
+                to: sw.to.name.clone(),
+                lightmap: to_lightmap,
+                sky: to_sky,
+                weight,
+                since_ns: self.ticks - sw.asked,
+            });
+        }
+        self.queue.submit(Some(enc.finish()));
+        if done {
+            self.finish_switch();
+        }
+        PackageRecord {
+            lightmap,
+            sky,
+            switch: record,
+        }
+    }
+
+    /// The fade is over: the new weather writes the outputs, the old one closes.
+    fn finish_switch(&mut self) {
+        let Some(sw) = self.switch.take() else { return };
+        let mut to = sw.to;
+        to.lightmap
+            .set_output(Some(&self.lightmap.0))
+            .expect("the output fits every lightmap track (checked at open)");
+        if let (Some(p), Some((t, _))) = (to.sky.as_mut(), &self.sky) {
+            p.set_output(Some(t))
+                .expect("the output fits every sky track");
+        }
+        for p in to.players() {
+            p.set_policy(self.cfg.policy);
+        }
+        // Dropping the old tracks stops their threads.
+        self.shown = to;
+        if let Some((name, fade)) = self.pending.take() {
+            // The weather was checked when it was asked for; a file that went away since
+            // leaves the weather as it is.
+            let _ = self.switch_weather(&name, fade);
+        }
+    }
+}
+
+fn read_f16(device: &wgpu::Device, queue: &wgpu::Queue, t: &wgpu::Texture) -> Vec<f32> {
+    let raw = crate::readback::read_texture(device, queue, t, 8);
+    bytemuck::cast_slice::<u8, half::f16>(&raw)
+        .iter()
+        .map(|v| v.to_f32())
+        .collect()
+}
+
+fn open_tracks(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    file: &PackageFile,
+    name: &str,
+    cfg: &PlayerConfig,
+) -> Result<Tracks, PlayerError> {
+    let open = |kind| -> Result<Option<Player<File>>, PlayerError> {
+        let Some(t) = file.track(name, kind) else {
+            return Ok(None);
+        };
+        let f = File::open(&t.path).map_err(|e| package_error(&t.path, e))?;
+        Player::open(device, queue, f, cfg.clone())
+            .map(Some)
+            .map_err(|e| PlayerError::Track {
+                path: t.path.clone(),
+                source: Box::new(e),
+            })
+    };
+    Ok(Tracks {
+        name: name.to_string(),
+        lightmap: open(TrackKind::Lightmap)?.expect("every weather has a lightmap"),
+        sky: open(TrackKind::Sky)?,
+    })
+}

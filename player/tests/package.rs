@@ -1,0 +1,303 @@
+//! Packages on a real adapter: a plain file plays as a package of one weather, a weather
+//! switch cross-fades lightmap and sky from one weather to the other in step with the
+//! timeline (never a pop, never a late frame of the shown weather), and bad packages are
+//! refused naming the file.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
+use vbim_format::decode::{Decoder, Output};
+use vbim_format::package::{Package, WeatherTracks};
+use vbim_player::{headless_device, FrameState, PackagePlayer, PlayerConfig, Policy};
+
+const DISPLAY: u64 = 16_666_667;
+
+fn device() -> (wgpu::Device, wgpu::Queue) {
+    match headless_device() {
+        Ok((d, q, _)) => (d, q),
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// A day-like sequence: a shadow edge sweeping over a gradient, scaled by `gain` and
+/// tinted by `tint` (a weather), `n` frames of `w × h`.
+fn sequence(w: usize, h: usize, n: usize, gain: f32, tint: [f32; 3]) -> MemorySource {
+    let frames = (0..n)
+        .map(|t| {
+            let day = 0.2 + (std::f32::consts::PI * t as f32 / n as f32).sin().max(0.0);
+            (0..w * h)
+                .flat_map(|i| {
+                    let (x, y) = ((i % w) as f32, (i / w) as f32);
+                    let edge = 1.0 / (1.0 + (-(x - w as f32 * t as f32 / n as f32) * 0.5).exp());
+                    let v = gain * day * (0.3 + 0.6 * edge) * (0.8 + 0.2 * (y * 0.3).sin());
+                    tint.map(|c| v * c)
+                })
+                .collect()
+        })
+        .collect();
+    MemorySource::new("test", w, h, 3, InputKind::Hdr, frames)
+}
+
+fn write_stream(path: &Path, src: &MemorySource) -> Vec<u8> {
+    let cfg = EncoderConfig {
+        segment: SegmentMode::Fixed(6),
+        rate: (24, 1),
+        aim: false,
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    let mut bytes = Vec::new();
+    encode(src, &cfg, Cursor::new(&mut bytes), &|_, _, _| {}).unwrap();
+    std::fs::write(path, &bytes).unwrap();
+    bytes
+}
+
+/// Two weathers of 40×24 lightmaps and 16×4 skies, 36 frames at 24 fps, looping.
+struct Fixture {
+    dir: tempfile::TempDir,
+    /// (lightmap, sky) bytes of "clear" then "overcast".
+    bytes: Vec<(Vec<u8>, Vec<u8>)>,
+}
+
+const FRAMES: usize = 36;
+
+fn fixture() -> Fixture {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = Vec::new();
+    let mut weathers = Vec::new();
+    for (name, gain, tint) in [
+        ("clear", 1.0, [1.0, 0.95, 0.8]),
+        ("overcast", 0.35, [0.8, 0.85, 0.9]),
+    ] {
+        let lm = write_stream(
+            &dir.path().join(format!("{name}.vbim")),
+            &sequence(40, 24, FRAMES, gain, tint),
+        );
+        let sky = write_stream(
+            &dir.path().join(format!("{name}-sky.vbim")),
+            &sequence(16, 4, FRAMES, 0.5 * gain, [0.5, 0.7, 1.0]),
+        );
+        bytes.push((lm, sky));
+        weathers.push(WeatherTracks {
+            name: name.into(),
+            lightmap: format!("{name}.vbim"),
+            sky: Some(format!("{name}-sky.vbim")),
+        });
+    }
+    let p = Package {
+        vbim_package: 1,
+        weathers,
+    };
+    std::fs::write(dir.path().join("day.vbimpkg"), p.to_json()).unwrap();
+    Fixture { dir, bytes }
+}
+
+fn inline() -> PlayerConfig {
+    PlayerConfig {
+        policy: Policy::Interpolate,
+        threaded: false,
+        ..Default::default()
+    }
+}
+
+fn reference(bytes: &[u8], t: f64, texels: usize) -> Vec<f32> {
+    let mut d =
+        Decoder::new(vbim_format::Reader::open(Cursor::new(bytes.to_vec())).unwrap()).unwrap();
+    let mut out = vec![0f32; texels * 3];
+    d.frame(t, Output::Linear, &mut out).unwrap();
+    out
+}
+
+/// `gpu` (RGBA) against `a + (b − a) w` (RGB): the protocol's HDR bound (2^-10 relative,
+/// the half float's own rounding) on each weather's reference, plus the fade's rounding.
+fn assert_mix(gpu: &[f32], a: &[f32], b: &[f32], w: f32, what: &str) {
+    for i in 0..a.len() / 3 {
+        for c in 0..3 {
+            let want = a[i * 3 + c] + (b[i * 3 + c] - a[i * 3 + c]) * w;
+            let g = gpu[i * 4 + c];
+            let tol = 2.5 * 2f32.powi(-10) * a[i * 3 + c].max(b[i * 3 + c]) + 1e-6;
+            assert!(
+                (g - want).abs() <= tol,
+                "{what}: texel {i} channel {c}: {g} against {want} (weight {w})"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_weather_switch_cross_fades_lightmap_and_sky_in_step_without_a_pop() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let mut p = PackagePlayer::open(
+        &device,
+        &queue,
+        &fx.dir.path().join("day.vbimpkg"),
+        None,
+        inline(),
+    )
+    .unwrap();
+    assert_eq!(p.weather(), "clear");
+    let one_weather = p.gpu_bytes();
+    for _ in 0..20 {
+        let r = p.advance(DISPLAY);
+        assert!(r.switch.is_none());
+    }
+    let fade_ns = 250_000_000;
+    p.switch_weather("overcast", fade_ns).unwrap();
+    assert!(p.switching());
+    let (mut last_w, mut fade_started, mut peak) = (0f32, None, 0u64);
+    let mut frames = 0;
+    while p.switching() {
+        frames += 1;
+        assert!(frames < 200, "the switch never ended");
+        let r = p.advance(DISPLAY);
+        peak = peak.max(p.gpu_bytes());
+        // The shown weather never waits for the new one.
+        assert_eq!(r.lightmap.state, FrameState::Exact, "frame {frames}");
+        assert_eq!(r.sky.unwrap().state, FrameState::Exact, "frame {frames}");
+        let Some(s) = r.switch else { break };
+        let t = r.lightmap.shown;
+        if s.weight > 0.0 {
+            fade_started.get_or_insert(s.since_ns);
+            // Both weathers show the same time, and the weight moves by one display frame
+            // of the fade at a time: no jump.
+            assert!((s.lightmap.shown - t).abs() < 1e-6 && s.lightmap.state == FrameState::Exact);
+            let step = DISPLAY as f32 / fade_ns as f32;
+            assert!(
+                s.weight - last_w <= step * 1.001 + 1e-6,
+                "{last_w} → {}",
+                s.weight
+            );
+        } else {
+            assert!(fade_started.is_none(), "the weight never goes back to 0");
+        }
+        last_w = s.weight;
+        let w = if s.weight > 0.0 { s.weight } else { 0.0 };
+        let lm = p.read_lightmap();
+        let a = reference(&fx.bytes[0].0, t, 40 * 24);
+        let b = reference(&fx.bytes[1].0, t, 40 * 24);
+        assert_mix(&lm, &a, &b, w, &format!("lightmap, switch frame {frames}"));
+        let sky = p.read_sky().unwrap();
+        let a = reference(&fx.bytes[0].1, t, 16 * 4);
+        let b = reference(&fx.bytes[1].1, t, 16 * 4);
+        assert_mix(&sky, &a, &b, w, &format!("sky, switch frame {frames}"));
+    }
+    assert_eq!(last_w, 1.0);
+    assert_eq!(p.weather(), "overcast");
+    let started = fade_started.expect("the fade started");
+    eprintln!(
+        "switch: fade started {:.0} ms after the switch; GPU memory {one_weather} → {peak} B during it",
+        started as f64 * 1e-6
+    );
+    assert!(peak > one_weather && p.gpu_bytes() <= one_weather + 1024);
+    // After the switch the new weather writes the outputs, exactly.
+    for _ in 0..30 {
+        let r = p.advance(DISPLAY);
+        assert!(r.switch.is_none());
+        assert_eq!(r.lightmap.state, FrameState::Exact);
+    }
+    let r = p.advance(DISPLAY);
+    let want = reference(&fx.bytes[1].0, r.lightmap.shown, 40 * 24);
+    assert_mix(&p.read_lightmap(), &want, &want, 0.0, "after the switch");
+    // Through the loop seam and a seek, still the new weather.
+    p.set_time(0);
+    for _ in 0..3 {
+        p.advance(DISPLAY);
+    }
+    let r = p.advance(DISPLAY);
+    let want = reference(&fx.bytes[1].1, r.sky.unwrap().shown, 16 * 4);
+    assert_mix(
+        &p.read_sky().unwrap(),
+        &want,
+        &want,
+        0.0,
+        "sky after a seek",
+    );
+}
+
+#[test]
+fn a_plain_file_plays_as_a_package_of_one_weather() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let path = fx.dir.path().join("clear.vbim");
+    let mut p = PackagePlayer::open(&device, &queue, &path, None, inline()).unwrap();
+    assert_eq!(p.weather(), vbim_format::package::SINGLE_WEATHER);
+    assert!(p.sky_view().is_none());
+    assert_eq!(p.file().tracks.len(), 1);
+    let mut r = p.advance(DISPLAY);
+    for _ in 0..10 {
+        r = p.advance(DISPLAY);
+    }
+    let want = reference(&fx.bytes[0].0, r.lightmap.shown, 40 * 24);
+    assert_mix(&p.read_lightmap(), &want, &want, 0.0, "a plain file");
+    let e = p.switch_weather("overcast", 1).unwrap_err().to_string();
+    assert!(
+        e.contains("no weather \"overcast\"") && e.contains("default"),
+        "{e}"
+    );
+}
+
+#[test]
+fn packages_that_cannot_play_are_refused_naming_the_file() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let dir = fx.dir.path();
+    let open = |name: &str, json: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, json).unwrap();
+        match PackagePlayer::open(&device, &queue, &path, None, inline()) {
+            Ok(_) => panic!("{name} opened"),
+            Err(e) => e.to_string(),
+        }
+    };
+    // A track of another length.
+    write_stream(
+        &dir.join("short.vbim"),
+        &sequence(40, 24, 12, 1.0, [1.0; 3]),
+    );
+    let e = open(
+        "short.vbimpkg",
+        r#"{"vbim_package": 1, "weathers": [{"name": "a", "lightmap": "clear.vbim"},
+            {"name": "b", "lightmap": "short.vbim"}]}"#,
+    );
+    assert!(
+        e.contains("short.vbim") && e.contains("one timeline"),
+        "{e}"
+    );
+    // A missing track.
+    let e = open(
+        "missing.vbimpkg",
+        r#"{"vbim_package": 1, "weathers": [{"name": "a", "lightmap": "gone.vbim"}]}"#,
+    );
+    assert!(e.contains("gone.vbim"), "{e}");
+    // A sky in one weather only.
+    let e = open(
+        "halfsky.vbimpkg",
+        r#"{"vbim_package": 1, "weathers": [{"name": "a", "lightmap": "clear.vbim", "sky": "clear-sky.vbim"},
+            {"name": "b", "lightmap": "overcast.vbim"}]}"#,
+    );
+    assert!(e.contains("halfsky.vbimpkg") && e.contains("sky"), "{e}");
+    // A path out of the package's folder, and a file that is neither.
+    let e = open(
+        "escape.vbimpkg",
+        r#"{"vbim_package": 1, "weathers": [{"name": "a", "lightmap": "../clear.vbim"}]}"#,
+    );
+    assert!(
+        e.contains("escape.vbimpkg") && e.contains("track path"),
+        "{e}"
+    );
+    let e = open("junk.vbimpkg", "\u{0}\u{1}binary");
+    assert!(e.contains("junk.vbimpkg"), "{e}");
+    // An unknown weather.
+    let e = match PackagePlayer::open(
+        &device,
+        &queue,
+        &dir.join("day.vbimpkg"),
+        Some("rain"),
+        inline(),
+    ) {
+        Ok(_) => panic!("opened"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.contains("rain") && e.contains("clear, overcast"), "{e}");
+}
