@@ -43,8 +43,17 @@ impl PlayArgs {
 
 #[derive(Args, Clone)]
 pub struct PlayArgs {
-    /// The .vbim file.
+    /// The .vbim file, or a package of weathers (.vbimpkg: `vbim encode` of a bake with weathers).
     pub file: PathBuf,
+    /// A package's weather to play, and the one whose lightmap track is measured [default: the package's first].
+    #[arg(long)]
+    pub weather: Option<String>,
+    /// With --scene: switch to another weather at a time of the display's clock, cross-fading lightmap and sky over --fade (`overcast@20s`; may be given again for later switches). In a window, W cycles the weathers.
+    #[arg(long, value_parser = crate::units::parse_weather_switch)]
+    pub switch_weather: Vec<crate::units::WeatherSwitch>,
+    /// The cross-fade of a weather switch, at most an hour.
+    #[arg(long, default_value = "2s", value_parser = crate::units::parse_short_span)]
+    pub fade: Span,
     /// Run without a window and print the summary.
     #[arg(long)]
     pub headless: bool,
@@ -120,8 +129,8 @@ pub struct PlayArgs {
 
 #[derive(Args)]
 pub struct DemoArgs {
-    /// Scene file.
-    #[arg(default_value = "samples/jacksboro.toml")]
+    /// Scene file (with `[[weather]]` tables: a package of weathers, and a switch mid-day in the preview).
+    #[arg(default_value = "samples/jacksboro-weather.toml")]
     pub scene: PathBuf,
     /// Output directory.
     #[arg(short, long, default_value = "out/demo")]

@@ -4,8 +4,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use serde_json::json;
-use vbim_bake::{bake, BakeOptions, FrameFormat, Scene};
+use vbim_bake::{bake, BakeOptions, BakeSummary, FrameFormat, Scene};
 use vbim_encoder::{encode_file, lossless_baseline, EncoderConfig, FrameSet, FrameSource, Preset};
+use vbim_format::package::{Package, WeatherTracks, PACKAGE_VERSION};
 
 use crate::cli::DemoArgs;
 use crate::cmd_play::{capture_scene, play, Outcome};
@@ -51,31 +52,68 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     .map_err(|e| e.to_string())?;
     stages.finish();
 
-    // 2. Encode it (the default preset), and measure the lossless baseline.
+    // 2. Encode every track (the default preset): the day, or each weather's day and sky
+    // (then a package ties them), and measure the lossless baseline of the first day.
     eprintln!("[2/5] encoding");
-    let fs = FrameSet::open(frames_dir.to_str().ok_or("output path is not UTF-8")?)
-        .map_err(|e| e.to_string())?;
     let mut cfg = EncoderConfig::preset(Preset::Default);
     cfg.rate = parse_rate(&a.fps)?;
-    cfg.metadata = std::fs::read_to_string(&baked.manifest).ok();
-    let file = out.join(format!("{}.vbim", scene.name));
-    let mut rep = encode_file(&fs, &cfg, &file, &progress).map_err(|e| e.to_string())?;
-    rep.verify_file(&fs, &file, &progress)
-        .map_err(|e| e.to_string())?;
-    stages.finish();
+    let jobs = tracks_of(&scene.name, &baked, &frames_dir, &out);
+    let mut tracks = Vec::new();
+    for job in &jobs {
+        let fs = FrameSet::open(job.input.to_str().ok_or("output path is not UTF-8")?)
+            .map_err(|e| e.to_string())?;
+        let mut cfg = cfg.clone();
+        cfg.metadata = std::fs::read_to_string(job.input.join(vbim_bake::Manifest::FILE_NAME)).ok();
+        let mut rep = encode_file(&fs, &cfg, &job.out, &progress).map_err(|e| e.to_string())?;
+        rep.verify_file(&fs, &job.out, &progress)
+            .map_err(|e| e.to_string())?;
+        stages.finish();
+        tracks.push((job, fs, rep));
+    }
+    let package = match &baked.package {
+        Some(_) => {
+            let p = Package {
+                vbim_package: PACKAGE_VERSION,
+                weathers: baked
+                    .weathers
+                    .iter()
+                    .map(|w| {
+                        let file = |kind: &str| {
+                            jobs.iter()
+                                .find(|j| j.weather.as_deref() == Some(&w.name) && j.kind == kind)
+                                .map(|j| j.file_name())
+                        };
+                        WeatherTracks {
+                            name: w.name.clone(),
+                            lightmap: file("lightmap").expect("every weather has a day"),
+                            sky: file("sky"),
+                        }
+                    })
+                    .collect(),
+            };
+            let path = out.join(format!("{}.vbimpkg", scene.name));
+            write(&path, &p.to_json())?;
+            Some(path)
+        }
+        None => None,
+    };
+    let (_, fs, rep) = &tracks[0];
+    let file = package.clone().unwrap_or_else(|| jobs[0].out.clone());
     rep.write_degree_map(&out.join("degree_map.png"))?;
-    let lossless = lossless_baseline(&fs, 3, &progress).map_err(|e| e.to_string())?;
+    let lossless = lossless_baseline(fs, 3, &progress).map_err(|e| e.to_string())?;
     stages.finish();
     let info = fs.info();
     let texel_frames = (info.width * info.height * info.frames) as f64;
     let lossless_bpp = lossless as f64 * 8.0 / texel_frames;
 
-    // 3. Play it headless under a bandwidth cap with stalls, measuring what is shown.
+    // 3. Play it headless under a bandwidth cap with stalls, measuring what is shown (the
+    // first weather's day).
     eprintln!(
         "[3/5] playing under {} with stalls {}",
         a.bandwidth, a.stall
     );
-    let duration = 2.0 * a.frames as f64 * cfg.rate.1 as f64 / cfg.rate.0 as f64;
+    let day_s = a.frames as f64 * cfg.rate.1 as f64 / cfg.rate.0 as f64;
+    let duration = 2.0 * day_s;
     let play_args = crate::cli::PlayArgs {
         duration: Span::from_secs(duration),
         bandwidth: Some(a.bandwidth),
@@ -85,14 +123,25 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         frames: a.render_frames,
         ..crate::cli::PlayArgs::headless(&file)
     };
-    let s = Session::from_args(&play_args)?;
+    let mut s = Session::from_args(&play_args)?;
     let (device, queue, adapter) = vbim_player::headless_device().map_err(|e| e.to_string())?;
     let adapter = format!("{} ({:?})", adapter.name, adapter.backend);
     let measured: Outcome = play(&s, &device, &queue, &adapter)?;
     drop((device, queue));
 
-    // 4. The same playback in the terrain scene, captured.
+    // 4. The same playback in the terrain scene, captured; with weathers, the last one
+    // comes in before noon of the first day and the first returns before noon of the
+    // second, each over a fade of a twentieth of a day (at most 1 s).
     eprintln!("[4/5] rendering {} frames of the scene", a.render_frames);
+    if baked.weathers.len() > 1 {
+        let (first, last) = (
+            &baked.weathers[0].name,
+            &baked.weathers[baked.weathers.len() - 1].name,
+        );
+        let at = |days: f64| (days * day_s * 1e9) as u64;
+        s.switches = vec![(last.clone(), at(0.42)), (first.clone(), at(1.42))];
+        s.fade_ns = (day_s / 20.0).min(1.0).mul_add(1e9, 0.0) as u64;
+    }
     let render_dir = out.join("render");
     let cap = capture_scene(
         &s,
@@ -153,6 +202,12 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         "scene": a.scene, "size": a.size, "frames": a.frames, "fps": a.fps,
         "bake": { "precompute_s": baked.precompute_s, "lighting_s": baked.lighting_s, "writing_s": baked.writing_s },
         "encode": rep,
+        "tracks": tracks.iter().map(|(j, _, r)| json!({
+            "weather": j.weather, "kind": j.kind, "file": j.out, "width": r.width, "height": r.height,
+            "bytes": r.bytes, "mean_psnr": r.mean_psnr(), "worst_psnr": r.worst_psnr(),
+        })).collect::<Vec<_>>(),
+        "package": package,
+        "switches": cap.switches,
         "lossless": { "bytes": lossless, "bpp": lossless_bpp },
         "playback": measured,
         "render": { "frames": cap.frames.len(), "dir": render_dir, "preview": out.join("preview.gif") },
@@ -181,6 +236,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
          {}\n\n\
          ![drift](drift.png)\n\n\
          Rendered frames: `render/` ({} PNG); a still: ![frame](frame.png)\n\n\
+         {}\
          Total time {:.1} s.\n",
         a.scene.display(), a.size, a.frames, a.fps,
         cfg.tolerance_db, rep.bytes, rep.bpp, rep.ratio_to_raw, rep.mean_psnr().unwrap_or(0.0), rep.worst_psnr().unwrap_or(0.0), rep.encode_s,
@@ -190,7 +246,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         measured.shown_mean_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),
         measured.shown_worst_psnr.map_or("–".into(), |v| format!("{v:.2} dB")),
         verdict,
-        cap.frames.len(), t0.elapsed().as_secs_f64(),
+        cap.frames.len(), weathers_md(&tracks, &cap.switches, s.fade_ns), t0.elapsed().as_secs_f64(),
     );
     write(&out.join("report.md"), &md)?;
     println!("demo finished in {:.1} s", t0.elapsed().as_secs_f64());
@@ -201,6 +257,20 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         rep.bpp,
         rep.mean_psnr().unwrap_or(0.0)
     );
+    for (j, _, r) in tracks.iter().skip(1) {
+        println!(
+            "  {}: {} bytes, mean PSNR {:.2} dB",
+            j.out.display(),
+            r.bytes,
+            r.mean_psnr().unwrap_or(0.0)
+        );
+    }
+    for sw in &cap.switches {
+        println!(
+            "  weather:  to {} at {:.2} s, its fade began {:.0} ms later",
+            sw.to, sw.asked_s, sw.fade_started_after_ms
+        );
+    }
     println!(
         "  playback: mean drift {:.3}, max {:.3} frames, {} stalls",
         measured.mean_drift, measured.max_drift, measured.stalls
@@ -219,6 +289,92 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         out.join("drift.png").display()
     );
     Ok(())
+}
+
+/// One track the demo encodes.
+struct TrackJob {
+    weather: Option<String>,
+    kind: &'static str,
+    input: std::path::PathBuf,
+    out: std::path::PathBuf,
+}
+
+impl TrackJob {
+    fn file_name(&self) -> String {
+        self.out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    }
+}
+
+/// The tracks of a bake: its one day, or each weather's day and sky.
+fn tracks_of(name: &str, baked: &BakeSummary, frames: &Path, out: &Path) -> Vec<TrackJob> {
+    if baked.weathers.is_empty() {
+        return vec![TrackJob {
+            weather: None,
+            kind: "lightmap",
+            input: frames.to_path_buf(),
+            out: out.join(format!("{name}.vbim")),
+        }];
+    }
+    let mut jobs = Vec::new();
+    for w in &baked.weathers {
+        let dir = frames.join(&w.name);
+        jobs.push(TrackJob {
+            weather: Some(w.name.clone()),
+            kind: "lightmap",
+            input: dir.clone(),
+            out: out.join(format!("{name}-{}.vbim", w.name)),
+        });
+        jobs.push(TrackJob {
+            weather: Some(w.name.clone()),
+            kind: "sky",
+            input: dir.join(vbim_bake::SKY_DIR),
+            out: out.join(format!("{name}-{}-sky.vbim", w.name)),
+        });
+    }
+    jobs
+}
+
+/// The report's section on weathers: every track's size and error, and each switch.
+fn weathers_md(
+    tracks: &[(&TrackJob, FrameSet, vbim_encoder::EncodeReport)],
+    switches: &[crate::cmd_play::SwitchTiming],
+    fade_ns: u64,
+) -> String {
+    if tracks.len() < 2 {
+        return String::new();
+    }
+    let mut md = String::from(
+        "## Weathers\n\nEach weather is a lightmap track and a sky track (a 128 × 32 map of the \
+         upper hemisphere) on one timeline, tied by the package file.\n\n\
+         | weather | track | size | bytes | mean PSNR | worst frame |\n|---|---|---|---:|---:|---:|\n",
+    );
+    for (j, _, r) in tracks {
+        md += &format!(
+            "| {} | {} | {}×{} | {} | {:.2} dB | {:.2} dB |\n",
+            j.weather.as_deref().unwrap_or(""),
+            j.kind,
+            r.width,
+            r.height,
+            r.bytes,
+            r.mean_psnr().unwrap_or(0.0),
+            r.worst_psnr().unwrap_or(0.0)
+        );
+    }
+    md += "\n";
+    for sw in switches {
+        md += &format!(
+            "- At {:.2} s the scene switched to **{}**: the new weather's tracks showed the \
+             shown time {:.0} ms later, then lightmap and sky cross-faded over {:.2} s.\n",
+            sw.asked_s,
+            sw.to,
+            sw.fade_started_after_ms,
+            fade_ns as f64 * 1e-9
+        );
+    }
+    md + "\n"
 }
 
 /// What the drift plot shows, in words: a plot that stays at zero is a result, not a

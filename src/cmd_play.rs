@@ -130,6 +130,27 @@ pub fn play(
 /// never by a size an argument alone asks for.
 const RESERVED_RECORDS: u64 = 1 << 20;
 
+/// What the summary needs from the player at the end of a session.
+struct Ended {
+    totals: vbim_player::Totals,
+    ring: usize,
+    gpu_bytes: u64,
+    preroll_ns: u64,
+    header: vbim_format::Header,
+}
+
+impl Ended {
+    fn of<R: std::io::Read + std::io::Seek + Send + 'static>(p: &Player<R>) -> Ended {
+        Ended {
+            totals: p.totals().clone(),
+            ring: p.ring_bytes(),
+            gpu_bytes: p.gpu_bytes(),
+            preroll_ns: p.preroll_ns(),
+            header: p.header().clone(),
+        }
+    }
+}
+
 /// Stops the player and summarises the session.
 fn finish(
     mut player: Player<BufReader<File>>,
@@ -138,15 +159,29 @@ fn finish(
     records: Vec<FrameRecord>,
     err: &SequenceError,
 ) -> Result<Outcome, String> {
-    let totals = player.totals().clone();
-    let ring = player.ring_bytes();
-    let gpu_bytes = player.gpu_bytes();
-    let player_preroll_ns = player.preroll_ns();
-    let preroll_ms = player_preroll_ns as f64 / 1e6;
-    let h = player.header().clone();
+    let ended = Ended::of(&player);
     player
         .stop(Duration::from_secs(10))
         .map_err(|e| e.to_string())?;
+    summarise(ended, s, adapter, records, err)
+}
+
+/// The session's summary from what the player said at its end.
+fn summarise(
+    ended: Ended,
+    s: &Session,
+    adapter: &str,
+    records: Vec<FrameRecord>,
+    err: &SequenceError,
+) -> Result<Outcome, String> {
+    let Ended {
+        totals,
+        ring,
+        gpu_bytes,
+        preroll_ns: player_preroll_ns,
+        header: h,
+    } = ended;
+    let preroll_ms = player_preroll_ns as f64 / 1e6;
     let sum = Summary::of(&records);
     // A stream that shows nothing while nothing holds its data back is broken in a way the
     // checks before did not see (it used to end "played N frames", exit 0, having shown
@@ -287,6 +322,15 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
         )?;
         stages.finish();
         print(&c.outcome, &s);
+        for sw in &c.switches {
+            println!(
+                "weather     to {} at {:.2} s: its tracks showed the shown time {:.0} ms later, then a {:.2} s fade",
+                sw.to,
+                sw.asked_s,
+                sw.fade_started_after_ms,
+                s.fade_ns as f64 * 1e-9
+            );
+        }
         println!(
             "frames      {} PNG in {}, preview {}",
             c.frames.len(),
@@ -321,10 +365,22 @@ pub struct Capture {
     pub frames: Vec<std::path::PathBuf>,
     pub preview: std::path::PathBuf,
     pub outcome: Outcome,
+    /// Each weather switch: where to, when it was asked for (s of playback), and how long
+    /// the new weather took to show the shown time (its fade's start), ms.
+    pub switches: Vec<SwitchTiming>,
+}
+
+/// How a weather switch went.
+#[derive(Serialize, Clone, Debug)]
+pub struct SwitchTiming {
+    pub to: String,
+    pub asked_s: f64,
+    pub fade_started_after_ms: f64,
 }
 
 /// Plays `s` while rendering the terrain scene, capturing `n` frames evenly over the
-/// duration into `out` (PNG) plus an animated preview (GIF).
+/// duration into `out` (PNG) plus an animated preview (GIF). A package plays with its sky
+/// track, and the session's weather switches happen at their times.
 pub fn capture_scene(
     s: &Session,
     scene_file: &Path,
@@ -336,8 +392,8 @@ pub fn capture_scene(
     use vbim_scene::{orbit, SceneRenderer, View, FORMAT};
     let (mesh, hf) = scene_mesh(scene_file)?;
     let (device, queue, info) = headless_device().map_err(|e| e.to_string())?;
-    let mut player = s.open_player(&device, &queue, s.realtime)?;
-    let h = player.header().clone();
+    let mut player = s.open_package(&device, &queue, s.realtime)?;
+    let h = player.lightmap_player().header().clone();
     if (h.width, h.height) != (hf.w as u32, hf.h as u32) {
         eprintln!(
             "note: the lightmap is {}×{}, the terrain {}×{}: the lightmap is stretched over it",
@@ -349,7 +405,8 @@ pub fn capture_scene(
         &device,
         &queue,
         &mesh,
-        player.view(),
+        player.lightmap_view(),
+        player.sky_view(),
         size.0,
         size.1,
         FORMAT,
@@ -364,21 +421,40 @@ pub fn capture_scene(
     let mut prev_t = 0;
     let mut next_capture = 0u64;
     let mut captured = 0u64;
+    let mut switches = s.switches.iter().peekable();
+    let mut switches_done: Vec<SwitchTiming> = Vec::new();
     for k in 1..=total {
         let t = k * 1_000_000_000 / s.display_hz as u64;
-        let r = player.advance(t - prev_t);
+        while let Some((name, _)) = switches.next_if(|(_, at)| t >= *at) {
+            player
+                .switch_weather(name, s.fade_ns)
+                .map_err(|e| e.to_string())?;
+        }
+        let rec = player.advance(t - prev_t);
         prev_t = t;
+        if let Some(sw) = &rec.switch {
+            let asked = (t - sw.since_ns) as f64 * 1e-9;
+            let new = switches_done
+                .last()
+                .is_none_or(|d: &SwitchTiming| (d.asked_s - asked).abs() > 1e-9);
+            if sw.weight > 0.0 && new {
+                switches_done.push(SwitchTiming {
+                    to: sw.to.clone(),
+                    asked_s: asked,
+                    fade_started_after_ms: sw.since_ns as f64 * 1e-6,
+                });
+            }
+        }
+        let r = rec.lightmap;
         records.push(r);
         if k >= next_capture && captured < n {
             let (eye, target) = orbit(captured as f32 / n as f32 * 0.5, &mesh);
-            let (zen, hor) = sky.at(r.shown);
             let v = View {
                 eye,
                 target,
                 fovy: 0.75,
                 exposure,
-                sky_zenith: zen,
-                sky_horizon: hor,
+                sky: sky.at(r.shown),
                 detail: 0.5,
             };
             renderer.render(&v, None);
@@ -415,10 +491,15 @@ pub fn capture_scene(
     })
     .map_err(|e| e.to_string())?;
     let adapter = format!("{} ({:?})", info.name, info.backend);
-    let outcome = finish(player, s, &adapter, records, &SequenceError::default())?;
+    // The lightmap track shown at the end (after a switch: the new weather's, since it
+    // opened).
+    let ended = Ended::of(player.lightmap_player());
+    drop(player);
+    let outcome = summarise(ended, s, &adapter, records, &SequenceError::default())?;
     Ok(Capture {
         frames,
         preview,
         outcome,
+        switches: switches_done,
     })
 }

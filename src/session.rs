@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use vbim_format::decode::Decoder;
 use vbim_format::metrics::Metric;
 use vbim_format::{Header, Limits, Reader};
-use vbim_player::{Player, PlayerConfig, Policy, Throttle};
+use vbim_player::{PackageFile, PackagePlayer, Player, PlayerConfig, Policy, Throttle};
 use vbim_scene::SkyTrack;
 
 use crate::cli::PlayArgs;
@@ -19,7 +19,15 @@ use crate::sequence::{open_input, Sequence};
 /// Everything one playback session needs.
 #[derive(Clone)]
 pub struct Session {
+    /// The lightmap track the session measures: the file itself, or a package's weather's.
     pub file: PathBuf,
+    /// What was asked to play: `file`, or the package it belongs to.
+    pub package: PathBuf,
+    /// The weather played (a plain file's is the package module's `SINGLE_WEATHER`).
+    pub weather: String,
+    /// Switches to other weathers at clock times (ns), in time order; and their fade (ns).
+    pub switches: Vec<(String, u64)>,
+    pub fade_ns: u64,
     pub policy: Policy,
     pub throttle: Throttle,
     pub catch_up_ns: u64,
@@ -52,12 +60,33 @@ impl Session {
     /// bandwidth relative to the stream's mean rate needs the file's header.
     pub fn from_args(a: &PlayArgs) -> Result<Session, String> {
         let limits = a.memory.limits;
-        let h = open_reference(&a.file, limits)?.header().clone();
+        let package = PackageFile::open(&a.file).map_err(|e| e.to_string())?;
+        let weather = match &a.weather {
+            Some(w) => w.clone(),
+            None => package.package.weathers[0].name.clone(),
+        };
+        let file = package.weather(&weather).map_err(|e| e.to_string())?;
+        let file = a
+            .file
+            .parent()
+            .unwrap_or(Path::new(""))
+            .join(&file.lightmap);
+        let mut switches = Vec::new();
+        for sw in &a.switch_weather {
+            package.weather(&sw.weather).map_err(|e| e.to_string())?;
+            switches.push((sw.weather.clone(), sw.at.ns()));
+        }
+        switches.sort_by_key(|s| s.1);
+        let h = open_reference(&file, limits)?.header().clone();
         let rate = a
             .bandwidth
             .map(|b| b.bytes_per_second(h.file_size, h.frame_count as f64 / h.fps()));
         Ok(Session {
-            file: a.file.clone(),
+            file,
+            package: a.file.clone(),
+            weather,
+            switches,
+            fade_ns: a.fade.ns(),
             policy: a.policy,
             throttle: Throttle {
                 rate,
@@ -88,7 +117,30 @@ impl Session {
     ) -> Result<Player<BufReader<File>>, String> {
         let name = self.file.display().to_string();
         let f = open_input(&self.file)?;
-        let cfg = PlayerConfig {
+        Player::open(device, queue, BufReader::new(f), self.config(threaded))
+            .map_err(|e| format!("{name}: {e}"))
+    }
+
+    /// Opens the session's package (or file) at its weather, with its sky.
+    pub fn open_package(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        threaded: bool,
+    ) -> Result<PackagePlayer, String> {
+        PackagePlayer::open(
+            device,
+            queue,
+            &self.package,
+            Some(&self.weather),
+            self.config(threaded),
+        )
+        .map_err(|e| e.to_string())
+    }
+
+    /// The player settings of the session.
+    fn config(&self, threaded: bool) -> PlayerConfig {
+        PlayerConfig {
             policy: self.policy,
             catch_up_ns: self.catch_up_ns,
             throttle: self.throttle,
@@ -99,8 +151,7 @@ impl Session {
             threaded,
             limits: self.limits,
             ..Default::default()
-        };
-        Player::open(device, queue, BufReader::new(f), cfg).map_err(|e| format!("{name}: {e}"))
+        }
     }
 
     /// What the scene needs from the bake of the session's file: the export curve's

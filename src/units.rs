@@ -194,6 +194,26 @@ pub fn parse_short_span(s: &str) -> Result<Span, String> {
     span_at_most(s, 3600.0, "an hour")
 }
 
+/// A weather switch at a time of the display's clock: `overcast@20s`.
+#[derive(Clone, Debug)]
+pub struct WeatherSwitch {
+    pub weather: String,
+    pub at: Span,
+}
+
+pub fn parse_weather_switch(s: &str) -> Result<WeatherSwitch, String> {
+    let (weather, at) = s
+        .split_once('@')
+        .ok_or_else(|| format!("{s:?}: expected WEATHER@TIME, e.g. overcast@20s"))?;
+    if !vbim_format::package::valid_name(weather) {
+        return Err(format!("{s:?}: {weather:?} is not a weather's name"));
+    }
+    Ok(WeatherSwitch {
+        weather: weather.to_string(),
+        at: span_at_most(at, 3.0 * 3600.0, "3 hours")?,
+    })
+}
+
 impl std::fmt::Display for Span {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.text)

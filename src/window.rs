@@ -3,15 +3,14 @@
 //! and the time of day, drift and bandwidth in the window title.
 //!
 //! Keys: Space pause · ←/→ scrub ∓/± 1 s · S stall the reader (toggle) ·
-//! B halve / restore the bandwidth · Esc quit.
+//! B halve / restore the bandwidth · W cycle a package's weathers (a cross-fade of
+//! `--fade`) · Esc quit.
 
-use std::fs::File;
-use std::io::BufReader;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-use vbim_player::{Player, Throttle};
+use vbim_player::{PackagePlayer, Throttle};
 use vbim_scene::{orbit, Mesh, SceneRenderer, SkyTrack, View};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
@@ -28,7 +27,7 @@ struct Gfx {
     config: wgpu::SurfaceConfiguration,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    player: Player<BufReader<File>>,
+    player: PackagePlayer,
     renderer: SceneRenderer,
 }
 
@@ -84,13 +83,14 @@ impl App {
             .find(|f| f.is_srgb())
             .unwrap_or(config.format);
         surface.configure(&device, &config);
-        let player = self.session.open_player(&device, &queue, true)?;
+        let player = self.session.open_package(&device, &queue, true)?;
         let (mesh, _) = scene_mesh(&self.scene_file)?;
         let renderer = SceneRenderer::new(
             &device,
             &queue,
             &mesh,
-            player.view(),
+            player.lightmap_view(),
+            player.sky_view(),
             config.width,
             config.height,
             config.format,
@@ -113,10 +113,10 @@ impl App {
         let now = Instant::now();
         let dt = self.last.map_or(0, |l| (now - l).as_nanos() as u64);
         self.last = Some(now);
-        let r = g.player.advance(if self.paused { 0 } else { dt });
+        let rec = g.player.advance(if self.paused { 0 } else { dt });
+        let r = rec.lightmap;
         let mesh = self.mesh.as_ref().unwrap();
         let (eye, target) = orbit(g.player.ticks() as f32 * 1e-9 / 60.0, mesh);
-        let (zen, hor) = self.sky.at(r.shown);
         let frame = match g.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f)
             | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
@@ -133,22 +133,29 @@ impl App {
                 target,
                 fovy: 0.75,
                 exposure: self.exposure,
-                sky_zenith: zen,
-                sky_horizon: hor,
+                sky: self.sky.at(r.shown),
                 detail: 0.5,
             },
             Some(&view),
         );
         frame.present();
         self.frames += 1;
-        let n = g.player.header().frame_count as f64;
+        let n = g.player.lightmap_player().header().frame_count as f64;
         let hours = 24.0 * (r.shown.rem_euclid(n)) / n;
+        let weather = match (&rec.switch, g.player.switching_to()) {
+            (Some(s), _) if s.weight > 0.0 => {
+                format!("{} → {} {:.0}%", g.player.weather(), s.to, s.weight * 100.0)
+            }
+            (_, Some(to)) => format!("{} → {to} (loading)", g.player.weather()),
+            _ => g.player.weather().to_string(),
+        };
+        let totals = g.player.lightmap_player().totals();
         g.window.set_title(&format!(
-            "vbim — {:02}:{:02}  drift {:.2} frames  read {:.0} kB/s{}{}{}",
+            "vbim — {:02}:{:02}  {weather}  drift {:.2} frames  read {:.0} kB/s{}{}{}",
             hours as u32,
             ((hours.fract()) * 60.0) as u32,
             r.drift,
-            g.player.totals().bytes_read as f64 / (g.player.ticks().max(1) as f64 * 1e-9) / 1e3,
+            totals.bytes_read as f64 / (g.player.ticks().max(1) as f64 * 1e-9) / 1e3,
             if self.paused { "  [paused]" } else { "" },
             if self.stalled { "  [stalled]" } else { "" },
             if self.slow { "  [½ bandwidth]" } else { "" },
@@ -176,12 +183,22 @@ impl App {
                     self.session.throttle
                 });
             }
+            Key::Character(c) if c.as_str() == "w" => {
+                // The weather after the one shown (or the one being switched to).
+                let names: Vec<String> = g.player.weathers().map(str::to_string).collect();
+                let current = g.player.switching_to().unwrap_or(g.player.weather());
+                let i = names.iter().position(|n| n == current).unwrap_or(0);
+                let next = names[(i + 1) % names.len()].clone();
+                if let Err(e) = g.player.switch_weather(&next, self.session.fade_ns) {
+                    eprintln!("{e}");
+                }
+            }
             Key::Character(c) if c.as_str() == "b" => {
                 self.slow = !self.slow;
                 let base = self.session.throttle;
                 let rate = base
                     .rate
-                    .unwrap_or((mean_rate(g.player.header()) * 2.0) as u64);
+                    .unwrap_or((mean_rate(g.player.lightmap_player().header()) * 2.0) as u64);
                 g.player.set_throttle(if self.slow {
                     Throttle {
                         rate: Some(rate / 2),
@@ -218,7 +235,8 @@ impl ApplicationHandler for App {
                         &g.device,
                         &g.queue,
                         self.mesh.as_ref().unwrap(),
-                        g.player.view(),
+                        g.player.lightmap_view(),
+                        g.player.sky_view(),
                         size.width,
                         size.height,
                         g.config.format,

@@ -97,10 +97,15 @@ impl Display {
         self.catch_start = None;
     }
 
-    /// Starts the clock now, without a pre-roll (a track joining a running timeline):
-    /// until its data is resident the display holds, under any policy but `wait`.
-    pub fn start_now(&mut self) {
+    /// Joins a running timeline: the clock runs from now with the playback position at
+    /// `position` ns at clock `ticks`, without a pre-roll; until the data for `at` (the
+    /// time the data restarts for) is resident the display holds, then cuts to it.
+    pub fn join(&mut self, ticks: u64, position: u64, at: MediaTime) {
         self.started = true;
+        self.startup = ticks.saturating_sub(position);
+        self.paused = 0;
+        self.catch_start = None;
+        self.jump = Some(at);
     }
 
     /// The playback position at clock `ticks`, ns (the clock less the start-up offset

@@ -20,6 +20,7 @@ use crate::throttle::Throttle;
 use crate::time::{frames_f64, ticks_to_media, MediaTime, ONE_FRAME};
 
 mod decoding;
+mod join;
 use crate::PlayerError;
 use decoding::Decoding;
 
@@ -72,6 +73,8 @@ pub struct Player<R: Read + Seek + Send + 'static> {
     ring_bytes: usize,
     /// Buffering before the first frame, ns.
     preroll: u64,
+    /// The reader's bandwidth cap, bytes/s (where a join can start: `join.rs`).
+    read_rate: Option<u64>,
 }
 
 fn ring_capacity(h: &Header, entries: &[IndexEntry], cfg: &PlayerConfig) -> usize {
@@ -235,6 +238,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
             totals: Totals::default(),
             ring_bytes,
             preroll,
+            read_rate: cfg.throttle.rate,
         })
     }
 
@@ -324,6 +328,7 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     /// Changes the reader's bandwidth cap and stalls from now on (inline mode: at once;
     /// threaded mode: at the reader's next chunk).
     pub fn set_throttle(&mut self, t: Throttle) {
+        self.read_rate = t.rate;
         self.pipeline.set_throttle(t);
     }
 
@@ -609,7 +614,10 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         // (This frame's ops, if any, were chosen before the seek: they still record, on
         // buffers nothing else reads before the next decode's upload.)
         self.resident = None;
-        self.known_end = 0;
+        // The data restarts for `pos`: measure how far behind it falls from there (from 0,
+        // a seek past half the day looked far behind before any data could come, and a
+        // capped reader was restarted every cooldown, never catching up).
+        self.known_end = pos;
         self.keys.clear();
         self.pipeline
             .restart(restart, (s, self.generation), self.ticks);
@@ -625,23 +633,6 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         let pos = ticks_to_media(ticks, self.header.rate_num, self.header.rate_den);
         self.display.restart_clock(pos);
         self.seek(pos);
-    }
-
-    /// Joins a running timeline at `ticks` ns of its playback position: a jump, as
-    /// [`Player::set_time`], but without a pre-roll. Until the data for that time is
-    /// resident the player reports [`FrameState::Held`] (its lightmap is not yet worth
-    /// showing), and its clock runs with the caller's from the first frame, so that once
-    /// the data is there it shows the very time its neighbours show. For a track that
-    /// starts beside others already playing: a weather switch's new tracks.
-    pub fn join(&mut self, ticks: u64) {
-        self.set_time(ticks);
-        self.display.start_now();
-    }
-
-    /// The playback position, ns: the clock less the pre-roll and the `wait` policy's
-    /// pauses (what [`Player::join`] takes to put another track at the same time).
-    pub fn position(&self) -> u64 {
-        self.display.position(self.ticks)
     }
 
     /// Stops the reader and decoder threads and waits for them (at most `deadline`).

@@ -301,3 +301,56 @@ fn packages_that_cannot_play_are_refused_naming_the_file() {
     };
     assert!(e.contains("rain") && e.contains("clear, overcast"), "{e}");
 }
+
+/// Under a bandwidth cap with stalls, a switch leaves the shown weather exactly as late as
+/// it is without one (the new tracks read beside it, starting at the first time their
+/// data can be there), and once the fade begins the new weather is never late either.
+#[test]
+fn a_capped_switch_never_makes_a_frame_late() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let path = fx.dir.path().join("day.vbimpkg");
+    let mean = fx.bytes[0].0.len() as f64 / (FRAMES as f64 / 24.0);
+    let cfg = PlayerConfig {
+        throttle: vbim_player::Throttle {
+            rate: Some((1.2 * mean) as u64),
+            stall: Some(vbim_player::Stall::every(200_000_000, 1_000_000_000)),
+        },
+        preroll_margin_ns: 200_000_000,
+        ..inline()
+    };
+    let late = |r: &vbim_player::FrameRecord| r.state != FrameState::Exact;
+    let run = |switch: bool| {
+        let mut p = PackagePlayer::open(&device, &queue, &path, None, cfg.clone()).unwrap();
+        let (mut shown_late, mut new_late_in_fade, mut started) = (0, 0, None);
+        for k in 0..400 {
+            if switch && k == 100 {
+                p.switch_weather("overcast", 200_000_000).unwrap();
+            }
+            let r = p.advance(DISPLAY);
+            // Frames before the first shown one are the pre-roll, the same in both runs.
+            shown_late += (k > 60 && late(&r.lightmap)) as u32;
+            if let Some(s) = &r.switch {
+                if s.weight > 0.0 {
+                    started.get_or_insert(s.since_ns);
+                    new_late_in_fade += late(&s.lightmap) as u32;
+                }
+            }
+        }
+        (
+            shown_late,
+            new_late_in_fade,
+            started,
+            p.weather().to_string(),
+        )
+    };
+    let (alone, _, _, _) = run(false);
+    let (with, new_late, started, weather) = run(true);
+    assert_eq!(with, alone, "the switch made the shown weather late");
+    assert_eq!(new_late, 0, "the new weather was late during its fade");
+    assert_eq!(weather, "overcast");
+    eprintln!(
+        "capped switch: fade began {:.0} ms after it was asked for; {alone} late frames alone",
+        started.unwrap() as f64 * 1e-6
+    );
+}

@@ -1,6 +1,8 @@
-//! vbim-scene — the terrain scene: the sample's height field as a mesh, lit by the streamed lightmap,
-//! under a sky whose colour follows the time of day (from the bake's manifest in the file's
-//! metadata chunk), seen from a camera orbiting the map (`vbim play --scene`).
+//! vbim-scene — the terrain scene: the sample's height field as a mesh, lit by the streamed
+//! lightmap, under the streamed sky where the package has a sky track (else a gradient whose
+//! colours follow the time of day, from the bake's manifest in the file's metadata chunk),
+//! with the sun's disc where the manifest puts it, seen from a camera orbiting the map
+//! (`vbim play --scene`).
 
 pub mod mesh;
 
@@ -19,9 +21,13 @@ const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Uniforms {
     view_proj: [[f32; 4]; 4],
+    inv_view_proj: [[f32; 4]; 4],
     params: [f32; 4],
     sky_zenith: [f32; 4],
     sky_horizon: [f32; 4],
+    eye: [f32; 4],
+    sun_dir: [f32; 4],
+    sun_color: [f32; 4],
 }
 
 /// What to draw a frame with.
@@ -31,11 +37,25 @@ pub struct View {
     pub target: Vec3,
     pub fovy: f32,
     pub exposure: f32,
-    pub sky_zenith: [f32; 3],
-    pub sky_horizon: [f32; 3],
+    /// The sky and sun of the moment shown ([`SkyTrack::at`]).
+    pub sky: SkyAt,
     /// Strength of the detail texture (0 = none).
     pub detail: f32,
 }
+
+/// The sky and sun of one moment, from the bake's manifest: the gradient's colours (used
+/// where no sky map is bound) and the sun's direction (map frame: x east, y south, z up)
+/// and colour (the direct sun's texel value at normal incidence).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SkyAt {
+    pub zenith: [f32; 3],
+    pub horizon: [f32; 3],
+    pub sun_dir: [f32; 3],
+    pub sun_color: [f32; 3],
+}
+
+/// The angular radius of the sun's disc as drawn: the bake's soft 1.5° disc.
+const SUN_RADIUS_DEG: f32 = 0.75;
 
 /// A camera orbiting the map: phase 0–1 is one turn, looking at the centre from above.
 pub fn orbit(phase: f32, mesh: &Mesh) -> (Vec3, Vec3) {
@@ -57,6 +77,7 @@ pub struct SceneRenderer {
     index_count: u32,
     uniforms: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+    has_sky_map: bool,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -104,11 +125,15 @@ fn detail_texels(n: usize) -> Vec<u8> {
 }
 
 impl SceneRenderer {
+    /// A renderer of `mesh` lit by `lightmap`, under `sky_map` (a sky track's map,
+    /// `Rgba16Float`) or, without one, the gradient of each [`View`]'s [`SkyAt`].
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         mesh: &Mesh,
         lightmap: &wgpu::TextureView,
+        sky_map: Option<&wgpu::TextureView>,
         width: u32,
         height: u32,
         format: wgpu::TextureFormat,
@@ -195,7 +220,25 @@ impl SceneRenderer {
                 samp_entry(2),
                 tex_entry(3),
                 samp_entry(4),
+                tex_entry(5),
+                samp_entry(6),
             ],
+        });
+        // Without a sky map, a 1×1 stand-in the shader does not read.
+        let blank = device
+            .create_texture(&vbim_player::lightmap_descriptor(
+                1,
+                1,
+                wgpu::TextureUsages::TEXTURE_BINDING,
+            ))
+            .create_view(&Default::default());
+        let sky_view = sky_map.unwrap_or(&blank);
+        let sky_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
         });
         let detail_view = detail.create_view(&Default::default());
         let (ls, ds) = (
@@ -225,6 +268,14 @@ impl SceneRenderer {
                 wgpu::BindGroupEntry {
                     binding: 4,
                     resource: wgpu::BindingResource::Sampler(&ds),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(sky_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::Sampler(&sky_sampler),
                 },
             ],
         });
@@ -312,6 +363,7 @@ impl SceneRenderer {
             index_count: mesh.indices.len() as u32,
             uniforms,
             bind_group,
+            has_sky_map: sky_map.is_some(),
             color_view: color.create_view(&Default::default()),
             color,
             depth_view: depth.create_view(&Default::default()),
@@ -325,11 +377,25 @@ impl SceneRenderer {
         let aspect = self.width as f32 / self.height as f32;
         let proj = Mat4::perspective_rh(v.fovy, aspect, 0.01, 20.0);
         let view = Mat4::look_at_rh(v.eye, v.target, Vec3::Y);
+        let vp = proj * view;
+        let rgb1 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
+        // Map frame (x east, y south, z up) to the world (x east, y up, z south).
+        let s = v.sky.sun_dir;
+        let sun_world = Vec3::new(s[0], s[2], s[1]).normalize_or_zero();
         let u = Uniforms {
-            view_proj: (proj * view).to_cols_array_2d(),
-            params: [v.exposure, 24.0, v.detail, 0.0],
-            sky_zenith: [v.sky_zenith[0], v.sky_zenith[1], v.sky_zenith[2], 1.0],
-            sky_horizon: [v.sky_horizon[0], v.sky_horizon[1], v.sky_horizon[2], 1.0],
+            view_proj: vp.to_cols_array_2d(),
+            inv_view_proj: vp.inverse().to_cols_array_2d(),
+            params: [v.exposure, 24.0, v.detail, self.has_sky_map as u32 as f32],
+            sky_zenith: rgb1(v.sky.zenith),
+            sky_horizon: rgb1(v.sky.horizon),
+            eye: [v.eye.x, v.eye.y, v.eye.z, 1.0],
+            sun_dir: [
+                sun_world.x,
+                sun_world.y,
+                sun_world.z,
+                SUN_RADIUS_DEG.to_radians().cos(),
+            ],
+            sun_color: rgb1(v.sky.sun_color),
         };
         self.queue
             .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
@@ -375,36 +441,53 @@ impl SceneRenderer {
     }
 }
 
-/// Sky colours over the day from the bake's manifest (each frame's `sky_color` and
-/// `sky_horizon_sun_side`), interpolated at a fractional frame; a plain sky without one.
+/// The sky and sun over the day from the bake's manifest (each frame's `sky_color`,
+/// `sky_horizon_sun_side`, `sun_dir` and `sun_color`), interpolated at a fractional frame;
+/// a plain sky and no sun without one.
 pub struct SkyTrack {
-    zenith: Vec<[f32; 3]>,
-    horizon: Vec<[f32; 3]>,
+    frames: Vec<SkyAt>,
 }
 
 impl SkyTrack {
     pub fn from_manifest(manifest: Option<&Manifest>) -> SkyTrack {
-        let (zenith, horizon): (Vec<[f32; 3]>, Vec<[f32; 3]>) =
-            manifest.map(|m| m.sky().unzip()).unwrap_or_default();
-        if zenith.is_empty() {
+        let f = |c: [f64; 3]| c.map(|v| v as f32);
+        let frames: Vec<SkyAt> = manifest
+            .map(|m| {
+                m.per_frame
+                    .iter()
+                    .map(|i| SkyAt {
+                        zenith: f(i.sky_color),
+                        horizon: f(i.sky_horizon_sun_side),
+                        sun_dir: f(i.sun_dir),
+                        sun_color: f(i.sun_color),
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        if frames.is_empty() {
             return SkyTrack {
-                zenith: vec![[0.046, 0.068, 0.11]],
-                horizon: vec![[0.08, 0.09, 0.11]],
+                frames: vec![SkyAt {
+                    zenith: [0.046, 0.068, 0.11],
+                    horizon: [0.08, 0.09, 0.11],
+                    ..Default::default()
+                }],
             };
         }
-        SkyTrack { zenith, horizon }
+        SkyTrack { frames }
     }
 
-    /// (zenith, horizon) at fractional frame `t` (wrapping).
-    pub fn at(&self, t: f64) -> ([f32; 3], [f32; 3]) {
-        let n = self.zenith.len();
+    /// The sky and sun at fractional frame `t` (wrapping).
+    pub fn at(&self, t: f64) -> SkyAt {
+        let n = self.frames.len();
         let t = t.rem_euclid(n as f64);
         let (i, f) = (t.floor() as usize % n, (t - t.floor()) as f32);
-        let j = (i + 1) % n;
+        let (a, b) = (self.frames[i], self.frames[(i + 1) % n]);
         let lerp = |a: [f32; 3], b: [f32; 3]| [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * f);
-        (
-            lerp(self.zenith[i], self.zenith[j]),
-            lerp(self.horizon[i], self.horizon[j]),
-        )
+        SkyAt {
+            zenith: lerp(a.zenith, b.zenith),
+            horizon: lerp(a.horizon, b.horizon),
+            sun_dir: lerp(a.sun_dir, b.sun_dir),
+            sun_color: lerp(a.sun_color, b.sun_color),
+        }
     }
 }

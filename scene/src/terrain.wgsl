@@ -1,13 +1,23 @@
 // The terrain scene: base colour × streamed lightmap × repeating detail texture, lit in
 // linear light and tone-mapped once, at the end (x·e / (1 + x·e), then the sRGB target
-// encodes). The sky behind is a gradient between the frame's horizon and zenith colours.
+// encodes). The sky behind is the sky track's map where the stream has one (an
+// equirectangular upper hemisphere, the zenith's row first, column 0 towards north) with
+// the sun's disc drawn over it, else a gradient between the frame's horizon and zenith
+// colours.
 
 struct Uniforms {
     view_proj: mat4x4<f32>,
-    // x: exposure, y: detail texture repeats across the map, z: detail strength, w: unused.
+    inv_view_proj: mat4x4<f32>,
+    // x: exposure, y: detail texture repeats across the map, z: detail strength,
+    // w: 1 when the sky map is bound.
     params: vec4<f32>,
     sky_zenith: vec4<f32>,
     sky_horizon: vec4<f32>,
+    // The camera (world), and the sun: direction (world) with w = cos of the disc's
+    // angular radius, and colour (the direct sun's texel value at normal incidence).
+    eye: vec4<f32>,
+    sun_dir: vec4<f32>,
+    sun_color: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
@@ -15,6 +25,8 @@ struct Uniforms {
 @group(0) @binding(2) var lightmap_sampler: sampler;
 @group(0) @binding(3) var detail: texture_2d<f32>;
 @group(0) @binding(4) var detail_sampler: sampler;
+@group(0) @binding(5) var sky_map: texture_2d<f32>;
+@group(0) @binding(6) var sky_sampler: sampler;
 
 struct VsOut {
     @builtin(position) pos: vec4<f32>,
@@ -46,7 +58,7 @@ fn fs_terrain(i: VsOut) -> @location(0) vec4<f32> {
 
 struct SkyOut {
     @builtin(position) pos: vec4<f32>,
-    @location(0) t: f32,
+    @location(0) ndc: vec2<f32>,
 }
 
 @vertex
@@ -55,12 +67,34 @@ fn vs_sky(@builtin(vertex_index) i: u32) -> SkyOut {
     let p = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - 1.0;
     var o: SkyOut;
     o.pos = vec4<f32>(p, 1.0, 1.0);
-    o.t = clamp(p.y * 0.5 + 0.5, 0.0, 1.0);
+    o.ndc = p;
     return o;
 }
 
+const PI: f32 = 3.14159265;
+
 @fragment
 fn fs_sky(i: SkyOut) -> @location(0) vec4<f32> {
-    let c = mix(u.sky_horizon.rgb, u.sky_zenith.rgb, pow(i.t, 0.6));
+    // The view ray through this pixel, in the world (x east, y up, z south).
+    let far = u.inv_view_proj * vec4<f32>(i.ndc, 1.0, 1.0);
+    let d = normalize(far.xyz / far.w - u.eye.xyz);
+    var c: vec3<f32>;
+    if (u.params.w > 0.5) {
+        // The map frame's azimuth clockwise from north (−z) and elevation; below the
+        // horizon the horizon's row, darkening.
+        let az = atan2(d.x, -d.z);
+        let e = asin(clamp(d.y, -1.0, 1.0));
+        let uv = vec2<f32>(fract(az / (2.0 * PI) + 1.0), clamp(1.0 - e / (0.5 * PI), 0.0, 1.0));
+        c = textureSampleLevel(sky_map, sky_sampler, uv, 0.0).rgb;
+        if (e < 0.0) {
+            c = c * max(1.0 + e * 4.0, 0.3);
+        }
+    } else {
+        c = mix(u.sky_horizon.rgb, u.sky_zenith.rgb, pow(clamp(d.y, 0.0, 1.0), 0.5));
+    }
+    // The sun's disc, soft-edged, far brighter than the sky around it.
+    let cs = dot(d, u.sun_dir.xyz);
+    let edge = smoothstep(u.sun_dir.w - 2e-5, u.sun_dir.w + 2e-5, cs);
+    c = c + u.sun_color.rgb * 40.0 * edge;
     return vec4<f32>(tonemap(c), 1.0);
 }

@@ -3,7 +3,7 @@
 use glam::Vec3;
 use vbim_bake::light_frame;
 use vbim_bake::{load_terrain, HeightField, Precomputed, Scene};
-use vbim_scene::{mesh::base_colour, Mesh, SceneRenderer, View, FORMAT};
+use vbim_scene::{mesh::base_colour, Mesh, SceneRenderer, SkyAt, View, FORMAT};
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
     let (d, q, info) = vbim_player::headless_device().unwrap_or_else(|e| panic!("{e}"));
@@ -41,8 +41,11 @@ fn view(eye: Vec3, exposure: f32) -> View {
         target: Vec3::ZERO,
         fovy: 0.8,
         exposure,
-        sky_zenith: [0.1, 0.15, 0.3],
-        sky_horizon: [0.2, 0.2, 0.25],
+        sky: SkyAt {
+            zenith: [0.1, 0.15, 0.3],
+            horizon: [0.2, 0.2, 0.25],
+            ..Default::default()
+        },
         detail: 0.0,
     }
 }
@@ -64,7 +67,7 @@ fn a_flat_terrain_under_a_constant_lightmap_renders_the_expected_colour() {
     let mesh = Mesh::new(&hf, 32, 1.0, 1.1);
     let light = [0.8f32, 0.7, 0.5];
     let lm = lightmap(&device, &queue, 32, 32, &light.repeat(32 * 32));
-    let r = SceneRenderer::new(&device, &queue, &mesh, &lm, 64, 64, FORMAT);
+    let r = SceneRenderer::new(&device, &queue, &mesh, &lm, None, 64, 64, FORMAT);
     let exposure = 2.0;
     // Straight down at the centre of the map.
     r.render(&view(Vec3::new(0.0, 1.5, 0.001), exposure), None);
@@ -114,7 +117,7 @@ fn render_frame(
         s.view.vertical_exaggeration as f32,
         s.view.snow_line as f32,
     );
-    let r = SceneRenderer::new(device, queue, &mesh, &lm, size.0, size.1, FORMAT);
+    let r = SceneRenderer::new(device, queue, &mesh, &lm, None, size.0, size.1, FORMAT);
     let (eye, target) = vbim_scene::orbit(0.1, &mesh);
     let mut v = view(eye, 3.0);
     v.target = target;
@@ -123,8 +126,8 @@ fn render_frame(
     let sun = vbim_bake::sun_for_frame(s, frame);
     let model = vbim_bake::sky_model(s);
     let (base, glow) = (model.base(sun.elevation), model.glow(sun.elevation));
-    v.sky_zenith = base.map(|c| c as f32);
-    v.sky_horizon = [0, 1, 2].map(|c| (base[c] + glow[c]) as f32);
+    v.sky.zenith = base.map(|c| c as f32);
+    v.sky.horizon = [0, 1, 2].map(|c| (base[c] + glow[c]) as f32);
     r.render(&v, None);
     r.read()
 }
@@ -175,4 +178,58 @@ fn a_rendered_frame_of_the_sample_matches_its_reference_image() {
         / (w * h) as f64;
     let psnr = 10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10();
     assert!(psnr >= 40.0, "rendered frame vs reference: {psnr:.2} dB");
+}
+
+/// The sky map is drawn where it says: column 0 towards north, the zenith's row first. A
+/// map whose north half is red and south half blue, seen looking north and south just above
+/// the horizon; and the sun's disc where the manifest puts it.
+#[test]
+fn the_sky_map_is_seen_in_the_direction_it_maps_and_the_sun_where_it_is() {
+    let (device, queue) = device();
+    let hf = HeightField {
+        w: 8,
+        h: 8,
+        cell_x: 30.0,
+        cell_y: 30.0,
+        z: vec![0.0; 64],
+    };
+    let mesh = Mesh::new(&hf, 8, 1.0, 1.1);
+    let lm = lightmap(&device, &queue, 8, 8, &[0.1f32; 3].repeat(64));
+    let (w, h) = (32usize, 8usize);
+    let sky: Vec<f32> = (0..w * h)
+        .flat_map(|i| {
+            let c = i % w;
+            // Azimuth from north: columns 0–7 and 24–31 face north, 8–23 south.
+            if !(8..24).contains(&c) {
+                [0.8, 0.0, 0.0]
+            } else {
+                [0.0, 0.0, 0.8]
+            }
+        })
+        .collect();
+    let sky = lightmap(&device, &queue, w as u32, h as u32, &sky);
+    let r = SceneRenderer::new(&device, &queue, &mesh, &lm, Some(&sky), 32, 32, FORMAT);
+    let centre = |v: &View| {
+        r.render(v, None);
+        let px = r.read();
+        let i = (16 * 32 + 16) * 4;
+        [px[i], px[i + 1], px[i + 2]]
+    };
+    // The eye far above the terrain, looking level: north is −z in the world.
+    let mut v = view(Vec3::new(0.0, 5.0, 0.0), 1.0);
+    v.target = Vec3::new(0.0, 5.2, -10.0);
+    let north = centre(&v);
+    v.target = Vec3::new(0.0, 5.2, 10.0);
+    let south = centre(&v);
+    assert!(north[0] > 100 && north[2] < 10, "north {north:?}");
+    assert!(south[2] > 100 && south[0] < 10, "south {south:?}");
+    // A sun in the east, 20° up (map frame: x east, z up), seen straight on.
+    let e = 20f32.to_radians();
+    v.sky.sun_dir = [e.cos(), 0.0, e.sin()];
+    v.sky.sun_color = [1.0, 0.9, 0.8];
+    v.target = Vec3::new(10.0 * e.cos(), 5.0 + 10.0 * e.sin(), 0.0);
+    // A narrow view: the 1.5° disc covers the middle pixels.
+    v.fovy = 0.05;
+    let sun = centre(&v);
+    assert!(sun.iter().all(|&c| c > 240), "the sun's disc: {sun:?}");
 }

@@ -82,12 +82,23 @@ impl PackageFile {
     /// differ, lightmaps (or skies) of different sizes, and a package where some weathers
     /// have a sky and others not; every error names the file.
     pub fn open(path: &Path) -> Result<PackageFile, PlayerError> {
+        let meta = std::fs::metadata(path).map_err(|e| package_error(path, e))?;
+        if !meta.is_file() {
+            return Err(package_error(path, "not a regular file"));
+        }
         let mut f = File::open(path).map_err(|e| package_error(path, e))?;
+        // A `.vbim` file is known by its first 8 bytes; only a package is read whole.
         let mut head = Vec::new();
         (&mut f)
-            .take(MAX_PACKAGE_BYTES + 1)
+            .take(MAGIC.len() as u64)
             .read_to_end(&mut head)
             .map_err(|e| package_error(path, e))?;
+        if !head.starts_with(&MAGIC) {
+            (&mut f)
+                .take(MAX_PACKAGE_BYTES + 1 - head.len() as u64)
+                .read_to_end(&mut head)
+                .map_err(|e| package_error(path, e))?;
+        }
         let package = if head.starts_with(&MAGIC) {
             let name = path
                 .file_name()
@@ -384,6 +395,45 @@ impl PackagePlayer {
     pub fn sky_player(&self) -> Option<&Player<File>> {
         self.shown.sky.as_ref()
     }
+    /// The package's playback clock, ns.
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+    /// Changes every open track's bandwidth cap and stalls (each track has its reader).
+    pub fn set_throttle(&mut self, t: crate::Throttle) {
+        self.cfg.throttle = t;
+        for p in self.shown.players() {
+            p.set_throttle(t);
+        }
+        if let Some(s) = self.switch.as_mut() {
+            for p in s.to.players() {
+                p.set_throttle(t);
+            }
+        }
+    }
+    /// Stops every track's threads and waits for them (each at most `deadline`).
+    pub fn stop(&mut self, deadline: std::time::Duration) -> Result<(), PlayerError> {
+        if let Some(s) = self.switch.as_mut() {
+            for p in s.to.players() {
+                p.stop(deadline)?;
+            }
+        }
+        for p in self.shown.players() {
+            p.stop(deadline)?;
+        }
+        Ok(())
+    }
+    /// The package's weathers, in its order.
+    pub fn weathers(&self) -> impl Iterator<Item = &str> {
+        self.file.package.weathers.iter().map(|w| w.name.as_str())
+    }
+    /// The weather a switch in progress goes to.
+    pub fn switching_to(&self) -> Option<&str> {
+        self.pending
+            .as_ref()
+            .map(|p| p.0.as_str())
+            .or(self.switch.as_ref().map(|s| s.to.name.as_str()))
+    }
     /// Whether a switch is in progress (or waiting for a fade to end).
     pub fn switching(&self) -> bool {
         self.switch.is_some() || self.pending.is_some()
@@ -425,9 +475,11 @@ impl PackagePlayer {
             join_cfg.policy = crate::Policy::Interpolate;
         }
         let mut to = open_tracks(&self.device, &self.queue, &self.file, name, &join_cfg)?;
-        let at = self.shown.lightmap.position();
+        // Every new track starts where the new lightmap's data can first be there.
+        let position = self.shown.lightmap.position();
+        let at = to.lightmap.earliest_join(position);
         for p in to.players() {
-            p.join(at);
+            p.join(self.ticks, position, at);
         }
         self.switch = Some(Switch {
             to,
@@ -449,8 +501,9 @@ impl PackagePlayer {
             p.set_time(ticks);
         }
         if let Some(s) = self.switch.as_mut() {
+            let at = s.to.lightmap.earliest_join(ticks);
             for p in s.to.players() {
-                p.join(ticks);
+                p.join(ticks, ticks, at);
             }
         }
     }
