@@ -338,7 +338,7 @@ pub struct BakeArgs {
 
 #[derive(Args)]
 pub struct InspectArgs {
-    /// The .vbim file.
+    /// The .vbim file, or a package (.vbimpkg): then each track's weather, kind, size and bytes, and with --verify every track's chunks.
     pub file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]

@@ -10,6 +10,13 @@ use vbim_format::{ChunkKind, ColorEncoding, Reader, Transfer};
 use crate::cli::InspectArgs;
 
 pub fn run(a: InspectArgs) -> Result<(), String> {
+    let mut magic = [0u8; 8];
+    let f = crate::sequence::open_input(&a.file)?;
+    let is_vbim =
+        std::io::Read::read_exact(&mut &f, &mut magic).is_ok() && magic == vbim_format::MAGIC;
+    if !is_vbim {
+        return package(&a);
+    }
     let name = a.file.display().to_string();
     let f = crate::sequence::open_input(&a.file)?;
     let mut r = Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?;
@@ -352,5 +359,96 @@ fn coding_name(h: &vbim_format::Header) -> &'static str {
         vbim_format::Coding::Lanes(_, vbim_format::plane2::Layout::States) => {
             "rANS lanes of several states (context maps in the header)"
         }
+    }
+}
+
+/// A package: its weathers and every track's kind, size, timing and bytes; with
+/// `--verify`, every track's chunks are checked as `inspect` checks a file.
+fn package(a: &InspectArgs) -> Result<(), String> {
+    let p = vbim_player::PackageFile::open(&a.file).map_err(|e| e.to_string())?;
+    let mut damaged = Vec::new();
+    if a.verify {
+        for t in &p.tracks {
+            let f = crate::sequence::open_input(&t.path)?;
+            let mut r = Reader::open(BufReader::new(f))
+                .map_err(|e| format!("{}: {e}", t.path.display()))?;
+            for i in 0..r.entries().len() {
+                if let Err(e) = r.read_chunk(i) {
+                    damaged.push(format!("{}: chunk {i}: {e}", t.path.display()));
+                }
+            }
+        }
+    }
+    let total: u64 = p.tracks.iter().map(|t| t.bytes).sum();
+    if a.json {
+        let tracks: Vec<_> = p
+            .tracks
+            .iter()
+            .map(|t| {
+                json!({
+                    "weather": t.weather, "kind": t.kind.name(), "file": t.path,
+                    "width": t.header.width, "height": t.header.height,
+                    "channels": t.header.channels, "frames": t.header.frame_count,
+                    "fps": format!("{}/{}", t.header.rate_num, t.header.rate_den),
+                    "looping": t.header.looping, "bytes": t.bytes,
+                    "version": format!("{}.{}", t.header.version_major(), t.header.version_minor),
+                })
+            })
+            .collect();
+        let j = json!({
+            "file": a.file, "package_version": p.package.vbim_package,
+            "weathers": p.package.weathers.iter().map(|w| &w.name).collect::<Vec<_>>(),
+            "tracks": tracks, "bytes": total, "damaged": damaged,
+        });
+        println!("{}", serde_json::to_string_pretty(&j).unwrap());
+    } else {
+        let h = &p.tracks[0].header;
+        println!(
+            "{}: vbim package {}, {} weather(s), {} track(s), {} bytes",
+            a.file.display(),
+            p.package.vbim_package,
+            p.package.weathers.len(),
+            p.tracks.len(),
+            total
+        );
+        println!(
+            "  timeline    {} frames at {}/{} fps ({:.1} s){}",
+            h.frame_count,
+            h.rate_num,
+            h.rate_den,
+            h.frame_count as f64 / h.fps(),
+            if h.looping { ", looping" } else { "" }
+        );
+        println!("  weather     track     size        bytes  file");
+        for t in &p.tracks {
+            println!(
+                "  {:<11} {:<8} {:>4}×{:<5} {:>10}  {}",
+                t.weather,
+                t.kind.name(),
+                t.header.width,
+                t.header.height,
+                t.bytes,
+                t.path.display()
+            );
+        }
+        if a.verify {
+            println!(
+                "  chunks      {}",
+                if damaged.is_empty() {
+                    "every track's chunks ok".to_string()
+                } else {
+                    format!("{} damaged: {}", damaged.len(), damaged.join("; "))
+                }
+            );
+        }
+    }
+    if damaged.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{}: {} damaged chunk(s)",
+            a.file.display(),
+            damaged.len()
+        ))
     }
 }

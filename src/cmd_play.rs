@@ -322,6 +322,13 @@ pub fn run(a: PlayArgs) -> Result<(), String> {
         )?;
         stages.finish();
         print(&c.outcome, &s);
+        if !c.switches.is_empty() {
+            println!(
+                "tracks      GPU memory {:.1} MB, {:.1} MB at most during a switch",
+                c.gpu_bytes.0 as f64 / 1e6,
+                c.gpu_bytes.1 as f64 / 1e6
+            );
+        }
         for sw in &c.switches {
             println!(
                 "weather     to {} at {:.2} s: its tracks showed the shown time {:.0} ms later, then a {:.2} s fade",
@@ -368,6 +375,9 @@ pub struct Capture {
     /// Each weather switch: where to, when it was asked for (s of playback), and how long
     /// the new weather took to show the shown time (its fade's start), ms.
     pub switches: Vec<SwitchTiming>,
+    /// GPU memory of every open track and the outputs: at the first frame, and at most
+    /// (both weathers open during a switch), bytes.
+    pub gpu_bytes: (u64, u64),
 }
 
 /// How a weather switch went.
@@ -423,6 +433,7 @@ pub fn capture_scene(
     let mut captured = 0u64;
     let mut switches = s.switches.iter().peekable();
     let mut switches_done: Vec<SwitchTiming> = Vec::new();
+    let mut gpu_bytes = (player.gpu_bytes(), player.gpu_bytes());
     for k in 1..=total {
         let t = k * 1_000_000_000 / s.display_hz as u64;
         while let Some((name, _)) = switches.next_if(|(_, at)| t >= *at) {
@@ -432,6 +443,7 @@ pub fn capture_scene(
         }
         let rec = player.advance(t - prev_t);
         prev_t = t;
+        gpu_bytes.1 = gpu_bytes.1.max(player.gpu_bytes());
         if let Some(sw) = &rec.switch {
             let asked = (t - sw.since_ns) as f64 * 1e-9;
             let new = switches_done
@@ -501,5 +513,6 @@ pub fn capture_scene(
         preview,
         outcome,
         switches: switches_done,
+        gpu_bytes,
     })
 }

@@ -899,3 +899,105 @@ fn convert_rewrites_a_stream_in_either_version_with_the_same_frames() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains(&format!("chunk {c}: ")), "{out}");
 }
+
+/// A bake with weathers goes to a package (every track coded, the package file last); the
+/// package is inspected, played at any weather, and switched in the terrain scene; what a
+/// package cannot be is refused with a message that says why.
+#[test]
+fn a_bake_of_weathers_becomes_a_package_that_plays_and_switches() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    ok(&[
+        "bake",
+        "samples/jacksboro-weather.toml",
+        "--out",
+        s(&frames),
+        "--size",
+        "32",
+        "--frames",
+        "12",
+    ]);
+    for w in ["clear", "broken", "overcast"] {
+        assert!(frames.join(w).join("sky").join("manifest.json").exists());
+    }
+    // A package needs a .vbimpkg name.
+    let o = vbim(&["encode", s(&frames), "-o", s(&dir.path().join("day.vbim"))]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains(".vbimpkg"));
+    let pkg = dir.path().join("day.vbimpkg");
+    let out = ok(&["encode", s(&frames), "-o", s(&pkg), "--fps", "24"]);
+    assert!(
+        out.contains("3 weather(s), clear, broken, overcast"),
+        "{out}"
+    );
+    assert!(dir.path().join("day-broken-sky.vbim").exists());
+    let out = ok(&["inspect", s(&pkg)]);
+    assert!(
+        out.contains("3 weather(s), 6 track(s)") && out.contains("128×32"),
+        "{out}"
+    );
+    assert!(out.contains("every track's chunks ok"), "{out}");
+    let j: serde_json::Value = serde_json::from_str(&ok(&["inspect", s(&pkg), "--json"])).unwrap();
+    assert_eq!(j["tracks"].as_array().unwrap().len(), 6);
+    assert_eq!(j["tracks"][1]["kind"], "sky");
+    // Played headless at one weather (its lightmap measured against its reference).
+    let out = ok(&[
+        "play",
+        s(&pkg),
+        "--headless",
+        "--weather",
+        "overcast",
+        "--duration",
+        "1s",
+        "--check-every",
+        "10",
+    ]);
+    assert!(out.contains("shown"), "{out}");
+    let o = vbim(&["play", s(&pkg), "--headless", "--weather", "rain"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("clear, broken, overcast"),
+        "{err}"
+    );
+    // In the scene, with its sky track, switching weather on the display's clock.
+    let render = dir.path().join("render");
+    let out = ok(&[
+        "play",
+        s(&pkg),
+        "--scene",
+        "samples/jacksboro-weather.toml",
+        "--headless",
+        "--out",
+        s(&render),
+        "--frames",
+        "4",
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--duration",
+        "0.5s",
+        "--switch-weather",
+        "overcast@0.1s",
+        "--fade",
+        "0.1s",
+    ]);
+    assert!(out.contains("weather     to overcast at 0.10 s"), "{out}");
+    assert!(render.join("preview.gif").exists());
+    // A damaged track makes the package's inspection fail, naming the track.
+    let track = dir.path().join("day-clear.vbim");
+    let mut bytes = std::fs::read(&track).unwrap();
+    let n = bytes.len();
+    bytes[n - 40] ^= 0x55;
+    std::fs::write(&track, bytes).unwrap();
+    let o = vbim(&["inspect", s(&pkg)]);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(!o.status.success(), "{out}");
+    assert!(
+        out.contains("day-clear.vbim") || err.contains("day-clear.vbim"),
+        "{out}{err}"
+    );
+}

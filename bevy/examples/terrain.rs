@@ -2,20 +2,21 @@
 //!
 //! ```sh
 //! cargo run --release -p bevy_vbim --example terrain            # bakes a small day first
-//! cargo run --release -p bevy_vbim --example terrain -- --stream out/demo/jacksboro.vbim
+//! cargo run --release -p bevy_vbim --example terrain -- --stream out/demo/jacksboro-weather.vbimpkg
 //! ```
 //!
 //! The terrain is a Bevy mesh with the bake's lightmap coordinates in `UV_1`, a
 //! `StandardMaterial` with vertex colours as its albedo, and Bevy's `Lightmap` component
 //! pointing at the image the player writes. A directional light and the ambient light
 //! follow the sun and sky of the bake's manifest (carried in the stream's metadata) and
-//! light a white sphere beside the terrain, under a sky of the manifest's zenith colour
-//! (`--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
-//! crashes lavapipe); they do not light the terrain's diffuse, which
-//! the lightmap already holds. `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
+//! light a white sphere beside the terrain; they do not light the terrain's diffuse, which
+//! the lightmap already holds. A package's sky track plays into a second image, drawn on a
+//! dome around the scene (without one, the background is the manifest's zenith colour;
+//! `--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
+//! crashes lavapipe). W cycles the package's weathers (a 2 s cross-fade). `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
 //! the window before `--frames N` quits. The window's title shows the time of day and the player's
 //! statistics. Keys: Space pause, ↑/↓ speed ×2 / ÷2, ←/→ one hour back /
-//! on, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
+//! on, W next weather, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -62,7 +63,7 @@ fn args() -> Result<Args, String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut a = Args {
         stream: None,
-        scene: root.join("samples/jacksboro.toml"),
+        scene: root.join("samples/jacksboro-weather.toml"),
         frames: None,
         hour: 0.0,
         paused: false,
@@ -82,7 +83,7 @@ fn args() -> Result<Args, String> {
             "--screenshot" => a.screenshot = Some(value()?.into()),
             _ => {
                 return Err(format!(
-                    "unknown argument {flag} (--stream F.vbim, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png)"
+                    "unknown argument {flag} (--stream F.vbim|F.vbimpkg, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png)"
                 ))
             }
         }
@@ -91,16 +92,19 @@ fn args() -> Result<Args, String> {
 }
 
 /// A small day of the scene (128², 48 frames, 24 fps), baked and encoded once into
-/// `target/bevy_vbim_example/`, for when no stream is given.
+/// `target/bevy_vbim_example/`, for when no stream is given: a package of its weathers
+/// (lightmap and sky tracks) when the scene has some, else one file.
 fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bevy_vbim_example");
     let mut scene = vbim_bake::Scene::load(scene_file).map_err(|e| e.to_string())?;
     scene.size = 128;
     scene.frames = 48;
-    let file = dir.join(format!(
-        "{}_{}x{}.vbim",
-        scene.name, scene.size, scene.frames
-    ));
+    let stem = format!("{}_{}x{}", scene.name, scene.size, scene.frames);
+    let file = dir.join(if scene.weathers.is_empty() {
+        format!("{stem}.vbim")
+    } else {
+        format!("{stem}.vbimpkg")
+    });
     if file.exists() {
         return Ok(file);
     }
@@ -108,7 +112,7 @@ fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
         "baking and encoding a small day into {} (once)",
         dir.display()
     );
-    let frames = dir.join("frames");
+    let frames = dir.join(format!("frames_{}", scene.name));
     let quiet = |_: &str, _: u64, _: u64| {};
     let baked = vbim_bake::bake(
         &scene,
@@ -120,21 +124,100 @@ fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
         &quiet,
     )
     .map_err(|e| e.to_string())?;
-    let fs = vbim_encoder::FrameSet::open(frames.to_str().ok_or("path is not UTF-8")?)
-        .map_err(|e| e.to_string())?;
-    let mut cfg = vbim_encoder::EncoderConfig::preset(vbim_encoder::Preset::Fast);
-    cfg.rate = (24, 1);
-    cfg.metadata = std::fs::read_to_string(&baked.manifest).ok();
-    // Written under another name first: an interrupted run leaves no half file behind.
-    let part = file.with_extension("vbim.part");
-    vbim_encoder::encode_file(&fs, &cfg, &part, &quiet).map_err(|e| e.to_string())?;
-    std::fs::rename(&part, &file).map_err(|e| e.to_string())?;
+    let encode = |input: &Path, out: &Path| -> Result<(), String> {
+        let fs = vbim_encoder::FrameSet::open(input.to_str().ok_or("path is not UTF-8")?)
+            .map_err(|e| e.to_string())?;
+        let mut cfg = vbim_encoder::EncoderConfig::preset(vbim_encoder::Preset::Fast);
+        cfg.rate = (24, 1);
+        cfg.metadata = std::fs::read_to_string(input.join(vbim_bake::Manifest::FILE_NAME)).ok();
+        // Written under another name first: an interrupted run leaves no half file behind.
+        let part = out.with_extension("part");
+        vbim_encoder::encode_file(&fs, &cfg, &part, &quiet).map_err(|e| e.to_string())?;
+        std::fs::rename(&part, out).map_err(|e| e.to_string())
+    };
+    if baked.weathers.is_empty() {
+        encode(&frames, &file)?;
+        return Ok(file);
+    }
+    let mut package = vbim_format::package::Package {
+        vbim_package: vbim_format::package::PACKAGE_VERSION,
+        weathers: Vec::new(),
+    };
+    for w in &baked.weathers {
+        let (lightmap, sky) = (
+            format!("{stem}-{}.vbim", w.name),
+            format!("{stem}-{}-sky.vbim", w.name),
+        );
+        encode(&frames.join(&w.name), &dir.join(&lightmap))?;
+        encode(
+            &frames.join(&w.name).join(vbim_bake::SKY_DIR),
+            &dir.join(&sky),
+        )?;
+        package.weathers.push(vbim_format::package::WeatherTracks {
+            name: w.name.clone(),
+            lightmap,
+            sky: Some(sky),
+        });
+    }
+    // The package last: it names only complete tracks.
+    vbim_bake::write_text(&file, &package.to_json()).map_err(|e| e.to_string())?;
     Ok(file)
+}
+
+/// A dome over the scene on which the sky map is drawn: the upper hemisphere with the sky
+/// track's equirectangular coordinates (u: azimuth clockwise from north, Bevy's −z; v: 0 at
+/// the zenith, 1 at the horizon), and a skirt below the horizon in the horizon's colour.
+fn sky_dome(radius: f32) -> Mesh {
+    let (segments, rings) = (64u32, 16u32);
+    let mut pos = Vec::new();
+    let mut uv = Vec::new();
+    for r in 0..=rings + 1 {
+        // The last ring is the skirt, 10° below the horizon.
+        let (e, v) = if r <= rings {
+            let v = r as f32 / rings as f32;
+            (std::f32::consts::FRAC_PI_2 * (1.0 - v), v)
+        } else {
+            (-10f32.to_radians(), 1.0)
+        };
+        for k in 0..=segments {
+            let u = k as f32 / segments as f32;
+            let az = std::f32::consts::TAU * u;
+            // Map frame (x east, y south, z up) to Bevy's (x east, y up, z south).
+            let (se, ce) = e.sin_cos();
+            pos.push([radius * az.sin() * ce, radius * se, -radius * az.cos() * ce]);
+            uv.push([u, v]);
+        }
+    }
+    let mut idx = Vec::new();
+    let row = segments + 1;
+    for r in 0..=rings {
+        for k in 0..segments {
+            let (a, b) = (r * row + k, (r + 1) * row + k);
+            idx.extend_from_slice(&[a, b, a + 1, a + 1, b, b + 1]);
+        }
+    }
+    let normals: Vec<[f32; 3]> = pos
+        .iter()
+        .map(|p| {
+            let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            [-p[0] / l, -p[1] / l, -p[2] / l]
+        })
+        .collect();
+    Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD,
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, pos)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
+    .with_inserted_indices(Indices::U32(idx))
 }
 
 #[derive(Resource)]
 struct Day {
     playback: Entity,
+    /// The stream's weathers (W cycles them).
+    weathers: Vec<String>,
     manifest: Option<Manifest>,
     /// The stream's frame rate, frames per second.
     fps: f64,
@@ -210,8 +293,10 @@ fn setup(
     let (w, h) = (opened.header().width, opened.header().height);
     let manifest = opened.metadata().and_then(|m| Manifest::parse(m).ok());
     let lightmap = images.add(bevy_vbim::lightmap_image(w, h));
+    let sky = opened.sky_image().map(|i| images.add(i));
     let stream: Handle<VbimStream> = assets.load(name.to_string());
     let mut p = VbimPlayback::new(stream, lightmap.clone());
+    p.sky = sky.clone();
     p.paused = a.paused;
     if a.hour > 0.0 {
         p.set_time(opened.duration().mul_f64((a.hour / 24.0).clamp(0.0, 1.0)));
@@ -259,6 +344,25 @@ fn setup(
         })),
         Transform::from_xyz(0.0, y + 0.06, 0.0),
     ));
+    if let Some(sky) = sky {
+        // The sky in the lightmap's units, as light: a texel of 1 is `lux_per_unit` nits, so
+        // the dome and the ground it lights share one exposure.
+        let k = lux_per_unit(SUN_LUX);
+        commands.spawn((
+            Mesh3d(meshes.add(sky_dome(12.0))),
+            MeshMaterial3d(materials.add(StandardMaterial {
+                base_color: Color::BLACK,
+                reflectance: 0.0,
+                emissive: LinearRgba::rgb(k, k, k),
+                emissive_texture: Some(sky),
+                // In nits, under the camera's exposure as the lit terrain is.
+                emissive_exposure_weight: 1.0,
+                double_sided: true,
+                cull_mode: None,
+                ..default()
+            })),
+        ));
+    }
     commands.spawn((
         Sun,
         DirectionalLight {
@@ -287,6 +391,7 @@ fn setup(
     }
     commands.insert_resource(Day {
         playback,
+        weathers: opened.weathers().to_vec(),
         manifest,
         fps: opened.header().rate_num as f64 / opened.header().rate_den.max(1) as f64,
         exit_after: a.frames,
@@ -403,6 +508,14 @@ fn keys(
     if input.just_pressed(KeyCode::ArrowLeft) {
         p.set_time(step(-1.0));
     }
+    if input.just_pressed(KeyCode::KeyW) && day.weathers.len() > 1 {
+        let current = s.switching.as_ref().map_or(&s.weather, |w| &w.0);
+        let i = day.weathers.iter().position(|w| w == current).unwrap_or(0);
+        p.switch_weather(
+            &day.weathers[(i + 1) % day.weathers.len()],
+            Duration::from_secs(2),
+        );
+    }
     if input.just_pressed(KeyCode::Escape) {
         exit.write(AppExit::Success);
     }
@@ -423,9 +536,13 @@ fn readout(
         .map_or(1, |m| m.per_frame.len().max(1)) as f64;
     let hours = 24.0 * s.frame / frames;
     window.title = format!(
-        "vbim {:02}:{:02} {}{} ×{} · drift {:.2} · loops {} · read {:.2} MB · GPU {:.1} MB · Space ↑↓ ←→ Esc",
+        "vbim {:02}:{:02} {}{}{} ×{} · drift {:.2} · loops {} · read {:.2} MB · GPU {:.1} MB · Space ↑↓ ←→ W Esc",
         hours.floor() as u32,
         (hours.fract() * 60.0).floor() as u32,
+        match &s.switching {
+            Some((to, w)) => format!("{} → {to} {:.0}% ", s.weather, w * 100.0),
+            None => format!("{} ", s.weather),
+        },
         if p.paused { "paused " } else { "" },
         s.state.map_or("loading", |st| st.name()),
         p.speed,

@@ -1,6 +1,7 @@
-//! `.vbim` files as Bevy assets. The asset is the stream's header and where its file is:
-//! the chunks stay on disk and the player reads them through its ring while it plays, so
-//! loading a day of lighting costs a few hundred bytes of main-world memory, not the file.
+//! `.vbim` files and packages (`.vbimpkg`: weathers, each a lightmap and a sky track) as
+//! Bevy assets. The asset is the stream's header and where its file is: the chunks stay on
+//! disk and the player reads them through its ring while it plays, so loading a day of
+//! lighting costs a few hundred bytes of main-world memory, not the file.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -15,13 +16,17 @@ use bevy::reflect::TypePath;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
 use vbim_format::{Header, Reader as StreamReader};
 
-/// A `.vbim` stream: its header, checked with its index when it was loaded, and the file the
-/// player streams it from.
+/// A `.vbim` stream or a package of weathers: the (first weather's) lightmap header,
+/// checked with its index when it was loaded, and the file the player streams it from.
 #[derive(Asset, TypePath, Clone, Debug)]
 pub struct VbimStream {
     path: Arc<PathBuf>,
     header: Header,
     metadata: Option<Arc<str>>,
+    /// The package's weathers (a plain file: one).
+    weathers: Arc<[String]>,
+    /// The sky tracks' size, when the package has them.
+    sky: Option<(u32, u32)>,
 }
 
 /// Why a stream could not be loaded.
@@ -44,6 +49,9 @@ pub enum StreamError {
         /// What is wrong with it.
         source: vbim_format::FormatError,
     },
+    /// A package that cannot be played (the error names the package or track file).
+    #[error("{0}")]
+    Package(String),
     /// The asset does not come from the file system (the player streams from a file).
     #[error("{0}: vbim streams play from files; this asset source is not the file system")]
     NotAFile(String),
@@ -55,12 +63,39 @@ impl VbimStream {
     /// streams outside the asset folder: add the result to `Assets<VbimStream>`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, StreamError> {
         let path = path.as_ref().to_path_buf();
-        let file = File::open(&path).map_err(|source| StreamError::Io {
+        let io = |source| StreamError::Io {
             path: path.clone(),
+            source,
+        };
+        let mut magic = [0u8; 8];
+        let is_file = std::io::Read::read_exact(&mut File::open(&path).map_err(io)?, &mut magic)
+            .is_ok()
+            && magic == vbim_format::MAGIC;
+        // A package: its tracks share one timeline (checked); the first weather's lightmap
+        // stands for it (its header and the bake's manifest).
+        let (lightmap, weathers, sky) = if is_file {
+            (
+                path.clone(),
+                vec![vbim_format::package::SINGLE_WEATHER.to_string()],
+                None,
+            )
+        } else {
+            let p = vbim_player::PackageFile::open(&path)
+                .map_err(|e| StreamError::Package(e.to_string()))?;
+            let sky = p
+                .tracks
+                .iter()
+                .find(|t| t.kind == vbim_player::TrackKind::Sky)
+                .map(|t| (t.header.width, t.header.height));
+            let names = p.package.weathers.iter().map(|w| w.name.clone()).collect();
+            (p.tracks[0].path.clone(), names, sky)
+        };
+        let file = File::open(&lightmap).map_err(|source| StreamError::Io {
+            path: lightmap.clone(),
             source,
         })?;
         let format = |source| StreamError::Format {
-            path: path.clone(),
+            path: lightmap.clone(),
             source,
         };
         let mut reader = StreamReader::open(BufReader::new(file)).map_err(format)?;
@@ -70,7 +105,23 @@ impl VbimStream {
             header: reader.header().clone(),
             path: Arc::new(path),
             metadata,
+            weathers: weathers.into(),
+            sky,
         })
+    }
+
+    /// The weathers a [`VbimPlayback`](crate::VbimPlayback) can switch between, in the
+    /// package's order (a plain `.vbim` file has one).
+    pub fn weathers(&self) -> &[String] {
+        &self.weathers
+    }
+
+    /// An image the sky track can be written into (see [`lightmap_image`]), when the
+    /// package has sky tracks: the sky's radiance over the upper hemisphere, equirectangular,
+    /// the zenith's row first, column 0 towards north (map frame −y, Bevy's −z), in the
+    /// lightmap's units.
+    pub fn sky_image(&self) -> Option<Image> {
+        self.sky.map(|(w, h)| lightmap_image(w, h))
     }
 
     /// The stream's header: size, channels, frame rate, frame count, looping.
@@ -168,6 +219,6 @@ impl AssetLoader for VbimLoader {
     }
 
     fn extensions(&self) -> &[&str] {
-        &["vbim"]
+        &["vbim", "vbimpkg"]
     }
 }

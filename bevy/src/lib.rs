@@ -28,6 +28,11 @@
 //! handle sees every frame. Playback follows `Time<Virtual>`; [`VbimStats`] and
 //! [`VbimEvent`] report back.
 //!
+//! A package of weathers (`.vbimpkg`) is an asset too: [`VbimPlayback::sky`] names an image
+//! its sky track is written into ([`VbimStream::sky_image`]), and setting
+//! [`VbimPlayback::weather`] cross-fades lightmap and sky to another weather
+//! ([`VbimEventKind::WeatherChanged`] when it is shown).
+//!
 //! # Units
 //! A texel is the irradiance reaching the surface divided by π, on a scale where the noon
 //! sun on flat open ground is about 1.0. Bevy adds a lightmap to a surface's diffuse light
@@ -94,12 +99,9 @@ impl Plugin for VbimPlugin {
             )
             .add_systems(
                 RenderGraph,
-                (
-                    render::advance_players
-                        .in_set(RenderGraphSystems::Render)
-                        .before(camera_driver),
-                    render::players_submitted.in_set(RenderGraphSystems::Finish),
-                ),
+                render::advance_players
+                    .in_set(RenderGraphSystems::Render)
+                    .before(camera_driver),
             );
     }
 }

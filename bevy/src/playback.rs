@@ -43,6 +43,15 @@ pub struct VbimPlayback {
     pub throttle: Throttle,
     /// The catch-up window of [`Policy::Interpolate`], used when the player opens.
     pub catch_up: Duration,
+    /// The image a package's sky track plays into ([`VbimStream::sky_image`]); `None`:
+    /// the sky is not written.
+    pub sky: Option<Handle<Image>>,
+    /// The weather to show (a package's weather name; `None`: its first). Changing it
+    /// switches weather: the new weather's tracks start reading at once and, when they show
+    /// the shown time, lightmap and sky cross-fade over [`fade`](VbimPlayback::fade).
+    pub weather: Option<String>,
+    /// The cross-fade of a weather switch.
+    pub fade: Duration,
     /// The playback clock: integer nanoseconds of media time driven so far.
     pub(crate) clock_ns: u64,
     /// The last seek asked for: (generation, media time in ns).
@@ -61,9 +70,19 @@ impl VbimPlayback {
             policy: Policy::Interpolate,
             throttle: Throttle::UNLIMITED,
             catch_up: Duration::from_millis(500),
+            sky: None,
+            weather: None,
+            fade: Duration::from_secs(2),
             clock_ns: 0,
             seek: (0, 0),
         }
+    }
+
+    /// Switches to weather `name` with a cross-fade of `fade` (see [`VbimPlayback::weather`];
+    /// [`VbimEventKind::WeatherChanged`] says when it is shown).
+    pub fn switch_weather(&mut self, name: &str, fade: Duration) {
+        self.weather = Some(name.to_string());
+        self.fade = fade;
     }
 
     /// Jumps to `time` into the day (wrapped at the day's end for a looping stream), from
@@ -92,8 +111,13 @@ pub struct VbimStats {
     pub state: Option<FrameState>,
     /// Times the day wrapped at its end.
     pub loops: u64,
-    /// Bytes the player holds on the GPU.
+    /// Bytes the player holds on the GPU (every track; both weathers during a switch).
     pub gpu_bytes: u64,
+    /// The weather shown (until a switch's fade ends, the one it started from).
+    pub weather: String,
+    /// The weather a switch in progress goes to, and its fade's weight (0 until the new
+    /// weather's tracks show the shown time, then rising to 1).
+    pub switching: Option<(String, f32)>,
     /// The player's running totals: frames, stalls, bytes read and uploaded, CPU time,
     /// damage.
     pub totals: Totals,
@@ -129,6 +153,11 @@ pub enum VbimEventKind {
     /// The stream could not be played (the image does not fit it, the file vanished, the
     /// device cannot hold it); the playback stays stopped.
     Failed(String),
+    /// A weather switch's fade ended: the weather named is shown.
+    WeatherChanged(String),
+    /// A weather switch was refused (no such weather, or its tracks cannot be opened); the
+    /// weather shown stays.
+    WeatherRefused(String),
 }
 
 /// What the render world tells the main world about one playback.
@@ -142,9 +171,14 @@ pub(crate) enum Report {
         frame_count: u32,
         rate: (u32, u32),
         looped: bool,
+        weather: String,
+        switching: Option<(String, f32)>,
+        gpu_bytes: u64,
     },
     /// The player could not open or write the image.
     Failed(String),
+    /// A weather switch was refused.
+    WeatherRefused(String),
 }
 
 /// The render world's reports, received by the main world.
@@ -185,16 +219,25 @@ pub(crate) fn receive_reports(
                 s.playing = false;
                 send(VbimEventKind::Failed(e));
             }
+            Report::WeatherRefused(e) => send(VbimEventKind::WeatherRefused(e)),
             Report::Frame {
                 record,
                 totals,
                 frame_count,
                 rate,
                 looped,
+                weather,
+                switching,
+                gpu_bytes,
             } => {
                 if !s.playing {
                     send(VbimEventKind::Loaded);
+                } else if s.weather != weather {
+                    send(VbimEventKind::WeatherChanged(weather.clone()));
                 }
+                s.weather = weather;
+                s.switching = switching;
+                s.gpu_bytes = gpu_bytes;
                 // A stall is the player's own count (a run of late frames counts once; the
                 // buffering before the first frame is not one).
                 if totals.stalls > s.totals.stalls {

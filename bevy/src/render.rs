@@ -1,9 +1,9 @@
-//! The render world's side: one `vbim_player::Player` per playing entity, opened on Bevy's
-//! own device, writing into the texture of the entity's image, its GPU work recorded into
-//! Bevy's command encoder before the cameras draw.
+//! The render world's side: one `vbim_player::PackagePlayer` per playing entity (a plain
+//! file is a package of one weather), opened on Bevy's own device, writing into the
+//! textures of the entity's images, its GPU work recorded into Bevy's command encoder
+//! before the cameras draw.
 
 use std::collections::HashMap;
-use std::fs::File;
 use std::path::PathBuf;
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex};
@@ -17,7 +17,7 @@ use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
 use bevy::render::texture::GpuImage;
 use bevy::render::Extract;
 use vbim_format::Header;
-use vbim_player::{Player, PlayerConfig, Policy, Throttle};
+use vbim_player::{PackagePlayer, PlayerConfig, Policy, Throttle};
 
 use crate::asset::VbimStream;
 use crate::playback::{Report, VbimPlayback};
@@ -28,6 +28,9 @@ pub(crate) struct Extracted {
     /// The stream's file and header, once the asset is loaded.
     stream: Option<(Arc<PathBuf>, Header)>,
     target: AssetId<Image>,
+    sky: Option<AssetId<Image>>,
+    weather: Option<String>,
+    fade_ns: u64,
     clock_ns: u64,
     seek: (u32, u64),
     policy: Policy,
@@ -42,8 +45,11 @@ pub(crate) struct ExtractedPlaybacks(Vec<(Entity, Extracted)>);
 /// One entity's player and what it was last told.
 struct Slot {
     /// `None` once it failed: it stays stopped until the entity's playback is replaced.
-    player: Option<Mutex<Player<File>>>,
+    player: Option<Mutex<PackagePlayer>>,
     texture: Option<TextureId>,
+    sky_texture: Option<TextureId>,
+    /// The weather last asked for.
+    weather: Option<String>,
     clock_ns: u64,
     seek: u32,
     policy: Policy,
@@ -55,8 +61,6 @@ struct Slot {
     lap: Option<i64>,
     /// A seek was applied since the last frame: a lap change is not a loop.
     sought: bool,
-    /// `advance_into` ran this frame (so `submitted` is due).
-    advanced: bool,
     /// The asset and target it was opened for (a different one reopens it).
     opened_for: (Arc<PathBuf>, AssetId<Image>),
 }
@@ -92,6 +96,9 @@ pub(crate) fn extract_playbacks(
             Extracted {
                 stream,
                 target: p.target.id(),
+                sky: p.sky.as_ref().map(|s| s.id()),
+                weather: p.weather.clone(),
+                fade_ns: p.fade.as_nanos().min(u64::MAX as u128) as u64,
                 clock_ns: p.clock_ns,
                 seek: p.seek,
                 policy: p.policy,
@@ -145,8 +152,11 @@ pub(crate) fn prepare_players(
         else {
             continue;
         };
-        if slot.texture != Some(image.texture.id()) {
-            if let Err(e) = player.set_output(Some(&image.texture)) {
+        let sky = want.sky.and_then(|s| images.get(s));
+        let sky_id = sky.map(|s| s.texture.id());
+        if slot.texture != Some(image.texture.id()) || slot.sky_texture != sky_id {
+            let sky = sky.map(|s| &*s.texture);
+            if let Err(e) = player.set_outputs(Some(&image.texture), sky) {
                 let _ = players
                     .reports
                     .send((*entity, Report::Failed(e.to_string())));
@@ -154,6 +164,17 @@ pub(crate) fn prepare_players(
                 continue;
             }
             slot.texture = Some(image.texture.id());
+            slot.sky_texture = sky_id;
+        }
+        if slot.weather != want.weather {
+            if let Some(name) = &want.weather {
+                if let Err(e) = player.switch_weather(name, want.fade_ns) {
+                    let _ = players
+                        .reports
+                        .send((*entity, Report::WeatherRefused(e.to_string())));
+                }
+            }
+            slot.weather = want.weather.clone();
         }
         if slot.policy != want.policy {
             player.set_policy(want.policy);
@@ -200,12 +221,14 @@ fn open(
         catch_up_ns: want.catch_up_ns,
         ..PlayerConfig::default()
     };
-    let opened = File::open(&*key.0)
-        .map_err(|e| format!("{}: {e}", key.0.display()))
-        .and_then(|f| {
-            Player::open(device.wgpu_device(), queue, f, cfg)
-                .map_err(|e| format!("{}: {e}", key.0.display()))
-        });
+    let opened = PackagePlayer::open(
+        device.wgpu_device(),
+        queue,
+        &key.0,
+        want.weather.as_deref(),
+        cfg,
+    )
+    .map_err(|e| e.to_string());
     let player = match opened {
         Ok(p) => {
             let _ = reports.send((
@@ -224,6 +247,8 @@ fn open(
     Slot {
         player,
         texture: None,
+        sky_texture: None,
+        weather: want.weather.clone(),
         // The day starts when it can first be shown.
         clock_ns: want.clock_ns,
         seek: 0,
@@ -234,7 +259,6 @@ fn open(
         looping: header.looping,
         lap: None,
         sought: false,
-        advanced: false,
         opened_for: key,
     }
 }
@@ -262,8 +286,8 @@ pub(crate) fn advance_players(
         }
         let dt = want.clock_ns.saturating_sub(slot.clock_ns);
         slot.clock_ns = want.clock_ns;
-        let record = player.advance_into(dt, ctx.command_encoder());
-        slot.advanced = true;
+        let package = player.advance_into(dt, ctx.command_encoder());
+        let record = package.lightmap;
         let lap = (record.shown / slot.frame_count.max(1) as f64).floor() as i64;
         let looped = slot.looping && !slot.sought && slot.lap.is_some_and(|l| lap > l);
         slot.lap = Some(lap);
@@ -272,22 +296,16 @@ pub(crate) fn advance_players(
             *entity,
             Report::Frame {
                 record,
-                totals: Box::new(player.totals().clone()),
+                totals: Box::new(player.lightmap_player().totals().clone()),
                 frame_count: slot.frame_count,
                 rate: slot.rate,
                 looped,
+                weather: player.weather().to_string(),
+                switching: player
+                    .switching_to()
+                    .map(|to| (to.to_string(), package.switch.map_or(0.0, |s| s.weight))),
+                gpu_bytes: player.gpu_bytes(),
             },
         ));
-    }
-}
-
-/// Tells each player that Bevy submitted the encoder it recorded into.
-pub(crate) fn players_submitted(mut players: ResMut<Players>) {
-    for slot in players.slots.values_mut() {
-        if std::mem::take(&mut slot.advanced) {
-            if let Some(p) = slot.player.as_mut() {
-                p.get_mut().expect("not poisoned").submitted();
-            }
-        }
     }
 }

@@ -380,3 +380,115 @@ fn a_damaged_chunk_raises_damaged_naming_it_and_playback_goes_on() {
     }
     assert!(app.world().get::<VbimStats>(e).unwrap().totals.frames >= before + 10);
 }
+
+/// A package of two weathers plays in Bevy: the lightmap and the sky go into the app's two
+/// images and match their tracks' reference decoders; changing the component's weather
+/// cross-fades to the other weather, raises `WeatherChanged`, and the images then match the
+/// new weather's tracks.
+#[test]
+fn a_package_plays_its_sky_and_switches_weather_from_the_component() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = Vec::new();
+    for (name, gain) in [("clear", 1.0f32), ("overcast", 0.3)] {
+        let mut lm = day(24, 16, 30, InputKind::Hdr, 3);
+        let mut sky = day(16, 4, 30, InputKind::Hdr, 3);
+        for f in lm.frames.iter_mut().chain(sky.frames.iter_mut()) {
+            f.iter_mut().for_each(|v| *v *= gain);
+        }
+        let lm = write_stream(dir.path(), &format!("{name}.vbim"), &lm);
+        let sky = write_stream(dir.path(), &format!("{name}-sky.vbim"), &sky);
+        bytes.push((lm, sky));
+    }
+    let package = vbim_format::package::Package {
+        vbim_package: 1,
+        weathers: ["clear", "overcast"]
+            .map(|n| vbim_format::package::WeatherTracks {
+                name: n.into(),
+                lightmap: format!("{n}.vbim"),
+                sky: Some(format!("{n}-sky.vbim")),
+            })
+            .to_vec(),
+    };
+    std::fs::write(dir.path().join("day.vbimpkg"), package.to_json()).unwrap();
+    let opened = VbimStream::open(dir.path().join("day.vbimpkg")).unwrap();
+    assert_eq!(opened.weathers(), ["clear", "overcast"]);
+    let mut app = app(dir.path());
+    let world = app.world_mut();
+    let stream: Handle<VbimStream> = world.resource::<AssetServer>().load("day.vbimpkg");
+    let mut images = world.resource_mut::<Assets<Image>>();
+    let lightmap = images.add(lightmap_image(24, 16));
+    let sky = images.add(opened.sky_image().unwrap());
+    let mut p = VbimPlayback::new(stream, lightmap.clone());
+    p.sky = Some(sky.clone());
+    p.policy = Policy::Wait;
+    let e = world.spawn(p).id();
+    let decoder =
+        |b: &Vec<u8>| Decoder::new(Reader::open(Cursor::new(b.clone())).unwrap()).unwrap();
+    let streams = |w: usize| {
+        vec![
+            Stream {
+                entity: e,
+                image: lightmap.clone(),
+                reference: decoder(&bytes[w].0),
+                kind: InputKind::Hdr,
+                channels: 3,
+                texels: 24 * 16,
+            },
+            Stream {
+                entity: e,
+                image: sky.clone(),
+                reference: decoder(&bytes[w].1),
+                kind: InputKind::Hdr,
+                channels: 3,
+                texels: 16 * 4,
+            },
+        ]
+    };
+    for _ in 0..600 {
+        app.update();
+        if stats(&app, e).frame > 6.0 {
+            break;
+        }
+    }
+    set_paused(&mut app, &streams(0), true);
+    check_paused(&mut app, &mut streams(0), "clear, paused");
+    assert_eq!(stats(&app, e).weather, "clear");
+
+    set_paused(&mut app, &streams(0), false);
+    app.world_mut()
+        .get_mut::<VbimPlayback>(e)
+        .unwrap()
+        .switch_weather("overcast", Duration::from_millis(100));
+    let seen = until(&mut app, 600, |v| {
+        v.iter()
+            .any(|x| x.kind == VbimEventKind::WeatherChanged("overcast".into()))
+    });
+    assert!(
+        seen.iter()
+            .any(|x| x.kind == VbimEventKind::WeatherChanged("overcast".into())),
+        "{:?}",
+        stats(&app, e)
+    );
+    assert_eq!(stats(&app, e).weather, "overcast");
+    for _ in 0..3 {
+        app.update();
+    }
+    set_paused(&mut app, &streams(1), true);
+    check_paused(&mut app, &mut streams(1), "overcast, after the switch");
+
+    // An unknown weather is refused and the weather shown stays.
+    app.world_mut()
+        .get_mut::<VbimPlayback>(e)
+        .unwrap()
+        .switch_weather("rain", Duration::from_millis(100));
+    let seen = until(&mut app, 60, |v| {
+        v.iter()
+            .any(|x| matches!(x.kind, VbimEventKind::WeatherRefused(_)))
+    });
+    let refused = seen.iter().find_map(|x| match &x.kind {
+        VbimEventKind::WeatherRefused(m) => Some(m.clone()),
+        _ => None,
+    });
+    assert!(refused.is_some_and(|m| m.contains("rain")));
+    assert_eq!(stats(&app, e).weather, "overcast");
+}

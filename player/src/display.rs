@@ -97,6 +97,11 @@ impl Display {
         self.catch_start = None;
     }
 
+    /// Sets the pre-roll (before the first frame only: after it, it has no effect).
+    pub fn set_preroll(&mut self, ns: u64) {
+        self.preroll_ns = ns;
+    }
+
     /// Joins a running timeline: the clock runs from now with the playback position at
     /// `position` ns at clock `ticks`, without a pre-roll; until the data for `at` (the
     /// time the data restarts for) is resident the display holds, then cuts to it.

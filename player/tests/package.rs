@@ -330,6 +330,11 @@ fn a_capped_switch_never_makes_a_frame_late() {
             let r = p.advance(DISPLAY);
             // Frames before the first shown one are the pre-roll, the same in both runs.
             shown_late += (k > 60 && late(&r.lightmap)) as u32;
+            // Lightmap and sky in step, from the first frame (their pre-rolls differ).
+            let sky = r.sky.unwrap();
+            if !late(&r.lightmap) && !late(&sky) {
+                assert_eq!(r.lightmap.shown, sky.shown, "frame {k}");
+            }
             if let Some(s) = &r.switch {
                 if s.weight > 0.0 {
                     started.get_or_insert(s.since_ns);

@@ -12,222 +12,17 @@
 //! outputs; then the new weather writes the outputs and the old one is closed.
 
 mod fade;
+mod file;
 
 use std::fs::File;
-use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use vbim_format::package::{Package, WeatherTracks, MAX_PACKAGE_BYTES};
-use vbim_format::{Header, Reader, MAGIC};
+use vbim_format::Header;
 
 use crate::{lightmap_descriptor, FrameRecord, FrameState, Player, PlayerConfig, PlayerError};
 use fade::{FadeJob, FadePass};
-
-/// What a track holds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TrackKind {
-    /// A lightmap sequence.
-    Lightmap,
-    /// The sky over the upper hemisphere (equirectangular, the zenith's row first).
-    Sky,
-}
-
-impl TrackKind {
-    /// The kind's name in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            TrackKind::Lightmap => "lightmap",
-            TrackKind::Sky => "sky",
-        }
-    }
-}
-
-/// One track of a package, as its file's header states it.
-#[derive(Clone, Debug)]
-pub struct TrackInfo {
-    /// Its weather.
-    pub weather: String,
-    /// What it holds.
-    pub kind: TrackKind,
-    /// Its file.
-    pub path: PathBuf,
-    /// Its header.
-    pub header: Header,
-    /// Its file's size, bytes.
-    pub bytes: u64,
-}
-
-/// A package on disk: its description and its tracks' headers, checked to share one
-/// timeline. [`PackageFile::open`] reads no more than the headers and indexes.
-#[derive(Clone, Debug)]
-pub struct PackageFile {
-    /// The package (for a plain `.vbim` file, a package of one weather).
-    pub package: Package,
-    /// Every track, weather by weather, the lightmap before the sky.
-    pub tracks: Vec<TrackInfo>,
-    /// The package file's path.
-    pub path: PathBuf,
-}
-
-fn package_error(path: &Path, reason: impl ToString) -> PlayerError {
-    PlayerError::Package {
-        path: path.to_path_buf(),
-        reason: reason.to_string(),
-    }
-}
-
-impl PackageFile {
-    /// Reads a package file, or a plain `.vbim` file as a package of one weather, and the
-    /// header of every track it names. Refuses tracks whose frame counts, rates or loops
-    /// differ, lightmaps (or skies) of different sizes, and a package where some weathers
-    /// have a sky and others not; every error names the file.
-    pub fn open(path: &Path) -> Result<PackageFile, PlayerError> {
-        let meta = std::fs::metadata(path).map_err(|e| package_error(path, e))?;
-        if !meta.is_file() {
-            return Err(package_error(path, "not a regular file"));
-        }
-        let mut f = File::open(path).map_err(|e| package_error(path, e))?;
-        // A `.vbim` file is known by its first 8 bytes; only a package is read whole.
-        let mut head = Vec::new();
-        (&mut f)
-            .take(MAGIC.len() as u64)
-            .read_to_end(&mut head)
-            .map_err(|e| package_error(path, e))?;
-        if !head.starts_with(&MAGIC) {
-            (&mut f)
-                .take(MAX_PACKAGE_BYTES + 1 - head.len() as u64)
-                .read_to_end(&mut head)
-                .map_err(|e| package_error(path, e))?;
-        }
-        let package = if head.starts_with(&MAGIC) {
-            let name = path
-                .file_name()
-                .and_then(|n| n.to_str())
-                .ok_or_else(|| package_error(path, "the file name is not UTF-8"))?;
-            Package::single(name)
-        } else {
-            let text = std::str::from_utf8(&head)
-                .map_err(|_| package_error(path, "neither a .vbim file nor a package's JSON"))?;
-            Package::parse(text).map_err(|e| package_error(path, e))?
-        };
-        let base = path.parent().unwrap_or(Path::new(""));
-        let mut tracks = Vec::new();
-        for w in &package.weathers {
-            let kinds = [
-                (TrackKind::Lightmap, Some(&w.lightmap)),
-                (TrackKind::Sky, w.sky.as_ref()),
-            ];
-            for (kind, rel) in kinds {
-                let Some(rel) = rel else { continue };
-                let path = base.join(rel);
-                let file = File::open(&path).map_err(|e| package_error(&path, e))?;
-                let bytes = file.metadata().map_err(|e| package_error(&path, e))?.len();
-                let reader = Reader::open(file).map_err(|e| package_error(&path, e))?;
-                tracks.push(TrackInfo {
-                    weather: w.name.clone(),
-                    kind,
-                    path,
-                    header: reader.header().clone(),
-                    bytes,
-                });
-            }
-        }
-        let p = PackageFile {
-            package,
-            tracks,
-            path: path.to_path_buf(),
-        };
-        p.check()?;
-        Ok(p)
-    }
-
-    /// One timeline: the same frames, rate and loop in every track; one size per kind;
-    /// a sky in every weather or in none.
-    fn check(&self) -> Result<(), PlayerError> {
-        let first = &self.tracks[0];
-        let timing = |h: &Header| (h.frame_count, h.rate_num, h.rate_den, h.looping);
-        for t in &self.tracks {
-            if timing(&t.header) != timing(&first.header) {
-                return Err(package_error(
-                    &t.path,
-                    format!(
-                        "{} frames at {}/{} fps{}, but {} has {} at {}/{}{}: the tracks of a \
-                         package share one timeline",
-                        t.header.frame_count,
-                        t.header.rate_num,
-                        t.header.rate_den,
-                        if t.header.looping { ", looping" } else { "" },
-                        first.path.display(),
-                        first.header.frame_count,
-                        first.header.rate_num,
-                        first.header.rate_den,
-                        if first.header.looping {
-                            ", looping"
-                        } else {
-                            ""
-                        },
-                    ),
-                ));
-            }
-            let same_kind = self
-                .tracks
-                .iter()
-                .find(|o| o.kind == t.kind)
-                .expect("itself");
-            let size = |h: &Header| (h.width, h.height);
-            if size(&t.header) != size(&same_kind.header) {
-                return Err(package_error(
-                    &t.path,
-                    format!(
-                        "a {} track of {}×{}, but {} is {}×{}",
-                        t.kind.name(),
-                        t.header.width,
-                        t.header.height,
-                        same_kind.path.display(),
-                        same_kind.header.width,
-                        same_kind.header.height
-                    ),
-                ));
-            }
-        }
-        let skies = self
-            .package
-            .weathers
-            .iter()
-            .filter(|w| w.sky.is_some())
-            .count();
-        if skies != 0 && skies != self.package.weathers.len() {
-            return Err(package_error(
-                &self.path,
-                "some weathers have a sky track and others not: a switch would lose the sky",
-            ));
-        }
-        Ok(())
-    }
-
-    /// The tracks of weather `name`.
-    pub fn weather(&self, name: &str) -> Result<&WeatherTracks, PlayerError> {
-        self.package.weather(name).ok_or_else(|| {
-            let names: Vec<&str> = self
-                .package
-                .weathers
-                .iter()
-                .map(|w| w.name.as_str())
-                .collect();
-            package_error(
-                &self.path,
-                format!("no weather {name:?} (it has {})", names.join(", ")),
-            )
-        })
-    }
-
-    /// A track's info.
-    fn track(&self, weather: &str, kind: TrackKind) -> Option<&TrackInfo> {
-        self.tracks
-            .iter()
-            .find(|t| t.weather == weather && t.kind == kind)
-    }
-}
+use file::package_error;
+pub use file::{PackageFile, TrackInfo, TrackKind};
 
 /// One weather's players.
 struct Tracks {
@@ -246,8 +41,9 @@ impl Tracks {
 struct Switch {
     to: Tracks,
     fade_ns: u64,
-    /// The package clock when it was asked for.
-    asked: u64,
+    /// The package clock of the first frame after it was asked for (the frame that
+    /// begins it).
+    asked: Option<u64>,
     /// Once every new track shows the shown time exactly: the clock the fade started at
     /// and its passes.
     fading: Option<(u64, FadeJob, Option<FadeJob>)>,
@@ -264,7 +60,8 @@ pub struct SwitchRecord {
     pub sky: Option<FrameRecord>,
     /// The fade's weight of the new weather (0 before the fade starts, 1 at its end).
     pub weight: f32,
-    /// Playback time since the switch was asked for, ns.
+    /// Playback time since the frame the switch began in (the first after it was asked
+    /// for), ns.
     pub since_ns: u64,
 }
 
@@ -333,6 +130,12 @@ impl PackagePlayer {
             .track(&name, TrackKind::Sky)
             .map(|t| output(device, &t.header));
         let mut shown = open_tracks(device, queue, &file, &name, &cfg)?;
+        // The tracks start together: each buffers for the longest of their pre-rolls (a
+        // sky's is shorter than its lightmap's, and would otherwise start ahead of it).
+        let preroll = shown.players().map(|p| p.preroll_ns()).max().unwrap_or(0);
+        for p in shown.players() {
+            p.set_preroll_ns(preroll);
+        }
         shown.lightmap.set_output(Some(&lightmap.0))?;
         if let (Some(p), Some(s)) = (shown.sky.as_mut(), &sky) {
             p.set_output(Some(&s.0))?;
@@ -395,6 +198,38 @@ impl PackagePlayer {
     pub fn sky_player(&self) -> Option<&Player<File>> {
         self.shown.sky.as_ref()
     }
+    /// Reconstructs into textures of the caller's from the next frame on (each `width ×
+    /// height` of its track, 2D, `Rgba16Float`, `STORAGE_BINDING | TEXTURE_BINDING`), as
+    /// [`Player::set_output`]; `None` keeps the package's own. A fade in progress ends at
+    /// once (the new weather is shown).
+    pub fn set_outputs(
+        &mut self,
+        lightmap: Option<&wgpu::Texture>,
+        sky: Option<&wgpu::Texture>,
+    ) -> Result<(), PlayerError> {
+        if self.switch.as_ref().is_some_and(|s| s.fading.is_some()) {
+            self.finish_switch();
+        }
+        if let Some(t) = lightmap {
+            self.shown.lightmap.set_output(Some(t))?;
+            self.lightmap = (t.clone(), t.create_view(&Default::default()));
+        }
+        if let (Some(t), Some(p)) = (sky, self.shown.sky.as_mut()) {
+            p.set_output(Some(t))?;
+            self.sky = Some((t.clone(), t.create_view(&Default::default())));
+        }
+        Ok(())
+    }
+
+    /// Changes the stall policy of the shown weather's tracks (and of the weather a switch
+    /// goes to, once shown) from the next frame on.
+    pub fn set_policy(&mut self, policy: crate::Policy) {
+        self.cfg.policy = policy;
+        for p in self.shown.players() {
+            p.set_policy(policy);
+        }
+    }
+
     /// The package's playback clock, ns.
     pub fn ticks(&self) -> u64 {
         self.ticks
@@ -484,7 +319,7 @@ impl PackagePlayer {
         self.switch = Some(Switch {
             to,
             fade_ns,
-            asked: self.ticks,
+            asked: None,
             fading: None,
         });
         Ok(())
@@ -510,21 +345,26 @@ impl PackagePlayer {
 
     /// Advances playback by `dt` ns: every open track, then the fade, in one submission.
     pub fn advance(&mut self, dt: u64) -> PackageRecord {
-        self.ticks += dt;
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        let lightmap = self.shown.lightmap.advance_into(dt, &mut enc);
-        let sky = self
-            .shown
-            .sky
-            .as_mut()
-            .map(|p| p.advance_into(dt, &mut enc));
+        let r = self.advance_into(dt, &mut enc);
+        self.queue.submit(Some(enc.finish()));
+        r
+    }
+
+    /// Like [`PackagePlayer::advance`], but records every track's work and the fade into
+    /// the caller's encoder, which must be the next submission on the queue (as for
+    /// [`Player::advance_into`]).
+    pub fn advance_into(&mut self, dt: u64, enc: &mut wgpu::CommandEncoder) -> PackageRecord {
+        self.ticks += dt;
+        let lightmap = self.shown.lightmap.advance_into(dt, enc);
+        let sky = self.shown.sky.as_mut().map(|p| p.advance_into(dt, enc));
         let mut record = None;
         let mut done = false;
         if let Some(sw) = self.switch.as_mut() {
-            let to_lightmap = sw.to.lightmap.advance_into(dt, &mut enc);
-            let to_sky = sw.to.sky.as_mut().map(|p| p.advance_into(dt, &mut enc));
+            let to_lightmap = sw.to.lightmap.advance_into(dt, enc);
+            let to_sky = sw.to.sky.as_mut().map(|p| p.advance_into(dt, enc));
             let mut weight = 0.0;
             match &sw.fading {
                 None => {
@@ -560,9 +400,9 @@ impl PackagePlayer {
                 Some((start, lm, sk)) => {
                     weight =
                         ((self.ticks - start) as f64 / sw.fade_ns.max(1) as f64).min(1.0) as f32;
-                    self.fade.record(&self.queue, &mut enc, lm, weight);
+                    self.fade.record(&self.queue, enc, lm, weight);
                     if let Some(sk) = sk {
-                        self.fade.record(&self.queue, &mut enc, sk, weight);
+                        self.fade.record(&self.queue, enc, sk, weight);
                     }
                     done = weight >= 1.0;
                 }
@@ -572,11 +412,12 @@ impl PackagePlayer {
                 lightmap: to_lightmap,
                 sky: to_sky,
                 weight,
-                since_ns: self.ticks - sw.asked,
+                since_ns: self.ticks - *sw.asked.get_or_insert(self.ticks),
             });
         }
-        self.queue.submit(Some(enc.finish()));
         if done {
+            // The new weather writes the outputs from the next frame on; the old tracks'
+            // textures stay alive while this frame's commands need them.
             self.finish_switch();
         }
         PackageRecord {

@@ -28,6 +28,14 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
         self.seek(at);
     }
 
+    /// Sets the buffering before the first frame to `ns` (tracks that start together take
+    /// the longest of their pre-rolls, so that they start in step). No effect once a frame
+    /// has been shown.
+    pub fn set_preroll_ns(&mut self, ns: u64) {
+        self.preroll = ns;
+        self.display.set_preroll(ns);
+    }
+
     /// The playback position, ns: the clock less the pre-roll and the `wait` policy's
     /// pauses (what [`Player::join`] takes to put another track at the same time).
     pub fn position(&self) -> u64 {
