@@ -4,7 +4,8 @@
 # chunk payload parser), `decode` (the whole reference decode within small limits) and
 # `player_decoder` (the player's decoder thread: scanning the streams for the GPU; it
 # starts from decode's seeds), `plane2` (format 2's coefficient sections: what decodes must
-# code again to the same blocks).
+# code again to the same blocks), `package` (a package file's JSON: what parses names only
+# paths inside its folder and writes itself out the same).
 # Checksums are made right before parsing (vbim_format::fuzz::with_checksums), so the
 # fuzzer reaches the semantic checks. A crash's input is copied into
 # fuzz/regressions/TARGET/, which `cargo test --workspace --all-features` replays; the script then fails. The last
@@ -16,7 +17,7 @@ command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked --version 
 cd fuzz
 cargo fuzz build --sanitizer none -O -a
 failed=0
-for t in container chunks decode player_decoder plane2; do
+for t in container chunks decode player_decoder plane2 package; do
     mkdir -p "corpus/$t" "regressions/$t"
     log="corpus/$t.log"
     seeds="seeds/$t"

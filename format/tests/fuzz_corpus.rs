@@ -28,4 +28,5 @@ fn every_kept_input_is_handled() {
     assert!(replay("decode", vbim_format::fuzz::decode) > 0);
     assert!(replay("chunks", vbim_format::fuzz::chunks) > 0);
     assert!(replay("plane2", vbim_format::fuzz::plane2) > 0);
+    assert!(replay("package", vbim_format::fuzz::package) > 0);
 }
