@@ -309,6 +309,27 @@ pub fn plane2_shape(
     (order, geometry, map)
 }
 
+/// `cargo fuzz run package`: any bytes as a package file's text. What parses must name only
+/// valid weathers and paths inside the package's folder, and write itself out as text that
+/// parses to the same package.
+pub fn package(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let Ok(p) = crate::package::Package::parse(text) else {
+        return;
+    };
+    for w in &p.weathers {
+        assert!(crate::package::valid_name(&w.name), "{:?}", w.name);
+        for path in std::iter::once(&w.lightmap).chain(&w.sky) {
+            assert!(crate::package::valid_track_path(path), "{path:?}");
+            assert!(!path.starts_with('/') && !path.split('/').any(|c| c == ".."));
+        }
+    }
+    let again = crate::package::Package::parse(&p.to_json()).expect("its own JSON parses");
+    assert_eq!(again, p);
+}
+
 #[cfg(test)]
 mod tests {
     /// A valid file is left as it is; a damaged one is made to pass its checksums.
@@ -350,25 +371,4 @@ mod tests {
             }
         }
     }
-}
-
-/// `cargo fuzz run package`: any bytes as a package file's text. What parses must name only
-/// valid weathers and paths inside the package's folder, and write itself out as text that
-/// parses to the same package.
-pub fn package(data: &[u8]) {
-    let Ok(text) = std::str::from_utf8(data) else {
-        return;
-    };
-    let Ok(p) = crate::package::Package::parse(text) else {
-        return;
-    };
-    for w in &p.weathers {
-        assert!(crate::package::valid_name(&w.name), "{:?}", w.name);
-        for path in std::iter::once(&w.lightmap).chain(&w.sky) {
-            assert!(crate::package::valid_track_path(path), "{path:?}");
-            assert!(!path.starts_with('/') && !path.split('/').any(|c| c == ".."));
-        }
-    }
-    let again = crate::package::Package::parse(&p.to_json()).expect("its own JSON parses");
-    assert_eq!(again, p);
 }
