@@ -54,6 +54,9 @@ pub struct PlayArgs {
     /// The cross-fade of a weather switch, at most an hour.
     #[arg(long, default_value = "2s", value_parser = crate::units::parse_short_span)]
     pub fade: Span,
+    /// A weather switch closes the shown weather at once and fades in from its last image (one weather's GPU memory; the light stands still while the new weather's data comes), instead of keeping both weathers playing until the fade ends.
+    #[arg(long)]
+    pub hold_on_switch: bool,
     /// Run without a window and print the summary.
     #[arg(long)]
     pub headless: bool,

@@ -28,6 +28,8 @@ pub struct Session {
     /// Switches to other weathers at clock times (ns), in time order; and their fade (ns).
     pub switches: Vec<(String, u64)>,
     pub fade_ns: u64,
+    /// `PackagePlayer::set_switch_mode(Held)`.
+    pub hold_on_switch: bool,
     pub policy: Policy,
     pub throttle: Throttle,
     pub catch_up_ns: u64,
@@ -87,6 +89,7 @@ impl Session {
             weather,
             switches,
             fade_ns: a.fade.ns(),
+            hold_on_switch: a.hold_on_switch,
             policy: a.policy,
             throttle: Throttle {
                 rate,
@@ -128,14 +131,18 @@ impl Session {
         queue: &wgpu::Queue,
         threaded: bool,
     ) -> Result<PackagePlayer, String> {
-        PackagePlayer::open(
+        let mut p = PackagePlayer::open(
             device,
             queue,
             &self.package,
             Some(&self.weather),
             self.config(threaded),
         )
-        .map_err(|e| e.to_string())
+        .map_err(|e| e.to_string())?;
+        if self.hold_on_switch {
+            p.set_switch_mode(vbim_player::SwitchMode::Held);
+        }
+        Ok(p)
     }
 
     /// The player settings of the session.

@@ -63,7 +63,7 @@ use bevy::render::{ExtractSchedule, Render, RenderApp, RenderSystems};
 pub use asset::{lightmap_image, StreamError, VbimStream};
 pub use playback::{VbimEvent, VbimEventKind, VbimPlayback, VbimStats};
 pub use units::{bake_sky, lux_per_unit, sky_light, sun_light, BEVY_AMBIENT_DIFFUSE};
-pub use vbim_player::{FrameState, Policy, Stall, Throttle, Totals};
+pub use vbim_player::{FrameState, Policy, Stall, SwitchMode, Throttle, Totals};
 
 /// Adds `.vbim` assets, [`VbimPlayback`], [`VbimStats`] and [`VbimEvent`]. Add it after
 /// Bevy's `DefaultPlugins` (it needs the asset and render plugins).

@@ -9,7 +9,7 @@ use bevy::asset::Handle;
 use bevy::ecs::prelude::*;
 use bevy::image::Image;
 use bevy::time::{Time, Virtual};
-use vbim_player::{FrameRecord, FrameState, Policy, Throttle, Totals};
+use vbim_player::{FrameRecord, FrameState, Policy, SwitchMode, Throttle, Totals};
 
 use crate::asset::VbimStream;
 
@@ -52,6 +52,10 @@ pub struct VbimPlayback {
     pub weather: Option<String>,
     /// The cross-fade of a weather switch.
     pub fade: Duration,
+    /// Whether a switch keeps the shown weather playing until the fade ends (`Live`: twice
+    /// the GPU memory meanwhile) or holds its last image (`Held`: one weather's memory, the
+    /// light standing still while the new weather's data comes).
+    pub switch_mode: SwitchMode,
     /// The playback clock: integer nanoseconds of media time driven so far.
     pub(crate) clock_ns: u64,
     /// The last seek asked for: (generation, media time in ns).
@@ -73,6 +77,7 @@ impl VbimPlayback {
             sky: None,
             weather: None,
             fade: Duration::from_secs(2),
+            switch_mode: SwitchMode::Live,
             clock_ns: 0,
             seek: (0, 0),
         }

@@ -17,7 +17,7 @@ use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
 use bevy::render::texture::GpuImage;
 use bevy::render::Extract;
 use vbim_format::Header;
-use vbim_player::{PackagePlayer, PlayerConfig, Policy, Throttle};
+use vbim_player::{PackagePlayer, PlayerConfig, Policy, SwitchMode, Throttle};
 
 use crate::asset::VbimStream;
 use crate::playback::{Report, VbimPlayback};
@@ -31,6 +31,7 @@ pub(crate) struct Extracted {
     sky: Option<AssetId<Image>>,
     weather: Option<String>,
     fade_ns: u64,
+    switch_mode: SwitchMode,
     clock_ns: u64,
     seek: (u32, u64),
     policy: Policy,
@@ -99,6 +100,7 @@ pub(crate) fn extract_playbacks(
                 sky: p.sky.as_ref().map(|s| s.id()),
                 weather: p.weather.clone(),
                 fade_ns: p.fade.as_nanos().min(u64::MAX as u128) as u64,
+                switch_mode: p.switch_mode,
                 clock_ns: p.clock_ns,
                 seek: p.seek,
                 policy: p.policy,
@@ -166,6 +168,8 @@ pub(crate) fn prepare_players(
             slot.texture = Some(image.texture.id());
             slot.sky_texture = sky_id;
         }
+        // Applies from the next switch on.
+        player.set_switch_mode(want.switch_mode);
         if slot.weather != want.weather {
             if let Some(name) = &want.weather {
                 if let Err(e) = player.switch_weather(name, want.fade_ns) {

@@ -68,7 +68,9 @@ pub use cpu_time::thread_cpu_ns;
 pub use gpu::{
     headless_device, headless_device_on, lightmap_descriptor, DeviceError, Headless, OutputError,
 };
-pub use package::{PackageFile, PackagePlayer, PackageRecord, SwitchRecord, TrackInfo, TrackKind};
+pub use package::{
+    PackageFile, PackagePlayer, PackageRecord, SwitchMode, SwitchRecord, TrackInfo, TrackKind,
+};
 pub use player::Player;
 pub use readback::read_texture;
 pub use record::{Frame, FrameRecord, FrameState, Totals};

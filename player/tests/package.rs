@@ -359,3 +359,87 @@ fn a_capped_switch_never_makes_a_frame_late() {
         started.unwrap() as f64 * 1e-6
     );
 }
+
+/// A held switch closes the shown weather at once: the outputs keep its last image while
+/// the new weather's data comes, then fade from that image into the new weather; the
+/// memory stays one weather's and the copy of the held image.
+#[test]
+fn a_held_switch_fades_from_the_last_image_within_one_weathers_memory() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let path = fx.dir.path().join("day.vbimpkg");
+    let mut p = PackagePlayer::open(&device, &queue, &path, None, inline()).unwrap();
+    p.set_switch_mode(vbim_player::SwitchMode::Held);
+    let mut last = p.advance(DISPLAY);
+    for _ in 0..20 {
+        last = p.advance(DISPLAY);
+    }
+    let one_weather = p.gpu_bytes();
+    let held_lm = reference(&fx.bytes[0].0, last.lightmap.shown, 40 * 24);
+    let held_sky = reference(&fx.bytes[0].1, last.lightmap.shown, 16 * 4);
+    let fade_ns = 200_000_000;
+    p.switch_weather("overcast", fade_ns).unwrap();
+    assert_eq!(
+        p.weather(),
+        "clear",
+        "the held weather is on screen until the fade ends"
+    );
+    let (mut peak, mut frames, mut last_w) = (0, 0, 0f32);
+    while p.switching() {
+        frames += 1;
+        assert!(frames < 200, "the switch never ended");
+        let r = p.advance(DISPLAY);
+        peak = peak.max(p.gpu_bytes());
+        let Some(s) = r.switch else { break };
+        // Before the fade: the held image; during it, the held image into the new weather.
+        let t = r.lightmap.shown;
+        let w = s.weight;
+        assert!(w >= last_w && w - last_w <= DISPLAY as f32 / fade_ns as f32 * 1.001 + 1e-6);
+        last_w = w;
+        let b = reference(&fx.bytes[1].0, t, 40 * 24);
+        let b_sky = reference(&fx.bytes[1].1, t, 16 * 4);
+        if w == 0.0 {
+            assert_mix(&p.read_lightmap(), &held_lm, &held_lm, 0.0, "held lightmap");
+            assert_mix(
+                &p.read_sky().unwrap(),
+                &held_sky,
+                &held_sky,
+                0.0,
+                "held sky",
+            );
+        } else {
+            assert_eq!(s.lightmap.state, FrameState::Exact);
+            assert_mix(
+                &p.read_lightmap(),
+                &held_lm,
+                &b,
+                w,
+                &format!("held fade, frame {frames}"),
+            );
+            assert_mix(
+                &p.read_sky().unwrap(),
+                &held_sky,
+                &b_sky,
+                w,
+                "held sky fade",
+            );
+        }
+    }
+    assert_eq!(p.weather(), "overcast");
+    // One weather at a time (the larger of the two) and the copies of the held images.
+    let one_weather = one_weather.max(p.gpu_bytes());
+    let copies = (40 * 24 + 16 * 4) * 8;
+    assert!(
+        peak <= one_weather + copies,
+        "{peak} B during the switch against {one_weather} B + {copies} B of copies"
+    );
+    let r = p.advance(DISPLAY);
+    let want = reference(&fx.bytes[1].0, r.lightmap.shown, 40 * 24);
+    assert_mix(
+        &p.read_lightmap(),
+        &want,
+        &want,
+        0.0,
+        "after the held switch",
+    );
+}

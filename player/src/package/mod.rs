@@ -13,6 +13,7 @@
 
 mod fade;
 mod file;
+mod held;
 
 use std::fs::File;
 use std::path::Path;
@@ -23,16 +24,33 @@ use crate::{lightmap_descriptor, FrameRecord, FrameState, Player, PlayerConfig, 
 use fade::{FadeJob, FadePass};
 use file::package_error;
 pub use file::{PackageFile, TrackInfo, TrackKind};
+use held::Held;
+
+/// How a weather switch holds the weather it starts from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SwitchMode {
+    /// The shown weather plays on until the new one shows the same time, then both fade
+    /// live: the light never stops, and both weathers are open (twice the memory) from the
+    /// switch to the fade's end.
+    #[default]
+    Live,
+    /// The shown weather's tracks close at once and its last image is held (the outputs
+    /// keep it; a copy of 8 bytes a texel during the fade); the new weather fades in from
+    /// that still image: the memory of one weather, but the light stands still while the
+    /// new weather's data comes (the display holds, and the records say so). Needs output
+    /// textures with `COPY_SRC` (the package's own have it; without it a switch is live).
+    Held,
+}
 
 /// One weather's players.
-struct Tracks {
+pub(super) struct Tracks {
     name: String,
     lightmap: Player<File>,
     sky: Option<Player<File>>,
 }
 
 impl Tracks {
-    fn players(&mut self) -> impl Iterator<Item = &mut Player<File>> {
+    pub(super) fn players(&mut self) -> impl Iterator<Item = &mut Player<File>> {
         std::iter::once(&mut self.lightmap).chain(self.sky.as_mut())
     }
 }
@@ -91,6 +109,11 @@ pub struct PackagePlayer {
     sky: Option<(wgpu::Texture, wgpu::TextureView)>,
     fade: FadePass,
     ticks: u64,
+    mode: SwitchMode,
+    /// A held switch in progress (the new weather is `shown`).
+    held: Option<Held>,
+    /// The media time the last frame showed (frames), which a held switch holds.
+    last_shown: f64,
 }
 
 fn output(device: &wgpu::Device, h: &Header) -> (wgpu::Texture, wgpu::TextureView) {
@@ -152,6 +175,9 @@ impl PackagePlayer {
             lightmap,
             sky,
             ticks: 0,
+            mode: SwitchMode::Live,
+            held: None,
+            last_shown: 0.0,
         })
     }
 
@@ -161,7 +187,11 @@ impl PackagePlayer {
     }
     /// The weather on screen (until a switch's fade ends, the one it started from).
     pub fn weather(&self) -> &str {
-        &self.shown.name
+        self.held.as_ref().map_or(&self.shown.name, |h| &h.from)
+    }
+    /// How switches hold the weather they start from, from the next switch on.
+    pub fn set_switch_mode(&mut self, mode: SwitchMode) {
+        self.mode = mode;
     }
     /// The lightmap (linear RGB, `Rgba16Float`), the same texture for the whole playback.
     pub fn lightmap_view(&self) -> &wgpu::TextureView {
@@ -210,6 +240,8 @@ impl PackagePlayer {
         if self.switch.as_ref().is_some_and(|s| s.fading.is_some()) {
             self.finish_switch();
         }
+        // A held image lives in the old outputs: with new ones the switch cuts.
+        self.held = None;
         if let Some(t) = lightmap {
             self.shown.lightmap.set_output(Some(t))?;
             self.lightmap = (t.clone(), t.create_view(&Default::default()));
@@ -268,10 +300,11 @@ impl PackagePlayer {
             .as_ref()
             .map(|p| p.0.as_str())
             .or(self.switch.as_ref().map(|s| s.to.name.as_str()))
+            .or(self.held.as_ref().map(|_| self.shown.name.as_str()))
     }
     /// Whether a switch is in progress (or waiting for a fade to end).
     pub fn switching(&self) -> bool {
-        self.switch.is_some() || self.pending.is_some()
+        self.switch.is_some() || self.pending.is_some() || self.held.is_some()
     }
     /// GPU memory of every open track and the outputs, bytes (both weathers during a
     /// switch).
@@ -282,6 +315,7 @@ impl PackagePlayer {
             |(t, _): &(wgpu::Texture, wgpu::TextureView)| t.width() as u64 * t.height() as u64 * 8;
         tracks(&self.shown)
             + self.switch.as_ref().map_or(0, |s| tracks(&s.to))
+            + self.held.as_ref().map_or(0, Held::bytes)
             + out(&self.lightmap)
             + self.sky.as_ref().map_or(0, out)
     }
@@ -292,11 +326,21 @@ impl PackagePlayer {
     /// that has not begun to fade; a switch asked for during a fade starts when it ends.
     pub fn switch_weather(&mut self, name: &str, fade_ns: u64) -> Result<(), PlayerError> {
         self.file.weather(name)?;
-        if self.switch.as_ref().is_some_and(|s| s.fading.is_some()) {
+        let fading = self.switch.as_ref().is_some_and(|s| s.fading.is_some())
+            || self.held.as_ref().is_some_and(Held::fading);
+        if fading {
             self.pending = Some((name.to_string(), fade_ns));
             return Ok(());
         }
         self.pending = None;
+        let copyable = |t: &wgpu::Texture| t.usage().contains(wgpu::TextureUsages::COPY_SRC);
+        let can_hold =
+            copyable(&self.lightmap.0) && self.sky.as_ref().is_none_or(|s| copyable(&s.0));
+        if self.held.is_some()
+            || (self.mode == SwitchMode::Held && can_hold && self.switch.is_none())
+        {
+            return self.switch_held(name, fade_ns);
+        }
         if self.switch.as_ref().is_some_and(|s| s.to.name == name) {
             return Ok(());
         }
@@ -330,6 +374,9 @@ impl PackagePlayer {
     pub fn set_time(&mut self, ticks: u64) {
         if self.switch.as_ref().is_some_and(|s| s.fading.is_some()) {
             self.finish_switch();
+        }
+        if self.held.as_ref().is_some_and(Held::fading) {
+            self.finish_held();
         }
         self.ticks = ticks;
         for p in self.shown.players() {
@@ -415,6 +462,23 @@ impl PackagePlayer {
                 since_ns: self.ticks - *sw.asked.get_or_insert(self.ticks),
             });
         }
+        let (mut lightmap, mut sky) = (lightmap, sky);
+        if self.held.is_some() {
+            let (r, held_done) = self.advance_held(enc, &lightmap, sky.as_ref());
+            record = Some(r);
+            if let Some(at) = self.held.as_ref().and_then(Held::still) {
+                // On screen is the held image: the frame says so.
+                for r in std::iter::once(&mut lightmap).chain(sky.as_mut()) {
+                    r.state = FrameState::Held;
+                    r.shown = at;
+                    r.drift = r.target - at;
+                }
+            }
+            if held_done {
+                self.finish_held();
+            }
+        }
+        self.last_shown = lightmap.shown;
         if done {
             // The new weather writes the outputs from the next frame on; the old tracks'
             // textures stay alive while this frame's commands need them.
@@ -459,7 +523,7 @@ fn read_f16(device: &wgpu::Device, queue: &wgpu::Queue, t: &wgpu::Texture) -> Ve
         .collect()
 }
 
-fn open_tracks(
+pub(super) fn open_tracks(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     file: &PackageFile,
