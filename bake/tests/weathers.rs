@@ -173,3 +173,113 @@ fn a_bake_with_weathers_writes_a_day_and_a_sky_per_weather() {
     bad.weathers = vec![weather("../up", 0.3)];
     assert!(bad.validate().unwrap_err().contains("name"));
 }
+
+/// The sky track seen from an open flat plane is the lightmap's sky term: at every frame of
+/// a day, the cosine-weighted integral of the written map (128 × 32 texels over the
+/// hemisphere) equals the plane's texel less its sun and ambient, within 1%.
+#[test]
+fn the_sky_track_integrated_over_the_dome_is_the_grounds_sky_term_at_every_frame() {
+    let mut scene = Scene::with_heightfield("synthetic");
+    scene.frames = 48;
+    scene.albedo = 0.0;
+    let pre = Precomputed::compute(field(16, |_, _| 100.0), &scene);
+    let alpha = scene.sun.angular_diameter_deg.to_radians();
+    let (w, h) = (SKY_MAP_WIDTH, SKY_MAP_WIDTH / 4);
+    for cover in [0.0, 1.0] {
+        let light = WeatherLight::new(&pre.hf, &scene, &weather("w", cover));
+        let mut out = vec![0f32; 16 * 16 * 3];
+        for i in 0..scene.frames {
+            let sun = vbim_bake::sun_for_frame(&scene, i);
+            vbim_bake::light_frame_in(&pre, &scene, Some(&light), i, &mut out);
+            let map = sky_map(&light.dome(&scene, &sun), w);
+            let direct = vbim_bake::direct_share(cover)
+                * vbim_bake::sun_visibility(sun.elevation, alpha, 0.0)
+                * sun.dir[2].max(0.0);
+            for c in 0..3 {
+                // Row r spans [e_lo, e_hi]: each of its texels weighs Δ(sin² e) / w of E/π.
+                let mut e_sum = 0.0;
+                for r in 0..h {
+                    let e_hi = std::f64::consts::FRAC_PI_2 * (1.0 - r as f64 / h as f64);
+                    let e_lo = std::f64::consts::FRAC_PI_2 * (1.0 - (r + 1) as f64 / h as f64);
+                    let weight = (e_hi.sin().powi(2) - e_lo.sin().powi(2)) / w as f64;
+                    for col in 0..w {
+                        e_sum += map[(r * w + col) * 3 + c] as f64 * weight;
+                    }
+                }
+                let ground = out[(8 * 16 + 8) * 3 + c] as f64;
+                let sky = ground - sun.color[c] * direct - scene.sky.ambient;
+                assert!(
+                    (e_sum - sky).abs() <= 0.01 * sky.abs() + 1e-6,
+                    "cover {cover}, frame {i}, channel {c}: the map gives {e_sum}, the ground {sky}"
+                );
+            }
+        }
+    }
+}
+
+/// Preetham's model at its published values: the zenith luminance for turbidity 2 and the
+/// sun 30° from the zenith is Y_z = (4.0453 T − 4.9710) tan χ − 0.2155 T + 2.4192 with
+/// χ = (4/9 − T/120)(π − 2θs) = 5.884 kcd/m² (Preetham, Shirley & Smits 1999, appendix); in
+/// texel units that is × π · 1.15 / 127.5. The CIE overcast horizon is a third of its zenith.
+#[test]
+fn the_clear_zenith_is_preethams_and_the_overcast_horizon_a_third_of_its_zenith() {
+    let e = 60f64.to_radians();
+    let sun = SunState {
+        elevation: e,
+        azimuth_north: 0.0,
+        dir: [0.0, -e.cos(), e.sin()],
+        color: [1.0; 3],
+    };
+    let clear = vbim_bake::SkyDome::new(
+        &sun,
+        1.15,
+        vbim_bake::SkyWeather {
+            cover: 0.0,
+            turbidity: 2.0,
+        },
+        0.0,
+    );
+    let z = clear.radiance([0.0, 0.0, 1.0]);
+    let lum = 0.2126 * z[0] + 0.7152 * z[1] + 0.0722 * z[2];
+    let want = 5.8837 * std::f64::consts::PI * 1.15 / 127.5;
+    assert!(
+        (lum / want - 1.0).abs() < 0.002,
+        "zenith {lum} against {want}"
+    );
+    // Brighter towards the horizon away from the sun than at the zenith (Perez's A < 0).
+    let h = clear.radiance([0.0, 0.999, 0.045]);
+    assert!(0.2126 * h[0] + 0.7152 * h[1] + 0.0722 * h[2] > lum);
+}
+
+/// On a real terrain at noon the overcast day is darker than the clear one, and the ridges'
+/// shading has less contrast (no sun: only the sky's gradient and the horizon's cut).
+#[test]
+fn overcast_is_darker_and_flatter_than_clear_at_noon() {
+    let hf = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../samples/dem/jacksboro_fault_mpl.png"
+    );
+    let mut scene = Scene::with_heightfield(hf);
+    scene.size = 48;
+    scene.frames = 24;
+    let pre = Precomputed::compute(vbim_bake::load_terrain(&scene).unwrap(), &scene);
+    let stats = |cover: f64| {
+        let light = WeatherLight::new(&pre.hf, &scene, &weather("w", cover));
+        let mut out = vec![0f32; 48 * 48 * 3];
+        vbim_bake::light_frame_in(&pre, &scene, Some(&light), 12, &mut out);
+        let g: Vec<f64> = out.chunks(3).map(|p| p[1] as f64).collect();
+        let mean = g.iter().sum::<f64>() / g.len() as f64;
+        let sd = (g.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / g.len() as f64).sqrt();
+        (mean, sd / mean)
+    };
+    let (clear, clear_cv) = stats(0.0);
+    let (overcast, overcast_cv) = stats(1.0);
+    assert!(
+        overcast < 0.5 * clear,
+        "overcast {overcast} against clear {clear}"
+    );
+    assert!(
+        overcast_cv < 0.5 * clear_cv,
+        "relative contrast: overcast {overcast_cv}, clear {clear_cv}"
+    );
+}

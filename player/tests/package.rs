@@ -443,3 +443,101 @@ fn a_held_switch_fades_from_the_last_image_within_one_weathers_memory() {
         "after the held switch",
     );
 }
+
+/// The tracks stay in step at every frame through reader stalls, a `set_time` and a jump
+/// to 100 simulated hours; a switch asked for during a stall fades only once the new
+/// weather's data is there; a damaged chunk in the sky track is reported while the
+/// lightmap plays on.
+#[test]
+fn tracks_stay_in_step_through_stalls_seeks_and_100_hours_and_damage_stops_no_other_track() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let path = fx.dir.path().join("day.vbimpkg");
+    let mean = fx.bytes[0].0.len() as f64 / (FRAMES as f64 / 24.0);
+    let cfg = PlayerConfig {
+        throttle: vbim_player::Throttle {
+            rate: Some((1.5 * mean) as u64),
+            stall: Some(vbim_player::Stall::every(400_000_000, 1_500_000_000)),
+        },
+        ..inline()
+    };
+    let mut p = PackagePlayer::open(&device, &queue, &path, None, cfg).unwrap();
+    let in_step = |r: &vbim_player::PackageRecord, what: &str| {
+        let sky = r.sky.unwrap();
+        if r.lightmap.state == FrameState::Exact && sky.state == FrameState::Exact {
+            assert_eq!(r.lightmap.shown, sky.shown, "{what}");
+        }
+    };
+    for k in 0..300 {
+        in_step(&p.advance(DISPLAY), &format!("frame {k}"));
+    }
+    // A switch asked for inside a stall (the reader stalls 0.4 s every 1.5 s: at 300 frames
+    // = 5 s, the next stall is at 6 s).
+    for _ in 0..65 {
+        p.advance(DISPLAY);
+    }
+    p.switch_weather("overcast", 100_000_000).unwrap();
+    let mut saw_fade = false;
+    for k in 0..400 {
+        let r = p.advance(DISPLAY);
+        in_step(&r, &format!("switch frame {k}"));
+        if let Some(s) = &r.switch {
+            if s.weight > 0.0 {
+                saw_fade = true;
+                assert_eq!(
+                    s.lightmap.state,
+                    FrameState::Exact,
+                    "a fade before the data"
+                );
+                assert_eq!(s.sky.unwrap().state, FrameState::Exact);
+            }
+        }
+        if !p.switching() {
+            break;
+        }
+    }
+    assert!(saw_fade && p.weather() == "overcast");
+    // A seek, then 100 hours on: in step, and on the exact frame (the day loops every 1.5 s).
+    p.set_time(700_000_000);
+    for k in 0..200 {
+        in_step(&p.advance(DISPLAY), &format!("after set_time, frame {k}"));
+    }
+    let hours = 100 * 3_600_000_000_000u64;
+    p.set_time(hours);
+    let mut last = None;
+    for k in 0..400 {
+        let r = p.advance(DISPLAY);
+        in_step(&r, &format!("at 100 h, frame {k}"));
+        last = Some(r);
+    }
+    let r = last.unwrap();
+    let clock_frames = (hours + 400 * DISPLAY) as f64 * 24.0 / 1e9;
+    assert!(
+        (r.lightmap.target - clock_frames).abs() < 1e-3,
+        "{} {clock_frames}",
+        r.lightmap.target
+    );
+
+    // A damaged chunk in the clear weather's sky: reported by the sky, the lightmap plays on.
+    let sky_path = fx.dir.path().join("clear-sky.vbim");
+    let mut bytes = fx.bytes[0].1.clone();
+    let reader = vbim_format::Reader::open(Cursor::new(bytes.clone())).unwrap();
+    let last_chunk = *reader.entries().last().unwrap();
+    bytes[(last_chunk.offset + last_chunk.length / 2) as usize] ^= 0x5a;
+    std::fs::write(&sky_path, &bytes).unwrap();
+    let mut p = PackagePlayer::open(&device, &queue, &path, None, inline()).unwrap();
+    let mut exact = 0;
+    for _ in 0..200 {
+        let r = p.advance(DISPLAY);
+        exact += (r.lightmap.state == FrameState::Exact) as u32;
+    }
+    assert!(
+        p.sky_player().unwrap().totals().damaged > 0,
+        "the damage is reported"
+    );
+    assert_eq!(p.lightmap_player().totals().damaged, 0);
+    assert!(
+        exact >= 195,
+        "the lightmap played on: {exact} exact frames of 200"
+    );
+}

@@ -5,11 +5,14 @@
 //! advanced with the same time step; the package owns the output textures a renderer
 //! binds once. Outside a switch only the shown weather's tracks are read and decoded, and
 //! they reconstruct straight into the outputs. A switch opens the new weather's tracks and
-//! joins them to the timeline at the shown position ([`Player::join`]); they read from
-//! their last intra keyframe at or before it while the shown weather goes on playing. When
-//! every new track shows that very time exactly, the fade starts: for its length both
-//! weathers reconstruct into their own textures and one pass a track mixes them into the
-//! outputs; then the new weather writes the outputs and the old one is closed.
+//! joins them to the timeline at the shown position ([`Player::join`]); their data
+//! restarts for the first segment boundary a capped reader can deliver in time
+//! ([`Player::earliest_join`]) while the shown weather goes on playing. When every new
+//! track shows that very time exactly, the fade starts: for its length both weathers
+//! reconstruct into their own textures and one pass a track mixes them into the outputs;
+//! then the new weather writes the outputs and the old one is closed. A held switch
+//! ([`SwitchMode::Held`], `held.rs`) closes the shown weather at once instead and fades
+//! from its last image.
 
 mod fade;
 mod file;
@@ -322,8 +325,9 @@ impl PackagePlayer {
 
     /// Switches to weather `name`, cross-fading over `fade_ns` of playback once the new
     /// weather's tracks show the shown time (see the module's documentation). The shown
-    /// weather keeps playing meanwhile. Switching to the weather shown cancels a switch
-    /// that has not begun to fade; a switch asked for during a fade starts when it ends.
+    /// weather keeps playing meanwhile, or, in [`SwitchMode::Held`], its last image stays.
+    /// Switching to the weather shown cancels a live switch that has not begun to fade; a
+    /// switch asked for during a fade starts when it ends.
     pub fn switch_weather(&mut self, name: &str, fade_ns: u64) -> Result<(), PlayerError> {
         self.file.weather(name)?;
         let fading = self.switch.as_ref().is_some_and(|s| s.fading.is_some())
