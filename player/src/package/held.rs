@@ -50,16 +50,7 @@ impl PackagePlayer {
             None if name == self.shown.name => return Ok(()),
             None => (self.shown.name.clone(), self.last_shown),
         };
-        let mut join_cfg = self.cfg.clone();
-        if join_cfg.policy == crate::Policy::Wait {
-            join_cfg.policy = crate::Policy::Interpolate;
-        }
-        let mut to = super::open_tracks(&self.device, &self.queue, &self.file, name, &join_cfg)?;
-        let position = self.shown.lightmap.position();
-        let at = to.lightmap.earliest_join(position);
-        for p in to.players() {
-            p.join(self.ticks, position, at);
-        }
+        let to = self.open_joined(name)?;
         // The outputs keep the shown weather's last image; its tracks close now.
         self.shown = to;
         self.held = Some(Held {
@@ -150,22 +141,8 @@ impl PackagePlayer {
 
     /// The held fade is over: the new weather writes the outputs.
     pub(super) fn finish_held(&mut self) {
-        if self.held.take().is_none() {
-            return;
-        }
-        self.shown
-            .lightmap
-            .set_output(Some(&self.lightmap.0))
-            .expect("the output fits every lightmap track (checked at open)");
-        if let (Some(p), Some((t, _))) = (self.shown.sky.as_mut(), &self.sky) {
-            p.set_output(Some(t))
-                .expect("the output fits every sky track");
-        }
-        for p in self.shown.players() {
-            p.set_policy(self.cfg.policy);
-        }
-        if let Some((name, fade)) = self.pending.take() {
-            let _ = self.switch_weather(&name, fade);
+        if self.held.take().is_some() {
+            self.shown_takes_over();
         }
     }
 }

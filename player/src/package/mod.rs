@@ -352,18 +352,7 @@ impl PackagePlayer {
         if name == self.shown.name {
             return Ok(());
         }
-        let mut join_cfg = self.cfg.clone();
-        // The new tracks follow the timeline: they never pause it while they load.
-        if join_cfg.policy == crate::Policy::Wait {
-            join_cfg.policy = crate::Policy::Interpolate;
-        }
-        let mut to = open_tracks(&self.device, &self.queue, &self.file, name, &join_cfg)?;
-        // Every new track starts where the new lightmap's data can first be there.
-        let position = self.shown.lightmap.position();
-        let at = to.lightmap.earliest_join(position);
-        for p in to.players() {
-            p.join(self.ticks, position, at);
-        }
+        let to = self.open_joined(name)?;
         self.switch = Some(Switch {
             to,
             fade_ns,
@@ -495,27 +484,50 @@ impl PackagePlayer {
         }
     }
 
-    /// The fade is over: the new weather writes the outputs, the old one closes.
-    fn finish_switch(&mut self) {
-        let Some(sw) = self.switch.take() else { return };
-        let mut to = sw.to;
-        to.lightmap
+    /// Opens weather `name`'s tracks and joins them to the timeline at the shown
+    /// position, from where the new lightmap's data can first be there (both switch modes).
+    fn open_joined(&self, name: &str) -> Result<Tracks, PlayerError> {
+        let mut join_cfg = self.cfg.clone();
+        // The new tracks follow the timeline: they never pause it while they load.
+        if join_cfg.policy == crate::Policy::Wait {
+            join_cfg.policy = crate::Policy::Interpolate;
+        }
+        let mut to = open_tracks(&self.device, &self.queue, &self.file, name, &join_cfg)?;
+        let position = self.shown.lightmap.position();
+        let at = to.lightmap.earliest_join(position);
+        for p in to.players() {
+            p.join(self.ticks, position, at);
+        }
+        Ok(to)
+    }
+
+    /// A switch is over: `shown`, the new weather, writes the outputs under the package's
+    /// policy, and a switch asked for meanwhile starts (both switch modes).
+    fn shown_takes_over(&mut self) {
+        self.shown
+            .lightmap
             .set_output(Some(&self.lightmap.0))
             .expect("the output fits every lightmap track (checked at open)");
-        if let (Some(p), Some((t, _))) = (to.sky.as_mut(), &self.sky) {
+        if let (Some(p), Some((t, _))) = (self.shown.sky.as_mut(), &self.sky) {
             p.set_output(Some(t))
                 .expect("the output fits every sky track");
         }
-        for p in to.players() {
+        for p in self.shown.players() {
             p.set_policy(self.cfg.policy);
         }
-        // Dropping the old tracks stops their threads.
-        self.shown = to;
         if let Some((name, fade)) = self.pending.take() {
             // The weather was checked when it was asked for; a file that went away since
             // leaves the weather as it is.
             let _ = self.switch_weather(&name, fade);
         }
+    }
+
+    /// The fade is over: the new weather writes the outputs, the old one closes.
+    fn finish_switch(&mut self) {
+        let Some(sw) = self.switch.take() else { return };
+        // Dropping the old tracks stops their threads.
+        self.shown = sw.to;
+        self.shown_takes_over();
     }
 }
 
@@ -527,7 +539,7 @@ fn read_f16(device: &wgpu::Device, queue: &wgpu::Queue, t: &wgpu::Texture) -> Ve
         .collect()
 }
 
-pub(super) fn open_tracks(
+fn open_tracks(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     file: &PackageFile,
