@@ -283,7 +283,9 @@ fn gpu_decode(
         for (i, c) in chunks.iter().enumerate() {
             if let Event::Ready(s) = dec.take(i, Some(c)) {
                 dec.fill(s, 0, 0, &mut seg)?;
-                let (dt, steps) = gpu.decode(&seg);
+                let (dt, steps) = gpu
+                    .decode(&seg)
+                    .map_err(|e| format!("the GPU decode of chunk {i}: {e}"))?;
                 t += dt.as_secs_f64();
                 n += 1;
                 let marks = gpu.pass_times();

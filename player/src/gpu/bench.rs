@@ -28,6 +28,9 @@ impl Gpu {
     }
 }
 
+/// A decode's wall-clock time, and each dispatch's pass and work ([`GpuDecoder::decode`]).
+pub type DecodeTime = (std::time::Duration, Vec<(&'static str, u64)>);
+
 /// The GPU decode alone, for `vbim bench decode --gpu`: boxes filled by a decoder without
 /// a device, decoded one after another on a GPU of the stream's size.
 pub struct GpuDecoder(Gpu);
@@ -59,10 +62,12 @@ impl GpuDecoder {
 
     /// Decodes `seg` (its keyframes and bubble planes), waits for the GPU and returns the
     /// wall-clock time from recording to completion, and each dispatch's pass and work in
-    /// the pass's own unit ([`PassWeights`]), in the order of their marks.
+    /// the pass's own unit ([`PassWeights`]), in the order of their marks. A segment that
+    /// does not fit this device's bindings is refused as the player refuses it.
     ///
     /// [`PassWeights`]: crate::PassWeights
-    pub fn decode(&mut self, seg: &SegmentData) -> (std::time::Duration, Vec<(&'static str, u64)>) {
+    pub fn decode(&mut self, seg: &SegmentData) -> Result<DecodeTime, String> {
+        self.0.fits(seg)?;
         let t = std::time::Instant::now();
         let mut enc = self.0.device.create_command_encoder(&Default::default());
         // A first mark, so that the time before the decode is not counted.
@@ -70,6 +75,6 @@ impl GpuDecoder {
         let steps = self.0.decode(&mut enc, seg, true);
         self.0.queue.submit([enc.finish()]);
         self.0.wait();
-        (t.elapsed(), steps)
+        Ok((t.elapsed(), steps))
     }
 }

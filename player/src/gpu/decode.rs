@@ -44,14 +44,20 @@ const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
 /// more workgroups, up to this much work each ([`Gpu::cheap_span`]).
 pub(crate) const FULL_GROUP: u64 = GROUP_BLOCKS as u64 * 4;
 
-/// A bound on the bytes of a segment's bubble terms after each block's first (what a
-/// bubble set's term buffer must hold for it): each plane's bound in words, four bytes a
-/// word.
-pub(crate) fn term_bytes(seg: &SegmentData) -> u64 {
+/// The bytes of a segment's bubble terms after each block's first (what a bubble set's
+/// term buffer must hold for it), four bytes a word: (exact, bound). Exact for planes
+/// parsed from pairs, whose scan counted them; only a bound for planes decoded from lanes,
+/// whose symbols the CPU does not decode. That bound (every state's most symbols, at most
+/// 63 a block) can pass one storage binding at 4096² while the terms themselves take a
+/// few percent of it: the buffer is then one binding, and the gather's guard (`put_term`
+/// in decode.wgsl) drops terms beyond it, never writing out of bounds.
+pub(crate) fn term_bytes(seg: &SegmentData) -> (u64, u64) {
     seg.planes[seg.bubbles.min(seg.planes.len())..]
         .iter()
-        .map(|p| p.terms as u64 * 4)
-        .sum()
+        .fold((0, 0), |(exact, bound), p| match p.lanes {
+            Some(_) => (exact, bound + p.terms as u64 * 4),
+            None => (exact + p.terms as u64 * 4, bound),
+        })
 }
 
 /// Where a segment's decode puts what it builds.
@@ -81,13 +87,14 @@ impl Gpu {
         };
     }
 
-    /// Whether a segment's coefficients, and the bubble terms they may hold, each fit one
-    /// storage binding of this device.
+    /// Whether a segment's coefficients, and the bubble terms counted from its pairs, each
+    /// fit one storage binding of this device (a lane plane's terms are bounded by the
+    /// buffer: [`term_bytes`]).
     pub fn fits(&self, seg: &SegmentData) -> Result<(), String> {
-        let limit = self.device.limits().max_storage_buffer_binding_size;
+        let limit = self.binding_limit();
         for (need, what) in [
             (seg.bytes(), "of coefficients"),
-            (term_bytes(seg), "of bubble terms at most"),
+            (term_bytes(seg).0, "of bubble terms"),
         ] {
             if need > limit {
                 return Err(format!(
@@ -97,6 +104,25 @@ impl Gpu {
             }
         }
         Ok(())
+    }
+
+    /// What a bubble set's term buffer must hold for `seg`: its terms' exact bytes and
+    /// bound ([`term_bytes`]), at most one binding.
+    pub(super) fn term_need(&self, seg: &SegmentData) -> u64 {
+        let (exact, bound) = term_bytes(seg);
+        (exact + bound).min(self.binding_limit())
+    }
+
+    /// The most bytes one storage binding of this device holds, whole words.
+    fn binding_limit(&self) -> u64 {
+        self.device.limits().max_storage_buffer_binding_size / 4 * 4
+    }
+
+    /// The size to give a buffer that is bound whole and must hold `need` bytes: some room
+    /// to grow ([`grown`]), but never more than one binding (a `need` beyond it is refused
+    /// first, [`Gpu::fits`]).
+    pub(super) fn bound_size(&self, need: u64) -> u64 {
+        grown(need).min(self.binding_limit().max(need))
     }
 
     /// Makes bubble set `set`'s term buffer hold at least `bytes` (its blocks' terms after
@@ -109,7 +135,7 @@ impl Gpu {
         }
         self.terms[s] = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vbim bubble terms"),
-            size: grown(bytes),
+            size: self.bound_size(bytes),
             // (COPY_SRC: tests read it back.)
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
@@ -130,7 +156,7 @@ impl Gpu {
         if words > self.words.size() {
             self.words = self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("vbim coefficient streams"),
-                size: grown(words),
+                size: self.bound_size(words),
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
@@ -185,7 +211,7 @@ impl Gpu {
             }
         }
         if let Some(set) = target.set {
-            self.hold_terms(set, term_bytes(seg));
+            self.hold_terms(set, self.term_need(seg));
             // The set's tile degrees and term counter cleared (the reconstruction reads a
             // tile's layers up to its degree only, which the gathers mark).
             let stride = degree_stride(self.plane, self.per * 8, ch);

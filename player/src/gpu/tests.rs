@@ -534,3 +534,46 @@ fn cheap_passes_take_slices_of_a_full_slices_work() {
     assert_eq!(of.len(), 1, "{of:?}");
     assert!(of.iter().all(|&u| u <= full), "{of:?} against {full}");
 }
+
+/// A version 2 or 3 stream's bubble terms are bounded, not counted, on the CPU (its
+/// symbols are decoded on the GPU): at 4096² the bound passed one storage binding (an
+/// H200 refused the bind group: 178 MB against 128 MiB) while the terms took a few
+/// percent of it. The bound is cut to one binding and no buffer bound whole passes one;
+/// terms counted from pairs beyond one binding refuse the segment, naming it.
+#[test]
+fn bubble_terms_and_streams_never_pass_one_binding() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let gpu = Gpu::new(&device, &queue, (64, 64), [64, 64], 2, 1, 16);
+    let limit = device.limits().max_storage_buffer_binding_size;
+    let lanes = PlaneSpan {
+        terms: u32::MAX,
+        lanes: Some(crate::coded::LanePlane::default()),
+        ..PlaneSpan::default()
+    };
+    let pairs = |words: u64| PlaneSpan {
+        terms: words as u32,
+        ..PlaneSpan::default()
+    };
+    let mut seg = SegmentData::new();
+    seg.index = 7;
+    seg.bubbles = 1;
+    // A keyframe plane (not counted), a bubble plane from pairs, two from lanes.
+    seg.planes = vec![pairs(limit), pairs(1000), lanes, lanes];
+    assert_eq!(
+        super::decode::term_bytes(&seg),
+        (4000, 2 * 4 * u32::MAX as u64)
+    );
+    assert!(gpu.fits(&seg).is_ok(), "a lane bound beyond one binding");
+    assert_eq!(gpu.term_need(&seg), limit);
+    // Room to grow, but never past one binding.
+    assert!(gpu.bound_size(gpu.term_need(&seg)) <= limit);
+    assert_eq!(gpu.bound_size(1 << 20), super::plan::grown(1 << 20));
+    assert_eq!(gpu.bound_size(limit - 4), limit);
+    // Pairs counted beyond one binding: refused, naming the segment.
+    seg.planes = vec![pairs(0), pairs(limit / 4 + 1)];
+    let e = gpu.fits(&seg).unwrap_err();
+    assert!(
+        e.starts_with("segment 7: ") && e.contains("of bubble terms"),
+        "{e}"
+    );
+}
