@@ -45,6 +45,14 @@ pub struct DecodeShape {
     /// 512². Planes larger than the dense plane (about
     /// 5800² texels) always go as pairs.
     pub lanes: bool,
+    /// Keep the DCT tables that the keyframe passes and the reconstruction index per
+    /// invocation (each at its own texel and term) in a storage buffer rather than a
+    /// uniform one. On an H200 a storage buffer took 6–8% off a smooth day's displayed
+    /// frame and 29% off a detailed day's, whose blocks hold several terms each (a GPU's
+    /// constant cache serves one address at a time, and a warp's invocations ask for
+    /// several); on lavapipe a uniform buffer is 14% faster (BENCHMARKS.md, "On a
+    /// hardware GPU").
+    pub storage_tables: bool,
 }
 
 impl DecodeShape {
@@ -52,7 +60,8 @@ impl DecodeShape {
     /// proportion to its work, and small slices spread a decode evenly), the serial parse
     /// and whole groups (the wide parse's scans and more workgroups are work there: a
     /// 512² segment took 105 ms with the wide parse against 91 ms), no cost per step,
-    /// version 2's sections decoded to pairs by the decoder thread.
+    /// version 2's sections decoded to pairs by the decoder thread, the DCT tables in a
+    /// uniform buffer.
     pub const CPU: DecodeShape = DecodeShape {
         slice_groups: 32,
         wide_parse: false,
@@ -60,6 +69,7 @@ impl DecodeShape {
         step_cost: 0,
         weights: PassWeights::LAVAPIPE,
         lanes: false,
+        storage_tables: false,
     };
 
     /// For a GPU, as measured on an H100: slices of 2048 workgroups (a 4096² segment
@@ -68,7 +78,8 @@ impl DecodeShape {
     /// chip (a 512² segment's `key_add` 0.33 → 0.09 ms), and 35 000 blocks per step: a
     /// segment's decode took as long at 512² as at 2048² (about 20 µs per step whatever
     /// its work), and a block of the budget's unit about 0.58 ns ([`PassWeights::H100`]);
-    /// version 2's sections decoded to pairs by the decoder thread (`lanes`).
+    /// version 2's sections decoded to pairs by the decoder thread (`lanes`); the DCT
+    /// tables in a storage buffer (measured on an H200).
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
         wide_parse: true,
@@ -76,6 +87,7 @@ impl DecodeShape {
         step_cost: 35_000,
         weights: PassWeights::H100,
         lanes: false,
+        storage_tables: true,
     };
 
     /// [`DecodeShape::CPU`] on a CPU adapter, [`DecodeShape::GPU`] on any other.

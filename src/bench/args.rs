@@ -304,6 +304,10 @@ pub struct ShapeArgs {
     /// 10–18 times as long as for the pairs).
     #[arg(long)]
     pub lanes: Option<bool>,
+    /// Keep the DCT tables in a storage buffer (true) or a uniform one (false)
+    /// (`DecodeShape::storage_tables`; true on a GPU, false on a CPU adapter)
+    #[arg(long)]
+    pub storage_tables: Option<bool>,
 }
 
 /// The measured pass weights (`vbim_player::PassWeights`).
@@ -328,6 +332,7 @@ impl ShapeArgs {
                 None => base.weights,
             },
             lanes: self.lanes.unwrap_or(base.lanes),
+            storage_tables: self.storage_tables.unwrap_or(base.storage_tables),
         }
     }
 }

@@ -22,8 +22,9 @@
 // A plane of more blocks than one storage binding holds (8192² and up) goes in parts of
 // blocks [lo, hi): each part parses the whole stream and keeps the blocks in its range.
 
-// The DCT tables (blocks.wgsl).
-@group(0) @binding(1) var<uniform> tables: Tables;
+// The DCT tables (blocks.wgsl), in the address space `TABLES` the adapter reads fastest
+// (resources.rs, `TablesIn`).
+@group(0) @binding(1) var<TABLES> tables: Tables;
 // A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
 // The 16-bit keyframes, two texels per R32Uint texel (`key_pack`).

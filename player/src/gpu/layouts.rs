@@ -11,7 +11,54 @@ pub(super) struct Layouts {
     pub parse: wgpu::BindGroupLayout,
 }
 
-pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
+/// Where the DCT tables live for the shaders that index them per invocation (each at its
+/// own texel and term: `basis` and `zigzag` in blocks.wgsl):
+/// [`DecodeShape::storage_tables`](crate::DecodeShape::storage_tables) says which, and why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum TablesIn {
+    Uniform,
+    Storage,
+}
+
+impl TablesIn {
+    /// Where `shape` keeps them.
+    pub fn of(shape: crate::DecodeShape) -> TablesIn {
+        match shape.storage_tables {
+            true => TablesIn::Storage,
+            false => TablesIn::Uniform,
+        }
+    }
+
+    /// `source` with the tables' address space put in (`var<TABLES>` in the WGSL).
+    pub fn wgsl(self, source: &str) -> String {
+        let space = match self {
+            TablesIn::Uniform => "uniform",
+            TablesIn::Storage => "storage, read",
+        };
+        source.replace("var<TABLES>", &format!("var<{space}>"))
+    }
+
+    /// The tables buffer's usage.
+    pub fn usage(self) -> wgpu::BufferUsages {
+        match self {
+            TablesIn::Uniform => wgpu::BufferUsages::UNIFORM,
+            TablesIn::Storage => wgpu::BufferUsages::STORAGE,
+        }
+    }
+
+    fn binding(self) -> wgpu::BindingType {
+        wgpu::BindingType::Buffer {
+            ty: match self {
+                TablesIn::Uniform => wgpu::BufferBindingType::Uniform,
+                TablesIn::Storage => wgpu::BufferBindingType::Storage { read_only: true },
+            },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        }
+    }
+}
+
+pub(super) fn layouts(device: &wgpu::Device, tables: TablesIn) -> Layouts {
     let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -64,7 +111,7 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
             entry(10, storage(false)),
             entry(12, storage(false)),
             entry(11, storage(true)),
-            entry(13, uniform(false)),
+            entry(13, tables.binding()),
         ],
     });
     let hold_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -87,7 +134,7 @@ pub(super) fn layouts(device: &wgpu::Device) -> Layouts {
         entries: &[
             entry(0, uniform(true)),
             entry(11, uniform(true)),
-            entry(1, uniform(false)),
+            entry(1, tables.binding()),
             words_entry,
             entry(3, storage_texture(Access::ReadWrite, Format::R32Float, D2)),
             planes16,

@@ -53,8 +53,9 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-// The DCT tables (blocks.wgsl).
-@group(0) @binding(13) var<uniform> tables: Tables;
+// The DCT tables (blocks.wgsl), in the address space `TABLES` the adapter reads fastest
+// (resources.rs, `TablesIn`).
+@group(0) @binding(13) var<TABLES> tables: Tables;
 // The head keyframe K_{s+1} (`channels` R32Float layers), read until the decode of the next
 // segment has packed it into 16 bits, and the bubble sets' blocks: per block of 8 × 8
 // texels and layer, the block's 64-bit mask of DCT coefficients, where its terms after

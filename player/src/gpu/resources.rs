@@ -5,7 +5,7 @@ use wgpu::util::DeviceExt;
 
 use super::decode::SLICE_GROUPS;
 use super::job::{decode_source, Job, JOB_STRIDE};
-use super::layouts::{compute_pipeline, layouts, Layouts};
+use super::layouts::{compute_pipeline, layouts, Layouts, TablesIn};
 use super::plan::*;
 use super::reconstruct::Params;
 use super::Gpu;
@@ -33,14 +33,12 @@ impl Gpu {
         shape: crate::DecodeShape,
     ) -> Gpu {
         let (pw, ph) = vbim_format::chunk::padded_size(h);
-        let mut gpu = Gpu::new(
+        let mut gpu = Gpu::with_tables(
             device,
             queue,
-            (h.width, h.height),
-            [pw as u32, ph as u32],
-            h.max_degree as u32,
-            h.channels as u32,
-            h.tile_size as u32,
+            ((h.width, h.height), [pw as u32, ph as u32]),
+            (h.max_degree as u32, h.channels as u32, h.tile_size as u32),
+            TablesIn::of(shape),
         );
         gpu.set_decode_shape(shape);
         if let Some(maps) = h.context_maps().filter(|_| shape.lanes) {
@@ -60,15 +58,30 @@ impl Gpu {
 
     /// GPU state for a stream of `width × height` texels of `channels` planes, coded on
     /// planes of `plane` texels (whole tiles of `tile_size`), with bubble terms up to
-    /// `max_degree`.
+    /// `max_degree`; the DCT tables where the adapter's decode shape keeps them (the
+    /// tests' constructor: the player's is [`Gpu::for_stream`]).
+    #[cfg(test)]
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        (width, height): (u32, u32),
+        size: (u32, u32),
         plane: [u32; 2],
         max_degree: u32,
         channels: u32,
         tile_size: u32,
+    ) -> Gpu {
+        let shape = crate::DecodeShape::for_adapter(&device.adapter_info());
+        let stream = (max_degree, channels, tile_size);
+        Gpu::with_tables(device, queue, (size, plane), stream, TablesIn::of(shape))
+    }
+
+    /// [`Gpu::new`], the DCT tables in `tables_in`.
+    fn with_tables(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        ((width, height), plane): ((u32, u32), [u32; 2]),
+        (max_degree, channels, tile_size): (u32, u32, u32),
+        tables_in: TablesIn,
     ) -> Gpu {
         let [keys, packed, bubble_blocks, display, held] = texture_plans(
             (width, height),
@@ -110,18 +123,23 @@ impl Gpu {
             contents: bytemuck::bytes_of(&Params::zeroed_params()),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
-        let tables = dct_tables(device);
+        let tables = dct_tables(device, tables_in);
         let Layouts {
             reconstruct: bgl,
             hold: hold_layout,
             key: key_layout,
             bubble: bubble_layout,
             parse: parse_layout,
-        } = layouts(device);
+        } = layouts(device, tables_in);
         let pipeline_for =
             |label, source, layout, entry| compute_pipeline(device, label, source, layout, entry);
-        let decode = &decode_source(&format!("{BLOCKS_WGSL}{}", include_str!("decode.wgsl")));
-        let reconstruct = &format!("{BLOCKS_WGSL}{}", include_str!("reconstruct.wgsl"));
+        let decode = &decode_source(
+            &tables_in.wgsl(&format!("{BLOCKS_WGSL}{}", include_str!("decode.wgsl"))),
+        );
+        let reconstruct = &tables_in.wgsl(&format!(
+            "{BLOCKS_WGSL}{}",
+            include_str!("reconstruct.wgsl")
+        ));
         let parse_source = &decode_source(&format!(
             "const PIECE_PAIRS: u32 = {}u;\nconst FILL_BLOCKS: u32 = {}u;\n{}",
             vbim_format::chunk::ENTRY_PAIRS,
@@ -512,7 +530,7 @@ pub(super) fn slice_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
 
 /// The DCT basis and the zig-zag order, from the reference decoder's own tables
 /// (`Tables` in blocks.wgsl), in a uniform buffer.
-fn dct_tables(device: &wgpu::Device) -> wgpu::Buffer {
+fn dct_tables(device: &wgpu::Device, tables_in: TablesIn) -> wgpu::Buffer {
     let mut t = Tables {
         basis: [0.0; 64],
         zigzag: [0; 64],
@@ -526,6 +544,6 @@ fn dct_tables(device: &wgpu::Device) -> wgpu::Buffer {
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("vbim dct tables"),
         contents: bytemuck::bytes_of(&t),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: tables_in.usage(),
     })
 }
