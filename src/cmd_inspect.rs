@@ -362,6 +362,32 @@ fn coding_name(h: &vbim_format::Header) -> &'static str {
     }
 }
 
+/// What a package's player reads at once, from its tracks' buffer models: each weather's
+/// tracks alone (outside a switch), and the two weathers of the switch that reads the most
+/// (from a switch to the end of its fade).
+fn read_sets(
+    p: &vbim_player::PackageFile,
+) -> Vec<(
+    Vec<String>,
+    [vbim_format::ReadAhead; vbim_format::READ_AHEAD_POINTS],
+)> {
+    let names: Vec<&str> = p.package.weathers.iter().map(|w| w.name.as_str()).collect();
+    let mut sets: Vec<_> = names
+        .iter()
+        .map(|&n| (vec![n.to_string()], p.read_ahead(&[n])))
+        .collect();
+    let heaviest = names
+        .iter()
+        .enumerate()
+        .flat_map(|(i, a)| names[i + 1..].iter().map(move |b| [*a, *b]))
+        .map(|pair| (pair, p.read_ahead(&pair)))
+        .max_by_key(|(_, pts)| pts[0].rate);
+    if let Some((pair, pts)) = heaviest {
+        sets.push((pair.map(String::from).to_vec(), pts));
+    }
+    sets
+}
+
 /// A package: its weathers and every track's kind, size, timing and bytes; with
 /// `--verify`, every track's chunks are checked as `inspect` checks a file.
 fn package(a: &InspectArgs) -> Result<(), String> {
@@ -380,6 +406,7 @@ fn package(a: &InspectArgs) -> Result<(), String> {
         }
     }
     let total: u64 = p.tracks.iter().map(|t| t.bytes).sum();
+    let sets = read_sets(&p);
     if a.json {
         let tracks: Vec<_> = p
             .tracks
@@ -399,6 +426,10 @@ fn package(a: &InspectArgs) -> Result<(), String> {
             "file": a.file, "package_version": p.package.vbim_package,
             "weathers": p.package.weathers.iter().map(|w| &w.name).collect::<Vec<_>>(),
             "tracks": tracks, "bytes": total, "damaged": damaged,
+            "read_sets": sets.iter().map(|(what, pts)| json!({
+                "tracks_of": what,
+                "read_ahead": pts.iter().map(|p| json!({"rate_bytes_per_s": p.rate, "bytes": p.bytes, "preroll_s": p.preroll_ns as f64 * 1e-9})).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&j).unwrap());
     } else {
@@ -430,6 +461,25 @@ fn package(a: &InspectArgs) -> Result<(), String> {
                 t.bytes,
                 t.path.display()
             );
+        }
+        let factors = vbim_format::buffer_model::RATE_FACTORS.map(|f| format!("{f}×"));
+        println!(
+            "  reading     each set of tracks, each track at {} its mean rate: rate, ring, pre-roll",
+            factors.join(" / ")
+        );
+        for (what, pts) in &sets {
+            let cells: Vec<String> = pts
+                .iter()
+                .map(|p| {
+                    format!(
+                        "{:.1} kB/s, {:.0} kB, {:.1} s",
+                        p.rate as f64 / 1e3,
+                        p.bytes as f64 / 1e3,
+                        p.preroll_ns as f64 * 1e-9
+                    )
+                })
+                .collect();
+            println!("  {:<22} {}", what.join(" + "), cells.join(" / "));
         }
         if a.verify {
             println!(

@@ -940,6 +940,50 @@ fn a_bake_of_weathers_becomes_a_package_that_plays_and_switches() {
     let j: serde_json::Value = serde_json::from_str(&ok(&["inspect", s(&pkg), "--json"])).unwrap();
     assert_eq!(j["tracks"].as_array().unwrap().len(), 6);
     assert_eq!(j["tracks"][1]["kind"], "sky");
+    // What a player reads: each weather's tracks side by side, and the heaviest switch's
+    // two weathers; at each point the sum of the tracks' own rates and rings.
+    let sets = j["read_sets"].as_array().unwrap();
+    assert_eq!(sets.len(), 4, "{sets:?}");
+    let rate = |set: &serde_json::Value, i: usize| {
+        set["read_ahead"][i]["rate_bytes_per_s"].as_u64().unwrap()
+    };
+    let clear_rates = |i: usize| -> u64 {
+        let headers: Vec<serde_json::Value> = ["day-clear.vbim", "day-clear-sky.vbim"]
+            .iter()
+            .map(|f| {
+                serde_json::from_str(&ok(&["inspect", s(&dir.path().join(f)), "--json"])).unwrap()
+            })
+            .collect();
+        headers
+            .iter()
+            .map(|h| {
+                h["header"]["read_ahead"][i]["rate_bytes_per_s"]
+                    .as_u64()
+                    .unwrap()
+            })
+            .sum()
+    };
+    assert_eq!(sets[0]["tracks_of"], serde_json::json!(["clear"]));
+    assert_eq!(rate(&sets[0], 0), clear_rates(0));
+    assert_eq!(rate(&sets[0], 3), clear_rates(3));
+    let pair = &sets[3];
+    let names: Vec<&str> = pair["tracks_of"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    let alone = |n: &str| {
+        rate(
+            sets.iter()
+                .find(|s| s["tracks_of"] == serde_json::json!([n]))
+                .unwrap(),
+            0,
+        )
+    };
+    assert_eq!(rate(pair, 0), alone(names[0]) + alone(names[1]));
+    assert!(sets[..3].iter().all(|s| rate(s, 0) <= rate(pair, 0)));
+    assert!(ok(&["inspect", s(&pkg)]).contains("each track at 1× / 1.2× / 1.5× / 2× its mean rate"));
     // Played headless at one weather (its lightmap measured against its reference).
     let out = ok(&[
         "play",

@@ -13,7 +13,7 @@
 //! the lightmap already holds. A package's sky track plays into a second image, drawn on a
 //! dome around the scene (without one, the background is the manifest's zenith colour;
 //! `--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
-//! crashes lavapipe). W cycles the package's weathers (a 2 s cross-fade). `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
+//! crashes lavapipe). W cycles the package's weathers (a 2 s cross-fade; `--weather NAME` starts in that one). `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
 //! the window before `--frames N` quits. The window's title shows the time of day and the player's
 //! statistics. Keys: Space pause, ↑/↓ speed ×2 / ÷2, ←/→ one hour back /
 //! on, W next weather, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
@@ -57,6 +57,8 @@ struct Args {
     atmosphere: bool,
     /// Save the window to this PNG before quitting (with `--frames`).
     screenshot: Option<PathBuf>,
+    /// The package's weather to start in (`None`: its first).
+    weather: Option<String>,
 }
 
 fn args() -> Result<Args, String> {
@@ -69,6 +71,7 @@ fn args() -> Result<Args, String> {
         paused: false,
         atmosphere: false,
         screenshot: None,
+        weather: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -81,9 +84,10 @@ fn args() -> Result<Args, String> {
             "--paused" => a.paused = true,
             "--atmosphere" => a.atmosphere = true,
             "--screenshot" => a.screenshot = Some(value()?.into()),
+            "--weather" => a.weather = Some(value()?),
             _ => {
                 return Err(format!(
-                    "unknown argument {flag} (--stream F.vbim|F.vbimpkg, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png)"
+                    "unknown argument {flag} (--stream F.vbim|F.vbimpkg, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png, --weather NAME)"
                 ))
             }
         }
@@ -298,6 +302,16 @@ fn setup(
     let mut p = VbimPlayback::new(stream, lightmap.clone());
     p.sky = sky.clone();
     p.paused = a.paused;
+    if let Some(w) = &a.weather {
+        if !opened.weathers().contains(w) {
+            panic!(
+                "{}: no weather {w} (it has {:?})",
+                path.display(),
+                opened.weathers()
+            );
+        }
+        p.weather = Some(w.clone());
+    }
     if a.hour > 0.0 {
         p.set_time(opened.duration().mul_f64((a.hour / 24.0).clamp(0.0, 1.0)));
     }

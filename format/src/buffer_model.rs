@@ -110,6 +110,24 @@ pub fn rate_at(file_size: u64, duration_s: f64, factor: f64) -> u64 {
     (file_size as f64 / duration_s * factor).ceil().max(1.0) as u64
 }
 
+/// The buffer model of several tracks read side by side (a package's lightmap and sky, or
+/// two weathers' during a switch), from their own tables: at each point every track reads
+/// at the same multiple of its own mean rate, so the set's rate is their sum, its ring
+/// their read-aheads' sum, and it starts when the slowest has buffered (the longest
+/// pre-roll). Each track then meets its own promise; a reader that shares the rate
+/// otherwise may need more.
+pub fn side_by_side(tables: &[[ReadAhead; READ_AHEAD_POINTS]]) -> [ReadAhead; READ_AHEAD_POINTS] {
+    let mut out = [ReadAhead::default(); READ_AHEAD_POINTS];
+    for (i, p) in out.iter_mut().enumerate() {
+        for t in tables {
+            p.rate = p.rate.saturating_add(t[i].rate);
+            p.bytes = p.bytes.saturating_add(t[i].bytes);
+            p.preroll_ns = p.preroll_ns.max(t[i].preroll_ns);
+        }
+    }
+    out
+}
+
 /// Computes the header's read-ahead table for a file whose chunks are `entries`.
 pub fn table(h: &Header, entries: &[IndexEntry]) -> [ReadAhead; READ_AHEAD_POINTS] {
     let needs = needs(h, entries);
@@ -142,4 +160,36 @@ pub fn table(h: &Header, entries: &[IndexEntry]) -> [ReadAhead; READ_AHEAD_POINT
         };
     }
     out
+}
+
+#[cfg(test)]
+mod side_by_side_tests {
+    use super::*;
+
+    #[test]
+    fn tracks_side_by_side_add_rates_and_rings_and_wait_for_the_slowest() {
+        let point = |rate, bytes, preroll_ns| ReadAhead {
+            rate,
+            bytes,
+            preroll_ns,
+        };
+        let a = [
+            point(100, 1000, 5),
+            point(120, 900, 4),
+            point(150, 800, 3),
+            point(200, 700, 2),
+        ];
+        let b = [
+            point(10, 50, 9),
+            point(12, 40, 1),
+            point(15, 30, 1),
+            point(u64::MAX, 20, 0),
+        ];
+        let s = side_by_side(&[a, b]);
+        assert_eq!(s[0], point(110, 1050, 9));
+        assert_eq!(s[1], point(132, 940, 4));
+        assert_eq!(s[3], point(u64::MAX, 720, 2));
+        assert_eq!(side_by_side(&[a]), a);
+        assert_eq!(side_by_side(&[]), [ReadAhead::default(); READ_AHEAD_POINTS]);
+    }
 }

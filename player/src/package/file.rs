@@ -6,7 +6,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use vbim_format::package::{Package, WeatherTracks, MAX_PACKAGE_BYTES};
-use vbim_format::{Header, Reader, MAGIC};
+use vbim_format::{Header, Reader, MAGIC, READ_AHEAD_POINTS};
 
 use crate::PlayerError;
 
@@ -206,6 +206,20 @@ impl PackageFile {
                 format!("no weather {name:?} (it has {})", names.join(", ")),
             )
         })
+    }
+
+    /// The buffer model of the tracks of `weathers` read side by side (one weather's
+    /// lightmap and sky; two weathers' from a switch to the end of its fade): at each of
+    /// the header's points, every track at that multiple of its own mean rate
+    /// ([`vbim_format::buffer_model::side_by_side`]).
+    pub fn read_ahead(&self, weathers: &[&str]) -> [vbim_format::ReadAhead; READ_AHEAD_POINTS] {
+        let tables: Vec<_> = self
+            .tracks
+            .iter()
+            .filter(|t| weathers.contains(&t.weather.as_str()))
+            .map(|t| t.header.read_ahead)
+            .collect();
+        vbim_format::buffer_model::side_by_side(&tables)
     }
 
     /// A track's info.
