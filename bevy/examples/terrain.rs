@@ -170,18 +170,19 @@ fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
 
 /// A dome over the scene on which the sky map is drawn: the upper hemisphere with the sky
 /// track's equirectangular coordinates (u: azimuth clockwise from north, Bevy's −z; v: 0 at
-/// the zenith, 1 at the horizon), and a skirt below the horizon in the horizon's colour.
+/// the zenith, 1 at the horizon), closed below the horizon by a bowl in the horizon's colour
+/// (what lies beyond the terrain's edge), so that no background shows through.
 fn sky_dome(radius: f32) -> Mesh {
     let (segments, rings) = (64u32, 16u32);
     let mut pos = Vec::new();
     let mut uv = Vec::new();
     for r in 0..=rings + 1 {
-        // The last ring is the skirt, 10° below the horizon.
+        // The last ring is the bowl's bottom, straight down.
         let (e, v) = if r <= rings {
             let v = r as f32 / rings as f32;
             (std::f32::consts::FRAC_PI_2 * (1.0 - v), v)
         } else {
-            (-10f32.to_radians(), 1.0)
+            (-std::f32::consts::FRAC_PI_2, 1.0)
         };
         for k in 0..=segments {
             let u = k as f32 / segments as f32;
@@ -398,7 +399,8 @@ fn setup(
         Exposure { ev100: EV100 },
         // ACES needs no lookup table (the example builds Bevy without them).
         Tonemapping::AcesFitted,
-        Transform::from_xyz(1.3, 0.9, 1.3).looking_at(Vec3::new(0.0, 0.05, 0.0), Vec3::Y),
+        // A little above the terrain's centre: the sky's lower third in view.
+        Transform::from_xyz(1.3, 0.9, 1.3).looking_at(Vec3::new(0.0, 0.4, 0.0), Vec3::Y),
     ));
     if a.atmosphere {
         camera.insert(AtmosphereSettings::default());
