@@ -6,7 +6,7 @@ use std::time::Instant;
 use serde_json::json;
 use vbim_bake::{bake, BakeOptions, BakeSummary, FrameFormat, Scene};
 use vbim_encoder::{encode_file, lossless_baseline, EncoderConfig, FrameSet, FrameSource, Preset};
-use vbim_format::package::{Package, WeatherTracks, PACKAGE_VERSION};
+use vbim_format::package::Package;
 
 use crate::cli::DemoArgs;
 use crate::cmd_play::{capture_scene, play, Outcome};
@@ -57,7 +57,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     eprintln!("[2/5] encoding");
     let mut cfg = EncoderConfig::preset(Preset::Default);
     cfg.rate = parse_rate(&a.fps)?;
-    let jobs = tracks_of(&scene.name, &baked, &frames_dir, &out);
+    let (jobs, coded) = tracks_of(&scene.name, &baked, &frames_dir, &out)?;
     let mut tracks = Vec::new();
     for job in &jobs {
         let fs = FrameSet::open(job.input.to_str().ok_or("output path is not UTF-8")?)
@@ -70,27 +70,9 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         stages.finish();
         tracks.push((job, fs, rep));
     }
-    let package = match &baked.package {
-        Some(_) => {
-            let p = Package {
-                vbim_package: PACKAGE_VERSION,
-                weathers: baked
-                    .weathers
-                    .iter()
-                    .map(|w| {
-                        let file = |kind: &str| {
-                            jobs.iter()
-                                .find(|j| j.weather.as_deref() == Some(&w.name) && j.kind == kind)
-                                .map(|j| j.file_name())
-                        };
-                        WeatherTracks {
-                            name: w.name.clone(),
-                            lightmap: file("lightmap").expect("every weather has a day"),
-                            sky: file("sky"),
-                        }
-                    })
-                    .collect(),
-            };
+    // The package last: it names only complete tracks.
+    let package = match coded {
+        Some(p) => {
             let path = out.join(format!("{}.vbimpkg", scene.name));
             write(&path, &p.to_json())?;
             Some(path)
@@ -306,42 +288,45 @@ struct TrackJob {
     out: std::path::PathBuf,
 }
 
-impl TrackJob {
-    fn file_name(&self) -> String {
-        self.out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    }
-}
-
-/// The tracks of a bake: its one day, or each weather's day and sky.
-fn tracks_of(name: &str, baked: &BakeSummary, frames: &Path, out: &Path) -> Vec<TrackJob> {
-    if baked.weathers.is_empty() {
-        return vec![TrackJob {
+/// The tracks of a bake: its one day, or each weather's day and sky, named as
+/// [`Package::coded_as`] names them (with the package that ties them).
+fn tracks_of(
+    name: &str,
+    baked: &BakeSummary,
+    frames: &Path,
+    out: &Path,
+) -> Result<(Vec<TrackJob>, Option<Package>), String> {
+    let Some(path) = &baked.package else {
+        let day = TrackJob {
             weather: None,
             kind: "lightmap",
             input: frames.to_path_buf(),
             out: out.join(format!("{name}.vbim")),
-        }];
-    }
+        };
+        return Ok((vec![day], None));
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let baked = Package::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let coded = baked.coded_as(name);
     let mut jobs = Vec::new();
-    for w in &baked.weathers {
-        let dir = frames.join(&w.name);
+    for (w, c) in baked.weathers.iter().zip(&coded.weathers) {
+        let weather = Some(w.name.clone());
         jobs.push(TrackJob {
-            weather: Some(w.name.clone()),
+            weather: weather.clone(),
             kind: "lightmap",
-            input: dir.clone(),
-            out: out.join(format!("{name}-{}.vbim", w.name)),
+            input: frames.join(&w.lightmap),
+            out: out.join(&c.lightmap),
         });
-        jobs.push(TrackJob {
-            weather: Some(w.name.clone()),
-            kind: "sky",
-            input: dir.join(vbim_bake::SKY_DIR),
-            out: out.join(format!("{name}-{}-sky.vbim", w.name)),
-        });
+        if let (Some(sky), Some(file)) = (&w.sky, &c.sky) {
+            jobs.push(TrackJob {
+                weather,
+                kind: "sky",
+                input: frames.join(sky),
+                out: out.join(file),
+            });
+        }
     }
-    jobs
+    Ok((jobs, Some(coded)))
 }
 
 /// The report's section on weathers: every track's size and error, and each switch.

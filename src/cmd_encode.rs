@@ -9,7 +9,7 @@ use vbim_encoder::{
     encode_file, encode_to_tolerance, ConfigError, EncoderConfig, FrameSet, Preset,
 };
 
-use vbim_format::package::{Package, WeatherTracks, PACKAGE_VERSION};
+use vbim_format::package::Package;
 
 use crate::cli::EncodeArgs;
 use crate::progress::Stages;
@@ -50,29 +50,18 @@ fn encode_package(a: &EncodeArgs, bake_package: &Path) -> Result<(), String> {
         .ok_or_else(|| format!("{}: the package's name is not UTF-8", a.out.display()))?;
     let dir = a.out.parent().unwrap_or(Path::new(""));
     let base = bake_package.parent().unwrap_or(Path::new("."));
-    let mut package = Package {
-        vbim_package: PACKAGE_VERSION,
-        weathers: Vec::new(),
+    let input = |rel: &str| -> Result<String, String> {
+        base.join(rel)
+            .to_str()
+            .map(str::to_string)
+            .ok_or_else(|| format!("{}: not UTF-8", base.join(rel).display()))
     };
-    for w in &baked.weathers {
-        let mut tracks = WeatherTracks {
-            name: w.name.clone(),
-            lightmap: format!("{stem}-{}.vbim", w.name),
-            sky: None,
-        };
-        let input = |rel: &str| -> Result<String, String> {
-            base.join(rel)
-                .to_str()
-                .map(str::to_string)
-                .ok_or_else(|| format!("{}: not UTF-8", base.join(rel).display()))
-        };
-        encode_one(a, &input(&w.lightmap)?, &dir.join(&tracks.lightmap))?;
-        if let Some(sky) = &w.sky {
-            let name = format!("{stem}-{}-sky.vbim", w.name);
-            encode_one(a, &input(sky)?, &dir.join(&name))?;
-            tracks.sky = Some(name);
+    let package = baked.coded_as(stem);
+    for (w, coded) in baked.weathers.iter().zip(&package.weathers) {
+        encode_one(a, &input(&w.lightmap)?, &dir.join(&coded.lightmap))?;
+        if let (Some(sky), Some(file)) = (&w.sky, &coded.sky) {
+            encode_one(a, &input(sky)?, &dir.join(file))?;
         }
-        package.weathers.push(tracks);
     }
     vbim_files::write_text(&a.out, &package.to_json())
         .map_err(|e| format!("{}: {e}", a.out.display()))?;

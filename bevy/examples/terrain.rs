@@ -143,25 +143,15 @@ fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
         encode(&frames, &file)?;
         return Ok(file);
     }
-    let mut package = vbim_format::package::Package {
-        vbim_package: vbim_format::package::PACKAGE_VERSION,
-        weathers: Vec::new(),
-    };
-    for w in &baked.weathers {
-        let (lightmap, sky) = (
-            format!("{stem}-{}.vbim", w.name),
-            format!("{stem}-{}-sky.vbim", w.name),
-        );
-        encode(&frames.join(&w.name), &dir.join(&lightmap))?;
-        encode(
-            &frames.join(&w.name).join(vbim_bake::SKY_DIR),
-            &dir.join(&sky),
-        )?;
-        package.weathers.push(vbim_format::package::WeatherTracks {
-            name: w.name.clone(),
-            lightmap,
-            sky: Some(sky),
-        });
+    let baked = std::fs::read_to_string(frames.join(vbim_bake::PACKAGE_FILE))
+        .map_err(|e| e.to_string())
+        .and_then(|t| vbim_format::package::Package::parse(&t).map_err(|e| e.to_string()))?;
+    let package = baked.coded_as(&stem);
+    for (w, coded) in baked.weathers.iter().zip(&package.weathers) {
+        encode(&frames.join(&w.lightmap), &dir.join(&coded.lightmap))?;
+        if let (Some(sky), Some(file)) = (&w.sky, &coded.sky) {
+            encode(&frames.join(sky), &dir.join(file))?;
+        }
     }
     // The package last: it names only complete tracks.
     vbim_bake::write_text(&file, &package.to_json()).map_err(|e| e.to_string())?;

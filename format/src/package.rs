@@ -151,6 +151,30 @@ impl Package {
         self.weathers.iter().find(|w| w.name == name)
     }
 
+    /// The package of coded tracks that this one's tracks (a bake's folders of frames)
+    /// become when each is coded into a file beside a package called `stem`.vbimpkg:
+    /// weather NAME's lightmap in `stem-NAME.vbim`, its sky in `stem-NAME-sky.vbim`. Every
+    /// tool that codes a bake of weathers (`vbim encode`, `vbim demo`, the Bevy example)
+    /// names its files so; it codes `self`'s folders into the returned package's files
+    /// (weather by weather, in the same order) and writes the package last.
+    pub fn coded_as(&self, stem: &str) -> Package {
+        Package {
+            vbim_package: PACKAGE_VERSION,
+            weathers: self
+                .weathers
+                .iter()
+                .map(|w| WeatherTracks {
+                    name: w.name.clone(),
+                    lightmap: format!("{stem}-{}.vbim", w.name),
+                    sky: w
+                        .sky
+                        .as_ref()
+                        .map(|_| format!("{stem}-{}-sky.vbim", w.name)),
+                })
+                .collect(),
+        }
+    }
+
     /// The package as JSON text, as [`Package::parse`] reads it.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("a package serialises") + "\n"
@@ -160,6 +184,32 @@ impl Package {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bake_of_folders_is_coded_into_files_named_after_the_package() {
+        let baked = Package {
+            vbim_package: 1,
+            weathers: vec![
+                WeatherTracks {
+                    name: "clear".into(),
+                    lightmap: "clear".into(),
+                    sky: Some("clear/sky".into()),
+                },
+                WeatherTracks {
+                    name: "night".into(),
+                    lightmap: "night".into(),
+                    sky: None,
+                },
+            ],
+        };
+        let coded = baked.coded_as("day");
+        assert_eq!(coded.weathers[0].lightmap, "day-clear.vbim");
+        assert_eq!(coded.weathers[0].sky.as_deref(), Some("day-clear-sky.vbim"));
+        assert_eq!(coded.weathers[1].lightmap, "day-night.vbim");
+        assert_eq!(coded.weathers[1].sky, None);
+        assert_eq!(coded.weathers.len(), 2);
+        assert!(Package::parse(&coded.to_json()).is_ok());
+    }
 
     fn two() -> Package {
         Package {
