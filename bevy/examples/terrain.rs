@@ -10,8 +10,8 @@
 //! pointing at the image the player writes. A directional light and the ambient light
 //! follow the sun and sky of the bake's manifest (carried in the stream's metadata) and
 //! light a white sphere beside the terrain; they do not light the terrain's diffuse, which
-//! the lightmap already holds. A package's sky track plays into a second image, drawn on a
-//! dome around the scene (without one, the background is the manifest's zenith colour;
+//! the lightmap already holds. A package's sky track is resampled into a cube map every
+//! frame, Bevy's `Skybox` (without one, the background is the manifest's zenith colour;
 //! `--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
 //! crashes lavapipe). W cycles the package's weathers (a 2 s cross-fade; `--weather NAME` starts in that one). `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
 //! the window before `--frames N` quits. The window's title shows the time of day and the player's
@@ -25,7 +25,7 @@ use bevy::asset::RenderAssetUsages;
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::atmosphere::ScatteringMedium;
-use bevy::light::{Atmosphere, GlobalAmbientLight};
+use bevy::light::{Atmosphere, GlobalAmbientLight, Skybox};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::AtmosphereSettings;
 use bevy::pbr::Lightmap;
@@ -158,56 +158,6 @@ fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
     Ok(file)
 }
 
-/// A dome over the scene on which the sky map is drawn: the upper hemisphere with the sky
-/// track's equirectangular coordinates (u: azimuth clockwise from north, Bevy's −z; v: 0 at
-/// the zenith, 1 at the horizon), closed below the horizon by a bowl in the horizon's colour
-/// (what lies beyond the terrain's edge), so that no background shows through.
-fn sky_dome(radius: f32) -> Mesh {
-    let (segments, rings) = (64u32, 16u32);
-    let mut pos = Vec::new();
-    let mut uv = Vec::new();
-    for r in 0..=rings + 1 {
-        // The last ring is the bowl's bottom, straight down.
-        let (e, v) = if r <= rings {
-            let v = r as f32 / rings as f32;
-            (std::f32::consts::FRAC_PI_2 * (1.0 - v), v)
-        } else {
-            (-std::f32::consts::FRAC_PI_2, 1.0)
-        };
-        for k in 0..=segments {
-            let u = k as f32 / segments as f32;
-            let az = std::f32::consts::TAU * u;
-            // Map frame (x east, y south, z up) to Bevy's (x east, y up, z south).
-            let (se, ce) = e.sin_cos();
-            pos.push([radius * az.sin() * ce, radius * se, -radius * az.cos() * ce]);
-            uv.push([u, v]);
-        }
-    }
-    let mut idx = Vec::new();
-    let row = segments + 1;
-    for r in 0..=rings {
-        for k in 0..segments {
-            let (a, b) = (r * row + k, (r + 1) * row + k);
-            idx.extend_from_slice(&[a, b, a + 1, a + 1, b, b + 1]);
-        }
-    }
-    let normals: Vec<[f32; 3]> = pos
-        .iter()
-        .map(|p| {
-            let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            [-p[0] / l, -p[1] / l, -p[2] / l]
-        })
-        .collect();
-    Mesh::new(
-        PrimitiveTopology::TriangleList,
-        RenderAssetUsages::RENDER_WORLD,
-    )
-    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, pos)
-    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
-    .with_inserted_indices(Indices::U32(idx))
-}
-
 #[derive(Resource)]
 struct Day {
     playback: Entity,
@@ -288,10 +238,13 @@ fn setup(
     let (w, h) = (opened.header().width, opened.header().height);
     let manifest = opened.metadata().and_then(|m| Manifest::parse(m).ok());
     let lightmap = images.add(bevy_vbim::lightmap_image(w, h));
-    let sky = opened.sky_image().map(|i| images.add(i));
+    // A package's sky, as a cube map for the camera's skybox.
+    let sky_cube = opened
+        .sky_image()
+        .map(|_| images.add(bevy_vbim::sky_cube_image(64)));
     let stream: Handle<VbimStream> = assets.load(name.to_string());
     let mut p = VbimPlayback::new(stream, lightmap.clone());
-    p.sky = sky.clone();
+    p.sky_cube = sky_cube.clone();
     p.paused = a.paused;
     if let Some(w) = &a.weather {
         if !opened.weathers().contains(w) {
@@ -349,25 +302,6 @@ fn setup(
         })),
         Transform::from_xyz(0.0, y + 0.06, 0.0),
     ));
-    if let Some(sky) = sky {
-        // The sky in the lightmap's units, as light: a texel of 1 is `lux_per_unit` nits, so
-        // the dome and the ground it lights share one exposure.
-        let k = lux_per_unit(SUN_LUX);
-        commands.spawn((
-            Mesh3d(meshes.add(sky_dome(12.0))),
-            MeshMaterial3d(materials.add(StandardMaterial {
-                base_color: Color::BLACK,
-                reflectance: 0.0,
-                emissive: LinearRgba::rgb(k, k, k),
-                emissive_texture: Some(sky),
-                // In nits, under the camera's exposure as the lit terrain is.
-                emissive_exposure_weight: 1.0,
-                double_sided: true,
-                cull_mode: None,
-                ..default()
-            })),
-        ));
-    }
     commands.spawn((
         Sun,
         DirectionalLight {
@@ -394,6 +328,14 @@ fn setup(
     ));
     if a.atmosphere {
         camera.insert(AtmosphereSettings::default());
+    } else if let Some(cube) = sky_cube {
+        // The sky in the lightmap's units: a texel of 1 is `lux_per_unit` nits, so the sky
+        // and the ground it lights share the camera's exposure.
+        camera.insert(Skybox {
+            image: Some(cube),
+            brightness: lux_per_unit(SUN_LUX),
+            ..default()
+        });
     }
     commands.insert_resource(Day {
         playback,

@@ -13,7 +13,10 @@ use bevy::asset::io::{AssetSourceId, Reader};
 use bevy::asset::{Asset, AssetLoader, LoadContext, RenderAssetUsages};
 use bevy::image::{Image, ImageSampler};
 use bevy::reflect::TypePath;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+use bevy::render::render_resource::{
+    Extent3d, TextureDimension, TextureFormat, TextureUsages, TextureViewDescriptor,
+    TextureViewDimension,
+};
 use vbim_format::{Header, Reader as StreamReader};
 
 /// A `.vbim` stream or a package of weathers: the (first weather's) lightmap header,
@@ -177,6 +180,34 @@ pub fn lightmap_image(width: u32, height: u32) -> Image {
         | TextureUsages::TEXTURE_BINDING
         | TextureUsages::COPY_SRC
         | TextureUsages::COPY_DST;
+    image.sampler = ImageSampler::linear();
+    image
+}
+
+/// A cube map of `size`² faces for a package's sky ([`VbimPlayback::sky_cube`]):
+/// `Rgba16Float`, linear, viewed as a cube (Bevy's `Skybox` samples it as it is), with the
+/// usages the player needs to write it. Its faces look along (east, up, north) in the
+/// bake's frame, which is Bevy's world with x east, y up and z south (the terrain
+/// example's): the skybox's own z flip puts north at −z. 64 is plenty for a 128 × 32 sky.
+///
+/// [`VbimPlayback::sky_cube`]: crate::VbimPlayback::sky_cube
+pub fn sky_cube_image(size: u32) -> Image {
+    let mut image = Image::new_uninit(
+        Extent3d {
+            width: size,
+            height: size,
+            depth_or_array_layers: 6,
+        },
+        TextureDimension::D2,
+        TextureFormat::Rgba16Float,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.texture_descriptor.usage =
+        TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC;
+    image.texture_view_descriptor = Some(TextureViewDescriptor {
+        dimension: Some(TextureViewDimension::Cube),
+        ..Default::default()
+    });
     image.sampler = ImageSampler::linear();
     image
 }

@@ -60,7 +60,7 @@ use bevy::ecs::prelude::*;
 use bevy::render::renderer::{RenderGraph, RenderGraphSystems};
 use bevy::render::{ExtractSchedule, Render, RenderApp, RenderSystems};
 
-pub use asset::{lightmap_image, StreamError, VbimStream};
+pub use asset::{lightmap_image, sky_cube_image, StreamError, VbimStream};
 pub use playback::{VbimEvent, VbimEventKind, VbimPlayback, VbimStats};
 pub use units::{bake_sky, lux_per_unit, sky_light, sun_light, BEVY_AMBIENT_DIFFUSE};
 pub use vbim_player::{FrameState, Policy, Stall, SwitchMode, Throttle, Totals};

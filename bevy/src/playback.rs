@@ -46,6 +46,13 @@ pub struct VbimPlayback {
     /// The image a package's sky track plays into ([`VbimStream::sky_image`]); `None`:
     /// the sky is not written.
     pub sky: Option<Handle<Image>>,
+    /// A cube map the sky is resampled into every frame ([`sky_cube_image`]), for Bevy's
+    /// `Skybox` (its `brightness`: [`lux_per_unit`]`(SUN_LUX)`, the sky being in the
+    /// lightmap's units) or a generated environment map; `None`: no cube is written.
+    ///
+    /// [`sky_cube_image`]: crate::sky_cube_image
+    /// [`lux_per_unit`]: crate::lux_per_unit
+    pub sky_cube: Option<Handle<Image>>,
     /// The weather to show (a package's weather name; `None`: its first). Changing it
     /// switches weather: the new weather's tracks start reading at once and, when they show
     /// the shown time, lightmap and sky cross-fade over [`fade`](VbimPlayback::fade).
@@ -75,6 +82,7 @@ impl VbimPlayback {
             throttle: Throttle::UNLIMITED,
             catch_up: Duration::from_millis(500),
             sky: None,
+            sky_cube: None,
             weather: None,
             fade: Duration::from_secs(2),
             switch_mode: SwitchMode::Live,

@@ -29,6 +29,7 @@ pub(crate) struct Extracted {
     stream: Option<(Arc<PathBuf>, Header)>,
     target: AssetId<Image>,
     sky: Option<AssetId<Image>>,
+    sky_cube: Option<AssetId<Image>>,
     weather: Option<String>,
     fade_ns: u64,
     switch_mode: SwitchMode,
@@ -49,6 +50,7 @@ struct Slot {
     player: Option<Mutex<PackagePlayer>>,
     texture: Option<TextureId>,
     sky_texture: Option<TextureId>,
+    cube_texture: Option<TextureId>,
     /// The weather last asked for.
     weather: Option<String>,
     clock_ns: u64,
@@ -98,6 +100,7 @@ pub(crate) fn extract_playbacks(
                 stream,
                 target: p.target.id(),
                 sky: p.sky.as_ref().map(|s| s.id()),
+                sky_cube: p.sky_cube.as_ref().map(|s| s.id()),
                 weather: p.weather.clone(),
                 fade_ns: p.fade.as_nanos().min(u64::MAX as u128) as u64,
                 switch_mode: p.switch_mode,
@@ -167,6 +170,18 @@ pub(crate) fn prepare_players(
             }
             slot.texture = Some(image.texture.id());
             slot.sky_texture = sky_id;
+        }
+        let cube = want.sky_cube.and_then(|c| images.get(c));
+        let cube_id = cube.map(|c| c.texture.id());
+        if slot.cube_texture != cube_id {
+            if let Err(e) = player.set_sky_cube(cube.map(|c| &*c.texture)) {
+                let _ = players
+                    .reports
+                    .send((*entity, Report::Failed(e.to_string())));
+                slot.player = None;
+                continue;
+            }
+            slot.cube_texture = cube_id;
         }
         // Applies from the next switch on.
         player.set_switch_mode(want.switch_mode);
@@ -252,6 +267,7 @@ fn open(
         player,
         texture: None,
         sky_texture: None,
+        cube_texture: None,
         weather: want.weather.clone(),
         // The day starts when it can first be shown.
         clock_ns: want.clock_ns,

@@ -381,6 +381,43 @@ fn a_damaged_chunk_raises_damaged_naming_it_and_playback_goes_on() {
     assert!(app.world().get::<VbimStats>(e).unwrap().totals.frames >= before + 10);
 }
 
+/// The sky's cube map (`VbimPlayback::sky_cube`, for a `Skybox`): every texel of every
+/// face is the sky image resampled along the texel's direction
+/// (`vbim_player::sky_cube_texel`), within the half float's rounding.
+fn check_cube(app: &App, (sky, cube): (&Handle<Image>, &Handle<Image>), what: &str) {
+    use bevy::render::render_asset::RenderAssets;
+    use bevy::render::renderer::{RenderDevice, RenderQueue};
+    use bevy::render::texture::GpuImage;
+    let sky = read_image(app, sky);
+    let world = app.sub_app(bevy::render::RenderApp).world();
+    let gpu = world
+        .resource::<RenderAssets<GpuImage>>()
+        .get(cube.id())
+        .unwrap();
+    let (device, queue) = (
+        world.resource::<RenderDevice>(),
+        world.resource::<RenderQueue>(),
+    );
+    let n = gpu.texture.width();
+    for face in 0..6 {
+        let raw =
+            vbim_player::read_texture_layer(device.wgpu_device(), &queue.0, &gpu.texture, 8, face);
+        for y in 0..n {
+            for x in 0..n {
+                let want = vbim_player::sky_cube_texel(&sky, (16, 4), face, (x, y), n);
+                for (c, want) in want.iter().enumerate() {
+                    let at = (((y * n + x) * 4) as usize + c) * 2;
+                    let got = half::f16::from_le_bytes([raw[at], raw[at + 1]]).to_f32();
+                    assert!(
+                        (got - want).abs() <= 1.1 * 2f32.powi(-10) * want.abs() + 1e-6,
+                        "{what}: cube face {face} texel ({x}, {y}) channel {c}: {got} against {want}"
+                    );
+                }
+            }
+        }
+    }
+}
+
 /// A package of two weathers plays in Bevy: the lightmap and the sky go into the app's two
 /// images and match their tracks' reference decoders; changing the component's weather
 /// cross-fades to the other weather, raises `WeatherChanged`, and the images then match the
@@ -418,8 +455,10 @@ fn a_package_plays_its_sky_and_switches_weather_from_the_component() {
     let mut images = world.resource_mut::<Assets<Image>>();
     let lightmap = images.add(lightmap_image(24, 16));
     let sky = images.add(opened.sky_image().unwrap());
+    let cube = images.add(bevy_vbim::sky_cube_image(8));
     let mut p = VbimPlayback::new(stream, lightmap.clone());
     p.sky = Some(sky.clone());
+    p.sky_cube = Some(cube.clone());
     p.policy = Policy::Wait;
     let e = world.spawn(p).id();
     let decoder =
@@ -452,6 +491,7 @@ fn a_package_plays_its_sky_and_switches_weather_from_the_component() {
     }
     set_paused(&mut app, &streams(0), true);
     check_paused(&mut app, &mut streams(0), "clear, paused");
+    check_cube(&app, (&sky, &cube), "clear, paused");
     assert_eq!(stats(&app, e).weather, "clear");
 
     set_paused(&mut app, &streams(0), false);
@@ -475,6 +515,7 @@ fn a_package_plays_its_sky_and_switches_weather_from_the_component() {
     }
     set_paused(&mut app, &streams(1), true);
     check_paused(&mut app, &mut streams(1), "overcast, after the switch");
+    check_cube(&app, (&sky, &cube), "overcast, after the switch");
 
     // An unknown weather is refused and the weather shown stays.
     app.world_mut()

@@ -69,10 +69,11 @@ pub use gpu::{
     headless_device, headless_device_on, lightmap_descriptor, DeviceError, Headless, OutputError,
 };
 pub use package::{
-    PackageFile, PackagePlayer, PackageRecord, SwitchMode, SwitchRecord, TrackInfo, TrackKind,
+    sky_cube_texel, PackageFile, PackagePlayer, PackageRecord, SwitchMode, SwitchRecord, TrackInfo,
+    TrackKind,
 };
 pub use player::Player;
-pub use readback::read_texture;
+pub use readback::{read_texture, read_texture_layer};
 pub use record::{Frame, FrameRecord, FrameState, Totals};
 pub use shape::{DecodeShape, PassWeights};
 pub use stats::{frames_csv, Summary};
@@ -140,6 +141,9 @@ pub enum PlayerError {
         /// What is wrong.
         reason: String,
     },
+    /// A texture given to [`PackagePlayer::set_sky_cube`] that cannot hold the sky's cube.
+    #[error("{0}")]
+    SkyCube(String),
     /// A package's track that the player refuses.
     #[error("{}: {source}", path.display())]
     Track {

@@ -44,7 +44,7 @@ pub fn read_texture(
 }
 
 /// [`read_texture`] for one layer of an array texture.
-pub(crate) fn read_texture_layer(
+pub fn read_texture_layer(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     texture: &wgpu::Texture,

@@ -541,3 +541,79 @@ fn tracks_stay_in_step_through_stalls_seeks_and_100_hours_and_damage_stops_no_ot
         "the lightmap played on: {exact} exact frames of 200"
     );
 }
+
+/// The sky as a cube map (`set_sky_cube`): every texel of every face is the sky output
+/// sampled along the texel's direction, read as (east, up, north) with the azimuth
+/// clockwise from north, bilinear between texel centres and the horizon's row below the
+/// horizon; through a weather switch too. What cannot hold a cube, or a package without a
+/// sky, is refused.
+#[test]
+fn the_sky_resampled_into_a_cube_follows_each_texels_direction() {
+    let (device, queue) = device();
+    let fx = fixture();
+    let pkg = fx.dir.path().join("day.vbimpkg");
+    let mut p = PackagePlayer::open(&device, &queue, &pkg, None, inline()).unwrap();
+    let n = 12;
+    let cube_texture = |layers: u32| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("test cube"),
+            size: wgpu::Extent3d {
+                width: n,
+                height: n,
+                depth_or_array_layers: layers,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        })
+    };
+    let e = p.set_sky_cube(Some(&cube_texture(4))).unwrap_err();
+    assert!(e.to_string().contains("6 layers"), "{e}");
+    let cube = cube_texture(6);
+    p.set_sky_cube(Some(&cube)).unwrap();
+    let check = |p: &PackagePlayer, what: &str| {
+        let sky = p.read_sky().unwrap();
+        for face in 0..6 {
+            let raw = vbim_player::read_texture_layer(&device, &queue, &cube, 8, face);
+            let texels: &[half::f16] = bytemuck::cast_slice(&raw);
+            for y in 0..n {
+                for x in 0..n {
+                    let want = vbim_player::sky_cube_texel(&sky, (16, 4), face, (x, y), n);
+                    for (ch, want) in want.iter().enumerate() {
+                        let got = texels[((y * n + x) * 4) as usize + ch].to_f32();
+                        assert!(
+                            (got - want).abs() <= 1.1 * 2f32.powi(-10) * want.abs() + 1e-6,
+                            "{what}: face {face} texel ({x}, {y}) channel {ch}: {got} against {want}"
+                        );
+                    }
+                }
+            }
+        }
+    };
+    for _ in 0..12 {
+        p.advance(DISPLAY);
+    }
+    check(&p, "clear");
+    p.switch_weather("overcast", 2 * DISPLAY).unwrap();
+    for _ in 0..40 {
+        p.advance(DISPLAY);
+    }
+    assert_eq!(p.weather(), "overcast");
+    check(&p, "overcast, after a switch");
+    // A plain file has no sky to put in a cube.
+    let mut plain = PackagePlayer::open(
+        &device,
+        &queue,
+        &fx.dir.path().join("clear.vbim"),
+        None,
+        inline(),
+    )
+    .unwrap();
+    let e = plain.set_sky_cube(Some(&cube)).unwrap_err();
+    assert!(e.to_string().contains("no sky"), "{e}");
+}

@@ -14,6 +14,8 @@
 //! ([`SwitchMode::Held`], `held.rs`) closes the shown weather at once instead and fades
 //! from its last image.
 
+mod cube;
+pub use cube::sky_cube_texel;
 mod fade;
 mod file;
 mod held;
@@ -117,6 +119,8 @@ pub struct PackagePlayer {
     held: Option<Held>,
     /// The media time the last frame showed (frames), which a held switch holds.
     last_shown: f64,
+    /// The sky resampled into the caller's cube map every frame.
+    cube: Option<cube::SkyCube>,
 }
 
 fn output(device: &wgpu::Device, h: &Header) -> (wgpu::Texture, wgpu::TextureView) {
@@ -181,6 +185,7 @@ impl PackagePlayer {
             mode: SwitchMode::Live,
             held: None,
             last_shown: 0.0,
+            cube: None,
         })
     }
 
@@ -252,6 +257,9 @@ impl PackagePlayer {
         if let (Some(t), Some(p)) = (sky, self.shown.sky.as_mut()) {
             p.set_output(Some(t))?;
             self.sky = Some((t.clone(), t.create_view(&Default::default())));
+            if let (Some(c), Some((_, v))) = (self.cube.as_mut(), &self.sky) {
+                c.bind(&self.device, v);
+            }
         }
         Ok(())
     }
@@ -477,11 +485,39 @@ impl PackagePlayer {
             // textures stay alive while this frame's commands need them.
             self.finish_switch();
         }
+        if let Some(c) = &self.cube {
+            // The sky output is complete: the tracks, the fade and the held image wrote it.
+            c.record(enc);
+        }
         PackageRecord {
             lightmap,
             sky,
             switch: record,
         }
+    }
+
+    /// Resamples the sky into `cube` every frame from now on (or stops with `None`): a
+    /// cube map's texture (a square `Rgba16Float` 2D texture of 6 layers, with
+    /// `STORAGE_BINDING` and `TEXTURE_BINDING`; 64² is plenty for a 128 × 32 sky), for
+    /// skyboxes and environment maps. Its faces are in WebGPU's order and its directions
+    /// are (east, up, north): a renderer whose world has x east, y up and z south samples
+    /// it at (x, y, −z), as Bevy's `Skybox` does. Below the horizon each direction has the
+    /// horizon's radiance at its azimuth. A package without sky tracks refuses it.
+    pub fn set_sky_cube(&mut self, cube: Option<&wgpu::Texture>) -> Result<(), PlayerError> {
+        let Some(cube) = cube else {
+            self.cube = None;
+            return Ok(());
+        };
+        let Some((_, sky)) = &self.sky else {
+            return Err(PlayerError::SkyCube(format!(
+                "{}: no sky tracks to put in a cube",
+                self.file.path.display()
+            )));
+        };
+        let mut c = cube::SkyCube::new(&self.device, cube)?;
+        c.bind(&self.device, sky);
+        self.cube = Some(c);
+        Ok(())
     }
 
     /// Opens weather `name`'s tracks and joins them to the timeline at the shown
