@@ -26,16 +26,6 @@ struct Uniform {
 
 impl FadePass {
     pub fn new(device: &wgpu::Device) -> FadePass {
-        let texture = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("vbim fade"),
             entries: &[
@@ -49,18 +39,9 @@ impl FadePass {
                     },
                     count: None,
                 },
-                texture(1),
-                texture(2),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::Rgba16Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
-                },
+                super::read_entry(1),
+                super::read_entry(2),
+                super::write_entry(3, wgpu::TextureViewDimension::D2),
             ],
         });
         let pipeline = crate::gpu::compute_pipeline(
