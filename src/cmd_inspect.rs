@@ -127,7 +127,7 @@ pub fn run(a: InspectArgs) -> Result<(), String> {
                 "keyframes": h.keyframe_count, "intra_interval_frames": h.intra_interval,
                 "chunks": h.chunk_count, "file_size": h.file_size,
                 "largest_payload": h.largest_payload,
-                "read_ahead": h.read_ahead.iter().map(|p| json!({"rate_bytes_per_s": p.rate, "bytes": p.bytes, "preroll_s": p.preroll_ns as f64 * 1e-9})).collect::<Vec<_>>(),
+                "read_ahead": read_ahead_json(&h.read_ahead),
             },
             "chunks": chunks,
             "model": {
@@ -362,6 +362,14 @@ fn coding_name(h: &vbim_format::Header) -> &'static str {
     }
 }
 
+/// A buffer model's points as `--json` gives them (a file's, or a set of tracks').
+fn read_ahead_json(points: &[vbim_format::ReadAhead]) -> serde_json::Value {
+    points
+        .iter()
+        .map(|p| json!({"rate_bytes_per_s": p.rate, "bytes": p.bytes, "preroll_s": p.preroll_ns as f64 * 1e-9}))
+        .collect()
+}
+
 /// What a package's player reads at once, from its tracks' buffer models: each weather's
 /// tracks alone (outside a switch), and the two weathers of the switch that reads the most
 /// (from a switch to the end of its fade).
@@ -428,7 +436,7 @@ fn package(a: &InspectArgs) -> Result<(), String> {
             "tracks": tracks, "bytes": total, "damaged": damaged,
             "read_sets": sets.iter().map(|(what, pts)| json!({
                 "tracks_of": what,
-                "read_ahead": pts.iter().map(|p| json!({"rate_bytes_per_s": p.rate, "bytes": p.bytes, "preroll_s": p.preroll_ns as f64 * 1e-9})).collect::<Vec<_>>(),
+                "read_ahead": read_ahead_json(pts),
             })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&j).unwrap());
