@@ -23,7 +23,7 @@
 // blocks [lo, hi): each part parses the whole stream and keeps the blocks in its range.
 
 // The DCT tables (blocks.wgsl), in the address space `TABLES` the adapter reads fastest
-// (resources.rs, `TablesIn`).
+// (layouts.rs, `TablesIn`).
 @group(0) @binding(1) var<TABLES> tables: Tables;
 // A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;

@@ -54,7 +54,7 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> p: Params;
 // The DCT tables (blocks.wgsl), in the address space `TABLES` the adapter reads fastest
-// (resources.rs, `TablesIn`).
+// (layouts.rs, `TablesIn`).
 @group(0) @binding(13) var<TABLES> tables: Tables;
 // The head keyframe K_{s+1} (`channels` R32Float layers), read until the decode of the next
 // segment has packed it into 16 bits, and the bubble sets' blocks: per block of 8 × 8

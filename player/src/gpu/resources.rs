@@ -529,7 +529,7 @@ pub(super) fn slice_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
 }
 
 /// The DCT basis and the zig-zag order, from the reference decoder's own tables
-/// (`Tables` in blocks.wgsl), in a uniform buffer.
+/// (`Tables` in blocks.wgsl), in a uniform or a storage buffer (`tables_in`).
 fn dct_tables(device: &wgpu::Device, tables_in: TablesIn) -> wgpu::Buffer {
     let mut t = Tables {
         basis: [0.0; 64],

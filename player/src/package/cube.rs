@@ -11,13 +11,17 @@ pub(crate) struct SkyCube {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     cube: wgpu::Texture,
-    group: Option<wgpu::BindGroup>,
+    group: wgpu::BindGroup,
 }
 
 impl SkyCube {
-    /// The pass writing into `cube`: a square `Rgba16Float` 2D texture of 6 layers (a cube
-    /// map's storage) with storage and sampling usages.
-    pub fn new(device: &wgpu::Device, cube: &wgpu::Texture) -> Result<SkyCube, PlayerError> {
+    /// The pass from `sky` (the package's sky output) into `cube`: a square `Rgba16Float`
+    /// 2D texture of 6 layers (a cube map's storage) with storage and sampling usages.
+    pub fn new(
+        device: &wgpu::Device,
+        sky: &wgpu::TextureView,
+        cube: &wgpu::Texture,
+    ) -> Result<SkyCube, PlayerError> {
         use wgpu::TextureUsages as U;
         let size = cube.size();
         if cube.format() != wgpu::TextureFormat::Rgba16Float
@@ -54,50 +58,58 @@ impl SkyCube {
             &layout,
             "main",
         );
+        let group = group(device, &layout, sky, cube);
         Ok(SkyCube {
             pipeline,
             layout,
             cube: cube.clone(),
-            group: None,
+            group,
         })
     }
 
-    /// Reads the sky from `sky` (the package's sky output) from now on.
+    /// Reads the sky from `sky` (a new sky output) from now on.
     pub fn bind(&mut self, device: &wgpu::Device, sky: &wgpu::TextureView) {
-        let cube = self.cube.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        });
-        self.group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vbim sky cube"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(sky),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&cube),
-                },
-            ],
-        }));
+        self.group = group(device, &self.layout, sky, &self.cube);
     }
 
     /// Records the pass (after everything that writes the sky output this frame).
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let Some(group) = &self.group else {
-            return;
-        };
         let n = self.cube.width();
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("vbim sky cube"),
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, group, &[]);
+        pass.set_bind_group(0, &self.group, &[]);
         pass.dispatch_workgroups(n.div_ceil(8), n.div_ceil(8), 6);
     }
+}
+
+/// The pass's bind group: `sky` read, `cube`'s six layers written.
+fn group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    sky: &wgpu::TextureView,
+    cube: &wgpu::Texture,
+) -> wgpu::BindGroup {
+    let faces = cube.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("vbim sky cube"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(sky),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&faces),
+            },
+        ],
+    })
 }
 
 /// What texel (`x`, `y`) of face `face` of an `n`² sky cube holds, from `sky` (the sky

@@ -514,9 +514,7 @@ impl PackagePlayer {
                 self.file.path.display()
             )));
         };
-        let mut c = cube::SkyCube::new(&self.device, cube)?;
-        c.bind(&self.device, sky);
-        self.cube = Some(c);
+        self.cube = Some(cube::SkyCube::new(&self.device, sky, cube)?);
         Ok(())
     }
 
