@@ -44,10 +44,20 @@ pub fn run(a: BakeArgs) -> Result<(), String> {
         s.lighting_s,
         s.writing_s
     );
+    if s.weathers.iter().any(|w| w.irradiance_manifest.is_some()) {
+        println!(
+            "light for objects ({0}² cells, {1} m above the ground): {2:.2} s of it \
+             (its horizons, then every frame's grid, written)",
+            scene.objects.cells, scene.objects.height_m, s.objects_s
+        );
+    }
     println!(
         "manifest: {}\ncontact sheet: {}",
         s.manifest.display(),
         s.contact_sheet.display()
     );
+    if let Some(p) = &s.package {
+        println!("package of folders: {}", p.display());
+    }
     Ok(())
 }

@@ -310,18 +310,11 @@ fn tracks_of(
     let coded = baked.coded_as(name);
     let mut jobs = Vec::new();
     for (w, c) in baked.weathers.iter().zip(&coded.weathers) {
-        let weather = Some(w.name.clone());
-        jobs.push(TrackJob {
-            weather: weather.clone(),
-            kind: "lightmap",
-            input: frames.join(&w.lightmap),
-            out: out.join(&c.lightmap),
-        });
-        if let (Some(sky), Some(file)) = (&w.sky, &c.sky) {
+        for ((kind, input), (_, file)) in w.tracks().zip(c.tracks()) {
             jobs.push(TrackJob {
-                weather,
-                kind: "sky",
-                input: frames.join(sky),
+                weather: Some(w.name.clone()),
+                kind,
+                input: frames.join(input),
                 out: out.join(file),
             });
         }
@@ -339,8 +332,9 @@ fn weathers_md(
         return String::new();
     }
     let mut md = String::from(
-        "## Weathers\n\nEach weather is a lightmap track and a sky track (a 128 × 32 map of the \
-         upper hemisphere) on one timeline, tied by the package file.\n\n\
+        "## Weathers\n\nEach weather is a lightmap track, a sky track (a 128 × 32 map of the \
+         upper hemisphere) and an irradiance track (light for objects: a grid of cells in 10 \
+         layers) on one timeline, tied by the package file.\n\n\
          | weather | track | size | bytes | mean PSNR | worst frame |\n|---|---|---|---:|---:|---:|\n",
     );
     for (j, _, r) in tracks {

@@ -1,6 +1,7 @@
 //! `vbim encode INPUT --out FILE.vbim`, or a bake with weathers into a package:
 //! `vbim encode BAKE --out DAY.vbimpkg` (each weather's lightmap and sky track coded with
-//! the same settings into `DAY-NAME.vbim` and `DAY-NAME-sky.vbim` beside it).
+//! the same settings into `DAY-NAME.vbim`, `DAY-NAME-sky.vbim` and
+//! `DAY-NAME-irradiance.vbim` beside it).
 
 use std::path::{Path, PathBuf};
 
@@ -58,9 +59,8 @@ fn encode_package(a: &EncodeArgs, bake_package: &Path) -> Result<(), String> {
     };
     let package = baked.coded_as(stem);
     for (w, coded) in baked.weathers.iter().zip(&package.weathers) {
-        encode_one(a, &input(&w.lightmap)?, &dir.join(&coded.lightmap))?;
-        if let (Some(sky), Some(file)) = (&w.sky, &coded.sky) {
-            encode_one(a, &input(sky)?, &dir.join(file))?;
+        for ((_, frames), (_, file)) in w.tracks().zip(coded.tracks()) {
+            encode_one(a, &input(frames)?, &dir.join(file))?;
         }
     }
     vbim_files::write_text(&a.out, &package.to_json())

@@ -458,10 +458,10 @@ fn package(a: &InspectArgs) -> Result<(), String> {
             h.frame_count as f64 / h.fps(),
             if h.looping { ", looping" } else { "" }
         );
-        println!("  weather     track     size        bytes  file");
+        println!("  weather     track       size        bytes  file");
         for t in &p.tracks {
             println!(
-                "  {:<11} {:<8} {:>4}×{:<5} {:>10}  {}",
+                "  {:<11} {:<10} {:>4}×{:<5} {:>10}  {}",
                 t.weather,
                 t.kind.name(),
                 t.header.width,

@@ -931,15 +931,19 @@ fn a_bake_of_weathers_becomes_a_package_that_plays_and_switches() {
         "{out}"
     );
     assert!(dir.path().join("day-broken-sky.vbim").exists());
+    assert!(dir.path().join("day-broken-irradiance.vbim").exists());
     let out = ok(&["inspect", s(&pkg)]);
     assert!(
-        out.contains("3 weather(s), 6 track(s)") && out.contains("128×32"),
+        out.contains("3 weather(s), 9 track(s)")
+            && out.contains("128×32")
+            && out.contains("irradiance  160×64"),
         "{out}"
     );
     assert!(out.contains("every track's chunks ok"), "{out}");
     let j: serde_json::Value = serde_json::from_str(&ok(&["inspect", s(&pkg), "--json"])).unwrap();
-    assert_eq!(j["tracks"].as_array().unwrap().len(), 6);
+    assert_eq!(j["tracks"].as_array().unwrap().len(), 9);
     assert_eq!(j["tracks"][1]["kind"], "sky");
+    assert_eq!(j["tracks"][2]["kind"], "irradiance");
     // What a player reads: each weather's tracks side by side, and the heaviest switch's
     // two weathers; at each point the sum of the tracks' own rates and rings.
     let sets = j["read_sets"].as_array().unwrap();
@@ -948,12 +952,14 @@ fn a_bake_of_weathers_becomes_a_package_that_plays_and_switches() {
         set["read_ahead"][i]["rate_bytes_per_s"].as_u64().unwrap()
     };
     let clear_rates = |i: usize| -> u64 {
-        let headers: Vec<serde_json::Value> = ["day-clear.vbim", "day-clear-sky.vbim"]
-            .iter()
-            .map(|f| {
-                serde_json::from_str(&ok(&["inspect", s(&dir.path().join(f)), "--json"])).unwrap()
-            })
-            .collect();
+        let headers: Vec<serde_json::Value> = [
+            "day-clear.vbim",
+            "day-clear-sky.vbim",
+            "day-clear-irradiance.vbim",
+        ]
+        .iter()
+        .map(|f| serde_json::from_str(&ok(&["inspect", s(&dir.path().join(f)), "--json"])).unwrap())
+        .collect();
         headers
             .iter()
             .map(|h| {

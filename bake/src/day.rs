@@ -10,6 +10,7 @@ use vbim_format::package::{Package, WeatherTracks, PACKAGE_VERSION};
 
 use crate::error::out_err;
 use crate::light::WeatherLight;
+use crate::objects::{self, ObjectGrid};
 use crate::scene::WeatherParams;
 use crate::{cache, detail, light, manifest, output, sky_track, BakeError};
 use crate::{FrameFormat, FrameInfo, HeightField, Manifest, Precomputed, Progress, Scene};
@@ -30,6 +31,9 @@ pub struct BakeSummary {
     pub cache_hit: bool,
     pub lighting_s: f64,
     pub writing_s: f64,
+    /// Of which the irradiance tracks (light for objects): the grid's horizons and every
+    /// frame's grid, wall-clock equivalent.
+    pub objects_s: f64,
     /// The day's manifest (the first weather's, for a scene with weathers).
     pub manifest: PathBuf,
     pub contact_sheet: PathBuf,
@@ -48,6 +52,9 @@ pub struct WeatherSummary {
     pub manifest: PathBuf,
     /// Its sky track's manifest (`OUT/NAME/sky/manifest.json`).
     pub sky_manifest: PathBuf,
+    /// Its irradiance track's manifest (`OUT/NAME/irradiance/manifest.json`), unless the
+    /// scene's `[objects]` is off.
+    pub irradiance_manifest: Option<PathBuf>,
 }
 
 /// Loads the scene's height field and resamples it to the bake's resolution.
@@ -105,6 +112,7 @@ pub fn bake(
         cache_hit,
         lighting_s: 0.0,
         writing_s: 0.0,
+        objects_s: 0.0,
         manifest: PathBuf::new(),
         contact_sheet: PathBuf::new(),
         weathers: Vec::new(),
@@ -123,7 +131,11 @@ pub fn bake(
         summary.add(day);
         return Ok(summary);
     }
-    // The horizon, sky and obscurance maps are shared; each weather lights its own day.
+    // The horizon, sky and obscurance maps are shared, and so is the objects' grid with its
+    // horizons; each weather lights its own day.
+    let t_grid = Instant::now();
+    let grid = scene.objects.enabled.then(|| ObjectGrid::new(&pre, scene));
+    summary.objects_s += t_grid.elapsed().as_secs_f64();
     for w in &scene.weathers {
         let dir = opts.out.join(&w.name);
         std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
@@ -132,7 +144,7 @@ pub fn bake(
         let day = bake_day(
             &pre,
             scene,
-            Some((w, &light)),
+            Some((w, &light, grid.as_ref())),
             &dir,
             opts.format,
             &stage,
@@ -151,6 +163,7 @@ pub fn bake(
             name: w.name.clone(),
             manifest: day.manifest.clone(),
             sky_manifest: sky,
+            irradiance_manifest: day.irradiance.clone(),
         });
         summary.add(day);
     }
@@ -165,6 +178,9 @@ pub fn bake(
                 name: w.name.clone(),
                 lightmap: w.name.clone(),
                 sky: Some(format!("{}/{}", w.name, sky_track::DIR)),
+                irradiance: grid
+                    .as_ref()
+                    .map(|_| format!("{}/{}", w.name, objects::DIR)),
             })
             .collect(),
     };
@@ -183,6 +199,9 @@ struct Day {
     contact_sheet: PathBuf,
     lighting_s: f64,
     writing_s: f64,
+    objects_s: f64,
+    /// The irradiance track's manifest, if the day has one.
+    irradiance: Option<PathBuf>,
 }
 
 impl BakeSummary {
@@ -193,21 +212,29 @@ impl BakeSummary {
         }
         self.lighting_s += day.lighting_s;
         self.writing_s += day.writing_s;
+        self.objects_s += day.objects_s;
     }
 }
 
 /// Lights every frame of the day under `weather` (or the scene's sector sky) into `dir`,
-/// with its manifest and contact sheet.
+/// with its manifest and contact sheet, and its irradiance track when the weather comes
+/// with the objects' grid.
 fn bake_day(
     pre: &Precomputed,
     scene: &Scene,
-    weather: Option<(&WeatherParams, &WeatherLight)>,
+    weather: Option<(&WeatherParams, &WeatherLight, Option<&ObjectGrid>)>,
     dir: &Path,
     format: FrameFormat,
     stage: &str,
     progress: Progress,
 ) -> Result<Day, BakeError> {
     let light = weather.map(|w| w.1);
+    let grid = weather.and_then(|w| w.2);
+    let grid_dir = dir.join(objects::DIR);
+    if grid.is_some() {
+        std::fs::create_dir_all(&grid_dir).map_err(|e| out_err(&grid_dir, e))?;
+    }
+    let objects_ns = std::sync::atomic::AtomicU64::new(0);
     let n = scene.frames;
     let texels = scene.size * scene.size;
     // The 8-bit export needs the exposure of the whole day before the first file: a first
@@ -250,6 +277,26 @@ fn bake_day(
                     tl.elapsed().as_nanos() as u64,
                     std::sync::atomic::Ordering::Relaxed,
                 );
+                if let Some(g) = grid {
+                    // What objects receive, from the lightmap just lit (its bounce).
+                    let to = Instant::now();
+                    let sun = light::sun_for_frame(scene, i);
+                    let frame = g.frame(pre, scene, light, &sun, i, buf);
+                    let (w, h) = vbim_format::irradiance::image_size(frame.nx, frame.ny);
+                    output::write_frame(
+                        &grid_dir.join(vbim_files::frame_name(i, FrameFormat::Exr)),
+                        w,
+                        h,
+                        &frame.to_image(),
+                        FrameFormat::Exr,
+                        None,
+                        None,
+                    )?;
+                    objects_ns.fetch_add(
+                        to.elapsed().as_nanos() as u64,
+                        std::sync::atomic::Ordering::Relaxed,
+                    );
+                }
                 let tw = Instant::now();
                 let path = dir.join(vbim_files::frame_name(i, format));
                 output::write_frame(
@@ -276,13 +323,17 @@ fn bake_day(
     let exposure = exposure.unwrap_or_else(|| exposure_from_max_greens(&greens));
     let threads = rayon::current_num_threads() as f64;
     let mut m = manifest::of_bake(scene, format, exposure, png16_scale, &infos);
-    if let Some((w, _)) = weather {
+    if let Some((w, _, _)) = weather {
         m.weather = Some(w.name.clone());
         m.sky = Some(sky_track::DIR.into());
     }
     let manifest = m
         .write(dir)
         .map_err(|e| out_err(&dir.join(Manifest::FILE_NAME), e))?;
+    let irradiance = match grid {
+        Some(g) => Some(write_grid_manifest(g, scene, &m, &grid_dir)?),
+        None => None,
+    };
     let contact_sheet = dir.join("contact_sheet.png");
     // The sheet is for people: expose so that the brightest frame's peak maps to x = 1
     // (mid-tone highlights), rather than the protocol's export exposure, which is set by the
@@ -296,5 +347,40 @@ fn bake_day(
         // Per-frame work summed over threads, divided by the threads: wall-clock equivalent.
         lighting_s: lighting_ns.into_inner() as f64 * 1e-9 / threads,
         writing_s: writing_ns.into_inner() as f64 * 1e-9 / threads,
+        objects_s: objects_ns.into_inner() as f64 * 1e-9 / threads,
+        irradiance,
     })
+}
+
+/// The irradiance track's manifest: the lightmap's timing, exposure and per-frame sun
+/// (the track plays in step with it and its errors are measured on the ground's display
+/// scale), the grid's frames and what they hold.
+fn write_grid_manifest(
+    grid: &ObjectGrid,
+    scene: &Scene,
+    day: &Manifest,
+    dir: &Path,
+) -> Result<PathBuf, BakeError> {
+    let info = grid.info(scene);
+    let (w, h) = vbim_format::irradiance::image_size(info.cells[0], info.cells[1]);
+    let manifest = Manifest {
+        width: w,
+        height: h,
+        format: Some(FrameFormat::Exr),
+        png16_scale: None,
+        units: "irradiance / π, linear RGB, in the lightmap's units, for objects on the \
+                terrain: 10 layers of cells (the sun at normal incidence, then sky and bounce \
+                at nine normals), vbim_format::irradiance"
+            .into(),
+        files: (0..scene.frames)
+            .map(|i| vbim_files::frame_name(i, FrameFormat::Exr))
+            .collect(),
+        track: Some("irradiance".into()),
+        sky: None,
+        irradiance_grid: Some(serde_json::to_value(&info).expect("a grid serialises")),
+        ..day.clone()
+    };
+    manifest
+        .write(dir)
+        .map_err(|e| out_err(&dir.join(Manifest::FILE_NAME), e))
 }

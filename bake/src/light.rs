@@ -179,6 +179,11 @@ pub fn light_with_sun(pre: &Precomputed, scene: &Scene, sun: &SunState, i: usize
 
 /// The sector sky of paper 001: a uniform dome with a glow on the sun's side per sector.
 fn sector_sky(scene: &Scene, sun: &SunState, azimuths: usize) -> SectorSky {
+    SectorSky::constant(sector_values(scene, sun, azimuths))
+}
+
+/// The sector sky's radiance / π per sector (for a horizon map of `azimuths` directions).
+pub(crate) fn sector_values(scene: &Scene, sun: &SunState, azimuths: usize) -> [[f32; 3]; SECTORS] {
     let sun_az = sun.dir[1].atan2(sun.dir[0]);
     let model = sky_model(scene);
     let base = model.base(sun.elevation);
@@ -190,7 +195,7 @@ fn sector_sky(scene: &Scene, sun: &SunState, azimuths: usize) -> SectorSky {
             l[c] = ((base[c] + glow[c] * w) / std::f64::consts::PI) as f32;
         }
     }
-    SectorSky::constant(sector)
+    sector
 }
 
 /// [`light_with_sun`] under `weather`'s sky (or the scene's sector sky for `None`).

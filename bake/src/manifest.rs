@@ -30,5 +30,6 @@ pub fn of_bake(
         track: None,
         weather: None,
         sky: None,
+        irradiance_grid: None,
     }
 }

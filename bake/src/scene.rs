@@ -49,6 +49,9 @@ pub struct Scene {
     /// How `vbim play --scene` shows the terrain (not used by the bake).
     #[serde(default)]
     pub view: ViewParams,
+    /// The irradiance track (light for objects on the terrain) of each weather.
+    #[serde(default)]
+    pub objects: ObjectParams,
     /// The weathers of the day (`[[weather]]` tables). With none, the bake lights one day
     /// under the sector sky of `[sky]` and the clouds of `[clouds]`; with some, it lights
     /// the day once per weather under its analytic sky and writes that sky beside it.
@@ -91,6 +94,29 @@ impl Default for ViewParams {
         ViewParams {
             vertical_exaggeration: 2.0,
             snow_line: 1.1,
+        }
+    }
+}
+
+/// The irradiance grid a bake with weathers writes beside each weather's lightmap
+/// (`docs/BAKE.md`, "Light for objects").
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObjectParams {
+    /// Whether a bake with weathers writes irradiance tracks.
+    pub enabled: bool,
+    /// Cells along each side of the map (4 to 128; 16 to 64 is the useful range; at most
+    /// one a texel: a smaller bake has as many cells as texels).
+    pub cells: usize,
+    /// The height above the ground the grid's points stand at, metres.
+    pub height_m: f64,
+}
+impl Default for ObjectParams {
+    fn default() -> Self {
+        ObjectParams {
+            enabled: true,
+            cells: 32,
+            height_m: 2.0,
         }
     }
 }
@@ -285,6 +311,13 @@ impl Scene {
                     w.name, w.turbidity
                 ));
             }
+        }
+        let o = &self.objects;
+        if !(4..=128).contains(&o.cells) {
+            return Err(format!("objects.cells = {} (4 to 128)", o.cells));
+        }
+        if !(0.0..=10_000.0).contains(&o.height_m) {
+            return Err(format!("objects.height_m = {} (0 to 10000)", o.height_m));
         }
         self.detail.validate()?;
         self.rate().map(|_| ())

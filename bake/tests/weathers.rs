@@ -151,7 +151,24 @@ fn a_bake_with_weathers_writes_a_day_and_a_sky_per_weather() {
                     || w.sky_manifest.parent().unwrap().join(f).exists()
             );
         }
+        // The light for objects: a grid of as many cells as texels here (24 < 32), in 10
+        // layers, on the day's timeline.
+        let grid_manifest = w.irradiance_manifest.as_ref().expect("an irradiance track");
+        let grid = Manifest::read(grid_manifest).unwrap();
+        assert_eq!(grid.track.as_deref(), Some("irradiance"));
+        assert_eq!((grid.width, grid.height), (5 * 24, 2 * 24));
+        assert_eq!((grid.frames, grid.per_frame.len()), (8, 8));
+        let info: vbim_format::irradiance::GridInfo =
+            serde_json::from_value(grid.irradiance_grid.clone().unwrap()).unwrap();
+        assert_eq!((info.cells, info.height_m), ([24, 24], 2.0));
+        for f in &grid.files {
+            assert!(grid_manifest.parent().unwrap().join(f).exists());
+        }
     }
+    assert_eq!(
+        package.weathers[1].irradiance.as_deref(),
+        Some("overcast/irradiance")
+    );
     // The zenith row of the clear sky's noon map against the dome.
     let light = WeatherLight::new(
         &vbim_bake::load_terrain(&scene).unwrap(),

@@ -148,9 +148,8 @@ fn small_day(scene_file: &Path) -> Result<PathBuf, String> {
         .and_then(|t| vbim_format::package::Package::parse(&t).map_err(|e| e.to_string()))?;
     let package = baked.coded_as(&stem);
     for (w, coded) in baked.weathers.iter().zip(&package.weathers) {
-        encode(&frames.join(&w.lightmap), &dir.join(&coded.lightmap))?;
-        if let (Some(sky), Some(file)) = (&w.sky, &coded.sky) {
-            encode(&frames.join(sky), &dir.join(file))?;
+        for ((_, input), (_, file)) in w.tracks().zip(coded.tracks()) {
+            encode(&frames.join(input), &dir.join(file))?;
         }
     }
     // The package last: it names only complete tracks.

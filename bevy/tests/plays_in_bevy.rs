@@ -443,6 +443,7 @@ fn a_package_plays_its_sky_and_switches_weather_from_the_component() {
                 name: n.into(),
                 lightmap: format!("{n}.vbim"),
                 sky: Some(format!("{n}-sky.vbim")),
+                irradiance: None,
             })
             .to_vec(),
     };

@@ -43,7 +43,8 @@ pub struct Manifest {
     /// Each frame's sun and sky.
     pub per_frame: Vec<FrameInfo>,
     /// What the frames are: absent for a lightmap, `"sky"` for a sky track (the sky's
-    /// radiance over the upper hemisphere, `docs/BAKE.md`).
+    /// radiance over the upper hemisphere, `docs/BAKE.md`), `"irradiance"` for light for
+    /// objects.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub track: Option<String>,
     /// The weather the frames belong to, for a bake with weathers.
@@ -52,6 +53,10 @@ pub struct Manifest {
     /// A lightmap's sky track: its folder, relative to this manifest's.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sky: Option<String>,
+    /// An irradiance track's grid (`vbim_format::irradiance::GridInfo`: cells, height
+    /// above the ground, albedo).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub irradiance_grid: Option<serde_json::Value>,
 }
 
 impl Manifest {

@@ -15,7 +15,8 @@
 //!   ([`metrics`]), and the CPU reference decoder ([`decode`]) that the GPU reconstruction
 //!   is tested against.
 //! - **Packages** ([`package`]): several files on one timeline (weathers, each a lightmap
-//!   and a sky track), tied by a small JSON file that this module parses and checks.
+//!   and a sky track), tied by a small JSON file that this module parses and checks;
+//!   [`irradiance`] defines what an irradiance track's frames mean (light for objects).
 //! - **Format 2's coefficient coding**, not yet used by any chunk: [`ans`] (rANS with
 //!   static 12-bit probabilities over 16-bit words, hybrid-uint tokens, histograms) and
 //!   [`plane2`] (a chunk's planes in rANS lanes and four passes a GPU can run).
@@ -44,6 +45,7 @@ pub mod fuzz;
 mod head;
 mod header;
 pub mod index;
+pub mod irradiance;
 pub mod limits;
 mod memory;
 pub mod metrics;

@@ -43,6 +43,20 @@ pub struct WeatherTracks {
     /// The sky track, if the weather has one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sky: Option<String>,
+    /// The irradiance track (light for objects, [`crate::irradiance`]), if it has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub irradiance: Option<String>,
+}
+
+impl WeatherTracks {
+    /// The weather's tracks as (kind, path): `"lightmap"`, then `"sky"` and `"irradiance"`
+    /// where it has them. A bake's package and the package [`Package::coded_as`] makes of
+    /// it give the same kinds in the same order.
+    pub fn tracks(&self) -> impl Iterator<Item = (&'static str, &str)> {
+        std::iter::once(("lightmap", self.lightmap.as_str()))
+            .chain(self.sky.as_deref().map(|p| ("sky", p)))
+            .chain(self.irradiance.as_deref().map(|p| ("irradiance", p)))
+    }
 }
 
 /// What is wrong with a package's text.
@@ -90,6 +104,7 @@ impl Package {
                 name: SINGLE_WEATHER.into(),
                 lightmap: file_name.into(),
                 sky: None,
+                irradiance: None,
             }],
         }
     }
@@ -133,7 +148,10 @@ impl Package {
                     w.name
                 )));
             }
-            for path in std::iter::once(&w.lightmap).chain(&w.sky) {
+            for path in std::iter::once(&w.lightmap)
+                .chain(&w.sky)
+                .chain(&w.irradiance)
+            {
                 if !valid_track_path(path) {
                     return Err(PackageError::Invalid(format!(
                         "weather {:?}: track path {path:?} (a relative path inside the \
@@ -153,7 +171,8 @@ impl Package {
 
     /// The package of coded tracks that this one's tracks (a bake's folders of frames)
     /// become when each is coded into a file beside a package called `stem`.vbimpkg:
-    /// weather NAME's lightmap in `stem-NAME.vbim`, its sky in `stem-NAME-sky.vbim`. Every
+    /// weather NAME's lightmap in `stem-NAME.vbim`, its sky in `stem-NAME-sky.vbim`, its
+    /// irradiance in `stem-NAME-irradiance.vbim`. Every
     /// tool that codes a bake of weathers (`vbim encode`, `vbim demo`, the Bevy example)
     /// names its files so; it codes `self`'s folders into the returned package's files
     /// (weather by weather, in the same order) and writes the package last.
@@ -170,6 +189,10 @@ impl Package {
                         .sky
                         .as_ref()
                         .map(|_| format!("{stem}-{}-sky.vbim", w.name)),
+                    irradiance: w
+                        .irradiance
+                        .as_ref()
+                        .map(|_| format!("{stem}-{}-irradiance.vbim", w.name)),
                 })
                 .collect(),
         }
@@ -194,11 +217,13 @@ mod tests {
                     name: "clear".into(),
                     lightmap: "clear".into(),
                     sky: Some("clear/sky".into()),
+                    irradiance: None,
                 },
                 WeatherTracks {
                     name: "night".into(),
                     lightmap: "night".into(),
                     sky: None,
+                    irradiance: None,
                 },
             ],
         };
@@ -219,11 +244,13 @@ mod tests {
                     name: "clear".into(),
                     lightmap: "day-clear.vbim".into(),
                     sky: Some("day-clear-sky.vbim".into()),
+                    irradiance: None,
                 },
                 WeatherTracks {
                     name: "overcast".into(),
                     lightmap: "tracks/day-overcast.vbim".into(),
                     sky: None,
+                    irradiance: None,
                 },
             ],
         }

@@ -28,6 +28,9 @@
 //! A [`PackagePlayer`] plays a package of weathers (`vbim_format::package`): the shown
 //! weather's lightmap and sky tracks in step, each a [`Player`], into two textures of its
 //! own, and [`PackagePlayer::switch_weather`] cross-fades to another weather without a pop.
+//! Its irradiance tracks light objects on the terrain: [`PackagePlayer::irradiance`]
+//! answers on the CPU, and [`irradiance_wgsl`] evaluates the same grid in a shader
+//! (module `irradiance`: the track's decoder thread, the answer, the buffer).
 //!
 //! Besides the player: [`headless_device`] opens a device where there is no window,
 //! [`lightmap_descriptor`] describes a texture the player can write into
@@ -48,6 +51,7 @@ mod display;
 #[cfg(feature = "bench")]
 mod fuzz;
 mod gpu;
+mod irradiance;
 #[cfg(feature = "bench")]
 mod marks;
 mod package;
@@ -68,9 +72,10 @@ pub use cpu_time::thread_cpu_ns;
 pub use gpu::{
     headless_device, headless_device_on, lightmap_descriptor, DeviceError, Headless, OutputError,
 };
+pub use irradiance::{irradiance_wgsl, Irradiance};
 pub use package::{
-    sky_cube_texel, PackageFile, PackagePlayer, PackageRecord, SwitchMode, SwitchRecord, TrackInfo,
-    TrackKind,
+    sky_cube_texel, ObjectsRecord, PackageFile, PackagePlayer, PackageRecord, SwitchMode,
+    SwitchRecord, TrackInfo, TrackKind,
 };
 pub use player::Player;
 pub use readback::{read_texture, read_texture_layer};

@@ -82,6 +82,7 @@ fn fixture() -> Fixture {
             name: name.into(),
             lightmap: format!("{name}.vbim"),
             sky: Some(format!("{name}-sky.vbim")),
+            irradiance: None,
         });
     }
     let p = Package {

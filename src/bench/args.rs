@@ -55,6 +55,23 @@ pub enum BenchCommand {
     /// histograms, rANS lanes), by design and number of histograms. Measures what a change
     /// of the format's entropy coding would buy.
     Entropy(BenchEntropyArgs),
+    /// Light for objects in a package with irradiance tracks: each track's bytes per frame
+    /// and share of its weather's bytes, the buffer and what a frame uploads, and the cost
+    /// of `PackagePlayer::irradiance` per call on one core (10 000 queries at scattered
+    /// positions and normals, two frames mixed and, mid-fade, four).
+    Objects(BenchObjectsArgs),
+}
+
+#[derive(Args)]
+pub struct BenchObjectsArgs {
+    /// The package (.vbimpkg) with irradiance tracks.
+    pub package: PathBuf,
+    /// Queries per timed run.
+    #[arg(long, default_value_t = 10_000)]
+    pub queries: usize,
+    /// Timed runs (the median and the spread are reported).
+    #[arg(long, default_value_t = 7)]
+    pub runs: usize,
 }
 
 #[derive(Args)]

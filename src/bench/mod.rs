@@ -8,13 +8,15 @@
 //! times each displayed frame's GPU work and the reference blend),
 //! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
 //! and `entropy` (what a context-adaptive coder would save: a research harness for the
-//! format's next coding); `fit` fits a GPU's decode costs from its timestamps.
+//! format's next coding); `fit` fits a GPU's decode costs from its timestamps; `objects`
+//! measures the light for objects (irradiance tracks and the CPU query).
 
 mod args;
 mod changes;
 mod entropy;
 mod fit;
 mod frame_gpu;
+mod objects;
 mod offline;
 mod runtime;
 mod scale;
@@ -37,6 +39,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::ScaleOne(a) => scale::run_one(a),
         BenchCommand::Changes(a) => changes::run(a),
         BenchCommand::Entropy(a) => entropy::run(a),
+        BenchCommand::Objects(a) => objects::run(a),
     }
 }
 

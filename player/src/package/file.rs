@@ -17,6 +17,8 @@ pub enum TrackKind {
     Lightmap,
     /// The sky over the upper hemisphere (equirectangular, the zenith's row first).
     Sky,
+    /// Light for objects: a grid of irradiance (`vbim_format::irradiance`).
+    Irradiance,
 }
 
 impl TrackKind {
@@ -25,6 +27,7 @@ impl TrackKind {
         match self {
             TrackKind::Lightmap => "lightmap",
             TrackKind::Sky => "sky",
+            TrackKind::Irradiance => "irradiance",
         }
     }
 }
@@ -103,6 +106,7 @@ impl PackageFile {
             let kinds = [
                 (TrackKind::Lightmap, Some(&w.lightmap)),
                 (TrackKind::Sky, w.sky.as_ref()),
+                (TrackKind::Irradiance, w.irradiance.as_ref()),
             ];
             for (kind, rel) in kinds {
                 let Some(rel) = rel else { continue };
@@ -177,17 +181,38 @@ impl PackageFile {
                 ));
             }
         }
-        let skies = self
-            .package
-            .weathers
-            .iter()
-            .filter(|w| w.sky.is_some())
-            .count();
-        if skies != 0 && skies != self.package.weathers.len() {
+        let weathers = &self.package.weathers;
+        let skies = weathers.iter().filter(|w| w.sky.is_some()).count();
+        if skies != 0 && skies != weathers.len() {
             return Err(package_error(
                 &self.path,
                 "some weathers have a sky track and others not: a switch would lose the sky",
             ));
+        }
+        let grids = weathers.iter().filter(|w| w.irradiance.is_some()).count();
+        if grids != 0 && grids != weathers.len() {
+            return Err(package_error(
+                &self.path,
+                "some weathers have an irradiance track and others not: a switch would lose \
+                 the light for objects",
+            ));
+        }
+        for t in self
+            .tracks
+            .iter()
+            .filter(|t| t.kind == TrackKind::Irradiance)
+        {
+            let (w, h) = (t.header.width as usize, t.header.height as usize);
+            if vbim_format::irradiance::cells_of(w, h).is_none() || t.header.channels != 3 {
+                return Err(package_error(
+                    &t.path,
+                    format!(
+                        "an irradiance track of {w}×{h}, {} channel(s): its frames are RGB \
+                         grids of 5·nx × 2·ny texels",
+                        t.header.channels
+                    ),
+                ));
+            }
         }
         Ok(())
     }

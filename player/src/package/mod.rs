@@ -14,11 +14,15 @@
 //! ([`SwitchMode::Held`], `held.rs`) closes the shown weather at once instead and fades
 //! from its last image.
 
+mod bindings;
 mod cube;
+pub(crate) use bindings::{read_entry, write_entry};
 pub use cube::sky_cube_texel;
 mod fade;
 mod file;
 mod held;
+mod objects;
+pub use objects::ObjectsRecord;
 
 use std::fs::File;
 use std::path::Path;
@@ -52,6 +56,8 @@ pub(super) struct Tracks {
     name: String,
     lightmap: Player<File>,
     sky: Option<Player<File>>,
+    /// Light for objects, decoded on the CPU.
+    irradiance: Option<crate::irradiance::IrradianceTrack>,
 }
 
 impl Tracks {
@@ -95,6 +101,8 @@ pub struct PackageRecord {
     pub lightmap: FrameRecord,
     /// The shown weather's sky.
     pub sky: Option<FrameRecord>,
+    /// The light for objects, for a package with irradiance tracks.
+    pub objects: Option<ObjectsRecord>,
     /// The switch in progress, if any.
     pub switch: Option<SwitchRecord>,
 }
@@ -121,6 +129,8 @@ pub struct PackagePlayer {
     last_shown: f64,
     /// The sky resampled into the caller's cube map every frame.
     cube: Option<cube::SkyCube>,
+    /// The light for objects, for a package with irradiance tracks.
+    objects: Option<objects::Objects>,
 }
 
 fn output(device: &wgpu::Device, h: &Header) -> (wgpu::Texture, wgpu::TextureView) {
@@ -170,7 +180,9 @@ impl PackagePlayer {
         if let (Some(p), Some(s)) = (shown.sky.as_mut(), &sky) {
             p.set_output(Some(&s.0))?;
         }
+        let objects = objects::Objects::new(device, &shown);
         Ok(PackagePlayer {
+            objects,
             device: device.clone(),
             queue: queue.clone(),
             fade: FadePass::new(device),
@@ -329,6 +341,7 @@ impl PackagePlayer {
             + self.held.as_ref().map_or(0, Held::bytes)
             + out(&self.lightmap)
             + self.sky.as_ref().map_or(0, out)
+            + self.objects.as_ref().map_or(0, objects::Objects::gpu_bytes)
     }
 
     /// Switches to weather `name`, cross-fading over `fade_ns` of playback once the new
@@ -479,6 +492,12 @@ impl PackagePlayer {
                 self.finish_held();
             }
         }
+        let (to, held_weight) = match (&self.held, &record) {
+            (Some(_), Some(r)) => (None, Some(r.weight)),
+            (None, Some(r)) => (Some((r.lightmap.shown, r.weight)), None),
+            _ => (None, None),
+        };
+        let objects = self.step_objects(lightmap.shown, to, held_weight);
         self.last_shown = lightmap.shown;
         if done {
             // The new weather writes the outputs from the next frame on; the old tracks'
@@ -492,6 +511,7 @@ impl PackagePlayer {
         PackageRecord {
             lightmap,
             sky,
+            objects,
             switch: record,
         }
     }
@@ -596,38 +616,9 @@ fn open_tracks(
         name: name.to_string(),
         lightmap: open(TrackKind::Lightmap)?.expect("every weather has a lightmap"),
         sky: open(TrackKind::Sky)?,
+        irradiance: file
+            .track(name, TrackKind::Irradiance)
+            .map(|t| crate::irradiance::IrradianceTrack::open(&t.path, cfg.limits))
+            .transpose()?,
     })
-}
-
-/// A compute binding of a 2D float texture read with `textureLoad` (the fade's and the
-/// cube's inputs).
-pub(crate) fn read_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-/// A compute binding of an `Rgba16Float` storage texture written in views of `dimension`
-/// (the fade's output, the cube's faces).
-pub(crate) fn write_entry(
-    binding: u32,
-    dimension: wgpu::TextureViewDimension,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format: wgpu::TextureFormat::Rgba16Float,
-            view_dimension: dimension,
-        },
-        count: None,
-    }
 }
