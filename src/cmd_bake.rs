@@ -46,7 +46,7 @@ pub fn run(a: BakeArgs) -> Result<(), String> {
     );
     if s.weathers.iter().any(|w| w.irradiance_manifest.is_some()) {
         println!(
-            "light for objects ({0}² cells, {1} m above the ground): {2:.2} s of it \
+            "light for objects ({0}² cells, {1} m above the ground): {2:.2} s more \
              (its horizons, then every frame's grid, written)",
             scene.objects.cells, scene.objects.height_m, s.objects_s
         );

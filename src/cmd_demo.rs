@@ -240,7 +240,7 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
     println!("demo finished in {:.1} s", t0.elapsed().as_secs_f64());
     if let Some(p) = &package {
         println!(
-            "  {}: {} weathers, each a lightmap and a sky track",
+            "  {}: {} weathers, each a lightmap, a sky and an irradiance track",
             p.display(),
             baked.weathers.len()
         );

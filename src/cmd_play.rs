@@ -411,7 +411,7 @@ pub fn capture_scene(
         );
     }
     let (exposure, sky) = s.scene_look()?;
-    let renderer = SceneRenderer::new(
+    let mut renderer = SceneRenderer::new(
         &device,
         &queue,
         &mesh,
@@ -421,9 +421,16 @@ pub fn capture_scene(
         size.1,
         FORMAT,
     );
+    if let Some(b) = player.irradiance_buffer() {
+        renderer.set_objects(b, &vbim_scene::showcase(&mesh, &hf));
+    }
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let total = s.display_frames();
     let n = n.max(1) as u64;
+    if s.start > 0 {
+        let h = player.lightmap_player().header();
+        player.set_time(s.start * 1_000_000_000 * h.rate_den as u64 / h.rate_num as u64);
+    }
     let mut records = Vec::with_capacity(total.min(RESERVED_RECORDS) as usize);
     let mut frames = Vec::new();
     let mut gif_frames = Vec::new();
@@ -460,6 +467,9 @@ pub fn capture_scene(
         let r = rec.lightmap;
         records.push(r);
         if k >= next_capture && captured < n {
+            // A capture is for looking at: the objects' light of this very frame, even if
+            // its grid's decoder thread is a frame behind.
+            player.wait_irradiance(std::time::Duration::from_secs(2));
             let (eye, target) = orbit(captured as f32 / n as f32 * 0.5, &mesh);
             let v = View {
                 eye,

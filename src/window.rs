@@ -39,6 +39,8 @@ struct App {
     instance: wgpu::Instance,
     gfx: Option<Gfx>,
     mesh: Option<Mesh>,
+    /// The spheres standing on the terrain, lit by the light for objects.
+    objects: Vec<vbim_scene::Object>,
     sky: SkyTrack,
     exposure: f32,
     paused: bool,
@@ -84,8 +86,9 @@ impl App {
             .unwrap_or(config.format);
         surface.configure(&device, &config);
         let player = self.session.open_package(&device, &queue, true)?;
-        let (mesh, _) = scene_mesh(&self.scene_file)?;
-        let renderer = SceneRenderer::new(
+        let (mesh, hf) = scene_mesh(&self.scene_file)?;
+        self.objects = vbim_scene::showcase(&mesh, &hf);
+        let mut renderer = SceneRenderer::new(
             &device,
             &queue,
             &mesh,
@@ -95,6 +98,9 @@ impl App {
             config.height,
             config.format,
         );
+        if let Some(b) = player.irradiance_buffer() {
+            renderer.set_objects(b, &self.objects);
+        }
         self.mesh = Some(mesh);
         self.gfx = Some(Gfx {
             window,
@@ -241,6 +247,9 @@ impl ApplicationHandler for App {
                         size.height,
                         g.config.format,
                     );
+                    if let Some(b) = g.player.irradiance_buffer() {
+                        g.renderer.set_objects(b, &self.objects);
+                    }
                 }
             }
             WindowEvent::KeyboardInput {
@@ -287,6 +296,7 @@ pub fn run(
         instance,
         gfx: None,
         mesh: None,
+        objects: Vec::new(),
         sky,
         exposure,
         paused: false,

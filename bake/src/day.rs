@@ -281,13 +281,13 @@ fn bake_day(
                     // What objects receive, from the lightmap just lit (its bounce).
                     let to = Instant::now();
                     let sun = light::sun_for_frame(scene, i);
-                    let frame = g.frame(pre, scene, light, &sun, i, buf);
+                    let (frame, transmission) = g.frame(pre, scene, light, &sun, i, buf);
                     let (w, h) = vbim_format::irradiance::image_size(frame.nx, frame.ny);
                     output::write_frame(
                         &grid_dir.join(vbim_files::frame_name(i, FrameFormat::Exr)),
                         w,
                         h,
-                        &frame.to_image(),
+                        &frame.to_image(&transmission),
                         FrameFormat::Exr,
                         None,
                         None,
@@ -331,7 +331,7 @@ fn bake_day(
         .write(dir)
         .map_err(|e| out_err(&dir.join(Manifest::FILE_NAME), e))?;
     let irradiance = match grid {
-        Some(g) => Some(write_grid_manifest(g, scene, &m, &grid_dir)?),
+        Some(g) => Some(write_grid_manifest(g, light, scene, &m, &grid_dir)?),
         None => None,
     };
     let contact_sheet = dir.join("contact_sheet.png");
@@ -357,11 +357,12 @@ fn bake_day(
 /// scale), the grid's frames and what they hold.
 fn write_grid_manifest(
     grid: &ObjectGrid,
+    light: Option<&WeatherLight>,
     scene: &Scene,
     day: &Manifest,
     dir: &Path,
 ) -> Result<PathBuf, BakeError> {
-    let info = grid.info(scene);
+    let info = grid.info(light);
     let (w, h) = vbim_format::irradiance::image_size(info.cells[0], info.cells[1]);
     let manifest = Manifest {
         width: w,
@@ -369,8 +370,8 @@ fn write_grid_manifest(
         format: Some(FrameFormat::Exr),
         png16_scale: None,
         units: "irradiance / π, linear RGB, in the lightmap's units, for objects on the \
-                terrain: 10 layers of cells (the sun at normal incidence, then sky and bounce \
-                at nine normals), vbim_format::irradiance"
+                terrain: 10 layers of cells (the sun's transmission, then sky and bounce at \
+                nine normals), vbim_format::irradiance"
             .into(),
         files: (0..scene.frames)
             .map(|i| vbim_files::frame_name(i, FrameFormat::Exr))

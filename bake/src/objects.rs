@@ -5,8 +5,10 @@
 //! Each cell stands for a point `height_m` above the ground at its centre. Its horizon is
 //! marched through the height field once per bake, unclamped by any surface (an object
 //! has every normal). Each frame then gives it:
-//! - the sun at normal incidence: the sun colour times the disc's share above that horizon
-//!   (soft as the ground's sun, paper 001) times the clouds' transmission there;
+//! - the sun's transmission: the clouds' (and the weather's direct share) at the point.
+//!   The terrain's share of the sun is not coded: the points' horizons go into the track's
+//!   metadata and a reader computes the disc's share above them for each frame's sun
+//!   (`GridInfo::visibility`, soft as the ground's sun, paper 001);
 //! - sky and bounce as order-2 spherical harmonics: the sky radiance of the very dome the
 //!   lightmap was lit by, over the directions above the horizon; the ground (albedo times
 //!   the lit lightmap, averaged over the cell) everywhere below it — below the horizontal
@@ -15,12 +17,12 @@
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use rayon::prelude::*;
-use vbim_format::irradiance::{sh_basis, Cell, Grid, GridInfo, COSINE_LOBE};
+use vbim_format::irradiance::{sh_basis, Cell, Grid, GridInfo, COSINE_LOBE, HORIZON_STEP};
 
 use crate::atmosphere::{direct_share, direction};
 use crate::clouds::CloudLayer;
 use crate::heightfield::HeightField;
-use crate::light::{sector_values, sun_visibility, Precomputed, WeatherLight};
+use crate::light::{sector_values, Precomputed, WeatherLight};
 use crate::scene::Scene;
 use crate::sky::SECTORS;
 use crate::sun::SunState;
@@ -50,8 +52,10 @@ struct Point {
 pub struct ObjectGrid {
     nx: usize,
     ny: usize,
-    height_m: f64,
     azimuths: usize,
+    /// The grid as the track's metadata states it, with the horizons quantised as a
+    /// reader sees them.
+    info: GridInfo,
     points: Vec<Point>,
     /// Per column, per band: Y_j(v) dΩ at the band's centre direction.
     basis: Vec<[[f64; 9]; BANDS]>,
@@ -66,7 +70,7 @@ impl ObjectGrid {
         let (nx, ny) = (scene.objects.cells.min(hf.w), scene.objects.cells.min(hf.h));
         let azimuths = scene.azimuths;
         let height_m = scene.objects.height_m;
-        let points = (0..nx * ny)
+        let points: Vec<Point> = (0..nx * ny)
             .into_par_iter()
             .map(|k| {
                 let (i, j) = (k % nx, k / nx);
@@ -93,6 +97,22 @@ impl ObjectGrid {
                 }
             })
             .collect();
+        let cells = nx * ny;
+        let mut horizons = vec![0u8; azimuths * cells];
+        for (c, p) in points.iter().enumerate() {
+            for (a, h) in p.horizon.iter().enumerate() {
+                horizons[a * cells + c] =
+                    (*h as f64 / HORIZON_STEP).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        let info = GridInfo {
+            cells: [nx, ny],
+            height_m: height_m as f32,
+            albedo: scene.albedo as f32,
+            sun_diameter_deg: scene.sun.angular_diameter_deg as f32,
+            azimuths,
+            horizons,
+        };
         let columns = azimuths * COLUMNS_PER_AZIMUTH;
         let da = TAU / columns as f64;
         let de = FRAC_PI_2 / BANDS as f64;
@@ -115,21 +135,23 @@ impl ObjectGrid {
         ObjectGrid {
             nx,
             ny,
-            height_m,
             azimuths,
+            info,
             points,
             basis,
             dirs,
         }
     }
 
-    /// What the track's manifest says about the grid.
-    pub fn info(&self, scene: &Scene) -> GridInfo {
-        GridInfo {
-            cells: [self.nx, self.ny],
-            height_m: self.height_m as f32,
-            albedo: scene.albedo as f32,
+    /// What the track's manifest says about the grid: the horizons included for a weather
+    /// with direct sun, none for one without (its layer 0 is 0 everywhere).
+    pub fn info(&self, weather: Option<&WeatherLight>) -> GridInfo {
+        let direct = weather.is_none_or(|w| direct_share(w.sky.cover) > 0.0);
+        let mut info = self.info.clone();
+        if !direct {
+            info.horizons.clear();
         }
+        info
     }
 
     /// The horizon of point `p` towards map-frame azimuth `a`, linear between azimuths.
@@ -142,7 +164,8 @@ impl ObjectGrid {
     }
 
     /// The grid of frame `i` under `weather` (the scene's sector sky and clouds for
-    /// `None`), at sun `sun`, whose lightmap `lit` (RGB, the terrain's size) is already lit.
+    /// `None`), at sun `sun`, whose lightmap `lit` (RGB, the terrain's size) is already lit,
+    /// and each cell's sun transmission (layer 0 of the track's frame).
     pub fn frame(
         &self,
         pre: &Precomputed,
@@ -151,7 +174,7 @@ impl ObjectGrid {
         sun: &SunState,
         i: usize,
         lit: &[f32],
-    ) -> Grid {
+    ) -> (Grid, Vec<f32>) {
         let hf = &pre.hf;
         // The sky's true radiance towards each column and band.
         let (direct, clouds, radiance): (f64, Option<&CloudLayer>, Vec<[[f64; 3]; BANDS]>) =
@@ -204,25 +227,34 @@ impl ObjectGrid {
 
         let alpha = scene.sun.angular_diameter_deg.to_radians();
         let sun_up = sun.elevation + 0.5 * alpha > 0.0 && direct > 0.0;
-        let sun_az = sun.dir[1].atan2(sun.dir[0]);
+        let sun_dir = sun.dir.map(|c| c as f32);
+        let cloud_frame = if sun_up {
+            (i, sun.dir)
+        } else {
+            last_sun_up(scene, i, alpha)
+        };
         let lift_scale = 1.0 / (0.5 * (hf.cell_x + hf.cell_y)) as f32;
         let cloud_h = scene.clouds.height_m as f32;
         let albedo = scene.albedo;
         let ambient = scene.sky.ambient * 2.0 * PI.sqrt();
         let de = FRAC_PI_2 / BANDS as f64;
-        let cells = self
+        let (cells, transmission): (Vec<Cell>, Vec<f32>) = self
             .points
             .par_iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(k, p)| {
+                let mut t = direct;
+                if let Some(cl) = clouds {
+                    // Clouds under a set sun do nothing: the night keeps the evening's
+                    // field (cheap to code, and no step at sunset).
+                    let (ci, cdir) = cloud_frame;
+                    let lift = (cloud_h - p.z).max(0.0) * lift_scale;
+                    t *= cl.transmission(p.x, p.y, ci, scene.frames, cdir, lift) as f64;
+                }
                 let mut sun_rgb = [0f32; 3];
                 if sun_up {
-                    let o = sun_visibility(sun.elevation, alpha, self.horizon(p, sun_az));
-                    let mut t = 1.0;
-                    if let Some(cl) = clouds {
-                        let lift = (cloud_h - p.z).max(0.0) * lift_scale;
-                        t = cl.transmission(p.x, p.y, i, scene.frames, sun.dir, lift) as f64;
-                    }
-                    sun_rgb = sun.color.map(|c| (c * direct * o * t) as f32);
+                    let o = self.info.visibility(k, sun_dir) as f64;
+                    sun_rgb = sun.color.map(|c| (c * o * t) as f32);
                 }
                 let g = mean(lit, hf.w, p.footprint).map(|v| v * albedo);
                 let mut sky = [[0f64; 3]; 9];
@@ -253,16 +285,28 @@ impl ObjectGrid {
                 for v in sh[0].iter_mut() {
                     *v += ambient as f32;
                 }
-                Cell { sun: sun_rgb, sh }
+                (Cell { sun: sun_rgb, sh }, t as f32)
             })
-            .collect();
-        Grid {
+            .unzip();
+        let grid = Grid {
             nx: self.nx,
             ny: self.ny,
             cells,
-            sun_dir: sun.dir.map(|c| c as f32),
-        }
+            sun_dir,
+        };
+        (grid, transmission)
     }
+}
+
+/// The last frame at or before `i` (cyclically) with the sun's disc above the astronomical
+/// horizon, and its sun's direction; `i` itself if the day has none.
+fn last_sun_up(scene: &Scene, i: usize, alpha: f64) -> (usize, [f64; 3]) {
+    let n = scene.frames;
+    (0..n)
+        .map(|back| (i + n - back) % n)
+        .map(|k| (k, crate::light::sun_for_frame(scene, k)))
+        .find(|(_, s)| s.elevation + 0.5 * alpha > 0.0)
+        .map_or((i, [0.0, 0.0, 1.0]), |(k, s)| (k, s.dir))
 }
 
 /// The mean of RGB image `lit` (`w` texels a row) over texels x0..x1, y0..y1.

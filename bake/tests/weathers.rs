@@ -161,6 +161,11 @@ fn a_bake_with_weathers_writes_a_day_and_a_sky_per_weather() {
         let info: vbim_format::irradiance::GridInfo =
             serde_json::from_value(grid.irradiance_grid.clone().unwrap()).unwrap();
         assert_eq!((info.cells, info.height_m), ([24, 24], 2.0));
+        // The terrain's share of the sun is computed from the horizons, which an overcast
+        // weather (no direct sun) does not carry.
+        let horizons = if w.name == "clear" { 24 * 24 * 32 } else { 0 };
+        assert_eq!(info.horizons.len(), horizons, "{}", w.name);
+        info.check().unwrap();
         for f in &grid.files {
             assert!(grid_manifest.parent().unwrap().join(f).exists());
         }

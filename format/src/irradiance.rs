@@ -8,10 +8,13 @@
 //! u = i / nx to (i + 1) / nx and v = j / ny to (j + 1) / ny and stands for a point a stated
 //! height above the ground at its centre. Every value is in the lightmap's units
 //! (irradiance / π), so the codec's error budget means the same as on the ground:
-//! - layer 0, **the sun**: the direct sun a surface facing it receives there (the sun
-//!   disc's share above the terrain's horizon, times cloud transmission, times the frame's
-//!   sun colour). A normal N receives it times max(0, N·s) for the frame's sun direction s:
-//!   order-2 spherical harmonics cannot carry a near-point source;
+//! - layer 0, **the sun's transmission**: the share of the direct sun the clouds (and the
+//!   weather's haze) let through at the cell, 0 to 1, the same in the three channels. The
+//!   terrain's part is not coded: each cell's horizon is in the metadata ([`GridInfo`]), and
+//!   a reader computes the sun disc's share above it for the frame's sun direction
+//!   ([`GridInfo::visibility`]), exact in time however suddenly a ridge hides the sun. A
+//!   normal N receives the frame's sun colour × that share × the transmission ×
+//!   max(0, N·s): order-2 spherical harmonics cannot carry a near-point source;
 //! - layers 1–9, **sky and bounce**: the order-2 spherical-harmonic irradiance
 //!   (Ramamoorthi & Hanrahan 2001) of everything else (the sky the terrain leaves visible,
 //!   the light reflected by the ground around, the ambient floor), stored as the irradiance
@@ -20,7 +23,7 @@
 //!
 //! Directions are in the map frame: x east (along u), y south (along v), z up.
 
-/// Layers in a frame: the sun, then the nine directions' irradiance.
+/// Layers in a frame: the sun's transmission, then the nine directions' irradiance.
 pub const LAYERS: usize = 10;
 /// Layers across a frame's image (two rows of layers).
 pub const LAYERS_ACROSS: usize = 5;
@@ -135,8 +138,9 @@ fn unit(v: [f64; 3]) -> [f64; 3] {
     v.map(|c| c / l)
 }
 
-/// One cell of a frame: the sun at normal incidence and the sky-and-bounce irradiance's
-/// nine coefficients per channel (irradiance / π = Σ_j `sh[j]` · Y_j(N)).
+/// One cell of a frame as a reader uses it: the sun a surface facing it receives (colour ×
+/// the terrain's share × the transmission) and the sky-and-bounce irradiance's nine
+/// coefficients per channel (irradiance / π = Σ_j `sh[j]` · Y_j(N)).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Cell {
     /// The direct sun a surface facing it receives, RGB.
@@ -146,7 +150,7 @@ pub struct Cell {
 }
 
 impl Cell {
-    /// The cell from its stored values: the sun and the irradiance at [`DIRECTIONS`].
+    /// The cell from the irradiance at [`DIRECTIONS`] and its sun.
     pub fn from_stored(sun: [f32; 3], at: &[[f32; 3]; 9]) -> Cell {
         let m = to_coefficients();
         let mut sh = [[0f32; 3]; 9];
@@ -170,15 +174,10 @@ impl Cell {
         e.map(|v| v as f32)
     }
 
-    /// The stored values of the cell: the sun and the irradiance at [`DIRECTIONS`],
-    /// each at least 0 (order-2 ringing can dip below it where the light is very uneven).
-    pub fn stored(&self) -> [[f32; 3]; LAYERS] {
-        let mut out = [[0f32; 3]; LAYERS];
-        out[0] = self.sun.map(|v| v.max(0.0));
-        for (k, d) in DIRECTIONS.iter().enumerate() {
-            out[k + 1] = self.sky(unit(*d)).map(|v| v.max(0.0));
-        }
-        out
+    /// The irradiance the coefficients give at [`DIRECTIONS`], each at least 0 (order-2
+    /// ringing can dip below it where the light is very uneven): layers 1 to 9.
+    pub fn stored(&self) -> [[f32; 3]; 9] {
+        DIRECTIONS.map(|d| self.sky(unit(d)).map(|v| v.max(0.0)))
     }
 
     /// `a · (1 − w) + b · w`, value by value.
@@ -209,9 +208,16 @@ pub struct Grid {
 }
 
 impl Grid {
-    /// The grid a frame image holds (`5·nx × 2·ny` texels, RGB interleaved), with the
-    /// frame's sun direction.
-    pub fn from_image(rgb: &[f32], nx: usize, ny: usize, sun_dir: [f32; 3]) -> Grid {
+    /// The grid a frame image holds (`5·nx × 2·ny` texels, RGB interleaved) for a frame
+    /// whose sun has direction `sun_dir` and colour `sun_color`, over the cells and horizons
+    /// of `info`.
+    pub fn from_image(
+        rgb: &[f32],
+        info: &GridInfo,
+        sun_dir: [f32; 3],
+        sun_color: [f32; 3],
+    ) -> Grid {
+        let [nx, ny] = info.cells;
         let (w, _) = image_size(nx, ny);
         let at = |layer: usize, i: usize, j: usize| {
             let (x, y) = texel(layer, i, j, nx, ny);
@@ -221,8 +227,11 @@ impl Grid {
         let mut cells = Vec::with_capacity(nx * ny);
         for j in 0..ny {
             for i in 0..nx {
+                let t = at(0, i, j);
+                let share = info.visibility(j * nx + i, sun_dir)
+                    * ((t[0] + t[1] + t[2]) / 3.0).clamp(0.0, 1.0);
                 let dirs = std::array::from_fn(|k| at(k + 1, i, j));
-                cells.push(Cell::from_stored(at(0, i, j), &dirs));
+                cells.push(Cell::from_stored(sun_color.map(|c| c * share), &dirs));
             }
         }
         Grid {
@@ -233,15 +242,19 @@ impl Grid {
         }
     }
 
-    /// The frame image of the grid (`5·nx × 2·ny` texels, RGB interleaved).
-    pub fn to_image(&self) -> Vec<f32> {
+    /// The frame image of the grid, with each cell's sun transmission (`nx × ny`, 0 to 1) in
+    /// layer 0.
+    pub fn to_image(&self, transmission: &[f32]) -> Vec<f32> {
         let (w, h) = image_size(self.nx, self.ny);
         let mut out = vec![0f32; w * h * 3];
         for j in 0..self.ny {
             for i in 0..self.nx {
-                for (layer, v) in self.cells[j * self.nx + i].stored().iter().enumerate() {
+                let k = j * self.nx + i;
+                let t = transmission[k].clamp(0.0, 1.0);
+                let layers = std::iter::once([t; 3]).chain(self.cells[k].stored());
+                for (layer, v) in layers.enumerate() {
                     let (x, y) = texel(layer, i, j, self.nx, self.ny);
-                    out[(y * w + x) * 3..][..3].copy_from_slice(v);
+                    out[(y * w + x) * 3..][..3].copy_from_slice(&v);
                 }
             }
         }
@@ -275,7 +288,8 @@ impl Grid {
 }
 
 /// What an irradiance track's metadata says about its grid (the bake's manifest's
-/// `irradiance_grid`).
+/// `irradiance_grid`), with each cell's horizon, from which a reader computes the sun's
+/// share above the terrain.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct GridInfo {
@@ -285,31 +299,109 @@ pub struct GridInfo {
     pub height_m: f32,
     /// The ground's albedo in the bounce.
     pub albedo: f32,
+    /// The sun disc's angular diameter, degrees (the bake's soft sun).
+    pub sun_diameter_deg: f32,
+    /// Azimuths of the horizons: azimuth a looks from +x (east) towards +y (south) by
+    /// 360° · a / azimuths.
+    pub azimuths: usize,
+    /// Each cell's horizon elevation in steps of 90° / 255 (0: the horizontal or below),
+    /// azimuth by azimuth: `horizons[a · cells + c]`. Empty for a track without direct sun
+    /// (layer 0 is 0 everywhere; [`GridInfo::visibility`] is then 1).
+    pub horizons: Vec<u8>,
 }
 
-/// Each frame's sun direction from a track's metadata (the bake's manifest: `per_frame`
-/// entries with `sun_dir`); `None` if the metadata has none for some frame of `frames`.
-pub fn sun_directions(metadata: &str, frames: usize) -> Option<Vec<[f32; 3]>> {
+/// The angle of one step of [`GridInfo::horizons`], radians.
+pub const HORIZON_STEP: f64 = std::f64::consts::FRAC_PI_2 / 255.0;
+
+impl GridInfo {
+    /// Whether the description holds together: cells, azimuths and horizons.
+    pub fn check(&self) -> Result<(), String> {
+        let [nx, ny] = self.cells;
+        if !(1..=4096).contains(&nx) || !(1..=4096).contains(&ny) {
+            return Err(format!("irradiance grid of {nx}×{ny} cells"));
+        }
+        let whole = self.horizons.is_empty() || self.horizons.len() == self.azimuths * nx * ny;
+        if !(1..=1024).contains(&self.azimuths) || !whole {
+            return Err(format!(
+                "irradiance grid: {} horizons for {} azimuths of {nx}×{ny} cells",
+                self.horizons.len(),
+                self.azimuths
+            ));
+        }
+        if !(self.sun_diameter_deg > 0.0 && self.sun_diameter_deg < 20.0) {
+            return Err(format!(
+                "irradiance grid: sun diameter {}°",
+                self.sun_diameter_deg
+            ));
+        }
+        Ok(())
+    }
+
+    /// The share of the sun disc above cell `c`'s horizon for sun direction `d` (unit, map
+    /// frame): the disc's elevation against the horizon towards its azimuth, linear
+    /// between the two nearest azimuths, over the disc's diameter (paper 001's soft sun).
+    pub fn visibility(&self, c: usize, d: [f32; 3]) -> f32 {
+        if self.horizons.is_empty() {
+            return 1.0;
+        }
+        let cells = self.cells[0] * self.cells[1];
+        let n = self.azimuths;
+        let e = (d[2] as f64).clamp(-1.0, 1.0).asin();
+        let t = (d[1] as f64)
+            .atan2(d[0] as f64)
+            .rem_euclid(std::f64::consts::TAU)
+            / std::f64::consts::TAU
+            * n as f64;
+        let a0 = (t.floor() as usize) % n;
+        let a1 = (a0 + 1) % n;
+        let f = t - t.floor();
+        let h = |a: usize| self.horizons[a * cells + c] as f64 * HORIZON_STEP;
+        let phi = h(a0) * (1.0 - f) + h(a1) * f;
+        let alpha = (self.sun_diameter_deg as f64).to_radians();
+        ((e + 0.5 * alpha - phi) / alpha).clamp(0.0, 1.0) as f32
+    }
+}
+
+/// One frame's sun: its direction (unit, map frame) and colour (the direct sun's texel
+/// value at normal incidence, RGB).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSun {
+    /// Direction.
+    pub dir: [f32; 3],
+    /// Colour.
+    pub color: [f32; 3],
+}
+
+/// Each frame's sun from a track's metadata (the bake's manifest: `per_frame` entries with
+/// `sun_dir` and `sun_color`); `None` if the metadata lacks them for some frame of `frames`.
+pub fn frame_suns(metadata: &str, frames: usize) -> Option<Vec<FrameSun>> {
     let v: serde_json::Value = serde_json::from_str(metadata).ok()?;
     let per = v.get("per_frame")?.as_array()?;
     if per.len() < frames {
         return None;
     }
+    let three = |f: &serde_json::Value, key: &str| -> Option<[f32; 3]> {
+        let d = f.get(key)?.as_array()?;
+        let c = |k: usize| d.get(k).and_then(|x| x.as_f64()).map(|x| x as f32);
+        let d = [c(0)?, c(1)?, c(2)?];
+        d.iter().all(|x| x.is_finite()).then_some(d)
+    };
     per.iter()
         .take(frames)
         .map(|f| {
-            let d = f.get("sun_dir")?.as_array()?;
-            let c = |k: usize| d.get(k).and_then(|x| x.as_f64()).map(|x| x as f32);
-            let d = [c(0)?, c(1)?, c(2)?];
-            d.iter().all(|x| x.is_finite()).then_some(d)
+            Some(FrameSun {
+                dir: three(f, "sun_dir")?,
+                color: three(f, "sun_color")?,
+            })
         })
         .collect()
 }
 
-/// The grid description in a track's metadata, if it has one.
+/// The grid description in a track's metadata, if it has a valid one.
 pub fn grid_info(metadata: &str) -> Option<GridInfo> {
     let v: serde_json::Value = serde_json::from_str(metadata).ok()?;
-    serde_json::from_value(v.get("irradiance_grid")?.clone()).ok()
+    let info: GridInfo = serde_json::from_value(v.get("irradiance_grid")?.clone()).ok()?;
+    info.check().ok().map(|()| info)
 }
 
 #[cfg(test)]
@@ -331,12 +423,15 @@ mod tests {
 
     #[test]
     fn the_stored_directions_give_back_the_coefficients() {
-        let sh: [[f32; 3]; 9] =
-            std::array::from_fn(|j| [1.0 - 0.1 * j as f32, 0.05 * j as f32, 0.3]);
+        // Y00's term (5 · 0.28) outweighs every other (8 · 0.1 · 1.09 at most): positive.
+        let sh: [[f32; 3]; 9] = std::array::from_fn(|j| match j {
+            0 => [5.0, 4.0, 3.0],
+            _ => [0.1 - 0.01 * j as f32, 0.01 * j as f32, -0.05],
+        });
         let cell = Cell { sun: [2.0; 3], sh };
         let stored = cell.stored();
         // Positive everywhere here, so nothing was clamped.
-        let back = Cell::from_stored(stored[0], &std::array::from_fn(|k| stored[k + 1]));
+        let back = Cell::from_stored(cell.sun, &stored);
         for (j, (got, want)) in back.sh.iter().zip(&sh).enumerate() {
             for (c, (g, w)) in got.iter().zip(want).enumerate() {
                 assert!((g - w).abs() < 1e-4, "{j} {c}");
@@ -389,19 +484,62 @@ mod tests {
         assert_eq!(g.irradiance(0.5, 0.5, up)[0], 2.0);
         assert_eq!(g.irradiance(1.0, 0.5, up)[0], 3.0);
         assert_eq!(g.irradiance(0.5, 0.5, [0.0, 0.0, -1.0])[0], 0.0);
-        let img = g.to_image();
+        let img = g.to_image(&[0.5, 1.0]);
         assert_eq!(img.len(), 5 * 2 * 2 * 3);
-        let back = Grid::from_image(&img, 2, 1, g.sun_dir);
-        assert_eq!(back.cells[1].sun, [3.0; 3]);
+        // No horizon anywhere: the sun at the zenith is wholly visible.
+        let info = GridInfo {
+            cells: [2, 1],
+            sun_diameter_deg: 1.5,
+            azimuths: 8,
+            horizons: vec![0; 16],
+            ..GridInfo::default()
+        };
+        let back = Grid::from_image(&img, &info, g.sun_dir, [2.0; 3]);
+        assert_eq!(back.cells[0].sun, [1.0; 3]);
+        assert_eq!(back.cells[1].sun, [2.0; 3]);
+    }
+
+    #[test]
+    fn the_sun_sets_behind_a_cells_horizon_over_the_discs_diameter() {
+        // Cell 0 has a horizon of 10° towards the west (azimuth 180°), none elsewhere.
+        let mut horizons = vec![0u8; 8];
+        let ten = (10f64.to_radians() / HORIZON_STEP).round() as u8;
+        horizons[4] = ten;
+        let info = GridInfo {
+            cells: [1, 1],
+            sun_diameter_deg: 2.0,
+            azimuths: 8,
+            horizons,
+            ..GridInfo::default()
+        };
+        info.check().unwrap();
+        let west = |deg: f64| {
+            let e = deg.to_radians();
+            [-(e.cos()) as f32, 0.0, e.sin() as f32]
+        };
+        let phi = ten as f64 * HORIZON_STEP;
+        let at = |e: f64| info.visibility(0, west(phi.to_degrees() + e));
+        assert!(at(1.0) > 0.999);
+        assert!((at(0.0) - 0.5).abs() < 1e-3);
+        assert!(at(-1.0) < 1e-3);
+        // To the east the sun is seen down to the horizontal.
+        assert!((info.visibility(0, [1.0, 0.0, 0.0]) - 0.5).abs() < 1e-3);
+        let mut bad = info.clone();
+        bad.horizons.pop();
+        assert!(bad.check().is_err());
     }
 
     #[test]
     fn metadata_gives_each_frames_sun_and_the_grid() {
-        let m = r#"{"per_frame":[{"sun_dir":[0,0,1]},{"sun_dir":[1,0,0]}],
-                    "irradiance_grid":{"cells":[32,32],"height_m":2.0,"albedo":0.3}}"#;
-        assert_eq!(sun_directions(m, 2).unwrap()[1], [1.0, 0.0, 0.0]);
-        assert_eq!(sun_directions(m, 3), None);
-        assert_eq!(grid_info(m).unwrap().cells, [32, 32]);
-        assert_eq!(sun_directions("{", 1), None);
+        let m = r#"{"per_frame":[{"sun_dir":[0,0,1],"sun_color":[1,1,1]},
+                                 {"sun_dir":[1,0,0],"sun_color":[0.5,0.4,0.3]}],
+                    "irradiance_grid":{"cells":[2,1],"height_m":2.0,"albedo":0.3,
+                        "sun_diameter_deg":1.5,"azimuths":2,"horizons":[0,1,2,3]}}"#;
+        assert_eq!(frame_suns(m, 2).unwrap()[1].dir, [1.0, 0.0, 0.0]);
+        assert_eq!(frame_suns(m, 2).unwrap()[1].color, [0.5, 0.4, 0.3]);
+        assert_eq!(frame_suns(m, 3), None);
+        assert_eq!(grid_info(m).unwrap().cells, [2, 1]);
+        assert_eq!(grid_info(&m.replace("[0,1,2,3]", "[0,1,2]")), None);
+        assert_eq!(frame_suns("{", 1), None);
     }
 }

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use vbim_encoder::{encode, EncoderConfig, FrameSet, Preset, SegmentMode};
 use vbim_format::decode::{Decoder, Output};
-use vbim_format::irradiance::{sun_directions, Grid};
+use vbim_format::irradiance::{frame_suns, grid_info, Grid};
 use vbim_format::package::Package;
 use vbim_format::{ChunkKind, Reader};
 use vbim_player::{headless_device, irradiance_wgsl, PackagePlayer, PlayerConfig};
@@ -86,11 +86,13 @@ fn encode_dir(input: &Path, out: &Path) {
 fn reference(path: &Path, k: usize) -> Grid {
     let mut reader = Reader::open(std::fs::File::open(path).unwrap()).unwrap();
     let h = reader.header().clone();
-    let suns = sun_directions(&reader.metadata().unwrap().unwrap(), 24).unwrap();
+    let meta = reader.metadata().unwrap().unwrap();
+    let (suns, info) = (frame_suns(&meta, 24).unwrap(), grid_info(&meta).unwrap());
+    assert_eq!(info.cells, [CELLS, CELLS]);
     let mut d = Decoder::new(reader).unwrap();
     let mut rgb = vec![0f32; (h.width * h.height * 3) as usize];
     d.frame(k as f64, Output::Linear, &mut rgb).unwrap();
-    Grid::from_image(&rgb, CELLS, CELLS, suns[k])
+    Grid::from_image(&rgb, &info, suns[k].dir, suns[k].color)
 }
 
 fn normals() -> Vec<[f32; 3]> {

@@ -2,15 +2,18 @@
 //! lightmap, under the streamed sky where the package has a sky track (else a gradient whose
 //! colours follow the time of day, from the bake's manifest in the file's metadata chunk),
 //! with the sun's disc where the manifest puts it, seen from a camera orbiting the map
-//! (`vbim play --scene`).
+//! (`vbim play --scene`); where the package has irradiance tracks, a few objects stand on
+//! the terrain lit by them (`objects`).
 
 pub mod mesh;
+mod objects;
 
 use glam::{Mat4, Vec3};
 use vbim_bake::Manifest;
 use wgpu::util::DeviceExt;
 
 pub use mesh::Mesh;
+pub use objects::{showcase, Object};
 
 /// Offscreen colour format: 8-bit sRGB, so the GPU applies the sRGB curve after the
 /// shader's tone mapping.
@@ -78,6 +81,9 @@ pub struct SceneRenderer {
     uniforms: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     has_sky_map: bool,
+    layout: wgpu::BindGroupLayout,
+    format: wgpu::TextureFormat,
+    objects: Option<objects::ObjectsPass>,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -364,6 +370,9 @@ impl SceneRenderer {
             uniforms,
             bind_group,
             has_sky_map: sky_map.is_some(),
+            layout: bgl,
+            format,
+            objects: None,
             color_view: color.create_view(&Default::default()),
             color,
             depth_view: depth.create_view(&Default::default()),
@@ -372,7 +381,23 @@ impl SceneRenderer {
         }
     }
 
-    /// Draws the sky and the terrain into `target` (or the offscreen target).
+    /// Stands `objects` on the terrain from the next frame on, lit by the light for
+    /// objects in `irradiance` (`PackagePlayer::irradiance_buffer`); none for an empty
+    /// list.
+    pub fn set_objects(&mut self, irradiance: &wgpu::Buffer, objects: &[Object]) {
+        self.objects = (!objects.is_empty()).then(|| {
+            objects::ObjectsPass::new(
+                &self.device,
+                &self.layout,
+                self.format,
+                DEPTH,
+                irradiance,
+                objects,
+            )
+        });
+    }
+
+    /// Draws the sky, the terrain and its objects into `target` (or the offscreen target).
     pub fn render(&self, v: &View, target: Option<&wgpu::TextureView>) {
         let aspect = self.width as f32 / self.height as f32;
         let proj = Mat4::perspective_rh(v.fovy, aspect, 0.01, 20.0);
@@ -431,6 +456,9 @@ impl SceneRenderer {
             pass.set_vertex_buffer(0, self.vertices.slice(..));
             pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..self.index_count, 0, 0..1);
+            if let Some(o) = &self.objects {
+                o.draw(&mut pass);
+            }
         }
         self.queue.submit(Some(enc.finish()));
     }

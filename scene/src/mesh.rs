@@ -17,6 +17,18 @@ pub struct Mesh {
     pub indices: Vec<u32>,
     /// Half the map's width and depth in scene units (its longer side spans [−1, 1]).
     pub extent: (f32, f32),
+    /// Map metres to scene units.
+    place: Place,
+}
+
+/// How the height field's metres become the scene's units (x east, y up, z south).
+#[derive(Clone, Copy, Debug)]
+struct Place {
+    half: f32,
+    width_m: f32,
+    depth_m: f32,
+    lo: f32,
+    vx: f32,
 }
 
 /// Base colour (linear albedo) from normalised elevation `e` (0–1) and slope (1 − n_z).
@@ -93,6 +105,26 @@ impl Mesh {
             vertices,
             indices,
             extent: (width_m / half * 0.5, depth_m / half * 0.5),
+            place: Place {
+                half,
+                width_m,
+                depth_m,
+                lo,
+                vx,
+            },
         }
+    }
+
+    /// The ground of `hf` (the field the mesh was made from) at lightmap coordinates
+    /// (u, v), in scene units.
+    pub fn ground(&self, hf: &HeightField, u: f32, v: f32) -> [f32; 3] {
+        let p = self.place;
+        let (x, y) = (u * hf.w as f32 - 0.5, v * hf.h as f32 - 0.5);
+        let z = hf.sample(x, y);
+        [
+            (x * hf.cell_x as f32 - 0.5 * p.width_m) / p.half,
+            (z - p.lo) * p.vx / p.half,
+            (y * hf.cell_y as f32 - 0.5 * p.depth_m) / p.half,
+        ]
     }
 }

@@ -94,7 +94,8 @@ fn fs_sky(i: SkyOut) -> @location(0) vec4<f32> {
     }
     // The sun's disc, soft-edged, far brighter than the sky around it.
     let cs = dot(d, u.sun_dir.xyz);
-    let edge = smoothstep(u.sun_dir.w - 2e-5, u.sun_dir.w + 2e-5, cs);
+    // Only above the horizon: below it the ground would hide the disc.
+    let edge = smoothstep(u.sun_dir.w - 2e-5, u.sun_dir.w + 2e-5, cs) * step(0.0, d.y);
     c = c + u.sun_color.rgb * 40.0 * edge;
     return vec4<f32>(tonemap(c), 1.0);
 }

@@ -3,7 +3,7 @@
 use glam::Vec3;
 use vbim_bake::light_frame;
 use vbim_bake::{load_terrain, HeightField, Precomputed, Scene};
-use vbim_scene::{mesh::base_colour, Mesh, SceneRenderer, SkyAt, View, FORMAT};
+use vbim_scene::{mesh::base_colour, Mesh, Object, SceneRenderer, SkyAt, View, FORMAT};
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
     let (d, q, info) = vbim_player::headless_device().unwrap_or_else(|e| panic!("{e}"));
@@ -232,4 +232,72 @@ fn the_sky_map_is_seen_in_the_direction_it_maps_and_the_sun_where_it_is() {
     v.fovy = 0.05;
     let sun = centre(&v);
     assert!(sun.iter().all(|&c| c > 240), "the sun's disc: {sun:?}");
+}
+
+/// An irradiance buffer (the layout of `vbim_player::irradiance_wgsl`) of one frame of
+/// 1×1 cell: a sun of `sun` towards `sun_dir` (map frame) and a uniform sky and ground of
+/// irradiance / π `ambient` at every normal.
+fn irradiance_buffer(
+    device: &wgpu::Device,
+    sun: [f32; 3],
+    sun_dir: [f32; 3],
+    ambient: [f32; 3],
+) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let mut words: Vec<u32> = vec![1, 1, 1, 0];
+    words.extend([1.0f32, 0.0, 0.0, 0.0].map(f32::to_bits));
+    words.extend([sun_dir[0], sun_dir[1], sun_dir[2], 0.0].map(f32::to_bits));
+    words.extend([0u32; 12]);
+    words.extend([sun[0], sun[1], sun[2], 0.0].map(f32::to_bits));
+    // Y00 = 1 / (2√π): the coefficient 2√π · a gives a at every normal.
+    let c0 = 2.0 * std::f32::consts::PI.sqrt();
+    words.extend(ambient.map(|a| (a * c0).to_bits()).into_iter().chain([0]));
+    words.extend([0u32; 32]);
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: None,
+        contents: bytemuck::cast_slice(&words),
+        usage: wgpu::BufferUsages::STORAGE,
+    })
+}
+
+#[test]
+fn an_object_is_lit_by_the_light_for_objects_where_it_stands() {
+    let (device, queue) = device();
+    let hf = HeightField {
+        w: 32,
+        h: 32,
+        cell_x: 30.0,
+        cell_y: 30.0,
+        z: vec![100.0; 32 * 32],
+    };
+    let mesh = Mesh::new(&hf, 32, 1.0, 1.1);
+    let lm = lightmap(&device, &queue, 32, 32, &[0.1f32; 3].repeat(32 * 32));
+    let mut r = SceneRenderer::new(&device, &queue, &mesh, &lm, None, 64, 64, FORMAT);
+    let albedo = [0.6, 0.5, 0.4];
+    let object = Object::on_ground(&mesh, &hf, [0.5, 0.5], 0.3, albedo);
+    assert!(
+        (object.centre[1] - 0.3).abs() < 1e-5,
+        "resting on the ground: {object:?}"
+    );
+    let exposure = 1.5;
+    // Straight down at the sphere's top, whose normal is up: the sun from the zenith gives
+    // it the sun's full value, plus the ambient; a sun from below gives it none.
+    for (sun_dir, lit) in [([0.0, 0.0, 1.0], true), ([0.0, 0.0, -1.0], false)] {
+        let (sun, ambient) = ([0.9, 0.8, 0.7], [0.05, 0.06, 0.08]);
+        let buf = irradiance_buffer(&device, sun, sun_dir, ambient);
+        r.set_objects(&buf, &[object]);
+        r.render(&view(Vec3::new(0.0, 1.5, 0.001), exposure), None);
+        let px = r.read();
+        let centre = (32 * 64 + 32) * 4;
+        for c in 0..3 {
+            let e = ambient[c] + if lit { sun[c] } else { 0.0 };
+            let x = albedo[c] * e * exposure;
+            let want = srgb8(x / (1.0 + x));
+            let got = px[centre + c] as f32;
+            assert!(
+                (got - want).abs() <= 1.5,
+                "sun {sun_dir:?}, channel {c}: {got} vs {want}"
+            );
+        }
+    }
 }

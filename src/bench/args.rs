@@ -72,6 +72,11 @@ pub struct BenchObjectsArgs {
     /// Timed runs (the median and the spread are reported).
     #[arg(long, default_value_t = 7)]
     pub runs: usize,
+    /// Also plot, from noon to midnight, what an up-facing object receives in the cell the
+    /// evening sun leaves last (a ridge) and in the one it leaves first (a valley), and
+    /// the sun's share of each (PNG).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
 #[derive(Args)]

@@ -60,6 +60,9 @@ pub fn run(a: BenchObjectsArgs) -> Result<(), String> {
     );
     time_queries(&p, &a, "two frames mixed");
     time_first_query(&mut p);
+    if let Some(path) = &a.plot {
+        plot_evening(&file, path)?;
+    }
     let weathers: Vec<String> = p.weathers().map(str::to_string).collect();
     if let Some(other) = weathers.iter().find(|w| *w != p.weather()) {
         p.switch_weather(other, 4_000_000_000)
@@ -132,4 +135,82 @@ fn time_first_query(p: &mut PackagePlayer) {
         "  first       the first call of a frame (it sums the frames' coefficients): \
          {med:.0} µs ({lo:.0}–{hi:.0})"
     );
+}
+
+/// The evening at the ridge and in the valley, from the first weather's irradiance track
+/// through the reference decoder: every media frame from noon on, the sun of every cell
+/// and what an up-facing object at its centre receives; the ridge is the cell the sun
+/// leaves last, the valley the one it leaves first.
+fn plot_evening(file: &vbim_player::PackageFile, path: &std::path::Path) -> Result<(), String> {
+    use vbim_format::irradiance::{frame_suns, grid_info, Grid};
+    let t = file
+        .tracks
+        .iter()
+        .find(|t| t.kind == TrackKind::Irradiance)
+        .ok_or("no irradiance track")?;
+    let err = |e: vbim_format::FormatError| format!("{}: {e}", t.path.display());
+    let f = std::fs::File::open(&t.path).map_err(|e| format!("{}: {e}", t.path.display()))?;
+    let mut reader = vbim_format::Reader::open(f).map_err(err)?;
+    let h = reader.header().clone();
+    let n = h.frame_count as usize;
+    let meta = reader.metadata().map_err(err)?.unwrap_or_default();
+    let suns_of = frame_suns(&meta, n).ok_or("the track's metadata lacks its suns")?;
+    let info = grid_info(&meta).ok_or("the track's metadata lacks its grid")?;
+    let [nx, ny] = info.cells;
+    let mut d = vbim_format::decode::Decoder::new(reader).map_err(err)?;
+    let mut rgb = vec![0f32; (h.width * h.height * 3) as usize];
+    let (mut suns, mut totals) = (Vec::new(), Vec::new());
+    for (k, sun) in suns_of.iter().enumerate().skip(n / 2) {
+        d.frame(k as f64, vbim_format::decode::Output::Linear, &mut rgb)
+            .map_err(err)?;
+        let g = Grid::from_image(&rgb, &info, sun.dir, sun.color);
+        suns.push(g.cells.iter().map(|c| c.sun[1]).collect::<Vec<f32>>());
+        totals.push(
+            (0..nx * ny)
+                .map(|c| {
+                    let u = ((c % nx) as f32 + 0.5) / nx as f32;
+                    let v = ((c / nx) as f32 + 0.5) / ny as f32;
+                    g.irradiance(u, v, [0.0, 0.0, 1.0])[1]
+                })
+                .collect::<Vec<f32>>(),
+        );
+    }
+    // The last frame after noon at which each cell still has the sun (above a thousandth
+    // of the day's brightest sun: coding noise is not sunlight).
+    let peak = suns.iter().flatten().fold(0f32, |m, &v| m.max(v));
+    let cells = nx * ny;
+    let last_sun = |c: usize| suns.iter().rposition(|s| s[c] > 1e-3 * peak).unwrap_or(0);
+    let ridge = (0..cells).max_by_key(|&c| last_sun(c)).unwrap_or(0);
+    let valley = (0..cells).min_by_key(|&c| last_sun(c)).unwrap_or(0);
+    let hours = |i: usize| 24.0 * (n / 2 + i) as f64 / n as f64;
+    let series = |c: usize, what: &str, v: &[Vec<f32>]| crate::plot::Series {
+        name: format!("{what}, cell {c}"),
+        points: v
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (hours(i), s[c] as f64))
+            .collect(),
+    };
+    crate::plot::lines(
+        path,
+        "Light for objects after noon: where the sun stays longest, where it leaves first",
+        "hour of the day",
+        "irradiance / π (green), lightmap units",
+        &[
+            series(ridge, "ridge: up-facing object", &totals),
+            series(ridge, "ridge: sun at normal incidence", &suns),
+            series(valley, "valley: up-facing object", &totals),
+            series(valley, "valley: sun at normal incidence", &suns),
+        ],
+        false,
+    )?;
+    println!(
+        "  evening     {}: the sun leaves the valley's cell {valley} after {:.1} h and the \
+         ridge's cell {ridge} after {:.1} h; plot {}",
+        t.weather,
+        hours(last_sun(valley)),
+        hours(last_sun(ridge)),
+        path.display()
+    );
+    Ok(())
 }

@@ -31,7 +31,7 @@ fn frame(
     let mut lit = vec![0f32; scene.size * scene.size * 3];
     light_with_sun_in(pre, scene, Some(light), sun, 0, &mut lit);
     let grid = ObjectGrid::new(pre, scene);
-    (grid.frame(pre, scene, Some(light), sun, 0, &lit), lit)
+    (grid.frame(pre, scene, Some(light), sun, 0, &lit).0, lit)
 }
 
 #[test]
@@ -95,7 +95,9 @@ fn after_sunset_in_a_valley_the_ridge_top_still_has_the_sun() {
     let sun = sun_for_frame(&scene, i);
     let mut lit = vec![0f32; 128 * 128 * 3];
     light_with_sun_in(&pre, &scene, Some(&light), &sun, i, &mut lit);
-    let grid = objects.frame(&pre, &scene, Some(&light), &sun, i, &lit);
+    let (grid, transmission) = objects.frame(&pre, &scene, Some(&light), &sun, i, &lit);
+    // A clear sky lets the whole sun through; the terrain's share is the horizons'.
+    assert!(transmission.iter().all(|&t| t == 1.0));
     let top = (0..objects.points.len())
         .max_by(|&a, &b| objects.points[a].z.total_cmp(&objects.points[b].z))
         .unwrap();

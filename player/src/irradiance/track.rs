@@ -10,7 +10,7 @@ use std::thread::JoinHandle;
 
 use crossbeam_channel::{Receiver, Sender};
 use vbim_format::decode::{Decoder, Output};
-use vbim_format::irradiance::{cells_of, grid_info, sun_directions, Grid, GridInfo};
+use vbim_format::irradiance::{cells_of, frame_suns, grid_info, Grid, GridInfo};
 use vbim_format::{Limits, Reader};
 
 use crate::PlayerError;
@@ -67,19 +67,25 @@ impl IrradianceTrack {
             .metadata()
             .map_err(|e| err(e.to_string()))?
             .ok_or_else(|| err("an irradiance track without metadata (each frame's sun)".into()))?;
-        let suns = sun_directions(&meta, frames).ok_or_else(|| {
+        let suns = frame_suns(&meta, frames).ok_or_else(|| {
             err(format!(
                 "its metadata lacks the sun of some of its {frames} frames"
             ))
         })?;
-        let info = grid_info(&meta).unwrap_or(GridInfo {
-            cells: [nx, ny],
-            ..GridInfo::default()
-        });
+        let info = grid_info(&meta).ok_or_else(|| {
+            err("its metadata lacks a valid irradiance_grid (cells, horizons, sun diameter)".into())
+        })?;
+        if info.cells != [nx, ny] {
+            return Err(err(format!(
+                "its metadata's grid is {:?} cells, its frames hold {nx}×{ny}",
+                info.cells
+            )));
+        }
         let mut decoder = Decoder::with_limits(reader, limits).map_err(|e| err(e.to_string()))?;
         let (ask, asked_rx) = crossbeam_channel::unbounded::<usize>();
         let (got_tx, got) = crossbeam_channel::unbounded::<Decoded>();
         let name = path.display().to_string();
+        let grid = info.clone();
         let worker = std::thread::Builder::new()
             .name("vbim-irradiance".into())
             .spawn(move || {
@@ -87,7 +93,9 @@ impl IrradianceTrack {
                 for k in asked_rx {
                     let r = decoder
                         .frame(k as f64, Output::Linear, &mut rgb)
-                        .map(|()| Arc::new(Grid::from_image(&rgb, nx, ny, suns[k])))
+                        .map(|()| {
+                            Arc::new(Grid::from_image(&rgb, &grid, suns[k].dir, suns[k].color))
+                        })
                         .map_err(|e| format!("{name}: frame {k}: {e}"));
                     if got_tx.send((k, r)).is_err() {
                         break;

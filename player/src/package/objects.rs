@@ -16,7 +16,13 @@ pub(super) struct Objects {
     /// During a held switch: what was shown when the old weather closed.
     from: Option<Irradiance>,
     info: GridInfo,
+    /// The last step's times and weights, which [`PackagePlayer::wait_irradiance`] repeats.
+    last: Step,
 }
+
+/// The shown weather's time, the new weather's time and the fade's weight during a live
+/// switch, and a held switch's weight.
+type Step = (f64, Option<(f64, f32)>, Option<f32>);
 
 /// What the light for objects did this frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -39,6 +45,7 @@ impl Objects {
             shown: Irradiance::default(),
             from: None,
             info,
+            last: (0.0, None, None),
         })
     }
 
@@ -66,6 +73,7 @@ impl PackagePlayer {
         held_weight: Option<f32>,
     ) -> Option<ObjectsRecord> {
         let objects = self.objects.as_mut()?;
+        objects.last = (shown, to, held_weight);
         let mut error = None;
         let mut take = |r: Result<Option<Irradiance>, String>| {
             r.unwrap_or_else(|e| {
@@ -134,13 +142,20 @@ impl PackagePlayer {
         self.objects.as_ref().map(|o| &o.info)
     }
 
-    /// Waits up to `timeout` for the shown weather's grid at the shown time, then steps
-    /// to it (for tools and tests that need the answer now, not a frame later).
+    /// Waits up to `timeout` for the grids of the last frame's time (the shown weather's,
+    /// and during a switch the new one's), then steps to them again (for tools and tests
+    /// that need the answer now, not a frame later).
     pub fn wait_irradiance(&mut self, timeout: std::time::Duration) -> Option<ObjectsRecord> {
-        let t = self.last_shown;
+        let (shown, to, held) = self.objects.as_ref()?.last;
+        let end = std::time::Instant::now() + timeout;
         if let Some(tr) = self.shown.irradiance.as_mut() {
-            let _ = tr.wait(t, timeout);
+            let _ = tr.wait(shown, timeout);
         }
-        self.step_objects(t, None, None)
+        if let (Some((t, _)), Some(sw)) = (to, self.switch.as_mut()) {
+            if let Some(tr) = sw.to.irradiance.as_mut() {
+                let _ = tr.wait(t, end.saturating_duration_since(std::time::Instant::now()));
+            }
+        }
+        self.step_objects(shown, to, held)
     }
 }
