@@ -74,8 +74,8 @@ pub use gpu::{
 };
 pub use irradiance::{irradiance_wgsl, Irradiance};
 pub use package::{
-    sky_cube_texel, ObjectsRecord, PackageFile, PackagePlayer, PackageRecord, SwitchMode,
-    SwitchRecord, TrackInfo, TrackKind,
+    sky_cube_texel, LightmapSample, LightmapSampling, ObjectsRecord, PackageFile, PackagePlayer,
+    PackageRecord, SwitchMode, SwitchRecord, TrackInfo, TrackKind,
 };
 pub use player::Player;
 pub use readback::{read_texture, read_texture_layer};

@@ -12,7 +12,9 @@ use vbim_format::decode::{Decoder, Output};
 use vbim_format::irradiance::{frame_suns, grid_info, Grid};
 use vbim_format::package::Package;
 use vbim_format::{ChunkKind, Reader};
-use vbim_player::{headless_device, irradiance_wgsl, PackagePlayer, PlayerConfig};
+use vbim_player::{
+    headless_device, irradiance_wgsl, LightmapSampling, PackagePlayer, PlayerConfig,
+};
 
 /// 1/60 s: a display frame.
 const DISPLAY: u64 = 16_666_667;
@@ -343,4 +345,52 @@ fn a_damaged_irradiance_chunk_is_held_then_caught_up() {
         held > 0 && caught_up,
         "held {held} frames, caught up: {caught_up}"
     );
+}
+
+#[test]
+fn the_lightmap_beneath_an_object_comes_back_a_frame_or_two_later_without_waiting() {
+    let dir = package();
+    let (device, queue) = device();
+    let path = dir.path().join("day.vbimpkg");
+    let mut p = PackagePlayer::open(&device, &queue, &path, None, PlayerConfig::default()).unwrap();
+    let before = p.gpu_bytes();
+    p.set_lightmap_sampling(Some(LightmapSampling {
+        max_side: 16,
+        every_ns: 0,
+    }));
+    // 64² averaged over blocks of 4: 16², and its three buffers counted.
+    assert_eq!(p.lightmap_sampling_grid(), Some([16, 16, 4]));
+    assert_eq!(p.gpu_bytes() - before, 3 * 16 * 16 * 16 + 16);
+    let mut shown = std::collections::HashMap::new();
+    let (mut checked, mut latest_lag) = (0, 0);
+    for frame in 0..40 {
+        let r = p.advance(DISPLAY);
+        let lm = p.read_lightmap();
+        shown.insert(r.lightmap.shown.to_bits(), (frame, lm));
+        let (bx, by) = (5usize, 9usize);
+        let (u, v) = ((bx as f32 + 0.5) / 16.0, (by as f32 + 0.5) / 16.0);
+        let Some(s) = p.sample_lightmap(u, v) else {
+            continue;
+        };
+        let (at, lm) = &shown[&s.shown.to_bits()];
+        latest_lag = frame - at;
+        // The mean of the block's 4 × 4 texels of that frame (RGBA, 64 texels a row).
+        for c in 0..3 {
+            let mut sum = 0.0;
+            for y in by * 4..by * 4 + 4 {
+                for x in bx * 4..bx * 4 + 4 {
+                    sum += lm[(y * 64 + x) * 4 + c];
+                }
+            }
+            let want = sum / 16.0;
+            assert!(
+                (s.rgb[c] - want).abs() <= 1e-5 + 1e-4 * want.abs(),
+                "frame {frame}, channel {c}: {} against {want}",
+                s.rgb[c]
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked > 30, "{checked} frames had a sample");
+    assert!(latest_lag <= 2, "the sample lags {latest_lag} frames");
 }

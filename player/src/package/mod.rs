@@ -23,6 +23,8 @@ mod file;
 mod held;
 mod objects;
 pub use objects::ObjectsRecord;
+mod probe;
+pub use probe::{LightmapSample, LightmapSampling};
 
 use std::fs::File;
 use std::path::Path;
@@ -131,6 +133,8 @@ pub struct PackagePlayer {
     cube: Option<cube::SkyCube>,
     /// The light for objects, for a package with irradiance tracks.
     objects: Option<objects::Objects>,
+    /// The lightmap read back for [`PackagePlayer::sample_lightmap`], when asked for.
+    probe: Option<probe::Probe>,
 }
 
 fn output(device: &wgpu::Device, h: &Header) -> (wgpu::Texture, wgpu::TextureView) {
@@ -183,6 +187,7 @@ impl PackagePlayer {
         let objects = objects::Objects::new(device, &shown);
         Ok(PackagePlayer {
             objects,
+            probe: None,
             device: device.clone(),
             queue: queue.clone(),
             fade: FadePass::new(device),
@@ -342,6 +347,7 @@ impl PackagePlayer {
             + out(&self.lightmap)
             + self.sky.as_ref().map_or(0, out)
             + self.objects.as_ref().map_or(0, objects::Objects::gpu_bytes)
+            + self.probe.as_ref().map_or(0, probe::Probe::bytes)
     }
 
     /// Switches to weather `name`, cross-fading over `fade_ns` of playback once the new
@@ -507,6 +513,17 @@ impl PackagePlayer {
         if let Some(c) = &self.cube {
             // The sky output is complete: the tracks, the fade and the held image wrote it.
             c.record(enc);
+        }
+        if let Some(p) = self.probe.as_mut() {
+            // The lightmap output is complete too.
+            p.step(
+                &self.device,
+                &self.queue,
+                enc,
+                &self.lightmap.0,
+                self.ticks,
+                lightmap.shown,
+            );
         }
         PackageRecord {
             lightmap,
