@@ -67,7 +67,9 @@ impl ObjectGrid {
     /// The grid of `scene.objects` over the precomputed terrain.
     pub fn new(pre: &Precomputed, scene: &Scene) -> ObjectGrid {
         let hf = &pre.hf;
-        let (nx, ny) = (scene.objects.cells.min(hf.w), scene.objects.cells.min(hf.h));
+        // At most one cell a texel, in multiples of 8 (a bake is at least 8 texels a side).
+        let fit = |texels: usize| scene.objects.cells.min(texels / 8 * 8).max(8);
+        let (nx, ny) = (fit(hf.w), fit(hf.h));
         let azimuths = scene.azimuths;
         let height_m = scene.objects.height_m;
         let points: Vec<Point> = (0..nx * ny)

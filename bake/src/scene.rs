@@ -105,8 +105,9 @@ impl Default for ViewParams {
 pub struct ObjectParams {
     /// Whether a bake with weathers writes irradiance tracks.
     pub enabled: bool,
-    /// Cells along each side of the map (4 to 128; 16 to 64 is the useful range; at most
-    /// one a texel: a smaller bake has as many cells as texels).
+    /// Cells along each side of the map (a multiple of 8 from 8 to 128, so that the
+    /// track's layers sit on the codec's 8 × 8 blocks; 16 to 64 is the useful range; at
+    /// most one a texel: a smaller bake has the most multiple of 8 it can).
     pub cells: usize,
     /// The height above the ground the grid's points stand at, metres.
     pub height_m: f64,
@@ -313,8 +314,12 @@ impl Scene {
             }
         }
         let o = &self.objects;
-        if !(4..=128).contains(&o.cells) {
-            return Err(format!("objects.cells = {} (4 to 128)", o.cells));
+        if !(8..=128).contains(&o.cells) || !o.cells.is_multiple_of(8) {
+            return Err(format!(
+                "objects.cells = {} (a multiple of 8 from 8 to 128: a track's layers then sit \
+                 on the codec's 8 × 8 blocks)",
+                o.cells
+            ));
         }
         if !(0.0..=10_000.0).contains(&o.height_m) {
             return Err(format!("objects.height_m = {} (0 to 10000)", o.height_m));

@@ -9,8 +9,11 @@
 //! `StandardMaterial` with vertex colours as its albedo, and Bevy's `Lightmap` component
 //! pointing at the image the player writes. A directional light and the ambient light
 //! follow the sun and sky of the bake's manifest (carried in the stream's metadata) and
-//! light a white sphere beside the terrain; they do not light the terrain's diffuse, which
-//! the lightmap already holds. A package's sky track is resampled into a cube map every
+//! light a few spheres standing on the terrain; they do not light the terrain's diffuse,
+//! which the lightmap already holds. A package's light for objects (its irradiance
+//! tracks) goes into Bevy's `IrradianceVolume` over the terrain and replaces the ambient
+//! light for the spheres: each is lit by the sky it sees and the ground around it, and
+//! Bevy's directional light, with its shadows, brings the sun. A package's sky track is resampled into a cube map every
 //! frame, Bevy's `Skybox` (without one, the background is the manifest's zenith colour;
 //! `--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
 //! crashes lavapipe). W cycles the package's weathers (a 2 s cross-fade; `--weather NAME` starts in that one). `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
@@ -25,7 +28,7 @@ use bevy::asset::RenderAssetUsages;
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::atmosphere::ScatteringMedium;
-use bevy::light::{Atmosphere, GlobalAmbientLight, Skybox};
+use bevy::light::{Atmosphere, GlobalAmbientLight, IrradianceVolume, LightProbe, Skybox};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::AtmosphereSettings;
 use bevy::pbr::Lightmap;
@@ -241,9 +244,15 @@ fn setup(
     let sky_cube = opened
         .sky_image()
         .map(|_| images.add(bevy_vbim::sky_cube_image(64)));
+    // A package's light for objects, for Bevy's irradiance volume over the terrain (one
+    // voxel a cell of the package's grid).
+    let volume = opened
+        .irradiance_volume_image()
+        .map(|image| images.add(image));
     let stream: Handle<VbimStream> = assets.load(name.to_string());
     let mut p = VbimPlayback::new(stream, lightmap.clone());
     p.sky_cube = sky_cube.clone();
+    p.irradiance_volume = volume.clone();
     p.paused = a.paused;
     if let Some(w) = &a.weather {
         if !opened.weathers().contains(w) {
@@ -284,23 +293,35 @@ fn setup(
             ..default()
         },
     ));
-    // A white sphere at the map's centre, resting on the ground: lit by the sun and sky
-    // lights only, to compare with the terrain's lightmap.
-    let ground = hf.sample((hf.w / 2) as f32, (hf.h / 2) as f32);
-    let lo = hf.z.iter().copied().fold(f32::MAX, f32::min);
-    let half =
-        0.5 * ((hf.w - 1) as f32 * hf.cell_x as f32).max((hf.h - 1) as f32 * hf.cell_y as f32);
-    let y = (ground - lo) * scene.view.vertical_exaggeration as f32 / half;
-    commands.spawn((
-        Mesh3d(meshes.add(Sphere::new(0.04).mesh().uv(48, 24))),
-        MeshMaterial3d(materials.add(StandardMaterial {
-            base_color: Color::WHITE,
-            perceptual_roughness: 1.0,
-            reflectance: 0.0,
-            ..default()
-        })),
-        Transform::from_xyz(0.0, y + 0.06, 0.0),
-    ));
+    // Spheres standing on the terrain (the terrain scene's: on the highest and the lowest
+    // ground and around the centre): ordinary meshes, lit by the irradiance volume and
+    // the sun.
+    for o in vbim_scene::showcase(&grid, &hf) {
+        let [r, g, b] = o.albedo;
+        commands.spawn((
+            Mesh3d(meshes.add(Sphere::new(o.radius).mesh().uv(48, 24))),
+            MeshMaterial3d(materials.add(StandardMaterial {
+                base_color: Color::linear_rgb(r, g, b),
+                perceptual_roughness: 1.0,
+                reflectance: 0.0,
+                ..default()
+            })),
+            Transform::from_xyz(o.centre[0], o.centre[1], o.centre[2]),
+        ));
+    }
+    if let Some(voxels) = volume {
+        // The volume spans the map (x east, z south) and every height above it.
+        let (ex, ez) = grid.extent;
+        commands.spawn((
+            LightProbe::default(),
+            IrradianceVolume {
+                voxels,
+                intensity: lux_per_unit(SUN_LUX),
+                affects_lightmapped_meshes: false,
+            },
+            Transform::from_xyz(0.0, 0.5, 0.0).with_scale(Vec3::new(2.0 * ex, 2.0, 2.0 * ez)),
+        ));
+    }
     commands.spawn((
         Sun,
         DirectionalLight {
@@ -418,6 +439,10 @@ fn follow_sun(
     }
     let sky = bake_sky(f32s(f.sky_color), f32s(f.sky_horizon_sun_side));
     (ambient.color, ambient.brightness) = sky_light(SUN_LUX, sky);
+    if s.irradiance.is_some() {
+        // The irradiance volume lights the objects with the sky they see.
+        ambient.brightness = 0.0;
+    }
     ambient.affects_lightmapped_meshes = false;
     let exposure = 1.0 / (1.2 * 2f32.powf(EV100));
     let k = lux_per_unit(SUN_LUX) * exposure;

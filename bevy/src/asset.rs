@@ -30,6 +30,8 @@ pub struct VbimStream {
     weathers: Arc<[String]>,
     /// The sky tracks' size, when the package has them.
     sky: Option<(u32, u32)>,
+    /// The irradiance grid's cells, when the package has irradiance tracks.
+    grid: Option<(u32, u32)>,
 }
 
 /// Why a stream could not be loaded.
@@ -76,10 +78,11 @@ impl VbimStream {
             && magic == vbim_format::MAGIC;
         // A package: its tracks share one timeline (checked); the first weather's lightmap
         // stands for it (its header and the bake's manifest).
-        let (lightmap, weathers, sky) = if is_file {
+        let (lightmap, weathers, sky, grid) = if is_file {
             (
                 path.clone(),
                 vec![vbim_format::package::SINGLE_WEATHER.to_string()],
+                None,
                 None,
             )
         } else {
@@ -90,8 +93,19 @@ impl VbimStream {
                 .iter()
                 .find(|t| t.kind == vbim_player::TrackKind::Sky)
                 .map(|t| (t.header.width, t.header.height));
+            let grid = p
+                .tracks
+                .iter()
+                .find(|t| t.kind == vbim_player::TrackKind::Irradiance)
+                .and_then(|t| {
+                    vbim_format::irradiance::cells_of(
+                        t.header.width as usize,
+                        t.header.height as usize,
+                    )
+                })
+                .map(|(nx, ny)| (nx as u32, ny as u32));
             let names = p.package.weathers.iter().map(|w| w.name.clone()).collect();
-            (p.tracks[0].path.clone(), names, sky)
+            (p.tracks[0].path.clone(), names, sky, grid)
         };
         let file = File::open(&lightmap).map_err(|source| StreamError::Io {
             path: lightmap.clone(),
@@ -110,6 +124,7 @@ impl VbimStream {
             metadata,
             weathers: weathers.into(),
             sky,
+            grid,
         })
     }
 
@@ -125,6 +140,14 @@ impl VbimStream {
     /// lightmap's units.
     pub fn sky_image(&self) -> Option<Image> {
         self.sky.map(|(w, h)| lightmap_image(w, h))
+    }
+
+    /// An image for [`VbimPlayback::irradiance_volume`](crate::VbimPlayback) of the
+    /// package's irradiance grid ([`irradiance_volume_image`](crate::irradiance_volume_image)),
+    /// when the package has irradiance tracks.
+    pub fn irradiance_volume_image(&self) -> Option<Image> {
+        self.grid
+            .map(|(nx, ny)| crate::irradiance_volume_image(nx, ny))
     }
 
     /// The stream's header: size, channels, frame rate, frame count, looping.

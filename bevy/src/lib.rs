@@ -31,7 +31,10 @@
 //! A package of weathers (`.vbimpkg`) is an asset too: [`VbimPlayback::sky`] names an image
 //! its sky track is written into ([`VbimStream::sky_image`]), and setting
 //! [`VbimPlayback::weather`] cross-fades lightmap and sky to another weather
-//! ([`VbimEventKind::WeatherChanged`] when it is shown).
+//! ([`VbimEventKind::WeatherChanged`] when it is shown). Its irradiance tracks light the
+//! objects on the terrain: [`VbimStats::irradiance`] answers on the CPU, and
+//! [`VbimPlayback::irradiance_volume`] names an image ([`irradiance_volume_image`]) written
+//! every frame for Bevy's `IrradianceVolume`, which lights ordinary meshes.
 //!
 //! # Units
 //! A texel is the irradiance reaching the surface divided by π, on a scale where the noon
@@ -46,6 +49,7 @@
 #![deny(missing_docs)]
 
 mod asset;
+mod objects;
 mod playback;
 mod render;
 mod units;
@@ -61,9 +65,10 @@ use bevy::render::renderer::{RenderGraph, RenderGraphSystems};
 use bevy::render::{ExtractSchedule, Render, RenderApp, RenderSystems};
 
 pub use asset::{lightmap_image, sky_cube_image, StreamError, VbimStream};
+pub use objects::irradiance_volume_image;
 pub use playback::{VbimEvent, VbimEventKind, VbimPlayback, VbimStats};
 pub use units::{bake_sky, lux_per_unit, sky_light, sun_light, BEVY_AMBIENT_DIFFUSE};
-pub use vbim_player::{FrameState, Policy, Stall, SwitchMode, Throttle, Totals};
+pub use vbim_player::{FrameState, Irradiance, Policy, Stall, SwitchMode, Throttle, Totals};
 
 /// Adds `.vbim` assets, [`VbimPlayback`], [`VbimStats`] and [`VbimEvent`]. Add it after
 /// Bevy's `DefaultPlugins` (it needs the asset and render plugins).
@@ -81,7 +86,13 @@ impl Plugin for VbimPlugin {
             .register_asset_loader(asset::VbimLoader::new(&folder))
             .add_message::<VbimEvent>()
             .insert_resource(playback::Reports(Mutex::new(rx)))
-            .add_systems(First, playback::receive_reports)
+            .add_systems(
+                First,
+                (
+                    playback::receive_reports,
+                    objects::write_irradiance_volumes.after(playback::receive_reports),
+                ),
+            )
             .add_systems(PostUpdate, playback::advance_clocks);
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             bevy::log::warn!(

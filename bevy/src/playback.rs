@@ -9,7 +9,7 @@ use bevy::asset::Handle;
 use bevy::ecs::prelude::*;
 use bevy::image::Image;
 use bevy::time::{Time, Virtual};
-use vbim_player::{FrameRecord, FrameState, Policy, SwitchMode, Throttle, Totals};
+use vbim_player::{FrameRecord, FrameState, Irradiance, Policy, SwitchMode, Throttle, Totals};
 
 use crate::asset::VbimStream;
 
@@ -53,6 +53,13 @@ pub struct VbimPlayback {
     /// [`sky_cube_image`]: crate::sky_cube_image
     /// [`lux_per_unit`]: crate::lux_per_unit
     pub sky_cube: Option<Handle<Image>>,
+    /// An image the package's light for objects is written into every frame
+    /// ([`irradiance_volume_image`]), for Bevy's `IrradianceVolume`: sky and bounce per
+    /// cell of its irradiance grid, so that ordinary meshes on the terrain are lit as the
+    /// ground around them; `None`: nothing is written.
+    ///
+    /// [`irradiance_volume_image`]: crate::irradiance_volume_image
+    pub irradiance_volume: Option<Handle<Image>>,
     /// The weather to show (a package's weather name; `None`: its first). Changing it
     /// switches weather: the new weather's tracks start reading at once and, when they show
     /// the shown time, lightmap and sky cross-fade over [`fade`](VbimPlayback::fade).
@@ -83,6 +90,7 @@ impl VbimPlayback {
             catch_up: Duration::from_millis(500),
             sky: None,
             sky_cube: None,
+            irradiance_volume: None,
             weather: None,
             fade: Duration::from_secs(2),
             switch_mode: SwitchMode::Live,
@@ -134,6 +142,10 @@ pub struct VbimStats {
     /// The player's running totals: frames, stalls, bytes read and uploaded, CPU time,
     /// damage.
     pub totals: Totals,
+    /// What an object standing on the terrain receives at the time shown, for a package
+    /// with irradiance tracks: `irradiance.at(u, v, normal)` (lightmap coordinates and a
+    /// map-frame normal: x east, y south, z up; Bevy's x, z, y), in the lightmap's units.
+    pub irradiance: Option<Irradiance>,
     /// A stall began and the true state has not been shown since.
     in_stall: bool,
 }
@@ -187,6 +199,7 @@ pub(crate) enum Report {
         weather: String,
         switching: Option<(String, f32)>,
         gpu_bytes: u64,
+        irradiance: Option<Box<Irradiance>>,
     },
     /// The player could not open or write the image.
     Failed(String),
@@ -242,6 +255,7 @@ pub(crate) fn receive_reports(
                 weather,
                 switching,
                 gpu_bytes,
+                irradiance,
             } => {
                 if !s.playing {
                     send(VbimEventKind::Loaded);
@@ -251,6 +265,7 @@ pub(crate) fn receive_reports(
                 s.weather = weather;
                 s.switching = switching;
                 s.gpu_bytes = gpu_bytes;
+                s.irradiance = irradiance.map(|b| *b);
                 // A stall is the player's own count (a run of late frames counts once; the
                 // buffering before the first frame is not one).
                 if totals.stalls > s.totals.stalls {

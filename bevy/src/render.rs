@@ -325,6 +325,7 @@ pub(crate) fn advance_players(
                     .switching_to()
                     .map(|to| (to.to_string(), package.switch.map_or(0.0, |s| s.weight))),
                 gpu_bytes: player.gpu_bytes(),
+                irradiance: player.irradiance_frames().cloned().map(Box::new),
             },
         ));
     }

@@ -534,3 +534,136 @@ fn a_package_plays_its_sky_and_switches_weather_from_the_component() {
     assert!(refused.is_some_and(|m| m.contains("rain")));
     assert_eq!(stats(&app, e).weather, "overcast");
 }
+
+/// A package's light for objects reaches Bevy: [`VbimStats::irradiance`] answers on the
+/// CPU, and the irradiance volume image holds, for each cell and face, the sky and bounce
+/// that answer gives towards that face (Bevy's +Y is the map's up).
+#[test]
+fn a_packages_light_for_objects_fills_an_irradiance_volume() {
+    use vbim_format::irradiance::{Cell, Grid, LAYERS};
+    let dir = tempfile::tempdir().unwrap();
+    let frames = 30;
+    write_stream(
+        dir.path(),
+        "clear.vbim",
+        &day(24, 16, frames, InputKind::Hdr, 3),
+    );
+    // An 8 × 8 grid (its layers on the codec's 8 × 8 blocks): a uniform A(t) plus an
+    // up–down term B(t), no direct sun.
+    let c0 = 2.0 * std::f32::consts::PI.sqrt();
+    let (a, b) = (
+        |k: usize| 0.1 + 0.01 * k as f32,
+        |k: usize| 0.05 + 0.002 * k as f32,
+    );
+    let grids: Vec<Vec<f32>> = (0..frames)
+        .map(|k| {
+            let mut sh = [[0f32; 3]; 9];
+            sh[0] = [a(k) * c0; 3];
+            sh[2] = [b(k); 3];
+            let g = Grid {
+                nx: 8,
+                ny: 8,
+                cells: vec![Cell { sun: [0.0; 3], sh }; 64],
+                sun_dir: [0.0, 0.0, 1.0],
+            };
+            g.to_image(&[0.0; 64])
+        })
+        .collect();
+    assert_eq!(grids[0].len(), 40 * 16 * 3);
+    assert_eq!(LAYERS, 10);
+    let per_frame: Vec<String> = (0..frames)
+        .map(|_| r#"{"sun_dir":[0,0,1],"sun_color":[1,1,1]}"#.to_string())
+        .collect();
+    let meta = format!(
+        r#"{{"per_frame":[{}],"irradiance_grid":{{"cells":[8,8],"height_m":2,"albedo":0.25,
+            "sun_diameter_deg":1.5,"azimuths":8,"horizons":[]}}}}"#,
+        per_frame.join(",")
+    );
+    let cfg = EncoderConfig {
+        segment: SegmentMode::Auto { max: 8 },
+        rate: (24, 1),
+        metadata: Some(meta),
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    let mut irr = Vec::new();
+    let src = MemorySource::new("irradiance", 40, 16, 3, InputKind::Hdr, grids);
+    encode(&src, &cfg, Cursor::new(&mut irr), &|_, _, _| {}).unwrap();
+    std::fs::write(dir.path().join("clear-irradiance.vbim"), &irr).unwrap();
+    let package = vbim_format::package::Package {
+        vbim_package: 1,
+        weathers: vec![vbim_format::package::WeatherTracks {
+            name: "clear".into(),
+            lightmap: "clear.vbim".into(),
+            sky: None,
+            irradiance: Some("clear-irradiance.vbim".into()),
+        }],
+    };
+    std::fs::write(dir.path().join("day.vbimpkg"), package.to_json()).unwrap();
+    let opened = VbimStream::open(dir.path().join("day.vbimpkg")).unwrap();
+    let mut app = app(dir.path());
+    let world = app.world_mut();
+    let stream: Handle<VbimStream> = world.resource::<AssetServer>().load("day.vbimpkg");
+    let mut images = world.resource_mut::<Assets<Image>>();
+    let lightmap = images.add(lightmap_image(24, 16));
+    let volume = images.add(opened.irradiance_volume_image().expect("a grid"));
+    let mut p = VbimPlayback::new(stream, lightmap);
+    p.irradiance_volume = Some(volume.clone());
+    p.speed = 0.25;
+    let e = world.spawn(p).id();
+    for _ in 0..600 {
+        app.update();
+        if stats(&app, e).frame > 6.0 && stats(&app, e).irradiance.is_some() {
+            break;
+        }
+    }
+    let s = stats(&app, e);
+    let irr = s
+        .irradiance
+        .expect("the light for objects reached the main world");
+    let image = app
+        .world()
+        .resource::<Assets<Image>>()
+        .get(&volume)
+        .unwrap();
+    let size = image.texture_descriptor.size;
+    assert_eq!(
+        (size.width, size.height, size.depth_or_array_layers),
+        (8, 2, 24)
+    );
+    let data = image.data.as_ref().unwrap();
+    let texel = |x: u32, y: u32, z: u32| {
+        let at = (((z * 2 + y) * 8 + x) * 8) as usize;
+        half::f16::from_le_bytes([data[at], data[at + 1]]).to_f32()
+    };
+    // Each face against the CPU answer towards it, within half-float rounding.
+    let faces = [
+        (0, 0, [1.0, 0.0, 0.0]),
+        (1, 0, [-1.0, 0.0, 0.0]),
+        (0, 1, [0.0, 0.0, 1.0]),
+        (1, 1, [0.0, 0.0, -1.0]),
+        (0, 2, [0.0, 1.0, 0.0]),
+        (1, 2, [0.0, -1.0, 0.0]),
+    ];
+    for z in 0..8u32 {
+        for x in 0..8u32 {
+            let (u, v) = ((x as f32 + 0.5) / 8.0, (z as f32 + 0.5) / 8.0);
+            for (dy, slab, n) in faces {
+                let want = irr.sky_at(u, v, n)[0];
+                let got = texel(x, dy, slab * 8 + z);
+                assert!(
+                    (got - want).abs() <= 2f32.powi(-10) * want.abs() + 1e-6,
+                    "cell ({x}, {z}) face {n:?}: {got} against {want}"
+                );
+            }
+        }
+    }
+    // Up is brighter than down by 2 · 0.4886 · B(t), as coded (within the codec's error).
+    let t = s.frame as usize;
+    let (up, down) = (texel(3, 0, 8 + 3), texel(3, 1, 8 + 3));
+    let want = 2.0 * 0.488_602_5 * b(t);
+    assert!(
+        ((up - down) - want).abs() < 0.1 * want,
+        "up {up}, down {down}: {} against {want} (frame {t})",
+        up - down
+    );
+}

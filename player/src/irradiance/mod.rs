@@ -47,6 +47,16 @@ impl Irradiance {
     /// in the lightmap's units (a flat open texel's value, for an up-facing normal). The
     /// weighted sum over the slots of [`Grid::irradiance`], bilinear between cell centres.
     pub fn at(&self, u: f32, v: f32, n: [f32; 3]) -> [f32; 3] {
+        self.eval(u, v, n, true)
+    }
+
+    /// [`Irradiance::at`] without the sun: the sky and the bounce alone (for a renderer
+    /// whose own directional light, with its own shadows, brings the sun).
+    pub fn sky_at(&self, u: f32, v: f32, n: [f32; 3]) -> [f32; 3] {
+        self.eval(u, v, n, false)
+    }
+
+    fn eval(&self, u: f32, v: f32, n: [f32; 3], sun: bool) -> [f32; 3] {
         if self.slots.is_empty() {
             return [0.0; 3];
         }
@@ -59,7 +69,7 @@ impl Irradiance {
         let y = vbim_format::irradiance::sh_basis(n.map(|c| c as f64)).map(|c| c as f32);
         let cos: [f32; MAX_SLOTS] = std::array::from_fn(|s| {
             let d = m.dirs[s];
-            (n[0] * d[0] + n[1] * d[1] + n[2] * d[2]).max(0.0)
+            (n[0] * d[0] + n[1] * d[1] + n[2] * d[2]).max(0.0) * sun as u32 as f32
         });
         let mut e = [0f32; 3];
         for (k, w) in [

@@ -63,6 +63,9 @@ impl IrradianceTrack {
             )));
         }
         let frames = h.frame_count as usize;
+        if frames == 0 {
+            return Err(err("an irradiance track without frames".into()));
+        }
         let meta = reader
             .metadata()
             .map_err(|e| err(e.to_string()))?
