@@ -146,7 +146,11 @@ impl SceneRenderer {
     ) -> SceneRenderer {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("terrain"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("terrain.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                [include_str!("uniforms.wgsl"), include_str!("terrain.wgsl")]
+                    .concat()
+                    .into(),
+            ),
         });
         let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("terrain vertices"),

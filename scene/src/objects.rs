@@ -116,7 +116,9 @@ impl ObjectsPass {
         irradiance: &wgpu::Buffer,
         objects: &[Object],
     ) -> ObjectsPass {
-        let source = vbim_player::irradiance_wgsl(1, 0) + include_str!("objects.wgsl");
+        let source = vbim_player::irradiance_wgsl(1, 0)
+            + include_str!("uniforms.wgsl")
+            + include_str!("objects.wgsl");
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("objects"),
             source: wgpu::ShaderSource::Wgsl(source.into()),

@@ -1,21 +1,7 @@
 // Objects on the terrain (spheres), lit by the package's light for objects: albedo ×
 // vbim_irradiance at the object's lightmap coordinates, per pixel of its normal, tone-mapped
-// as the terrain is. The irradiance buffer's declaration and function are prepended
-// (vbim_player::irradiance_wgsl(1, 0)).
-
-struct Uniforms {
-    view_proj: mat4x4<f32>,
-    inv_view_proj: mat4x4<f32>,
-    // x: exposure (the rest as in terrain.wgsl)
-    params: vec4<f32>,
-    sky_zenith: vec4<f32>,
-    sky_horizon: vec4<f32>,
-    eye: vec4<f32>,
-    sun_dir: vec4<f32>,
-    sun_color: vec4<f32>,
-}
-
-@group(0) @binding(0) var<uniform> u: Uniforms;
+// as the terrain is. The scene's uniforms (uniforms.wgsl) and the irradiance buffer's
+// declaration and function (vbim_player::irradiance_wgsl(1, 0)) are prepended.
 
 struct ObjOut {
     @builtin(position) pos: vec4<f32>,
