@@ -280,7 +280,8 @@ fn bake_day(
                 if let Some(g) = grid {
                     // What objects receive, from the lightmap just lit (its bounce).
                     let to = Instant::now();
-                    let sun = light::sun_for_frame(scene, i);
+                    let sun =
+                        light.map_or_else(|| light::sun_for_frame(scene, i), |w| w.sun(scene, i));
                     let (frame, transmission) = g.frame(pre, scene, light, &sun, i, buf);
                     let (w, h) = vbim_format::irradiance::image_size(frame.nx, frame.ny);
                     output::write_frame(

@@ -92,6 +92,11 @@ impl WeatherLight {
         }
     }
 
+    /// The sun of frame `i` through this weather's haze ([`crate::sun::hazed`]).
+    pub fn sun(&self, scene: &Scene, i: usize) -> SunState {
+        crate::sun::hazed(sun_for_frame(scene, i), self.sky.turbidity)
+    }
+
     /// The sky dome at sun `sun`.
     pub fn dome(&self, scene: &Scene, sun: &SunState) -> SkyDome {
         SkyDome::new(sun, scene.sun.strength, self.sky, scene.sky.night)
@@ -140,7 +145,7 @@ pub fn light_frame_in(
     i: usize,
     out: &mut [f32],
 ) -> FrameInfo {
-    let sun = sun_for_frame(scene, i);
+    let sun = weather.map_or_else(|| sun_for_frame(scene, i), |w| w.sun(scene, i));
     light_with_sun_in(pre, scene, weather, &sun, i, out);
     let (zenith, horizon) = match weather {
         None => {

@@ -16,7 +16,7 @@ use vbim_files::{frame_name, FrameFormat, Manifest};
 
 use crate::atmosphere::SkyDome;
 use crate::error::out_err;
-use crate::light::{sun_for_frame, WeatherLight};
+use crate::light::WeatherLight;
 use crate::scene::{Scene, WeatherParams, SKY_MAP_WIDTH};
 use crate::{output, BakeError, Progress};
 
@@ -60,7 +60,7 @@ pub fn write(
     let done = AtomicU64::new(0);
     let stage = format!("{} sky", weather.name);
     (0..n).into_par_iter().try_for_each(|i| {
-        let dome = light.dome(scene, &sun_for_frame(scene, i));
+        let dome = light.dome(scene, &light.sun(scene, i));
         let path = dir.join(frame_name(i, FrameFormat::Exr));
         output::write_frame(
             &path,
@@ -113,7 +113,7 @@ fn sheet(scene: &Scene, light: &WeatherLight, exposure: f32, path: &Path) -> Res
         image::RgbImage::from_pixel(size(cols, tw), size(rows, th), image::Rgb([24, 24, 28]));
     for k in 0..12 {
         let i = k * scene.frames / 12;
-        let map = sky_map(&light.dome(scene, &sun_for_frame(scene, i)), w);
+        let map = sky_map(&light.dome(scene, &light.sun(scene, i)), w);
         let px = output::to_png8(&map, exposure);
         let (ox, oy) = (gap + (k % cols) * (tw + gap), gap + (k / cols) * (th + gap));
         for y in 0..th {

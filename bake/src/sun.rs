@@ -17,6 +17,33 @@ pub struct SunState {
 /// Extinction per unit air mass (Rayleigh-like: blue scatters most), per RGB channel.
 pub const EXTINCTION: [f64; 3] = [0.12, 0.21, 0.42];
 
+/// The turbidity at which [`EXTINCTION`] holds: a weather's sun at this turbidity (the
+/// default) is the sector sky's, and a hazier or clearer one differs by its aerosols alone.
+pub const REFERENCE_TURBIDITY: f64 = 2.5;
+
+/// Wavelengths standing for the R, G and B channels, µm.
+const WAVELENGTHS: [f64; 3] = [0.65, 0.55, 0.45];
+
+/// The aerosol extinction per unit air mass that turbidity `t` adds to [`EXTINCTION`]
+/// (negative below [`REFERENCE_TURBIDITY`]): Preetham et al.'s Ångström coefficient
+/// β = 0.04608 T − 0.04586, over λ^1.3 at each channel's wavelength. Haze dims the blue end
+/// most, less steeply than the air's own (Rayleigh) scattering.
+pub fn aerosol_extinction(t: f64) -> [f64; 3] {
+    let db = 0.04608 * (t - REFERENCE_TURBIDITY);
+    WAVELENGTHS.map(|l| db * l.powf(-1.3))
+}
+
+/// `sun` seen through the aerosols of turbidity `t`: its colour dimmed (or, below
+/// [`REFERENCE_TURBIDITY`], brightened) by [`aerosol_extinction`] along its air mass.
+pub fn hazed(sun: SunState, t: f64) -> SunState {
+    let m = air_mass(sun.elevation);
+    let dk = aerosol_extinction(t);
+    SunState {
+        color: std::array::from_fn(|c| sun.color[c] * (-dk[c] * m).exp()),
+        ..sun
+    }
+}
+
 /// Air mass along the line of sight at elevation `e` (Kasten & Young 1989), finite at and
 /// below the horizon.
 pub fn air_mass(e: f64) -> f64 {
@@ -95,6 +122,20 @@ mod tests {
     #[test]
     fn noon_is_south_and_highest_midnight_below() {
         let noon = sun_at(36.6, 172.0, 12.0, 1.0);
+        // Haze: the reference turbidity leaves the sun as it is; more dims it, the blue
+        // most, and the more so the lower the sun.
+        assert_eq!(hazed(noon, REFERENCE_TURBIDITY).color, noon.color);
+        let hazy = hazed(noon, 6.0);
+        let ratio = |s: SunState, c: usize| s.color[c] / noon.color[c];
+        assert!(ratio(hazy, 2) < ratio(hazy, 1) && ratio(hazy, 1) < ratio(hazy, 0));
+        assert!(
+            ratio(hazy, 0) < 0.9 && ratio(hazy, 2) > 0.6,
+            "{:?}",
+            hazy.color
+        );
+        let low = sun_at(36.6, 172.0, 18.5, 1.0);
+        assert!(hazed(low, 6.0).color[1] / low.color[1] < ratio(hazy, 1));
+        assert!(hazed(noon, 1.7).color[2] > noon.color[2]);
         assert!((noon.azimuth_north.to_degrees() - 180.0).abs() < 1e-6);
         assert!((noon.elevation.to_degrees() - (90.0 - 36.6 + 23.44)).abs() < 0.1);
         assert!(sun_at(36.6, 172.0, 0.0, 1.0).elevation < 0.0);
