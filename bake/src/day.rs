@@ -273,15 +273,11 @@ fn bake_day(
             |buf, i| {
                 let tl = Instant::now();
                 let info = light::light_frame_in(pre, scene, light, i, buf);
-                lighting_ns.fetch_add(
-                    tl.elapsed().as_nanos() as u64,
-                    std::sync::atomic::Ordering::Relaxed,
-                );
+                add_elapsed(&lighting_ns, tl);
                 if let Some(g) = grid {
                     // What objects receive, from the lightmap just lit (its bounce).
                     let to = Instant::now();
-                    let sun =
-                        light.map_or_else(|| light::sun_for_frame(scene, i), |w| w.sun(scene, i));
+                    let sun = light::sun_in(scene, light, i);
                     let (frame, transmission) = g.frame(pre, scene, light, &sun, i, buf);
                     let (w, h) = vbim_format::irradiance::image_size(frame.nx, frame.ny);
                     output::write_frame(
@@ -293,10 +289,7 @@ fn bake_day(
                         None,
                         None,
                     )?;
-                    objects_ns.fetch_add(
-                        to.elapsed().as_nanos() as u64,
-                        std::sync::atomic::Ordering::Relaxed,
-                    );
+                    add_elapsed(&objects_ns, to);
                 }
                 let tw = Instant::now();
                 let path = dir.join(vbim_files::frame_name(i, format));
@@ -309,10 +302,7 @@ fn bake_day(
                     exposure,
                     png16_scale,
                 )?;
-                writing_ns.fetch_add(
-                    tw.elapsed().as_nanos() as u64,
-                    std::sync::atomic::Ordering::Relaxed,
-                );
+                add_elapsed(&writing_ns, tw);
                 let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 progress(stage, k, n as u64);
                 Ok(info)
@@ -351,6 +341,14 @@ fn bake_day(
         objects_s: objects_ns.into_inner() as f64 * 1e-9 / threads,
         irradiance,
     })
+}
+
+/// Adds the time since `since` to `counter`, ns (per-frame work summed over threads).
+fn add_elapsed(counter: &std::sync::atomic::AtomicU64, since: Instant) {
+    counter.fetch_add(
+        since.elapsed().as_nanos() as u64,
+        std::sync::atomic::Ordering::Relaxed,
+    );
 }
 
 /// The irradiance track's manifest: the lightmap's timing, exposure and per-frame sun

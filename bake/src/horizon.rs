@@ -77,11 +77,16 @@ impl HorizonMap {
 
     /// The two azimuth planes around `phi` and the weight of the second.
     pub fn bracket(&self, phi: f64) -> (usize, usize, f32) {
-        let n = self.azimuths;
-        let pos = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * n as f64;
-        let a0 = (pos.floor() as usize) % n;
-        (a0, (a0 + 1) % n, (pos - pos.floor()) as f32)
+        bracket(phi, self.azimuths)
     }
+}
+
+/// The two of `n` azimuths ([`azimuth`]) around map-frame azimuth `phi` and the weight of
+/// the second.
+pub fn bracket(phi: f64, n: usize) -> (usize, usize, f32) {
+    let pos = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * n as f64;
+    let a0 = (pos.floor() as usize) % n;
+    (a0, (a0 + 1) % n, (pos - pos.floor()) as f32)
 }
 
 fn transpose(hf: &HeightField) -> HeightField {

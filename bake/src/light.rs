@@ -117,6 +117,11 @@ pub fn sun_for_frame(scene: &Scene, i: usize) -> SunState {
     )
 }
 
+/// The sun of frame `i` under `weather` (through its haze), or the scene's for `None`.
+pub fn sun_in(scene: &Scene, weather: Option<&WeatherLight>, i: usize) -> SunState {
+    weather.map_or_else(|| sun_for_frame(scene, i), |w| w.sun(scene, i))
+}
+
 pub fn sky_model(scene: &Scene) -> SkyModel {
     SkyModel {
         strength: scene.sky.strength,
@@ -145,7 +150,7 @@ pub fn light_frame_in(
     i: usize,
     out: &mut [f32],
 ) -> FrameInfo {
-    let sun = weather.map_or_else(|| sun_for_frame(scene, i), |w| w.sun(scene, i));
+    let sun = sun_in(scene, weather, i);
     light_with_sun_in(pre, scene, weather, &sun, i, out);
     let (zenith, horizon) = match weather {
         None => {

@@ -22,6 +22,7 @@ use vbim_format::irradiance::{sh_basis, Cell, Grid, GridInfo, COSINE_LOBE, HORIZ
 use crate::atmosphere::{direct_share, direction};
 use crate::clouds::CloudLayer;
 use crate::heightfield::HeightField;
+use crate::horizon::bracket;
 use crate::light::{sector_values, Precomputed, WeatherLight};
 use crate::scene::Scene;
 use crate::sky::SECTORS;
@@ -50,11 +51,8 @@ struct Point {
 
 /// The grid of a terrain, with everything about it that does not change over the day.
 pub struct ObjectGrid {
-    nx: usize,
-    ny: usize,
-    azimuths: usize,
-    /// The grid as the track's metadata states it, with the horizons quantised as a
-    /// reader sees them.
+    /// The grid as the track's metadata states it (cells, azimuths), with the horizons
+    /// quantised as a reader sees them.
     info: GridInfo,
     points: Vec<Point>,
     /// Per column, per band: Y_j(v) dΩ at the band's centre direction.
@@ -135,9 +133,6 @@ impl ObjectGrid {
             dirs.push(d);
         }
         ObjectGrid {
-            nx,
-            ny,
-            azimuths,
             info,
             points,
             basis,
@@ -158,10 +153,8 @@ impl ObjectGrid {
 
     /// The horizon of point `p` towards map-frame azimuth `a`, linear between azimuths.
     fn horizon(&self, p: &Point, a: f64) -> f64 {
-        let t = a.rem_euclid(TAU) / TAU * self.azimuths as f64;
-        let a0 = (t.floor() as usize) % self.azimuths;
-        let a1 = (a0 + 1) % self.azimuths;
-        let f = t - t.floor();
+        let (a0, a1, f) = bracket(a, self.info.azimuths);
+        let f = f as f64;
         p.horizon[a0] as f64 * (1.0 - f) + p.horizon[a1] as f64 * f
     }
 
@@ -224,8 +217,9 @@ impl ObjectGrid {
         }
         // ∫ Y dΩ over the lower hemisphere: Y00 · 2π and Y10 · (−π); the rest vanish.
         let mut lower = [0f64; 9];
-        lower[0] = sh_basis([0.0, 0.0, 1.0])[0] * TAU;
-        lower[2] = -0.488_602_5 * PI;
+        let y = sh_basis([0.0, 0.0, 1.0]);
+        lower[0] = y[0] * TAU;
+        lower[2] = -y[2] * PI;
 
         let alpha = scene.sun.angular_diameter_deg.to_radians();
         let sun_up = sun.elevation + 0.5 * alpha > 0.0 && direct > 0.0;
@@ -290,9 +284,10 @@ impl ObjectGrid {
                 (Cell { sun: sun_rgb, sh }, t as f32)
             })
             .unzip();
+        let [nx, ny] = self.info.cells;
         let grid = Grid {
-            nx: self.nx,
-            ny: self.ny,
+            nx,
+            ny,
             cells,
             sun_dir,
         };

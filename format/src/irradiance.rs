@@ -265,14 +265,10 @@ impl Grid {
     /// lightmap), bilinear between cell centres and clamped at the edges: what an object
     /// at (u, v) receives.
     pub fn cell_at(&self, u: f32, v: f32) -> Cell {
-        let fx = (u * self.nx as f32 - 0.5).clamp(0.0, (self.nx - 1) as f32);
-        let fy = (v * self.ny as f32 - 0.5).clamp(0.0, (self.ny - 1) as f32);
-        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(self.nx - 1), (y0 + 1).min(self.ny - 1));
-        let (wx, wy) = (fx - x0 as f32, fy - y0 as f32);
-        let c = |x: usize, y: usize| &self.cells[y * self.nx + x];
-        let top = Cell::lerp(c(x0, y0), c(x1, y0), wx);
-        let bottom = Cell::lerp(c(x0, y1), c(x1, y1), wx);
+        let ([a, b, c, d], [wx, wy]) = corners(u, v, self.nx, self.ny);
+        let [a, b, c, d] = [a, b, c, d].map(|k| &self.cells[k]);
+        let top = Cell::lerp(a, b, wx);
+        let bottom = Cell::lerp(c, d, wx);
         Cell::lerp(&top, &bottom, wy)
     }
 
@@ -285,6 +281,21 @@ impl Grid {
         let sky = c.sky(n.map(|x| x as f64));
         std::array::from_fn(|k| c.sun[k] * cos + sky[k])
     }
+}
+
+/// The four cells around lightmap coordinates (u, v) on a grid of `nx × ny` cells (row by
+/// row: (x0, y0), (x1, y0), (x0, y1), (x1, y1)) and the weights of x1 and y1: bilinear
+/// between cell centres, clamped at the edges. The grid's readers (the CPU query, the
+/// player's lightmap sample) all sample so; `irradiance.wgsl` says the same.
+pub fn corners(u: f32, v: f32, nx: usize, ny: usize) -> ([usize; 4], [f32; 2]) {
+    let fx = (u * nx as f32 - 0.5).clamp(0.0, (nx - 1) as f32);
+    let fy = (v * ny as f32 - 0.5).clamp(0.0, (ny - 1) as f32);
+    let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(nx - 1), (y0 + 1).min(ny - 1));
+    (
+        [y0 * nx + x0, y0 * nx + x1, y1 * nx + x0, y1 * nx + x1],
+        [fx - x0 as f32, fy - y0 as f32],
+    )
 }
 
 /// What an irradiance track's metadata says about its grid (the bake's manifest's
@@ -395,6 +406,47 @@ pub fn frame_suns(metadata: &str, frames: usize) -> Option<Vec<FrameSun>> {
             })
         })
         .collect()
+}
+
+/// The cells of an irradiance track as its header states them, or why it cannot be one:
+/// its frames must be RGB grids of 5·nx × 2·ny texels, and there must be frames.
+pub fn frame_cells(h: &crate::Header) -> Result<(usize, usize), String> {
+    let cells = cells_of(h.width as usize, h.height as usize).filter(|_| h.channels == 3);
+    match cells {
+        Some(c) if h.frame_count > 0 => Ok(c),
+        Some(_) => Err("an irradiance track without frames".into()),
+        None => Err(format!(
+            "an irradiance track of {}×{}, {} channel(s): its frames are RGB grids of \
+             5·nx × 2·ny texels",
+            h.width, h.height, h.channels
+        )),
+    }
+}
+
+/// An irradiance track's grid and each frame's sun, from its header and metadata, or why
+/// it cannot be played: [`frame_cells`], then a metadata chunk with every frame's sun and
+/// a grid that holds together ([`GridInfo::check`]) and matches the frames.
+pub fn read_track<R: std::io::Read + std::io::Seek>(
+    reader: &mut crate::Reader<R>,
+) -> Result<(GridInfo, Vec<FrameSun>), String> {
+    let h = reader.header().clone();
+    let (nx, ny) = frame_cells(&h)?;
+    let frames = h.frame_count as usize;
+    let meta = reader
+        .metadata()
+        .map_err(|e| e.to_string())?
+        .ok_or("an irradiance track without metadata (each frame's sun)")?;
+    let suns = frame_suns(&meta, frames)
+        .ok_or_else(|| format!("its metadata lacks the sun of some of its {frames} frames"))?;
+    let info = grid_info(&meta)
+        .ok_or("its metadata lacks a valid irradiance_grid (cells, horizons, sun diameter)")?;
+    if info.cells != [nx, ny] {
+        return Err(format!(
+            "its metadata's grid is {:?} cells, its frames hold {nx}×{ny}",
+            info.cells
+        ));
+    }
+    Ok((info, suns))
 }
 
 /// The grid description in a track's metadata, if it has a valid one.

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use vbim_encoder::{encode, EncoderConfig, FrameSet, Preset, SegmentMode};
 use vbim_format::decode::{Decoder, Output};
-use vbim_format::irradiance::{frame_suns, grid_info, Grid};
+use vbim_format::irradiance::{read_track, Grid};
 use vbim_format::package::Package;
 use vbim_format::{ChunkKind, Reader};
 use vbim_player::{
@@ -88,8 +88,7 @@ fn encode_dir(input: &Path, out: &Path) {
 fn reference(path: &Path, k: usize) -> Grid {
     let mut reader = Reader::open(std::fs::File::open(path).unwrap()).unwrap();
     let h = reader.header().clone();
-    let meta = reader.metadata().unwrap().unwrap();
-    let (suns, info) = (frame_suns(&meta, 24).unwrap(), grid_info(&meta).unwrap());
+    let (info, suns) = read_track(&mut reader).unwrap();
     assert_eq!(info.cells, [CELLS, CELLS]);
     let mut d = Decoder::new(reader).unwrap();
     let mut rgb = vec![0f32; (h.width * h.height * 3) as usize];

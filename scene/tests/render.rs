@@ -35,6 +35,17 @@ fn lightmap(
         .create_view(&Default::default())
 }
 
+/// A flat `n` × `n` height field of 30 m cells at height `z`.
+fn flat(n: usize, z: f32) -> HeightField {
+    HeightField {
+        w: n,
+        h: n,
+        cell_x: 30.0,
+        cell_y: 30.0,
+        z: vec![z; n * n],
+    }
+}
+
 fn view(eye: Vec3, exposure: f32) -> View {
     View {
         eye,
@@ -57,13 +68,7 @@ fn srgb8(x: f32) -> f32 {
 #[test]
 fn a_flat_terrain_under_a_constant_lightmap_renders_the_expected_colour() {
     let (device, queue) = device();
-    let hf = HeightField {
-        w: 32,
-        h: 32,
-        cell_x: 30.0,
-        cell_y: 30.0,
-        z: vec![100.0; 32 * 32],
-    };
+    let hf = flat(32, 100.0);
     let mesh = Mesh::new(&hf, 32, 1.0, 1.1);
     let light = [0.8f32, 0.7, 0.5];
     let lm = lightmap(&device, &queue, 32, 32, &light.repeat(32 * 32));
@@ -186,13 +191,7 @@ fn a_rendered_frame_of_the_sample_matches_its_reference_image() {
 #[test]
 fn the_sky_map_is_seen_in_the_direction_it_maps_and_the_sun_where_it_is() {
     let (device, queue) = device();
-    let hf = HeightField {
-        w: 8,
-        h: 8,
-        cell_x: 30.0,
-        cell_y: 30.0,
-        z: vec![0.0; 64],
-    };
+    let hf = flat(8, 0.0);
     let mesh = Mesh::new(&hf, 8, 1.0, 1.1);
     let lm = lightmap(&device, &queue, 8, 8, &[0.1f32; 3].repeat(64));
     let (w, h) = (32usize, 8usize);
@@ -263,13 +262,7 @@ fn irradiance_buffer(
 #[test]
 fn an_object_is_lit_by_the_light_for_objects_where_it_stands() {
     let (device, queue) = device();
-    let hf = HeightField {
-        w: 32,
-        h: 32,
-        cell_x: 30.0,
-        cell_y: 30.0,
-        z: vec![100.0; 32 * 32],
-    };
+    let hf = flat(32, 100.0);
     let mesh = Mesh::new(&hf, 32, 1.0, 1.1);
     let lm = lightmap(&device, &queue, 32, 32, &[0.1f32; 3].repeat(32 * 32));
     let mut r = SceneRenderer::new(&device, &queue, &mesh, &lm, None, 64, 64, FORMAT);

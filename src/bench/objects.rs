@@ -142,7 +142,7 @@ fn time_first_query(p: &mut PackagePlayer) {
 /// and what an up-facing object at its centre receives; the ridge is the cell the sun
 /// leaves last, the valley the one it leaves first.
 fn plot_evening(file: &vbim_player::PackageFile, path: &std::path::Path) -> Result<(), String> {
-    use vbim_format::irradiance::{frame_suns, grid_info, Grid};
+    use vbim_format::irradiance::{read_track, Grid};
     let t = file
         .tracks
         .iter()
@@ -153,9 +153,8 @@ fn plot_evening(file: &vbim_player::PackageFile, path: &std::path::Path) -> Resu
     let mut reader = vbim_format::Reader::open(f).map_err(err)?;
     let h = reader.header().clone();
     let n = h.frame_count as usize;
-    let meta = reader.metadata().map_err(err)?.unwrap_or_default();
-    let suns_of = frame_suns(&meta, n).ok_or("the track's metadata lacks its suns")?;
-    let info = grid_info(&meta).ok_or("the track's metadata lacks its grid")?;
+    let (info, suns_of) =
+        read_track(&mut reader).map_err(|e| format!("{}: {e}", t.path.display()))?;
     let [nx, ny] = info.cells;
     let mut d = vbim_format::decode::Decoder::new(reader).map_err(err)?;
     let mut rgb = vec![0f32; (h.width * h.height * 3) as usize];

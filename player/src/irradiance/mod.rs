@@ -61,11 +61,7 @@ impl Irradiance {
             return [0.0; 3];
         }
         let m = self.mixed.get_or_init(|| self.mix_slots());
-        let fx = (u * m.nx as f32 - 0.5).clamp(0.0, (m.nx - 1) as f32);
-        let fy = (v * m.ny as f32 - 0.5).clamp(0.0, (m.ny - 1) as f32);
-        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(m.nx - 1), (y0 + 1).min(m.ny - 1));
-        let (wx, wy) = (fx - x0 as f32, fy - y0 as f32);
+        let ([k00, k10, k01, k11], [wx, wy]) = vbim_format::irradiance::corners(u, v, m.nx, m.ny);
         let y = vbim_format::irradiance::sh_basis(n.map(|c| c as f64)).map(|c| c as f32);
         let cos: [f32; MAX_SLOTS] = std::array::from_fn(|s| {
             let d = m.dirs[s];
@@ -73,10 +69,10 @@ impl Irradiance {
         });
         let mut e = [0f32; 3];
         for (k, w) in [
-            (y0 * m.nx + x0, (1.0 - wx) * (1.0 - wy)),
-            (y0 * m.nx + x1, wx * (1.0 - wy)),
-            (y1 * m.nx + x0, (1.0 - wx) * wy),
-            (y1 * m.nx + x1, wx * wy),
+            (k00, (1.0 - wx) * (1.0 - wy)),
+            (k10, wx * (1.0 - wy)),
+            (k01, (1.0 - wx) * wy),
+            (k11, wx * wy),
         ] {
             let (sh, sun) = (&m.sh[k], &m.sun[k]);
             for c in 0..3 {

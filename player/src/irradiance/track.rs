@@ -10,7 +10,7 @@ use std::thread::JoinHandle;
 
 use crossbeam_channel::{Receiver, Sender};
 use vbim_format::decode::{Decoder, Output};
-use vbim_format::irradiance::{cells_of, frame_suns, grid_info, Grid, GridInfo};
+use vbim_format::irradiance::{read_track, Grid, GridInfo};
 use vbim_format::{Limits, Reader};
 
 use crate::PlayerError;
@@ -50,40 +50,9 @@ impl IrradianceTrack {
         let file = File::open(path).map_err(|e| err(e.to_string()))?;
         let mut reader = Reader::open(file).map_err(|e| err(e.to_string()))?;
         let h = reader.header().clone();
-        let (nx, ny) = cells_of(h.width as usize, h.height as usize).ok_or_else(|| {
-            err(format!(
-                "a {}×{} irradiance track: its frames are 5·nx × 2·ny grids of cells",
-                h.width, h.height
-            ))
-        })?;
-        if h.channels != 3 {
-            return Err(err(format!(
-                "an irradiance track of {} channel(s) (RGB: 3)",
-                h.channels
-            )));
-        }
+        let (info, suns) = read_track(&mut reader).map_err(err)?;
+        let [nx, ny] = info.cells;
         let frames = h.frame_count as usize;
-        if frames == 0 {
-            return Err(err("an irradiance track without frames".into()));
-        }
-        let meta = reader
-            .metadata()
-            .map_err(|e| err(e.to_string()))?
-            .ok_or_else(|| err("an irradiance track without metadata (each frame's sun)".into()))?;
-        let suns = frame_suns(&meta, frames).ok_or_else(|| {
-            err(format!(
-                "its metadata lacks the sun of some of its {frames} frames"
-            ))
-        })?;
-        let info = grid_info(&meta).ok_or_else(|| {
-            err("its metadata lacks a valid irradiance_grid (cells, horizons, sun diameter)".into())
-        })?;
-        if info.cells != [nx, ny] {
-            return Err(err(format!(
-                "its metadata's grid is {:?} cells, its frames hold {nx}×{ny}",
-                info.cells
-            )));
-        }
         let mut decoder = Decoder::with_limits(reader, limits).map_err(|e| err(e.to_string()))?;
         let (ask, asked_rx) = crossbeam_channel::unbounded::<usize>();
         let (got_tx, got) = crossbeam_channel::unbounded::<Decoded>();
@@ -145,17 +114,8 @@ impl IrradianceTrack {
     /// returns the two frames around `t` with the second's weight, if both are decoded;
     /// else the first frame that failed, if one did.
     pub(crate) fn update(&mut self, t: f64) -> Result<Option<Around>, String> {
-        while let Ok((k, r)) = self.got.try_recv() {
-            self.asked.remove(&k);
-            match r {
-                Ok(g) => {
-                    self.cache.insert(k, g);
-                    self.failed.remove(&k);
-                }
-                Err(e) => {
-                    self.failed.insert(k, e);
-                }
-            }
+        while let Ok(decoded) = self.got.try_recv() {
+            self.take(decoded);
         }
         let (k0, k1, w) = self.around(t);
         let n = self.frames;
@@ -201,10 +161,29 @@ impl IrradianceTrack {
         let end = std::time::Instant::now() + timeout;
         loop {
             let r = self.update(t);
-            if !matches!(r, Ok(None)) || std::time::Instant::now() >= end {
+            if !matches!(r, Ok(None)) {
                 return r;
             }
-            std::thread::sleep(std::time::Duration::from_millis(1));
+            // Sleeps until the thread sends a frame (or the time is up).
+            let left = end.saturating_duration_since(std::time::Instant::now());
+            match self.got.recv_timeout(left) {
+                Ok(decoded) => self.take(decoded),
+                Err(_) => return r,
+            }
+        }
+    }
+
+    /// Keeps a frame the thread sent: its grid, or why it could not be decoded.
+    fn take(&mut self, (k, r): Decoded) {
+        self.asked.remove(&k);
+        match r {
+            Ok(g) => {
+                self.cache.insert(k, g);
+                self.failed.remove(&k);
+            }
+            Err(e) => {
+                self.failed.insert(k, e);
+            }
         }
     }
 }

@@ -59,6 +59,10 @@ pub struct PackageFile {
     pub path: PathBuf,
 }
 
+/// An optional track of a weather: what it is, what a switch would lose without it, and
+/// whether a weather has it.
+type OptionalTrack = (&'static str, &'static str, fn(&WeatherTracks) -> bool);
+
 pub(super) fn package_error(path: &Path, reason: impl ToString) -> PlayerError {
     PlayerError::Package {
         path: path.to_path_buf(),
@@ -181,38 +185,32 @@ impl PackageFile {
                 ));
             }
         }
+        // An optional track in every weather or in none.
         let weathers = &self.package.weathers;
-        let skies = weathers.iter().filter(|w| w.sky.is_some()).count();
-        if skies != 0 && skies != weathers.len() {
-            return Err(package_error(
-                &self.path,
-                "some weathers have a sky track and others not: a switch would lose the sky",
-            ));
-        }
-        let grids = weathers.iter().filter(|w| w.irradiance.is_some()).count();
-        if grids != 0 && grids != weathers.len() {
-            return Err(package_error(
-                &self.path,
-                "some weathers have an irradiance track and others not: a switch would lose \
-                 the light for objects",
-            ));
+        let optional: [OptionalTrack; 2] = [
+            ("a sky track", "the sky", |w| w.sky.is_some()),
+            ("an irradiance track", "the light for objects", |w| {
+                w.irradiance.is_some()
+            }),
+        ];
+        for (track, lost, has) in optional {
+            let n = weathers.iter().filter(|w| has(w)).count();
+            if n != 0 && n != weathers.len() {
+                return Err(package_error(
+                    &self.path,
+                    format!(
+                        "some weathers have {track} and others not: a switch would lose {lost}"
+                    ),
+                ));
+            }
         }
         for t in self
             .tracks
             .iter()
             .filter(|t| t.kind == TrackKind::Irradiance)
         {
-            let (w, h) = (t.header.width as usize, t.header.height as usize);
-            if vbim_format::irradiance::cells_of(w, h).is_none() || t.header.channels != 3 {
-                return Err(package_error(
-                    &t.path,
-                    format!(
-                        "an irradiance track of {w}×{h}, {} channel(s): its frames are RGB \
-                         grids of 5·nx × 2·ny texels",
-                        t.header.channels
-                    ),
-                ));
-            }
+            vbim_format::irradiance::frame_cells(&t.header)
+                .map_err(|e| package_error(&t.path, e))?;
         }
         Ok(())
     }

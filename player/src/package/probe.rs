@@ -239,15 +239,11 @@ impl Probe {
     fn sample(&self, u: f32, v: f32) -> Option<LightmapSample> {
         let (grid, shown) = self.latest.as_ref()?;
         let [w, h, _] = self.size.map(|x| x as usize);
-        let fx = (u * w as f32 - 0.5).clamp(0.0, (w - 1) as f32);
-        let fy = (v * h as f32 - 0.5).clamp(0.0, (h - 1) as f32);
-        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-        let (wx, wy) = (fx - x0 as f32, fy - y0 as f32);
-        let at = |x: usize, y: usize| grid[y * w + x];
-        let rgb = std::array::from_fn(|c| {
-            let top = at(x0, y0)[c] * (1.0 - wx) + at(x1, y0)[c] * wx;
-            let bottom = at(x0, y1)[c] * (1.0 - wx) + at(x1, y1)[c] * wx;
+        // Block centres as the irradiance grid's cell centres: the same sampling.
+        let ([a, b, c, d], [wx, wy]) = vbim_format::irradiance::corners(u, v, w, h);
+        let rgb = std::array::from_fn(|ch| {
+            let top = grid[a][ch] * (1.0 - wx) + grid[b][ch] * wx;
+            let bottom = grid[c][ch] * (1.0 - wx) + grid[d][ch] * wx;
             top * (1.0 - wy) + bottom * wy
         });
         Some(LightmapSample { rgb, shown: *shown })
