@@ -186,13 +186,15 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
     }
 
     /// Moves the pipeline forward to playback time `now` (inline mode) and takes a decoded
-    /// segment into `incoming` if it is empty (never blocks). Counts bytes read and
-    /// damaged chunks into `totals`; returns the CPU time the reader and the decoder
-    /// spent since the last call, ns, each on its own thread's clock (inline: the time
-    /// this call spent in each).
+    /// segment of seek generation `generation` into `incoming` if it is empty (never
+    /// blocks); boxes decoded before the last seek go straight back to the decoder. Counts
+    /// bytes read and damaged chunks into `totals`; returns the CPU time the reader and the
+    /// decoder spent since the last call, ns, each on its own thread's clock (inline: the
+    /// time this call spent in each).
     pub fn pump(
         &mut self,
         now: u64,
+        generation: u32,
         incoming: &mut Option<Box<SegmentData>>,
         totals: &mut Totals,
     ) -> [u64; 2] {
@@ -210,10 +212,17 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                     totals.damaged += 1;
                     totals.last_error = Some(e);
                 }
-                if incoming.is_none() {
+                // Every stale box at once: dropping one a frame left a seek waiting a
+                // frame for each segment that was decoded before it (a paused Bevy app on
+                // lavapipe, a few frames a second, showed the sky a minute after the
+                // lightmap).
+                while incoming.is_none() {
                     match ready.try_recv() {
+                        Ok(b) if b.generation != generation => {
+                            let _ = self.recycle.try_send(b);
+                        }
                         Ok(b) => *incoming = Some(b),
-                        Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => {}
+                        Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => break,
                     }
                 }
                 let r = bytes_read.load(Ordering::Relaxed);
@@ -287,8 +296,13 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                         break;
                     }
                 }
-                if incoming.is_none() && !ready.is_empty() {
-                    *incoming = Some(ready.remove(0));
+                while incoming.is_none() && !ready.is_empty() {
+                    let b = ready.remove(0);
+                    if b.generation == generation {
+                        *incoming = Some(b);
+                    } else {
+                        pool.push(b);
+                    }
                 }
                 totals.bytes_read += reader.bytes_read - *read_seen;
                 *read_seen = reader.bytes_read;
@@ -451,6 +465,11 @@ fn reader_loop<R: Read + Seek>(
     }
 }
 
+/// Whether a message of seek generation `generation` was read before the last seek.
+fn stale(target: &SeekTarget, generation: u32) -> bool {
+    (target.load(Ordering::Acquire) >> 32) as u32 != generation
+}
+
 #[allow(clippy::too_many_arguments)]
 fn decoder_loop(
     core: &mut DecoderCore,
@@ -479,6 +498,11 @@ fn decoder_loop(
         // here rather than after the message: a `continue` or a blocked send skips the end
         // of the loop).
         cpu.store(thread_cpu_ns(), Ordering::Relaxed);
+        if stale(target, m.generation) {
+            // Read before the last seek (the seek's target is stored before the reader
+            // hears of it): decoding it would hold a box the seek's segments need.
+            continue;
+        }
         if m.generation != generation {
             generation = m.generation;
             // The segment this generation's seek is for, if the seek was not overtaken.
@@ -503,6 +527,11 @@ fn decoder_loop(
                         Err(_) => {}
                     }
                 };
+                if stale(target, m.generation) {
+                    // A seek came while this thread waited for the box.
+                    spare = Some(b);
+                    continue;
+                }
                 match core.fill(s, m.generation, m.pass, &mut b) {
                     Ok(()) => {
                         let mut b = Some(b);

@@ -437,9 +437,12 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn plan(&mut self, dt: u64) -> Frame {
         let t0 = Instant::now();
         self.ticks += dt;
-        let cpu = self
-            .pipeline
-            .pump(self.ticks, &mut self.incoming, &mut self.totals);
+        let cpu = self.pipeline.pump(
+            self.ticks,
+            self.generation,
+            &mut self.incoming,
+            &mut self.totals,
+        );
         let rate = (self.header.rate_num, self.header.rate_den);
         let n = self.n_frames() << 32;
         let (wall, mut pos) = self.display.clock(self.ticks, rate);

@@ -840,6 +840,77 @@ fn threaded_playback_shows_the_reference_whenever_it_says_exact() {
     assert!(t.segments_uploaded >= 24, "two loops and more: {t:?}");
 }
 
+/// A seek while the ring holds a whole file read before it: nothing decoded or read for
+/// the old position may delay the new one. The reader and decoder run on their own
+/// threads, the clock is paused (as in an app that seeks, then waits), and most of the
+/// day was read before the seek, so that a player which still decoded or showed the
+/// stale segments one a frame would need about a hundred frames to show the seek's.
+#[test]
+fn a_seek_shows_its_frame_without_working_through_what_was_read_before_it() {
+    let (device, queue) = device();
+    let n = 480;
+    let bytes = encode_bytes(
+        &sequence(16, 8, n, InputKind::Hdr),
+        &config(SegmentMode::Fixed(4)),
+    );
+    let segments = n / 4;
+    let cfg = PlayerConfig {
+        ring_bytes: Some(2 * bytes.len()),
+        clock: Arc::new(vbim_player::SystemClock::new()),
+        ..Default::default()
+    };
+    // The chunks' bytes (the file less its header and index).
+    let chunks: u64 = Reader::open(Cursor::new(&bytes))
+        .unwrap()
+        .entries()
+        .iter()
+        .map(|e| e.length)
+        .sum();
+    let mut player = Player::open(&device, &queue, Cursor::new(bytes), cfg).unwrap();
+    // Until the ring (as large as the file) is full, the boxes full behind it; the clock
+    // still.
+    let (mut last, mut still) = (0, 0);
+    for _ in 0..1000 {
+        player.advance(0);
+        let read = player.totals().bytes_read;
+        still = if read == last { still + 1 } else { 0 };
+        last = read;
+        if still == 20 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // The ring and the boxes hold most of the day: a hundred segments or so.
+    assert!(
+        3 * last >= 2 * chunks,
+        "{last} of {chunks} bytes read before the seek"
+    );
+    // Near the end of the day: every segment before it was read for the old position.
+    let frame = (n - 10) as u64;
+    player.set_time(frame * 1_000_000_000 / 24);
+    let mut shown_after = None;
+    for k in 0..segments {
+        let r = player.advance(0);
+        if r.state == FrameState::Exact {
+            assert!((r.shown - frame as f64).abs() < 1e-6, "{r:?}");
+            shown_after = Some(k);
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let t = player.totals().clone();
+    player
+        .stop(Duration::from_secs(10))
+        .expect("threads joined");
+    // Generous: the seek's chain is a few chunks, read and parsed in milliseconds; 1 s of
+    // frames covers a loaded machine, and is still far from the stale segments' count.
+    assert!(
+        shown_after.is_some_and(|k| k <= 50),
+        "the seek's frame was shown after {shown_after:?} frames (None: not in {segments}), \
+         {segments} segments having been read before it: {t:?}"
+    );
+}
+
 /// A moving edge takes tiles in and out of each bubble term from segment to segment: the
 /// GPU's bubble planes (one set, rebuilt for every segment) must never keep a tile's
 /// terms from the segment before, at any frame — checked against the reference decoder.
