@@ -13,8 +13,13 @@
 //! which the lightmap already holds. A package's light for objects (its irradiance
 //! tracks) goes into Bevy's `IrradianceVolume` over the terrain and replaces the ambient
 //! light for the spheres: each is lit by the sky it sees and the ground around it, and
-//! Bevy's directional light, with its shadows, brings the sun. A package's sky track is resampled into a cube map every
-//! frame, Bevy's `Skybox` (without one, the background is the manifest's zenith colour;
+//! Bevy's directional light, with its shadows, brings the sun. A package's sky track is
+//! resampled into a cube map every frame, which is both the camera's `Skybox` and, on an
+//! adapter with binding arrays, its `GeneratedEnvironmentMapLight` (Bevy filters it again
+//! each frame): every surface's specular light is the streamed sky, which the sixth
+//! sphere, polished metal, mirrors. (Without binding arrays Bevy 0.19.1 cannot draw a
+//! lightmapped mesh under an environment map, so lavapipe shows no reflections.) (Without
+//! a sky track the background is the manifest's zenith colour;
 //! `--atmosphere`: Bevy's own atmosphere, scattering that sun — on a hardware GPU; it
 //! crashes lavapipe). W cycles the package's weathers (a 2 s cross-fade; `--weather NAME` starts in that one). `--hour H` starts at that hour (`--paused`: and stays there); `--screenshot F.png` saves
 //! the window before `--frames N` quits. The window's title shows the time of day and the player's
@@ -28,11 +33,16 @@ use bevy::asset::RenderAssetUsages;
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::atmosphere::ScatteringMedium;
-use bevy::light::{Atmosphere, GlobalAmbientLight, IrradianceVolume, LightProbe, Skybox};
+use bevy::light::{
+    Atmosphere, GeneratedEnvironmentMapLight, GlobalAmbientLight, IrradianceVolume, LightProbe,
+    Skybox,
+};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::AtmosphereSettings;
 use bevy::pbr::Lightmap;
 use bevy::prelude::*;
+use bevy::render::renderer::RenderDevice;
+use bevy::render::settings::WgpuFeatures;
 use bevy::render::view::screenshot::{save_to_disk, Screenshot};
 use bevy::window::PrimaryWindow;
 use bevy_vbim::{
@@ -209,9 +219,19 @@ fn main() {
                   images: ResMut<Assets<Image>>,
                   meshes: ResMut<Assets<Mesh>>,
                   materials: ResMut<Assets<StandardMaterial>>,
-                  media: ResMut<Assets<ScatteringMedium>>| {
+                  media: ResMut<Assets<ScatteringMedium>>,
+                  device: Res<RenderDevice>| {
+                let reflections = light_probes_in_arrays(&device);
                 setup(
-                    commands, assets, images, meshes, materials, media, &a, &name, &stream,
+                    commands,
+                    assets,
+                    images,
+                    meshes,
+                    materials,
+                    media,
+                    &a,
+                    (&name, &stream),
+                    reflections,
                 )
             },
         )
@@ -231,8 +251,8 @@ fn setup(
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut media: ResMut<Assets<ScatteringMedium>>,
     a: &Args,
-    name: &str,
-    path: &Path,
+    (name, path): (&str, &Path),
+    reflections: bool,
 ) {
     // The header and manifest now, for the mesh's size and the sun; the asset server
     // loads the same file for the player.
@@ -296,13 +316,17 @@ fn setup(
     // Spheres standing on the terrain (the terrain scene's: on the highest and the lowest
     // ground and around the centre): ordinary meshes, lit by the irradiance volume and
     // the sun.
-    for o in vbim_scene::showcase(&grid, &hf) {
+    for (k, o) in vbim_scene::showcase(&grid, &hf).into_iter().enumerate() {
         let [r, g, b] = o.albedo;
+        // Diffuse, as the terrain scene draws them; the last one polished metal, whose
+        // only light is specular: the environment map's sky, and the sun's highlight.
+        let polished = k == 5 && reflections && sky_cube.is_some();
         commands.spawn((
             Mesh3d(meshes.add(Sphere::new(o.radius).mesh().uv(48, 24))),
             MeshMaterial3d(materials.add(StandardMaterial {
                 base_color: Color::linear_rgb(r, g, b),
-                perceptual_roughness: 1.0,
+                perceptual_roughness: if polished { 0.2 } else { 1.0 },
+                metallic: if polished { 1.0 } else { 0.0 },
                 reflectance: 0.0,
                 ..default()
             })),
@@ -352,10 +376,21 @@ fn setup(
         // The sky in the lightmap's units: a texel of 1 is `lux_per_unit` nits, so the sky
         // and the ground it lights share the camera's exposure.
         camera.insert(Skybox {
-            image: Some(cube),
+            image: Some(cube.clone()),
             brightness: lux_per_unit(SUN_LUX),
             ..default()
         });
+        if reflections {
+            // The same cube as the light of reflections. Diffuse light is the lightmap's
+            // (the terrain) and the irradiance volume's (the spheres): Bevy takes the
+            // environment map's only where neither is.
+            camera.insert(GeneratedEnvironmentMapLight {
+                environment_map: cube,
+                intensity: lux_per_unit(SUN_LUX),
+                affects_lightmapped_mesh_diffuse: false,
+                ..default()
+            });
+        }
     }
     commands.insert_resource(Day {
         playback,
@@ -407,6 +442,22 @@ fn frame_at(m: &Manifest, t: f64) -> Option<FrameInfo> {
     out.sky_color = mix3(a.sky_color, b.sky_color);
     out.sky_horizon_sun_side = mix3(a.sky_horizon_sun_side, b.sky_horizon_sun_side);
     Some(out)
+}
+
+/// Whether Bevy keeps this adapter's light probes in binding arrays (its own test, in
+/// `bevy_pbr`'s `light_probe` module). Without them Bevy 0.19.1's shader for a lightmapped
+/// mesh under an environment map does not compile (it ands a `bool` with the `u32` of
+/// `affects_lightmapped_mesh_diffuse`), and the terrain is not drawn: lavapipe, WebGPU in
+/// browsers and many phones lack them, so there the example shows no reflections.
+fn light_probes_in_arrays(device: &RenderDevice) -> bool {
+    // Bevy's own bound: a standard material's 16 textures and 8 light probes.
+    let needed = 16 + 8;
+    let limits = device.limits();
+    device.features().contains(
+        WgpuFeatures::TEXTURE_BINDING_ARRAY
+            | WgpuFeatures::SAMPLED_TEXTURE_AND_STORAGE_BUFFER_ARRAY_NON_UNIFORM_INDEXING,
+    ) && limits.max_binding_array_elements_per_shader_stage >= needed
+        && limits.max_binding_array_sampler_elements_per_shader_stage >= needed
 }
 
 /// The sun, sky light and background follow the time the lightmap shows.

@@ -1,7 +1,8 @@
 //! What Bevy renders from a streamed lightmap, read back from a camera's HDR target with
 //! tone mapping off and a fixed exposure: a flat white lightmapped quad shows its texel
 //! times the documented conversion, and a white sphere lit by the sun and sky lights the
-//! plugin's conversions give matches the bake's texel beneath it at noon.
+//! plugin's conversions give matches the bake's texel beneath it at noon; the sky's cube
+//! map, as Bevy's generated environment map, lights a sphere with the sky's radiance.
 
 mod common;
 
@@ -12,7 +13,7 @@ use std::time::Duration;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::{Exposure, RenderTarget, ScalingMode};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
-use bevy::light::GlobalAmbientLight;
+use bevy::light::{GeneratedEnvironmentMapLight, GlobalAmbientLight};
 use bevy::pbr::Lightmap;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
@@ -55,23 +56,25 @@ fn target(images: &mut Assets<Image>) -> Handle<Image> {
 
 /// A camera looking straight down at the origin, seeing `side` scene units across, with
 /// tone mapping and dithering off and a fixed exposure, rendering into `target`.
-fn camera(world: &mut World, target: Handle<Image>, side: f32, height: f32) {
-    world.spawn((
-        Camera3d::default(),
-        RenderTarget::Image(target.into()),
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: side,
-                height: side,
-            },
-            ..OrthographicProjection::default_3d()
-        }),
-        Tonemapping::None,
-        DebandDither::Disabled,
-        Exposure { ev100: EV100 },
-        Msaa::Off,
-        Transform::from_xyz(0.0, height, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z),
-    ));
+fn camera(world: &mut World, target: Handle<Image>, side: f32, height: f32) -> Entity {
+    world
+        .spawn((
+            Camera3d::default(),
+            RenderTarget::Image(target.into()),
+            Projection::Orthographic(OrthographicProjection {
+                scaling_mode: ScalingMode::Fixed {
+                    width: side,
+                    height: side,
+                },
+                ..OrthographicProjection::default_3d()
+            }),
+            Tonemapping::None,
+            DebandDither::Disabled,
+            Exposure { ev100: EV100 },
+            Msaa::Off,
+            Transform::from_xyz(0.0, height, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z),
+        ))
+        .id()
 }
 
 /// A flat square of `side` on the ground, lightmapped over its whole surface.
@@ -358,6 +361,84 @@ fn a_white_sphere_at_noon_matches_the_terrain_texel_beneath_it() {
              ({ratio:.3}×)",
             pixel[c],
             texel[beneath + c]
+        );
+    }
+}
+
+/// The sky's cube map (`VbimPlayback::sky_cube`) is a source Bevy's
+/// `GeneratedEnvironmentMapLight` filters: under a sky of one radiance L everywhere (the
+/// cube's directions below the horizon take the horizon's), a white diffuse sphere with no
+/// other light shows L times the sky's conversion on top, as the lightmap's units promise.
+/// (The sphere is not lightmapped: Bevy 0.19.1 cannot compile a lightmapped mesh's shader
+/// under an environment map without binding arrays, which lavapipe lacks.)
+#[test]
+fn the_sky_cube_lights_a_sphere_as_bevys_generated_environment_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let sky = [0.30f32, 0.42, 0.65];
+    let frames = 24;
+    let constant = |w: usize, h: usize, rgb: [f32; 3]| {
+        let frame: Vec<f32> = (0..w * h).flat_map(|_| rgb).collect();
+        MemorySource::new("sky", w, h, 3, InputKind::Hdr, vec![frame; frames])
+    };
+    encode_to(dir.path(), "day.vbim", &constant(8, 8, [0.2; 3]), None);
+    encode_to(dir.path(), "day-sky.vbim", &constant(16, 4, sky), None);
+    let package = vbim_format::package::Package {
+        vbim_package: 1,
+        weathers: vec![vbim_format::package::WeatherTracks {
+            name: "clear".into(),
+            lightmap: "day.vbim".into(),
+            sky: Some("day-sky.vbim".into()),
+            irradiance: None,
+        }],
+    };
+    std::fs::write(dir.path().join("day.vbimpkg"), package.to_json()).unwrap();
+
+    let mut app = app(dir.path());
+    app.insert_resource(ClearColor(Color::BLACK));
+    let world = app.world_mut();
+    world.insert_resource(GlobalAmbientLight::NONE);
+    let mut images = world.resource_mut::<Assets<Image>>();
+    let lightmap = images.add(lightmap_image(8, 8));
+    let cube = images.add(bevy_vbim::sky_cube_image(64));
+    let view = target(&mut images);
+    let stream: Handle<VbimStream> = world.resource::<AssetServer>().load("day.vbimpkg");
+    let mut p = VbimPlayback::new(stream, lightmap);
+    p.sky_cube = Some(cube.clone());
+    let e = world.spawn(p).id();
+    let sphere = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Sphere::new(0.2).mesh().uv(64, 32));
+    let white = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+    world.spawn((
+        Mesh3d(sphere),
+        MeshMaterial3d(white),
+        Transform::from_xyz(0.0, 0.2, 0.0),
+    ));
+    let cam = camera(world, view.clone(), 0.1, 3.0);
+    world.entity_mut(cam).insert(GeneratedEnvironmentMapLight {
+        environment_map: cube,
+        intensity: lux_per_unit(SUN_LUX),
+        ..default()
+    });
+
+    show(&mut app, e, Duration::from_secs_f64(0.25));
+    let pixel = centre(&mut app, &view);
+    for c in 0..3 {
+        let want = sky[c] * lux_per_unit(SUN_LUX) * exposure();
+        let ratio = pixel[c] / want;
+        eprintln!("sky {c}: sphere top / (sky radiance × conversion) = {ratio:.4}");
+        assert!(
+            (ratio - 1.0).abs() <= 0.03,
+            "channel {c}: sphere top {} against the sky's {} × conversion = {want} ({ratio:.3}×)",
+            pixel[c],
+            sky[c]
         );
     }
 }
