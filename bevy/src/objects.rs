@@ -4,10 +4,14 @@
 //! that volume is lit by the sky and the ground around it, frame by frame. The sun stays
 //! Bevy's directional light, with Bevy's own shadows ([`sun_light`](crate::sun_light)).
 
-use bevy::asset::{Assets, RenderAssetUsages};
+use std::collections::HashMap;
+
+use bevy::asset::{AssetId, Assets, RenderAssetUsages};
 use bevy::ecs::prelude::*;
 use bevy::image::{Image, ImageSampler};
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+
+use vbim_player::Irradiance;
 
 use crate::playback::{VbimPlayback, VbimStats};
 
@@ -50,14 +54,24 @@ const FACES: [(u32, u32, [f32; 3]); 6] = [
 
 /// Writes each playback's shown light for objects into its irradiance volume image: each
 /// cell's sky and bounce ([`vbim_player::Irradiance::sky_at`]) towards the six faces.
+/// An answer equal to the one last written into the same image (a paused or held
+/// display) is not written again: touching the image makes Bevy upload it anew.
 pub(crate) fn write_irradiance_volumes(
-    playbacks: Query<(&VbimPlayback, &VbimStats)>,
+    playbacks: Query<(Entity, &VbimPlayback, &VbimStats)>,
     mut images: ResMut<Assets<Image>>,
+    mut written: Local<HashMap<Entity, (AssetId<Image>, Irradiance)>>,
 ) {
-    for (p, stats) in &playbacks {
+    written.retain(|e, _| playbacks.contains(*e));
+    for (entity, p, stats) in &playbacks {
         let (Some(handle), Some(irr)) = (&p.irradiance_volume, &stats.irradiance) else {
             continue;
         };
+        if written
+            .get(&entity)
+            .is_some_and(|(id, last)| *id == handle.id() && last == irr)
+        {
+            continue;
+        }
         let Some(mut image) = images.get_mut(handle) else {
             continue;
         };
@@ -84,5 +98,6 @@ pub(crate) fn write_irradiance_volumes(
                 }
             }
         }
+        written.insert(entity, (handle.id(), irr.clone()));
     }
 }

@@ -666,4 +666,37 @@ fn a_packages_light_for_objects_fills_an_irradiance_volume() {
         "up {up}, down {down}: {} against {want} (frame {t})",
         up - down
     );
+
+    // Paused, the volume is written no more (each write is an upload); playing, it is.
+    #[derive(Resource, Default)]
+    struct Modified(usize);
+    let id = volume.id();
+    app.init_resource::<Modified>().add_systems(
+        Last,
+        move |mut events: MessageReader<AssetEvent<Image>>, mut n: ResMut<Modified>| {
+            n.0 += events.read().filter(|e| e.is_modified(id)).count();
+        },
+    );
+    app.world_mut().get_mut::<VbimPlayback>(e).unwrap().paused = true;
+    for _ in 0..5 {
+        app.update();
+    }
+    app.world_mut().resource_mut::<Modified>().0 = 0;
+    for _ in 0..20 {
+        app.update();
+    }
+    assert_eq!(
+        app.world().resource::<Modified>().0,
+        0,
+        "writes while paused"
+    );
+    app.world_mut().get_mut::<VbimPlayback>(e).unwrap().paused = false;
+    for _ in 0..20 {
+        app.update();
+    }
+    assert!(
+        app.world().resource::<Modified>().0 >= 10,
+        "{} writes in 20 frames of playing",
+        app.world().resource::<Modified>().0
+    );
 }

@@ -41,6 +41,19 @@ struct Mixed {
     dirs: [[f32; 3]; MAX_SLOTS],
 }
 
+/// The same decoded frames with the same weights: the same answer everywhere (a paused
+/// or held display gives an equal value every frame, which a caller can skip).
+impl PartialEq for Irradiance {
+    fn eq(&self, other: &Self) -> bool {
+        self.slots.len() == other.slots.len()
+            && self
+                .slots
+                .iter()
+                .zip(&other.slots)
+                .all(|((a, wa), (b, wb))| Arc::ptr_eq(a, b) && wa == wb)
+    }
+}
+
 impl Irradiance {
     /// What a surface at lightmap coordinates (u, v) (0 to 1; u east, v south) with unit
     /// normal `n` (map frame: x east, y south, z up) receives: irradiance / π, linear RGB,
