@@ -102,6 +102,26 @@ fn lightmapped_ground(world: &mut World, side: f32, lightmap: Handle<Image>) {
     ));
 }
 
+/// A white diffuse sphere of radius 0.2 standing on the origin, not lightmapped.
+fn white_sphere(world: &mut World) {
+    let sphere = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Sphere::new(0.2).mesh().uv(64, 32));
+    let white = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+    world.spawn((
+        Mesh3d(sphere),
+        MeshMaterial3d(white),
+        Transform::from_xyz(0.0, 0.2, 0.0),
+    ));
+}
+
 fn stats(app: &App, e: Entity) -> VbimStats {
     app.world().get::<VbimStats>(e).unwrap().clone()
 }
@@ -325,22 +345,7 @@ fn a_white_sphere_at_noon_matches_the_terrain_texel_beneath_it() {
         .spawn(VbimPlayback::new(stream, lightmap.clone()))
         .id();
     lightmapped_ground(world, 2.0, lightmap);
-    let sphere = world
-        .resource_mut::<Assets<Mesh>>()
-        .add(Sphere::new(0.2).mesh().uv(64, 32));
-    let white = world
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial {
-            base_color: Color::WHITE,
-            perceptual_roughness: 1.0,
-            reflectance: 0.0,
-            ..default()
-        });
-    world.spawn((
-        Mesh3d(sphere),
-        MeshMaterial3d(white),
-        Transform::from_xyz(0.0, 0.2, 0.0),
-    ));
+    white_sphere(world);
     // Looking straight down at the sphere's top.
     camera(world, view.clone(), 0.1, 3.0);
 
@@ -405,22 +410,7 @@ fn the_sky_cube_lights_a_sphere_as_bevys_generated_environment_map() {
     let mut p = VbimPlayback::new(stream, lightmap);
     p.sky_cube = Some(cube.clone());
     let e = world.spawn(p).id();
-    let sphere = world
-        .resource_mut::<Assets<Mesh>>()
-        .add(Sphere::new(0.2).mesh().uv(64, 32));
-    let white = world
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial {
-            base_color: Color::WHITE,
-            perceptual_roughness: 1.0,
-            reflectance: 0.0,
-            ..default()
-        });
-    world.spawn((
-        Mesh3d(sphere),
-        MeshMaterial3d(white),
-        Transform::from_xyz(0.0, 0.2, 0.0),
-    ));
+    white_sphere(world);
     let cam = camera(world, view.clone(), 0.1, 3.0);
     world.entity_mut(cam).insert(GeneratedEnvironmentMapLight {
         environment_map: cube,
