@@ -313,6 +313,9 @@ fn setup(
             ..default()
         },
     ));
+    // Reflections of the streamed sky: only with a sky track, under its Skybox (not Bevy's
+    // atmosphere), and where Bevy can draw the lightmapped terrain with them.
+    let reflections = reflections && sky_cube.is_some() && !a.atmosphere;
     // Spheres standing on the terrain (the terrain scene's: on the highest and the lowest
     // ground and around the centre): ordinary meshes, lit by the irradiance volume and
     // the sun.
@@ -320,7 +323,7 @@ fn setup(
         let [r, g, b] = o.albedo;
         // Diffuse, as the terrain scene draws them; the last one polished metal, whose
         // only light is specular: the environment map's sky, and the sun's highlight.
-        let polished = k == 5 && reflections && sky_cube.is_some();
+        let polished = k == 5 && reflections;
         commands.spawn((
             Mesh3d(meshes.add(Sphere::new(o.radius).mesh().uv(48, 24))),
             MeshMaterial3d(materials.add(StandardMaterial {

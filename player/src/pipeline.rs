@@ -296,13 +296,9 @@ impl<R: Read + Seek + Send + 'static> Pipeline<R> {
                         break;
                     }
                 }
-                while incoming.is_none() && !ready.is_empty() {
-                    let b = ready.remove(0);
-                    if b.generation == generation {
-                        *incoming = Some(b);
-                    } else {
-                        pool.push(b);
-                    }
+                // (A restart puts the ready boxes back in the pool: none here is stale.)
+                if incoming.is_none() && !ready.is_empty() {
+                    *incoming = Some(ready.remove(0));
                 }
                 totals.bytes_read += reader.bytes_read - *read_seen;
                 *read_seen = reader.bytes_read;

@@ -416,17 +416,13 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
     pub fn submitted(&mut self) {}
 
     /// Starts decoding the segment the decoder thread sent, if none is decoding and one
-    /// came (one dropped if a seek made it stale); returns the bytes it uploads.
+    /// came (of this seek generation: `pump` gives back the others, and a seek gives back
+    /// what was waiting); returns the bytes it uploads.
     fn start_incoming(&mut self, pos: MediaTime, n: MediaTime) -> u64 {
         if self.decoding.is_some() {
             return 0;
         }
         match self.incoming.take() {
-            Some(b) if b.generation != self.generation => {
-                // Decoded before a seek: no longer wanted.
-                self.pipeline.give_back(b);
-                0
-            }
             Some(b) => self.start_decode(b, pos, n),
             None => 0,
         }
