@@ -20,6 +20,8 @@
 use std::io::Cursor;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::encode::CodedCache;
+use crate::report::Tally;
 use crate::secant::{bracket, next_tolerance, Pass};
 use crate::{EncodeError, EncoderConfig, FrameSource, MemorySource, Progress};
 
@@ -131,6 +133,8 @@ pub(crate) fn aim(
     };
     let quiet: Progress = &|_, _, _| {};
     let frames = source.info().frames;
+    // Every pass codes the same sample frames at the same exposure: code them once.
+    let cache = validated.map(|e| CodedCache::new(source, e, SAMPLE_BYTES));
     let done = AtomicU64::new(0);
     let run = |internal: f64, raise: &[f64], round: usize| {
         let c = EncoderConfig {
@@ -144,8 +148,15 @@ pub(crate) fn aim(
             ..cfg.clone()
         };
         let mut out = Cursor::new(Vec::new());
-        let mut rep = crate::encode::encode_in_pool(source, &c, validated, &mut out, quiet)?;
-        rep.verify_bytes(source, out.get_ref(), "the tolerance's sample", quiet)?;
+        let mut rep =
+            crate::encode::encode_in_pool(source, &c, validated, cache.as_ref(), &mut out, quiet)?;
+        rep.verify_in_memory(
+            source,
+            out.get_ref(),
+            "the tolerance's sample",
+            Tally::Psnr,
+            quiet,
+        )?;
         progress(
             "aim",
             done.fetch_add(1, Ordering::Relaxed) + 1,

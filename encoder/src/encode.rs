@@ -55,6 +55,31 @@ pub(crate) struct Coded {
     pub started: Instant,
 }
 
+/// Frames coded once and kept for later encodes of the same frames at the same exposure:
+/// the aim codes its sample a few times at different budgets, and coding a frame (its
+/// transfer curve, colour transform and sensitivity) is a fifth of an encode's work.
+pub(crate) struct CodedCache {
+    /// The exposure the frames were coded at (the domain's curve depends on it).
+    exposure: f32,
+    /// Frame by number; frames past the end are not kept (the memory it may hold).
+    frames: Vec<std::sync::OnceLock<Arc<CodedFrame>>>,
+}
+
+impl CodedCache {
+    /// A cache for `src` coded at `exposure`, keeping its first frames within `bytes`.
+    pub fn new(src: &dyn FrameSource, exposure: f32, bytes: usize) -> CodedCache {
+        let i = src.info();
+        // A coded frame: its planes and its sensitivity, f32, padded to whole tiles (a
+        // sample is whole tiles; a little more for anything else).
+        let per_frame = ((i.width + 16) * (i.height + 16) * (i.channels + 1) * 4).max(1);
+        let kept = (bytes / per_frame).min(i.frames);
+        CodedCache {
+            exposure,
+            frames: (0..kept).map(|_| std::sync::OnceLock::new()).collect(),
+        }
+    }
+}
+
 /// Codes `src` with `cfg` (inside the worker pool). `validated`: every frame was already
 /// read and checked, and this is the sequence's exposure (used for HDR); `None` reads and
 /// checks them first.
@@ -62,9 +87,11 @@ pub(crate) fn code_sequence(
     src: &dyn FrameSource,
     cfg: &EncoderConfig,
     validated: Option<f32>,
+    cache: Option<&CodedCache>,
     progress: Progress,
 ) -> Result<Coded, EncodeError> {
     let info = src.info();
+    let cache = cache.filter(|c| Some(c.exposure) == validated);
     let n = info.frames;
     check_shape(&info)?;
     let raise = Raise::new(&cfg.frame_raise_db, n)?;
@@ -127,7 +154,7 @@ pub(crate) fn code_sequence(
     let intra_every = cfg.intra_interval_frames();
     let sub_dom = dom.subsampled(cfg.tile_size, cfg.search_stride);
     let bands = (dom.ph / cfg.tile_size).div_ceil(plan.band_tiles) as u64;
-    let mut window = Window::new(src, &dom, cfg, plan, end);
+    let mut window = Window::new(src, &dom, cfg, plan, end, cache);
     let mut chunks: Vec<PendingChunk> = Vec::new();
     if let Some(m) = &cfg.metadata {
         chunks.push(PendingChunk {
@@ -361,6 +388,8 @@ struct Window<'a> {
     next: u32,
     /// The last frame there is (frame 0 again at a loop's end).
     end: u32,
+    /// Frames coded by an earlier encode of the same frames.
+    cache: Option<&'a CodedCache>,
 }
 
 impl<'a> Window<'a> {
@@ -370,6 +399,7 @@ impl<'a> Window<'a> {
         cfg: &EncoderConfig,
         plan: Plan,
         end: u32,
+        cache: Option<&'a CodedCache>,
     ) -> Self {
         Window {
             src,
@@ -383,14 +413,24 @@ impl<'a> Window<'a> {
             frames_in_source: src.info().frames,
             next: 0,
             end,
+            cache,
         }
     }
 
     /// Frame `i` of the window, read whole and coded.
-    fn read_full(&self, i: u32) -> Result<CodedFrame, EncodeError> {
-        let f = self.src.read(i as usize % self.frames_in_source)?;
+    fn read_full(&self, i: u32) -> Result<Arc<CodedFrame>, EncodeError> {
+        let i = i as usize % self.frames_in_source;
+        let kept = self.cache.and_then(|c| c.frames.get(i));
+        if let Some(f) = kept.and_then(|k| k.get()) {
+            return Ok(f.clone());
+        }
+        let f = self.src.read(i)?;
         let (planes, sens) = self.dom.code(&f.data);
-        Ok(CodedFrame { planes, sens })
+        let f = Arc::new(CodedFrame { planes, sens });
+        Ok(match kept {
+            Some(k) => k.get_or_init(|| f).clone(),
+            None => f,
+        })
     }
 
     /// Reads and codes every frame up to `upto` not read yet (in parallel, as many at
@@ -403,7 +443,7 @@ impl<'a> Window<'a> {
         let missing: Vec<u32> = (self.next..=upto).collect();
         self.next = upto + 1;
         for group in missing.chunks(self.plan.readers.max(1)) {
-            let fresh: Vec<(u32, f64, CodedFrame, Option<CodedFrame>)> = group
+            let fresh: Vec<(u32, f64, CodedFrame, Option<Arc<CodedFrame>>)> = group
                 .par_iter()
                 .map(|&i| {
                     let f = self.read_full(i)?;
@@ -419,7 +459,7 @@ impl<'a> Window<'a> {
                 self.subs.insert(i, Arc::new(sub));
                 self.sens_sq.insert(i, sens_sq);
                 if let Some(f) = full {
-                    self.full.insert(i, Arc::new(f));
+                    self.full.insert(i, f);
                 }
             }
         }
@@ -430,7 +470,7 @@ impl<'a> Window<'a> {
     fn full(&self, i: u32) -> Result<Arc<CodedFrame>, EncodeError> {
         match self.full.get(&i) {
             Some(f) => Ok(f.clone()),
-            None => Ok(Arc::new(self.read_full(i)?)),
+            None => self.read_full(i),
         }
     }
 
@@ -481,11 +521,12 @@ pub(crate) fn encode_in_pool<W: Write + Seek>(
     src: &dyn FrameSource,
     cfg: &EncoderConfig,
     validated: Option<f32>,
+    cache: Option<&CodedCache>,
     out: W,
     progress: Progress,
 ) -> Result<EncodeReport, EncodeError> {
     let t_start = std::time::Instant::now();
-    let coded = code_sequence(src, cfg, validated, progress)?;
+    let coded = code_sequence(src, cfg, validated, cache, progress)?;
     write_coded(src, cfg, coded, out, t_start)
 }
 
@@ -512,4 +553,60 @@ pub(crate) fn write_coded<W: Write + Seek>(
     rep.band_tiles = (!coded.plan.whole).then_some(coded.plan.band_tiles);
     rep.memory_estimate = coded.plan.estimate;
     Ok(rep)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::MemorySource;
+
+    /// A small HDR day: light rising and setting with a moving edge.
+    fn day(w: usize, h: usize, n: usize) -> MemorySource {
+        let frames = (0..n)
+            .map(|t| {
+                let sun = (std::f32::consts::PI * t as f32 / n as f32).sin();
+                (0..w * h)
+                    .flat_map(|i| {
+                        let (x, y) = ((i % w) as f32, (i / w) as f32);
+                        let edge = 1.0 / (1.0 + (-(x - 3.0 * t as f32) * 0.5).exp());
+                        let v = 1e-3 + sun * (0.2 + 0.6 * edge) * (0.9 + 0.1 * (y * 0.2).sin());
+                        [v, 0.9 * v, 0.7 * v]
+                    })
+                    .collect()
+            })
+            .collect();
+        MemorySource::new("cache", w, h, 3, InputKind::Hdr, frames)
+    }
+
+    fn encoded(src: &MemorySource, e: f32, cache: Option<&CodedCache>) -> Vec<u8> {
+        let cfg = EncoderConfig {
+            aim: false,
+            ..EncoderConfig::preset(crate::Preset::Default)
+        };
+        let mut out = std::io::Cursor::new(Vec::new());
+        encode_in_pool(src, &cfg, Some(e), cache, &mut out, &|_, _, _| {}).unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn frames_coded_once_give_the_same_file_as_frames_coded_again() {
+        let src = day(48, 32, 20);
+        let greens: Vec<f32> = (0..20)
+            .map(|i| vbim_format::curve::max_green(&src.read(i).unwrap().data, 3))
+            .collect();
+        let e = exposure_from_max_greens(&greens);
+        let plain = encoded(&src, e, None);
+        // Room for half the frames: the rest are coded every time.
+        let per_frame = (48 + 16) * (32 + 16) * 4 * 4;
+        let cache = CodedCache::new(&src, e, 10 * per_frame);
+        assert_eq!(cache.frames.len(), 10);
+        assert_eq!(encoded(&src, e, Some(&cache)), plain, "filling the cache");
+        assert!(cache.frames.iter().all(|f| f.get().is_some()));
+        assert_eq!(encoded(&src, e, Some(&cache)), plain, "reading the cache");
+        // Frames coded at another exposure are not used.
+        let other = CodedCache::new(&src, 2.0 * e, usize::MAX);
+        let at_other = encoded(&src, 2.0 * e, Some(&other));
+        assert_eq!(encoded(&src, e, Some(&other)), plain);
+        assert_ne!(at_other, plain);
+    }
 }

@@ -62,9 +62,19 @@ fn tile_errors(
     let nb = p.bubbles;
     let len = (m + 1) as f64;
     let mut err = [vec![0.0; (nb + 1) * m], vec![0.0; (nb + 1) * m]];
+    // A texel's source value and sensitivity in each inner frame, gathered once: the
+    // frames are planes of their own, and reading them again for every number of bubbles
+    // was a fifth of the encode.
+    let mut src = vec![0.0f32; m];
+    let mut sens = vec![0.0f32; m];
     let mut r = vec![0.0f64; m];
     let mut e = vec![0.0f64; m];
     let mut z = vec![0.0f64; nb];
+    // The bubbles' columns of Q, each contiguous, and the keyframes' weights.
+    let q: Vec<Vec<f64>> = (0..nb)
+        .map(|k| (0..m).map(|j| p.q[j * nb + k]).collect())
+        .collect();
+    let hat: Vec<f64> = (0..m).map(|j| (j + 1) as f64 / len).collect();
     let mut count = 0;
     let pw = dom.pw;
     for ty in (0..ts).step_by(stride) {
@@ -72,39 +82,45 @@ fn tile_errors(
             let i = (tile.1 * ts + ty) * pw + tile.0 * ts + tx;
             let bi = i - inner_at;
             count += 1;
+            for (s, f) in sens.iter_mut().zip(inner) {
+                *s = f.sens[bi];
+            }
             for pl in 0..dom.channels {
                 let (a, b) = (k0[pl].data[i] as f64, k1[pl].data[i] as f64);
-                for (j, f) in inner.iter().enumerate() {
-                    let u = (j + 1) as f64 / len;
-                    r[j] = f.planes[pl].data[bi] as f64 - (a * (1.0 - u) + b * u);
+                for (v, f) in src.iter_mut().zip(inner) {
+                    *v = f.planes[pl].data[bi];
                 }
-                for (k, zk) in z.iter_mut().enumerate() {
-                    *zk = (0..m).map(|j| p.q[j * nb + k] * r[j]).sum();
+                for ((rj, &v), &u) in r.iter_mut().zip(&src).zip(&hat) {
+                    *rj = v as f64 - (a * (1.0 - u) + b * u);
+                }
+                for (zk, qk) in z.iter_mut().zip(&q) {
+                    *zk = qk.iter().zip(&r).map(|(q, r)| q * r).sum();
                 }
                 let g = if pl == 0 { 0 } else { 1 };
                 let w = PLANE_WEIGHT[pl];
-                let mut acc = |e: &[f64], slot: usize| {
-                    for (j, (v, f)) in e.iter().zip(inner).enumerate() {
+                let acc = |err: &mut [f64], e: &[f64]| {
+                    if pl == 0 {
                         // The sensitivity at the source value alone understates a large
                         // luma error: a curve that misses a jump out of the metric's
                         // saturated range (dawn under a night-set exposure) lands where
                         // the metric is steep. Take the larger of the two ends.
-                        let sens = if pl == 0 {
-                            let fitted = f.planes[0].data[bi] - *v as f32;
-                            f.sens[bi].max(dom.sensitivity(fitted))
-                        } else {
-                            f.sens[bi]
-                        };
-                        err[g][slot * m + j] += w * (v * sens as f64).powi(2);
+                        for (((acc, &v), &s), &x) in err.iter_mut().zip(e).zip(&sens).zip(&src) {
+                            let s = s.max(dom.sensitivity(x - v as f32));
+                            *acc += w * (v * s as f64).powi(2);
+                        }
+                    } else {
+                        for ((acc, &v), &s) in err.iter_mut().zip(e).zip(&sens) {
+                            *acc += w * (v * s as f64).powi(2);
+                        }
                     }
                 };
                 e.copy_from_slice(&r);
-                acc(&e, 0);
-                for (k, zk) in z.iter().enumerate() {
-                    for (j, ej) in e.iter_mut().enumerate() {
-                        *ej -= zk * p.q[j * nb + k];
+                acc(&mut err[g][..m], &e);
+                for (k, (zk, qk)) in z.iter().zip(&q).enumerate() {
+                    for (ej, qj) in e.iter_mut().zip(qk) {
+                        *ej -= zk * qj;
                     }
-                    acc(&e, k + 1);
+                    acc(&mut err[g][(k + 1) * m..(k + 2) * m], &e);
                 }
                 if let Some(zs) = keep_z.as_deref_mut() {
                     zs.extend_from_slice(&z);

@@ -189,6 +189,7 @@ impl EncodeReport {
             0..src.info().frames,
             name,
             self.metric,
+            Tally::Levels,
             progress,
         )?;
         self.take(seq);
@@ -212,7 +213,7 @@ impl EncodeReport {
                     source: e.into(),
                 })
         };
-        let seq = measure_parallel(src, &open, &name, self.metric, progress)?;
+        let seq = measure_parallel(src, &open, &name, self.metric, Tally::Levels, progress)?;
         self.take(seq);
         Ok(())
     }
@@ -225,8 +226,22 @@ impl EncodeReport {
         name: &str,
         progress: Progress,
     ) -> Result<(), EncodeError> {
+        self.verify_in_memory(src, bytes, name, Tally::Levels, progress)
+    }
+
+    /// [`EncodeReport::verify_bytes`]; with `Tally::Psnr` only the frames' PSNR is
+    /// measured (the percentile is 0): what the aim's sample passes need, without a
+    /// histogram count per value.
+    pub(crate) fn verify_in_memory(
+        &mut self,
+        src: &dyn FrameSource,
+        bytes: &[u8],
+        name: &str,
+        tally: Tally,
+        progress: Progress,
+    ) -> Result<(), EncodeError> {
         let open = || Ok(std::io::Cursor::new(bytes));
-        let seq = measure_parallel(src, &open, name, self.metric, progress)?;
+        let seq = measure_parallel(src, &open, name, self.metric, tally, progress)?;
         self.take(seq);
         Ok(())
     }
@@ -301,11 +316,21 @@ const PARALLEL_TEXELS: usize = 1 << 26;
 
 /// [`measure`] split into runs of frames, one decoder per run, on the worker pool (a run
 /// starting mid-chain decodes its keyframes from the last intra one, as a seek does).
+/// What a verification measures.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Tally {
+    /// Every frame's error and every value's, for the percentiles.
+    Levels,
+    /// Every frame's error alone.
+    Psnr,
+}
+
 fn measure_parallel<R: Read + Seek + Send>(
     src: &dyn FrameSource,
     open: &(dyn Fn() -> Result<R, EncodeError> + Sync),
     name: &str,
     metric: Metric,
+    tally: Tally,
     progress: Progress,
 ) -> Result<SequenceError, EncodeError> {
     use rayon::prelude::*;
@@ -331,6 +356,7 @@ fn measure_parallel<R: Read + Seek + Send>(
                 k * n / runs..(k + 1) * n / runs,
                 name,
                 metric,
+                tally,
                 &counted,
             )
         })
@@ -350,6 +376,7 @@ fn measure<R: Read + Seek>(
     frames: std::ops::Range<usize>,
     name: &str,
     metric: Metric,
+    tally: Tally,
     progress: Progress,
 ) -> Result<SequenceError, EncodeError> {
     let info = src.info();
@@ -378,7 +405,10 @@ fn measure<R: Read + Seek>(
         dec.frame(i as f64, Output::Stored, &mut out)
             .map_err(verify)?;
         let src = src.read(i)?;
-        seq.add(metric, &src.data, &out);
+        match tally {
+            Tally::Levels => seq.add(metric, &src.data, &out),
+            Tally::Psnr => seq.push(metric.compare(&src.data, &out)),
+        }
         progress("verify", i as u64 + 1, info.frames as u64);
     }
     Ok(seq)

@@ -44,7 +44,7 @@ pub fn encode<W: Write + Seek>(
         } else {
             (cfg.clone(), None, None)
         };
-        let coded = crate::encode::code_sequence(src, &c, validated, progress)?;
+        let coded = crate::encode::code_sequence(src, &c, validated, None, progress)?;
         Ok::<_, EncodeError>((c, aimed, coded))
     })?;
     let mut rep = crate::encode::write_coded(src, &c, coded, out, t_start)?;
