@@ -134,7 +134,7 @@ pub(crate) fn aim(
     let quiet: Progress = &|_, _, _| {};
     let frames = source.info().frames;
     // Every pass codes the same sample frames at the same exposure: code them once.
-    let cache = validated.map(|e| CodedCache::new(source, e, SAMPLE_BYTES));
+    let cache = validated.map(|e| CodedCache::new(source, e, cfg.tile_size, SAMPLE_BYTES));
     let done = AtomicU64::new(0);
     let run = |internal: f64, raise: &[f64], round: usize| {
         let c = EncoderConfig {

@@ -66,12 +66,13 @@ pub(crate) struct CodedCache {
 }
 
 impl CodedCache {
-    /// A cache for `src` coded at `exposure`, keeping its first frames within `bytes`.
-    pub fn new(src: &dyn FrameSource, exposure: f32, bytes: usize) -> CodedCache {
+    /// A cache for `src` coded at `exposure` in tiles of `tile` texels, keeping its first
+    /// frames within `bytes`.
+    pub fn new(src: &dyn FrameSource, exposure: f32, tile: usize, bytes: usize) -> CodedCache {
         let i = src.info();
-        // A coded frame: its planes and its sensitivity, f32, padded to whole tiles (a
-        // sample is whole tiles; a little more for anything else).
-        let per_frame = ((i.width + 16) * (i.height + 16) * (i.channels + 1) * 4).max(1);
+        // A coded frame: its planes and its sensitivity, f32, padded to whole tiles.
+        let padded = i.width.div_ceil(tile) * tile * i.height.div_ceil(tile) * tile;
+        let per_frame = (padded * (i.channels + 1) * 4).max(1);
         let kept = (bytes / per_frame).min(i.frames);
         CodedCache {
             exposure,
@@ -597,14 +598,14 @@ mod tests {
         let e = exposure_from_max_greens(&greens);
         let plain = encoded(&src, e, None);
         // Room for half the frames: the rest are coded every time.
-        let per_frame = (48 + 16) * (32 + 16) * 4 * 4;
-        let cache = CodedCache::new(&src, e, 10 * per_frame);
+        let per_frame = 48 * 32 * 4 * 4;
+        let cache = CodedCache::new(&src, e, 16, 10 * per_frame);
         assert_eq!(cache.frames.len(), 10);
         assert_eq!(encoded(&src, e, Some(&cache)), plain, "filling the cache");
         assert!(cache.frames.iter().all(|f| f.get().is_some()));
         assert_eq!(encoded(&src, e, Some(&cache)), plain, "reading the cache");
         // Frames coded at another exposure are not used.
-        let other = CodedCache::new(&src, 2.0 * e, usize::MAX);
+        let other = CodedCache::new(&src, 2.0 * e, 16, usize::MAX);
         let at_other = encoded(&src, 2.0 * e, Some(&other));
         assert_eq!(encoded(&src, e, Some(&other)), plain);
         assert_ne!(at_other, plain);
