@@ -418,7 +418,7 @@ impl<'a> Window<'a> {
         }
     }
 
-    /// Frame `i` of the window, read whole and coded.
+    /// Frame `i` of the window, read whole and coded (or as the cache kept it).
     fn read_full(&self, i: u32) -> Result<Arc<CodedFrame>, EncodeError> {
         let i = i as usize % self.frames_in_source;
         let kept = self.cache.and_then(|c| c.frames.get(i));

@@ -314,8 +314,6 @@ impl EncodeReport {
 /// worker holds a decoder (its keyframes and terms), so large frames take fewer workers.
 const PARALLEL_TEXELS: usize = 1 << 26;
 
-/// [`measure`] split into runs of frames, one decoder per run, on the worker pool (a run
-/// starting mid-chain decodes its keyframes from the last intra one, as a seek does).
 /// What a verification measures.
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Tally {
@@ -325,6 +323,8 @@ pub(crate) enum Tally {
     Psnr,
 }
 
+/// [`measure`] split into runs of frames, one decoder per run, on the worker pool (a run
+/// starting mid-chain decodes its keyframes from the last intra one, as a seek does).
 fn measure_parallel<R: Read + Seek + Send>(
     src: &dyn FrameSource,
     open: &(dyn Fn() -> Result<R, EncodeError> + Sync),
