@@ -53,6 +53,13 @@ pub struct DecodeShape {
     /// several); on lavapipe a uniform buffer is 14% faster (BENCHMARKS.md, "On a
     /// hardware GPU").
     pub storage_tables: bool,
+    /// An invocation of the reconstruction evaluates two quads of 2 × 2 texels side by
+    /// side rather than one, so that a block's terms, a region's range and a tile's
+    /// degree are found once for eight texels. On an H200 it took 14–21% off a detailed
+    /// day's reconstruction (blocks of several terms) and changed nothing measurable on
+    /// smooth days; on lavapipe the frame was 15–25% slower with it (BENCHMARKS.md, "On a
+    /// hardware GPU").
+    pub wide_reconstruct: bool,
 }
 
 impl DecodeShape {
@@ -61,7 +68,7 @@ impl DecodeShape {
     /// and whole groups (the wide parse's scans and more workgroups are work there: a
     /// 512² segment took 105 ms with the wide parse against 91 ms), no cost per step,
     /// version 2's sections decoded to pairs by the decoder thread, the DCT tables in a
-    /// uniform buffer.
+    /// uniform buffer, a quad per invocation of the reconstruction.
     pub const CPU: DecodeShape = DecodeShape {
         slice_groups: 32,
         wide_parse: false,
@@ -70,6 +77,7 @@ impl DecodeShape {
         weights: PassWeights::LAVAPIPE,
         lanes: false,
         storage_tables: false,
+        wide_reconstruct: false,
     };
 
     /// For a GPU, as measured on an H100: slices of 2048 workgroups (a 4096² segment
@@ -79,7 +87,8 @@ impl DecodeShape {
     /// segment's decode took as long at 512² as at 2048² (about 20 µs per step whatever
     /// its work), and a block of the budget's unit about 0.58 ns ([`PassWeights::H100`]);
     /// version 2's sections decoded to pairs by the decoder thread (`lanes`); the DCT
-    /// tables in a storage buffer (measured on an H200).
+    /// tables in a storage buffer and two quads per invocation of the reconstruction
+    /// (measured on an H200).
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
         wide_parse: true,
@@ -88,6 +97,7 @@ impl DecodeShape {
         weights: PassWeights::H100,
         lanes: false,
         storage_tables: true,
+        wide_reconstruct: true,
     };
 
     /// [`DecodeShape::CPU`] on a CPU adapter, [`DecodeShape::GPU`] on any other.

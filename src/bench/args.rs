@@ -330,6 +330,10 @@ pub struct ShapeArgs {
     /// (`DecodeShape::storage_tables`; true on a GPU, false on a CPU adapter)
     #[arg(long)]
     pub storage_tables: Option<bool>,
+    /// Reconstruct two quads of 2 × 2 texels per invocation (true) or one (false)
+    /// (`DecodeShape::wide_reconstruct`; true on a GPU, false on a CPU adapter)
+    #[arg(long)]
+    pub wide_reconstruct: Option<bool>,
 }
 
 /// The measured pass weights (`vbim_player::PassWeights`).
@@ -355,6 +359,7 @@ impl ShapeArgs {
             },
             lanes: self.lanes.unwrap_or(base.lanes),
             storage_tables: self.storage_tables.unwrap_or(base.storage_tables),
+            wide_reconstruct: self.wide_reconstruct.unwrap_or(base.wide_reconstruct),
         }
     }
 }

@@ -232,13 +232,15 @@ fn each_payload(
 /// A decode shape in words, for the benchmarks' first line.
 fn describe(s: &vbim_player::DecodeShape) -> String {
     format!(
-        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}",
+        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}, DCT tables in a {} buffer, {} an invocation of the reconstruction",
         s.slice_groups,
         if s.wide_parse { "wide" } else { "serial" },
         s.group_split,
         s.step_cost,
         if s.weights == vbim_player::PassWeights::H100 { "H100" } else if s.weights == vbim_player::PassWeights::LAVAPIPE { "lavapipe" } else { "own" },
-        if s.lanes { "as coded" } else { "as pairs" }
+        if s.lanes { "as coded" } else { "as pairs" },
+        if s.storage_tables { "storage" } else { "uniform" },
+        if s.wide_reconstruct { "two quads" } else { "a quad" }
     )
 }
 

@@ -7,6 +7,11 @@
 struct Tables {
     basis: array<vec4<f32>, 16>,
     zigzag: array<vec4<u32>, 16>,
+    // Per zig-zag index i and quad (qx, qy) of a block (texels 2qx, 2qx + 1 across and
+    // 2qy, 2qy + 1 down), at 16 i + 4 qy + qx: (T[ky][2qy], T[ky][2qy + 1], T[kx][2qx],
+    // T[kx][2qx + 1]) for the position (ky, kx) the index stands for, so that a quad's
+    // term takes one load.
+    quad: array<vec4<f32>, 1024>,
 }
 
 fn basis(k: u32, n: u32) -> f32 {

@@ -89,13 +89,41 @@ const PEAK_WORDS: u32 = 9u;
 // segment's there, and a tile reads no further.
 @group(0) @binding(11) var<storage, read> degrees: array<u32>;
 
-// An invocation reconstructs a quad of 2 × 2 texels: the two texels across share a 32-bit
-// word of every 16-bit plane, so each word is read once, and a region's range and a
-// layer's scale are found once for four texels (on lavapipe, where a load costs far more
-// than the arithmetic around it, this halves the frame). A workgroup of 8 × 8 quads lies
-// in one region (32² texels: 2 × 2 workgroups), so its ranges are read at addresses
-// uniform across it.
+// An invocation reconstructs QUADS quads of 2 × 2 texels side by side (put before this
+// source: 1 on a CPU adapter, 2 on a GPU; `DecodeShape::wide_reconstruct`): the two
+// texels across a quad share a 32-bit word of every 16-bit plane, so each word is read
+// once, and a region's range, a tile's degree, a block's terms and a layer's scale are
+// found once for all of them (on lavapipe, where a load costs far more than the
+// arithmetic around it, quads halved the frame; on an H200 pairs of quads took 14–21%
+// off a detailed day's reconstruction, whose blocks hold several terms each, while
+// lavapipe's frame was 15–25% slower with them). A workgroup covers a tile of 16 × 16
+// texels, so 2 × 2 workgroups lie in one region (32² texels), and its ranges are read at
+// addresses uniform across it.
 const REGION_GROUPS: u32 = 2u;
+const GROUP_X: u32 = 8u / QUADS;
+
+// What an invocation computes of one plane or term: the values at its quads, the second
+// (x + 2 … x + 3) unused where QUADS is 1.
+struct Quads {
+    a: vec4<f32>,
+    b: vec4<f32>,
+}
+
+fn quads_zero() -> Quads {
+    return Quads(vec4<f32>(0.0), vec4<f32>(0.0));
+}
+
+// The largest value at either quad.
+fn quads_max(q: Quads) -> f32 {
+    if (QUADS == 2u) {
+        return max(max4(q.a), max4(q.b));
+    }
+    return max4(q.a);
+}
+
+fn quads_abs(q: Quads) -> Quads {
+    return Quads(abs(q.a), abs(q.b));
+}
 
 fn weight(k: u32) -> f32 {
     return p.w[k / 4u][k % 4u];
@@ -123,9 +151,16 @@ fn halves(t: texture_2d_array<u32>, w: vec2<i32>, layer: u32) -> vec4<u32> {
     return vec4<u32>(a & 0xFFFFu, a >> 16u, b & 0xFFFFu, b >> 16u);
 }
 
-fn packed_plane(w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec4<f32> {
+// Layer `plane` of the 16-bit keyframes at the invocation's quads (the first's words at
+// `w`, the second's one word across).
+fn packed_plane(w: vec2<i32>, region: vec2<u32>, plane: u32) -> Quads {
     let r = ranges[(plane * p.regions.y + region.y) * p.regions.x + region.x];
-    return r.x + vec4<f32>(halves(packed, w, plane)) * r.y;
+    var q = quads_zero();
+    q.a = r.x + vec4<f32>(halves(packed, w, plane)) * r.y;
+    if (QUADS == 2u) {
+        q.b = r.x + vec4<f32>(halves(packed, w + vec2<i32>(1, 0), plane)) * r.y;
+    }
+    return q;
 }
 
 fn head_plane(xy: vec2<i32>, plane: u32) -> vec4<f32> {
@@ -138,27 +173,35 @@ fn head_plane(xy: vec2<i32>, plane: u32) -> vec4<f32> {
     );
 }
 
-// Plane `plane` of K_{s+1} at the quad.
-fn next_plane(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec4<f32> {
+// Plane `plane` of K_{s+1} at the invocation's quads.
+fn next_plane(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> Quads {
     if (p.head_f32 == 0u) {
         return packed_plane(w, region, p.keys.y + plane);
     }
-    return head_plane(xy, plane);
+    var q = quads_zero();
+    q.a = head_plane(xy, plane);
+    if (QUADS == 2u) {
+        q.b = head_plane(xy + vec2<i32>(2, 0), plane);
+    }
+    return q;
 }
 
-// Bubble layer `layer` of the segment at the quad whose top-left texel is `xy`: its block's
-// terms summed at each texel, (c · T[ky][y]) · T[kx][x] in increasing zig-zag order, as the
-// reference decoder sums a block of few terms. A quad lies in one block; a block with no
-// term costs one load, one with a single term (three in four of the non-empty blocks of
-// the benchmark days' bubble planes at 2048² and 4096²) no more.
-fn bubble_plane(xy: vec2<i32>, layer: u32) -> vec4<f32> {
+// Bubble layer `layer` of the segment at the invocation's quads (the first's top-left
+// texel is `xy`): its block's terms summed at each texel, (c · T[ky][y]) · T[kx][x] in
+// increasing zig-zag order, as the reference decoder sums a block of few terms. The
+// quads lie in one block; a block with no term costs one load, one with a single term
+// (three in four of the non-empty blocks of the benchmark days' bubble planes at 2048²
+// and 4096²) no more. A term's four basis values at a quad are one load
+// (`Tables::quad`): five loads a term, with the zig-zag lookup, made a detailed day's
+// reconstruction 30% slower on an H200 and its frame 12–20% slower on lavapipe.
+fn bubble_plane(xy: vec2<i32>, layer: u32) -> Quads {
     let b = textureLoad(bubble_blocks, xy / 8, i32(p.set_base + layer), 0);
     let wide = (b.z & 0x80000000u) != 0u;
     let start = b.z & 0x7FFFFFFFu;
     let step = p.steps[layer / 4u][layer % 4u];
-    let x = u32(xy.x) % 8u;
-    let y = u32(xy.y) % 8u;
-    var s = vec4<f32>(0.0);
+    // The first quad's place in the block, 4 · (y / 2) + x / 2; the second is the next.
+    let quad = (u32(xy.y) % 8u / 2u) * 4u + u32(xy.x) % 8u / 2u;
+    var s = quads_zero();
     var c = bitcast<f32>(b.w);
     // Terms visited so far: the first is in the block's texel, the rest in `terms`.
     var j = 0u;
@@ -180,14 +223,15 @@ fn bubble_plane(xy: vec2<i32>, layer: u32) -> vec4<f32> {
             }
         }
         j = j + 1u;
-        let pos = zigzag(i);
-        let ky = pos / 8u;
-        let kx = pos % 8u;
-        let r0 = c * basis(ky, y);
-        let r1 = c * basis(ky, y + 1u);
-        let c0 = basis(kx, x);
-        let c1 = basis(kx, x + 1u);
-        s = s + vec4<f32>(r0 * c0, r0 * c1, r1 * c0, r1 * c1);
+        let t = tables.quad[i * 16u + quad];
+        let r0 = c * t.x;
+        let r1 = c * t.y;
+        s.a = s.a + vec4<f32>(r0 * t.z, r0 * t.w, r1 * t.z, r1 * t.w);
+        if (QUADS == 2u) {
+            // The second quad has the first's rows (r0, r1) and its own columns.
+            let u = tables.quad[i * 16u + quad + 1u];
+            s.b = s.b + vec4<f32>(r0 * u.z, r0 * u.w, r1 * u.z, r1 * u.w);
+        }
     }
     return s;
 }
@@ -205,19 +249,32 @@ fn terms_end(xy: vec2<i32>, plane: u32) -> u32 {
     return min(p.layers, degree + 1u);
 }
 
-// Plane `plane` of the segment's polynomial at the quad, in the reference decoder's order:
-// w0·K0 + w1·K1, then each bubble term.
-fn plane_value(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> vec4<f32> {
-    var c = weight(0u) * packed_plane(w, region, p.keys.x + plane)
-        + weight(1u) * next_plane(xy, w, region, plane);
+// w0·K0 + w1·K1 at each quad.
+fn keys_value(k0: Quads, k1: Quads) -> Quads {
+    let w0 = weight(0u);
+    let w1 = weight(1u);
+    return Quads(w0 * k0.a + w1 * k1.a, w0 * k0.b + w1 * k1.b);
+}
+
+// `c + w · t` at each quad.
+fn add_weighted(c: Quads, w: f32, t: Quads) -> Quads {
+    return Quads(c.a + w * t.a, c.b + w * t.b);
+}
+
+// Plane `plane` of the segment's polynomial at the invocation's quads, in the reference
+// decoder's order: w0·K0 + w1·K1, then each bubble term.
+fn plane_value(xy: vec2<i32>, w: vec2<i32>, region: vec2<u32>, plane: u32) -> Quads {
+    let k0 = packed_plane(w, region, p.keys.x + plane);
+    let k1 = next_plane(xy, w, region, plane);
+    var c = keys_value(k0, k1);
     let end = terms_end(xy, plane);
     for (var k = 2u; k < end; k = k + 1u) {
-        c = c + weight(k) * bubble_plane(xy, (k - 2u) * p.channels + plane);
+        c = add_weighted(c, weight(k), bubble_plane(xy, (k - 2u) * p.channels + plane));
     }
     return c;
 }
 
-// The same, adding the quad's largest |K1 − K0|, |K0| and |C_k| in this plane to `peak`
+// The same, adding the quads' largest |K1 − K0|, |K0| and |C_k| in this plane to `peak`
 // (0, 1, k): what `main_fresh` finds in the first frame of a generation.
 fn plane_peaks(
     xy: vec2<i32>,
@@ -225,17 +282,17 @@ fn plane_peaks(
     region: vec2<u32>,
     plane: u32,
     peak: ptr<function, array<f32, 9>>,
-) -> vec4<f32> {
+) -> Quads {
     let k0 = packed_plane(w, region, p.keys.x + plane);
     let k1 = next_plane(xy, w, region, plane);
-    var c = weight(0u) * k0 + weight(1u) * k1;
-    (*peak)[0] += max4(abs(k1 - k0));
-    (*peak)[1] += max4(abs(k0));
+    var c = keys_value(k0, k1);
+    (*peak)[0] += quads_max(Quads(abs(k1.a - k0.a), abs(k1.b - k0.b)));
+    (*peak)[1] += quads_max(quads_abs(k0));
     let end = terms_end(xy, plane);
     for (var k = 2u; k < end; k = k + 1u) {
         let term = bubble_plane(xy, (k - 2u) * p.channels + plane);
-        c = c + weight(k) * term;
-        (*peak)[k] += max4(abs(term));
+        c = add_weighted(c, weight(k), term);
+        (*peak)[k] += quads_max(quads_abs(term));
     }
     return c;
 }
@@ -314,8 +371,15 @@ fn store_quad(xy: vec2<i32>, y: vec4<f32>, co: vec4<f32>, cg: vec4<f32>) {
     finish(xy + vec2<i32>(1, 1), vec3<f32>(y.w, co.w, cg.w));
 }
 
+fn store_quads(xy: vec2<i32>, y: Quads, co: Quads, cg: Quads) {
+    store_quad(xy, y.a, co.a, cg.a);
+    if (QUADS == 2u) {
+        store_quad(xy + vec2<i32>(2, 0), y.b, co.b, cg.b);
+    }
+}
+
 // A frame: each tile evaluated unless its state says it changed by at most `reuse`.
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(GROUP_X, 8)
 fn main(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -332,24 +396,24 @@ fn main(
             keep_state(at, go);
         }
     }
-    let xy = vec2<i32>(id.xy * 2u);
+    let xy = vec2<i32>(i32(id.x * 2u * QUADS), i32(id.y * 2u));
     if (go && u32(xy.x) < p.size.x && u32(xy.y) < p.size.y) {
-        let w = vec2<i32>(i32(id.x), xy.y);
+        let w = vec2<i32>(i32(id.x * QUADS), xy.y);
         let region = wg.xy / REGION_GROUPS;
         let y = plane_value(xy, w, region, 0u);
-        var co = vec4<f32>(0.0);
-        var cg = vec4<f32>(0.0);
+        var co = quads_zero();
+        var cg = quads_zero();
         if (p.channels == 3u) {
             co = plane_value(xy, w, region, 1u);
             cg = plane_value(xy, w, region, 2u);
         }
-        store_quad(xy, y, co, cg);
+        store_quads(xy, y, co, cg);
     }
 }
 
 // The first frame of a generation (with `reuse`): every tile evaluated, and its bounds
 // found (atomic maxima over the tile; cleared before).
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(GROUP_X, 8)
 fn main_fresh(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -360,19 +424,19 @@ fn main_fresh(
     if (li == 0u) {
         keep_state(state_at(tile, groups.x * groups.y), true);
     }
-    let xy = vec2<i32>(id.xy * 2u);
+    let xy = vec2<i32>(i32(id.x * 2u * QUADS), i32(id.y * 2u));
     if (u32(xy.x) < p.size.x && u32(xy.y) < p.size.y) {
-        let w = vec2<i32>(i32(id.x), xy.y);
+        let w = vec2<i32>(i32(id.x * QUADS), xy.y);
         let region = wg.xy / REGION_GROUPS;
         var peak: array<f32, 9>;
         let y = plane_peaks(xy, w, region, 0u, &peak);
-        var co = vec4<f32>(0.0);
-        var cg = vec4<f32>(0.0);
+        var co = quads_zero();
+        var cg = quads_zero();
         if (p.channels == 3u) {
             co = plane_peaks(xy, w, region, 1u, &peak);
             cg = plane_peaks(xy, w, region, 2u, &peak);
         }
-        store_quad(xy, y, co, cg);
+        store_quads(xy, y, co, cg);
         for (var k = 0u; k < max(p.layers, 2u); k = k + 1u) {
             atomicMax(&peaks[tile * PEAK_WORDS + k], bitcast<u32>(peak[k]));
         }

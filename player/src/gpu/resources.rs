@@ -20,6 +20,8 @@ const BLOCKS_WGSL: &str = include_str!("blocks.wgsl");
 struct Tables {
     basis: [f32; 64],
     zigzag: [u32; 64],
+    /// A term's basis values at a quad (`Tables::quad` in blocks.wgsl).
+    quad: [[f32; 4]; 1024],
 }
 
 impl Gpu {
@@ -33,12 +35,12 @@ impl Gpu {
         shape: crate::DecodeShape,
     ) -> Gpu {
         let (pw, ph) = vbim_format::chunk::padded_size(h);
-        let mut gpu = Gpu::with_tables(
+        let mut gpu = Gpu::with_shape(
             device,
             queue,
             ((h.width, h.height), [pw as u32, ph as u32]),
             (h.max_degree as u32, h.channels as u32, h.tile_size as u32),
-            TablesIn::of(shape),
+            shape,
         );
         gpu.set_decode_shape(shape);
         if let Some(maps) = h.context_maps().filter(|_| shape.lanes) {
@@ -72,17 +74,19 @@ impl Gpu {
     ) -> Gpu {
         let shape = crate::DecodeShape::for_adapter(&device.adapter_info());
         let stream = (max_degree, channels, tile_size);
-        Gpu::with_tables(device, queue, (size, plane), stream, TablesIn::of(shape))
+        Gpu::with_shape(device, queue, (size, plane), stream, shape)
     }
 
-    /// [`Gpu::new`], the DCT tables in `tables_in`.
-    fn with_tables(
+    /// [`Gpu::new`], built as `shape` says: the DCT tables where its `storage_tables` keeps
+    /// them, the reconstruction's quads per invocation from its `wide_reconstruct`.
+    fn with_shape(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         ((width, height), plane): ((u32, u32), [u32; 2]),
         (max_degree, channels, tile_size): (u32, u32, u32),
-        tables_in: TablesIn,
+        shape: crate::DecodeShape,
     ) -> Gpu {
+        let tables_in = TablesIn::of(shape);
         let [keys, packed, bubble_blocks, display, held] = texture_plans(
             (width, height),
             plane,
@@ -137,7 +141,8 @@ impl Gpu {
             &tables_in.wgsl(&format!("{BLOCKS_WGSL}{}", include_str!("decode.wgsl"))),
         );
         let reconstruct = &tables_in.wgsl(&format!(
-            "{BLOCKS_WGSL}{}",
+            "const QUADS: u32 = {}u;\n{BLOCKS_WGSL}{}",
+            if shape.wide_reconstruct { 2 } else { 1 },
             include_str!("reconstruct.wgsl")
         ));
         let parse_source = &decode_source(&format!(
@@ -534,12 +539,26 @@ fn dct_tables(device: &wgpu::Device, tables_in: TablesIn) -> wgpu::Buffer {
     let mut t = Tables {
         basis: [0.0; 64],
         zigzag: [0; 64],
+        quad: [[0.0; 4]; 1024],
     };
     for (k, row) in vbim_format::dct::basis().iter().enumerate() {
         t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
     }
     for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
         t.zigzag[i] = z as u32;
+    }
+    let basis = vbim_format::dct::basis();
+    for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
+        let (ky, kx) = (z / 8, z % 8);
+        for (q, slot) in t.quad[i * 16..i * 16 + 16].iter_mut().enumerate() {
+            let (qx, qy) = (q % 4, q / 4);
+            *slot = [
+                basis[ky][2 * qy],
+                basis[ky][2 * qy + 1],
+                basis[kx][2 * qx],
+                basis[kx][2 * qx + 1],
+            ];
+        }
     }
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("vbim dct tables"),
