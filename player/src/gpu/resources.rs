@@ -541,14 +541,12 @@ fn dct_tables(device: &wgpu::Device, tables_in: TablesIn) -> wgpu::Buffer {
         zigzag: [0; 64],
         quad: [[0.0; 4]; 1024],
     };
-    for (k, row) in vbim_format::dct::basis().iter().enumerate() {
+    let basis = vbim_format::dct::basis();
+    for (k, row) in basis.iter().enumerate() {
         t.basis[k * 8..k * 8 + 8].copy_from_slice(row);
     }
     for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
         t.zigzag[i] = z as u32;
-    }
-    let basis = vbim_format::dct::basis();
-    for (i, &z) in vbim_format::dct::zigzag().iter().enumerate() {
         let (ky, kx) = (z / 8, z % 8);
         for (q, slot) in t.quad[i * 16..i * 16 + 16].iter_mut().enumerate() {
             let (qx, qy) = (q % 4, q / 4);
