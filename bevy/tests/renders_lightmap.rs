@@ -288,8 +288,12 @@ fn flat_day(dir: &Path) -> (Vec<u8>, vbim_bake::Manifest) {
     let manifest_text = std::fs::read_to_string(&baked.manifest).unwrap();
     let manifest = vbim_bake::Manifest::parse(&manifest_text).unwrap();
     let fs = vbim_encoder::FrameSet::open(frames.to_str().unwrap()).unwrap();
+    // Coded at 55 dB: what the test measures is the light's conversion between the
+    // lightmap and Bevy's lights, so a texel's coding error (several per cent at noon at
+    // the default 45 dB, and moved by any change to the encoder's budget) stays out of it.
     let cfg = EncoderConfig {
         rate: (24, 1),
+        tolerance_db: 55.0,
         metadata: Some(manifest_text),
         ..EncoderConfig::preset(Preset::Default)
     };
