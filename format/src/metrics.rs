@@ -100,17 +100,18 @@ impl Metric {
             Metric::Hdr { exposure } => 0.01 / exposure,
             Metric::Srgb8 => f32::INFINITY,
         };
+        let curve = match self {
+            Metric::Hdr { exposure } => Some(ExportCurve::new(exposure)),
+            Metric::Srgb8 => None,
+        };
         let mut diff = [0f64; RUN];
         let (mut sse, mut max_abs, mut max_rel) = ([0f64; LANES], [0f64; LANES], 0f64);
         let mut nan = false;
         for (s, d) in src.chunks(RUN).zip(dec.chunks(RUN)) {
             let diff = &mut diff[..s.len()];
-            match self {
-                Metric::Hdr { exposure } => {
-                    let c = ExportCurve::new(exposure);
-                    differences(diff, s, d, |v| c.apply(v) as f64, |v| c.apply(v) as f64);
-                }
-                Metric::Srgb8 => differences(
+            match curve {
+                Some(c) => differences(diff, s, d, |v| c.apply(v) as f64, |v| c.apply(v) as f64),
+                None => differences(
                     diff,
                     s,
                     d,
@@ -134,11 +135,14 @@ impl Metric {
                 }
             }
         }
-        let nan_if = |v: f64| if nan { f64::NAN } else { v };
         FrameError {
             count: src.len() as u64,
-            sse: nan_if(sse.iter().sum()),
-            max_abs: nan_if(max_abs.iter().copied().fold(0.0, f64::max)),
+            // A NaN carries through the sums; `max` would drop it.
+            sse: sse.iter().sum(),
+            max_abs: match nan {
+                true => f64::NAN,
+                false => max_abs.iter().copied().fold(0.0, f64::max),
+            },
             max_rel,
         }
     }
