@@ -1,7 +1,8 @@
 //! The encode itself: validate every frame, choose the coded domain, then walk the
-//! sequence front to back — segment length, closing keyframe, the segment's model — over
-//! a window of frames that holds one segment's worth at a time: subsampled for the
-//! search, and whole or a band of tile rows at a time for the model (module `plan`).
+//! sequence front to back — segment length (one segment ahead), closing keyframe, the
+//! segment's model — over a window of frames that holds two segments' worth at a time:
+//! subsampled for the search, and whole (as far as the memory limit allows) or a band of
+//! tile rows at a time for the model (module `plan`).
 
 use std::collections::BTreeMap;
 use std::io::{Seek, Write};
@@ -21,6 +22,7 @@ use crate::keyframe::{self, KeyParams};
 use crate::model::{self, CodedFrame, Projectors, Rows, SegmentInput, SegmentParams};
 use crate::output::{header_for, pack_metadata, PendingChunk};
 use crate::plan::Plan;
+use crate::reach;
 use crate::segment::Search;
 use crate::{
     ConfigError, EncodeError, EncodeReport, EncoderConfig, FrameSource, InputKind, Progress,
@@ -169,46 +171,68 @@ pub(crate) fn code_sequence(
     }
     // The header keyframes are decoded against (their shape and curve only).
     let key_header = header_for(&info, cfg, (color, transfer), 0, 0, 1);
+    let mut projectors = Projectors::default();
+    // Each segment's length is found one segment ahead: a keyframe is coded once the
+    // segments on both sides of it are known, for its error reaches into both (`reach`).
+    let longest = match cfg.segment {
+        SegmentMode::Fixed(l) => l,
+        SegmentMode::Auto { max } => max,
+    };
+    let length = |window: &mut Window, projectors: &mut Projectors, b: u32| {
+        let max_len = longest.min(end - b);
+        window.load(b + max_len)?;
+        let len = match cfg.segment {
+            SegmentMode::Fixed(_) => max_len,
+            SegmentMode::Auto { .. } => Search {
+                dom: &sub_dom,
+                tile: Domain::sub_tile(cfg.tile_size, cfg.search_stride),
+                window: &window.subs,
+                cfg,
+                params: &sp,
+            }
+            .length(b, max_len, projectors),
+        };
+        // The search is done with the segment's inner frames: its keyframe needs only
+        // their sensitivity.
+        window.keep_sensitivity_only(b + 1..b + len);
+        Ok::<u32, EncodeError>(len)
+    };
     window.load(0)?;
-    let first = keyframe::code(&*window.full(0)?, None, &key_header, raise.key(kp, 0))?;
+    let mut next_len = length(&mut window, &mut projectors, 0)?;
+    // Keyframe 0 of a loop also closes the last segment, not known yet: taken as the
+    // longest one allowed.
+    let loop_end = match looping {
+        true => window.loop_end(longest.min(n as u32))?,
+        false => Vec::new(),
+    };
+    let sens = window.key_sensitivity(0, None, next_len, &loop_end);
+    drop(loop_end);
+    let first = keyframe::code(&*window.full(0)?, None, &key_header, raise.key(kp, 0), sens)?;
     let k0 = first.decoded.clone();
     chunks.push(keyframe_chunk(first, 0, 0));
     let mut boundaries = vec![0u32];
-    let mut projectors = Projectors::default();
     let mut prev_key = k0.clone();
     let mut last_intra = 0u32;
     let mut intra_keyframes = 1; // keyframe 0
     let mut tilemaps = Vec::new();
     let mut b = 0u32;
     while b < end {
-        let max_len = match cfg.segment {
-            SegmentMode::Fixed(l) => l,
-            SegmentMode::Auto { max } => max,
-        }
-        .min(end - b);
-        window.load(b + max_len)?;
-        let len = match cfg.segment {
-            SegmentMode::Fixed(_) => max_len,
-            SegmentMode::Auto { .. } => {
-                let search = Search {
-                    dom: &sub_dom,
-                    tile: Domain::sub_tile(cfg.tile_size, cfg.search_stride),
-                    window: &window.subs,
-                    cfg,
-                    params: &sp,
-                };
-                search.length(b, max_len, &mut projectors)
-            }
-        };
+        let len = next_len;
         let e = b + len;
         let s = boundaries.len() as u32 - 1;
+        next_len = if e < end {
+            length(&mut window, &mut projectors, e)?
+        } else {
+            0
+        };
         // The keyframe closing this segment (keyframe 0 again at a loop's end): predicted
         // from the previous one while the intra interval allows it.
         let k1 = if looping && e == end {
             k0.clone()
         } else {
             let prev = (e - last_intra <= intra_every).then(|| prev_key.as_slice());
-            let k = keyframe::code(&*window.full(e)?, prev, &key_header, raise.key(kp, e))?;
+            let sens = window.key_sensitivity(e, Some(b), next_len, &[]);
+            let k = keyframe::code(&*window.full(e)?, prev, &key_header, raise.key(kp, e), sens)?;
             if k.intra {
                 last_intra = e;
                 intra_keyframes += 1;
@@ -221,7 +245,7 @@ pub(crate) fn code_sequence(
             k0: &prev_key,
             k1: &k1,
             inner: (e - b).saturating_sub(1) as usize,
-            sens_sq: (b + 1..e).map(|i| window.sens_sq[&i]).sum(),
+            frame_sens_sq: (b + 1..e).map(|i| window.sens_sq[&i]).collect(),
             band_tiles: plan.band_tiles,
             rows: |rows: std::ops::Range<usize>| {
                 // Progress in frames × bands: a segment of a large frame takes a while.
@@ -444,7 +468,7 @@ impl<'a> Window<'a> {
         let missing: Vec<u32> = (self.next..=upto).collect();
         self.next = upto + 1;
         for group in missing.chunks(self.plan.readers.max(1)) {
-            let fresh: Vec<(u32, f64, CodedFrame, Option<Arc<CodedFrame>>)> = group
+            let fresh: Vec<(u32, f64, CodedFrame, Arc<CodedFrame>)> = group
                 .par_iter()
                 .map(|&i| {
                     let f = self.read_full(i)?;
@@ -452,15 +476,16 @@ impl<'a> Window<'a> {
                     let (planes, sens) =
                         self.dom
                             .subsample(&f.planes, &f.sens, self.tile, self.stride);
-                    let full = self.plan.whole.then_some(f);
-                    Ok((i, sens_sq, CodedFrame { planes, sens }, full))
+                    Ok((i, sens_sq, CodedFrame { planes, sens }, f))
                 })
                 .collect::<Result<_, EncodeError>>()?;
             for (i, sens_sq, sub, full) in fresh {
                 self.subs.insert(i, Arc::new(sub));
                 self.sens_sq.insert(i, sens_sq);
-                if let Some(f) = full {
-                    self.full.insert(i, f);
+                // Whole: held while there is room (in order, so the segment being coded
+                // comes first); the rest is read again when its segment is coded.
+                if self.plan.whole && self.full.len() < self.plan.whole_frames {
+                    self.full.insert(i, full);
                 }
             }
         }
@@ -484,9 +509,13 @@ impl<'a> Window<'a> {
     ) -> Result<Rows, EncodeError> {
         if self.plan.whole {
             debug_assert_eq!(rows, 0..self.dom.ph);
+            let idx: Vec<u32> = frames.collect();
             return Ok(Rows {
                 first: 0,
-                frames: frames.map(|i| self.full[&i].clone()).collect(),
+                frames: idx
+                    .par_iter()
+                    .map(|&i| self.full(i))
+                    .collect::<Result<_, EncodeError>>()?,
             });
         }
         let src_rows = self.dom.source_rows(&rows);
@@ -505,6 +534,73 @@ impl<'a> Window<'a> {
             first: rows.start,
             frames,
         })
+    }
+
+    /// The RMS sensitivity keyframe `e`'s error is seen at ([`reach::keyframe`]): the
+    /// segment from `before` ends at it, one of `after` frames starts there, and `more`
+    /// frames (weight, subsampled sensitivity) reach it too.
+    fn key_sensitivity(
+        &self,
+        e: u32,
+        before: Option<u32>,
+        after: u32,
+        more: &[(f32, Vec<f32>)],
+    ) -> f64 {
+        let sens = |j: u32| self.subs[&j].sens.as_slice();
+        let mut reached: Vec<(f32, &[f32])> = Vec::new();
+        if let Some(b) = before {
+            reached.extend(reach::weights(e - b, false).map(|(j, w)| (w, sens(b + j))));
+        }
+        reached.extend(reach::weights(after, true).map(|(j, w)| (w, sens(e + j))));
+        reached.extend(more.iter().map(|(w, s)| (*w, s.as_slice())));
+        let own = (self.sens_sq[&e] / (self.dom.pw * self.dom.ph) as f64).sqrt();
+        reach::keyframe(sens(e), own, &reached)
+    }
+
+    /// The subsampled sensitivity of the last `len − 1` frames of the sequence, as the
+    /// segment of `len` frames that a loop's end would close at keyframe 0 weighs them:
+    /// keyframe 0 is coded first, before that segment is known (the frames are read
+    /// once more when their turn comes).
+    fn loop_end(&self, len: u32) -> Result<Vec<(f32, Vec<f32>)>, EncodeError> {
+        let n = self.frames_in_source as u32;
+        let frames: Vec<(u32, f32)> = reach::weights(len, false)
+            .map(|(j, w)| (n - len + j, w))
+            .collect();
+        let mut out = Vec::with_capacity(frames.len());
+        for group in frames.chunks(self.plan.readers.max(1)) {
+            let read: Vec<(f32, Vec<f32>)> = group
+                .par_iter()
+                .map(|&(i, w)| {
+                    if let Some(f) = self.subs.get(&i) {
+                        return Ok((w, f.sens.clone()));
+                    }
+                    let f = self.read_full(i)?;
+                    let (_, sens) = self
+                        .dom
+                        .subsample(&f.planes, &f.sens, self.tile, self.stride);
+                    Ok((w, sens))
+                })
+                .collect::<Result<_, EncodeError>>()?;
+            out.extend(read);
+        }
+        Ok(out)
+    }
+
+    /// Drops the subsampled planes of `frames`, keeping their sensitivity.
+    fn keep_sensitivity_only(&mut self, frames: std::ops::Range<u32>) {
+        for i in frames {
+            if let Some(f) = self.subs.get_mut(&i) {
+                match Arc::get_mut(f) {
+                    Some(f) => f.planes = Vec::new(),
+                    None => {
+                        *f = Arc::new(CodedFrame {
+                            planes: Vec::new(),
+                            sens: f.sens.clone(),
+                        })
+                    }
+                }
+            }
+        }
     }
 
     /// Drops the frames before `b`, except frame 0's subsample (a loop's end needs it).

@@ -32,15 +32,24 @@ pub(crate) struct KeyParams {
 
 /// Codes `frame` as a keyframe of the stream described by `header`. `prev`: the decoded
 /// keyframe before it, when the intra interval allows predicting from it; `None` codes it
-/// intra (keyframe 0, or an interval reached).
+/// intra (keyframe 0, or an interval reached). `sens_rms`: the RMS sensitivity its error
+/// is weighed by in the frames it reaches ([`crate::reach::keyframe`]).
 pub(crate) fn code(
     frame: &CodedFrame,
     prev: Option<&[Plane]>,
     header: &Header,
     p: KeyParams,
+    sens_rms: f64,
 ) -> Result<CodedKeyframe, EncodeError> {
     let payload = |prev: Option<&[Plane]>| {
-        model::code_keyframe(frame, prev, p.budget, p.chroma_step_factor, p.deadzone)
+        model::code_keyframe(
+            frame,
+            prev,
+            p.budget,
+            sens_rms,
+            p.chroma_step_factor,
+            p.deadzone,
+        )
     };
     // Both quantise with the same step, but a residual carries the reference's
     // quantisation noise as well as the change, and a change that falls in the dead zone

@@ -212,13 +212,14 @@ pub struct Rows {
 }
 
 /// What a segment is coded from: its decoded keyframes (whole), its inner frames (read a
-/// band at a time through `rows`), and the sum of their squared sensitivities over the
-/// whole frame (which sets the quantiser steps, so it must be known before any band).
+/// band at a time through `rows`), and each inner frame's sum of squared sensitivities
+/// over the whole frame (which set the quantiser steps, so they must be known before any
+/// band).
 pub struct SegmentInput<'a, R> {
     pub k0: &'a [Plane],
     pub k1: &'a [Plane],
     pub inner: usize,
-    pub sens_sq: f64,
+    pub frame_sens_sq: Vec<f64>,
     /// Tile rows per band (all of them: the whole frame at once).
     pub band_tiles: usize,
     pub rows: R,
@@ -243,7 +244,7 @@ where
         k0,
         k1,
         inner: m,
-        sens_sq,
+        frame_sens_sq,
         band_tiles,
         mut rows,
     } = input;
@@ -253,11 +254,10 @@ where
     let p = projectors.get(len, sp.max_degree);
     let nb = p.bubbles;
     // Quantiser steps: a coefficient error δ costs about rms(B_k)·δ in value, and the
-    // segment's RMS sensitivity turns that into metric units; the budget is shared by
-    // the dmax − 1 bubble terms of the segment's highest degree.
-    let sens_rms = (sens_sq / (m.max(1) * dom.pw * dom.ph) as f64)
-        .sqrt()
-        .max(1e-9);
+    // RMS sensitivity of the segment's most sensitive frame turns that into metric units
+    // (`reach::segment`); the budget is shared by the dmax − 1 bubble terms of the
+    // segment's highest degree.
+    let sens_rms = crate::reach::segment(&frame_sens_sq, dom.pw * dom.ph).max(1e-9);
     let steps_for = |dmax: usize| -> Vec<f32> {
         let mut steps = Vec::new();
         for k in 2..=dmax {
@@ -438,21 +438,19 @@ fn choose_degrees(
     ((best.0 + 1) as u8, (dc + 1) as u8)
 }
 
-/// Codes a keyframe: intra, or as the difference from the previous decoded keyframe.
-/// Returns the payload before zstd (see [`compress`]); the caller decodes it with the
-/// reference decoder (closed loop).
+/// Codes a keyframe: intra, or as the difference from the previous decoded keyframe, with
+/// its error `budget` (metric units) weighed at RMS sensitivity `sens_rms` (that of the
+/// frames it reaches, `reach::keyframe`). Returns the payload before its coding for the
+/// file's version; the caller decodes it with the reference decoder (closed loop).
 pub fn code_keyframe(
     src: &CodedFrame,
     prev: Option<&[Plane]>,
     budget: f64,
+    sens_rms: f64,
     chroma_step_factor: f32,
     deadzone: f32,
 ) -> Vec<u8> {
-    let sens_rms = (src.sens.iter().map(|v| (*v as f64).powi(2)).sum::<f64>()
-        / src.sens.len() as f64)
-        .sqrt()
-        .max(1e-9);
-    let base = ((12.0f64).sqrt() * budget / sens_rms) as f32;
+    let base = ((12.0f64).sqrt() * budget / sens_rms.max(1e-9)) as f32;
     let mut steps = Vec::new();
     let mut blocks = Vec::new();
     for (pl, plane_src) in src.planes.iter().enumerate() {

@@ -1,9 +1,12 @@
 //! How much of the sequence the encoder holds at once. The segment search reads only a
 //! subsample of each frame, and everything after it is local to a tile, so only three
-//! things span the whole frame: the search's window of subsampled frames, the decoded
-//! keyframes, and the keyframe being coded. The inner frames of a segment, which are most of what the
-//! encoder would hold, are held whole when they fit the memory limit and otherwise read
-//! from the input one band of tile rows at a time. The output is the same either way.
+//! things span the whole frame: the search's window of subsampled frames (and the
+//! sensitivity of the segment before it: a keyframe is coded once the segments on both
+//! sides are known, `reach`), the decoded keyframes, and the keyframe being coded. The inner frames of a segment, which are most
+//! of what the encoder would hold, are held whole when they fit the memory limit and
+//! otherwise read from the input one band of tile rows at a time. Held whole, the frames
+//! of the segment after are kept too as far as the limit allows, and read again when
+//! their segment is coded where it does not. The output is the same either way.
 
 use crate::domain::Domain;
 use crate::{EncodeError, EncoderConfig, SegmentMode, SourceInfo};
@@ -18,6 +21,9 @@ pub(crate) struct Plan {
     pub whole: bool,
     /// Frames read at once while loading the search's window.
     pub readers: usize,
+    /// When `whole`: frames the window may hold whole (at least a segment's worth; those
+    /// of the next segment beyond it are read again when it is coded).
+    pub whole_frames: usize,
     /// What the plan expects the encode to hold at its peak, bytes.
     pub estimate: u64,
 }
@@ -41,11 +47,13 @@ pub(crate) fn plan(
     // A coded frame: its planes and the sensitivity plane, f32.
     let frame = t * (ch + 1) * 4;
     let st = Domain::sub_tile(ts, cfg.search_stride) as u64;
-    // Held throughout: the search's window of subsampled frames, the decoded keyframes
+    // Held throughout: the search's window of subsampled frames (and of the segment
+    // before it, their sensitivity alone, for the keyframe between), the decoded keyframes
     // at both ends of the segment and keyframe 0 (for the loop), and the quantised
     // streams held sparse until a segment is written (an allowance: about 2 bytes a
     // coefficient at most at the tolerances of interest).
-    let window = (longest + 2) * tiles_x * tiles_y * st * st * (ch + 1) * 4;
+    let sub = tiles_x * tiles_y * st * st * 4;
+    let window = (longest + 2) * sub * (ch + 1) + longest * sub;
     let held = window + 3 * t * ch * 4 + t * ch * nb * 2;
     // The phases, one at a time on top of that. Reading a frame: the decoded file (f32
     // interleaved) and the coded frame it becomes. Coding a keyframe: the coded frame, a
@@ -58,9 +66,12 @@ pub(crate) fn plan(
     let limit = cfg.memory_limit;
     let threads = threads.max(1) as u64;
     let readers = |room: u64| (room / read.max(1)).clamp(1, threads) as usize;
-    // Whole: the window also holds every frame of the segment whole.
-    let whole_held = held + (longest + 1) * frame;
-    let whole_cost = whole_held + keyframe.max(threads * read).max(ph as u64 * work_row);
+    // Whole: the window also holds every frame of the segment whole, and as many of the
+    // next segment's as the limit leaves room for.
+    let whole_work = held + keyframe.max(threads * read).max(ph as u64 * work_row);
+    let whole_cost = whole_work + (longest + 1) * frame;
+    let whole_frames = (limit.saturating_sub(whole_work) / frame.max(1)).min(2 * longest + 1);
+    let whole_estimate = whole_work + whole_frames * frame;
     let band_cost = |tiles: usize| held + keyframe.max(read).max((tiles * ts) as u64 * band_row);
     if let Some(b) = cfg.band_tiles {
         let b = b.min(tiles_y as usize);
@@ -73,7 +84,8 @@ pub(crate) fn plan(
             } else {
                 readers(limit.saturating_sub(held))
             },
-            estimate: if whole { whole_cost } else { band_cost(b) },
+            whole_frames: if whole { whole_frames as usize } else { 0 },
+            estimate: if whole { whole_estimate } else { band_cost(b) },
         });
     }
     if whole_cost <= limit {
@@ -81,7 +93,8 @@ pub(crate) fn plan(
             band_tiles: tiles_y as usize,
             whole: true,
             readers: threads as usize,
-            estimate: whole_cost,
+            whole_frames: whole_frames as usize,
+            estimate: whole_estimate,
         });
     }
     // Bands: as many tile rows as the room left by what is held allows.
@@ -109,6 +122,7 @@ pub(crate) fn plan(
         band_tiles,
         whole: false,
         readers: readers(room),
+        whole_frames: 0,
         estimate: band_cost(band_tiles),
     })
 }
@@ -157,6 +171,13 @@ mod tests {
         for side in [512, 1024, 2048] {
             let p = plan(&info(side, 3), &cfg, 2).unwrap();
             assert!(p.whole && p.estimate <= cfg.memory_limit, "{side}²: {p:?}");
+            // A segment's frames at least; two segments' where they fit (2048² 3-channel
+            // frames take 67 MB: not all 65 of them within 4 GB).
+            assert!(
+                p.whole_frames > 32 && p.whole_frames <= 65,
+                "{side}²: {p:?}"
+            );
+            assert_eq!(p.whole_frames == 65, side < 2048, "{side}²: {p:?}");
         }
         let p = plan(&info(4096, 3), &cfg, 2).unwrap();
         assert!(!p.whole && p.estimate <= cfg.memory_limit, "4096²: {p:?}");

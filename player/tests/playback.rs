@@ -565,9 +565,9 @@ fn the_loop_seam_in_a_sunrise_adds_no_error() {
     let (per_frame, per_mid) = (worst(&mse), worst(&mid));
     let mean = per_frame.iter().sum::<f64>() / n as f64;
     let mid_mean = per_mid.iter().sum::<f64>() / n as f64;
-    // The two frames that meet at the seam, and the state halfway across it, have no more
-    // error than the loop's mean. (The sunrise's own frames a little further on have up to
-    // 4× the mean, as they do with no seam there: that is the content, not the seam.)
+    // The two frames that meet at the seam have no more error than the loop's mean. (The
+    // sunrise's own frames a little further on have up to 4× the mean, as they do with no
+    // seam there: that is the content, not the seam.)
     for k in [n - 1, 0] {
         assert!(
             per_frame[k] <= mean,
@@ -575,13 +575,21 @@ fn the_loop_seam_in_a_sunrise_adds_no_error() {
             per_frame[k]
         );
     }
+    // Halfway across the seam the source itself is a blend of the sunrise's steepest step,
+    // which no curve through the frames follows exactly: no more error there than halfway
+    // between the sunrise's other frames (±8 frames), nor than 1.25 × the loop's mean at
+    // midpoints (mostly the flat night and day; it was 0.79× it when the keyframes'
+    // quantisers took their own frame's sensitivity, and 1.05× since they take the most
+    // sensitive frame they reach, which lowers the day's error and not the seam's).
+    let sunrise: Vec<usize> = (n - 8..n).chain(0..9).collect();
+    let sunrise_mid = sunrise.iter().map(|k| per_mid[*k]).sum::<f64>() / sunrise.len() as f64;
     assert!(
-        per_mid[n - 1] <= mid_mean,
-        "halfway across the seam: MSE {:e} over the loop's mean at midpoints {mid_mean:e}",
+        per_mid[n - 1] <= sunrise_mid && per_mid[n - 1] <= 1.25 * mid_mean,
+        "halfway across the seam: MSE {:e} over the sunrise's mean at midpoints {sunrise_mid:e} \
+         or 1.25 × the loop's {mid_mean:e}",
         per_mid[n - 1]
     );
     // And the frames around it have no more than the sunrise's mean (±8 frames).
-    let sunrise: Vec<usize> = (n - 8..n).chain(0..9).collect();
     let sunrise_mean = sunrise.iter().map(|k| per_frame[*k]).sum::<f64>() / sunrise.len() as f64;
     for k in [n - 2, n - 1, 0, 1] {
         assert!(
