@@ -244,15 +244,26 @@ pub(crate) fn aim(
     let mut predicted_db = along(&at, internal_db, mean);
     if round > 0 {
         // Of every pass, raised or not, whose mean is T (or a little above) and whose worst
-        // frame meets the floor: the smallest. Where none does, the raises did not reach
-        // the floor (error in frames no budget governs, such as a sunrise the segment
-        // search's subsample misses): they only cost bytes, and the mean's budget is
+        // frame meets the floor: the smallest. Where none does, the rounds ran out before
+        // the raises reached the floor: they only cost bytes, and the mean's budget is
         // kept, raised as far as a mean of T + WORST_RAISE_DB where the passes without
         // raises bracket it.
+        // The last round's own answer counts as a pass too: the budget its passes
+        // bracket T at, with the mean and the worst frame read off the line between them
+        // (they are the same raises).
+        let interpolated = SamplePass {
+            internal_db,
+            round,
+            mean_db: predicted_db,
+            worst_db: along(&at, internal_db, worst),
+            bytes: along(&at, internal_db, |p| p.bytes as f64) as u64,
+            frame_db: Vec::new(),
+        };
         let near =
             |p: &SamplePass| (target - CLOSE_DB..=target + PICK_ABOVE_DB).contains(&p.mean_db);
         let pick = passes
             .iter()
+            .chain(std::iter::once(&interpolated))
             .filter(|p| near(p) && p.worst_db >= floor)
             .min_by_key(|p| p.bytes);
         (round, internal_db, predicted_db) = match pick {
@@ -316,10 +327,7 @@ fn solve(
     run: &mut impl FnMut(f64) -> Result<SamplePass, EncodeError>,
 ) -> Result<f64, EncodeError> {
     loop {
-        let pts: Vec<Pass> = passes
-            .iter()
-            .map(|p| (p.internal_db, of(p), p.bytes))
-            .collect();
+        let pts = points(passes, &of);
         let closest = pts
             .iter()
             .min_by(|a, b| (a.1 - goal).abs().total_cmp(&(b.1 - goal).abs()));
@@ -340,6 +348,14 @@ fn solve(
         }
         passes.push(run(next)?);
     }
+}
+
+/// The passes as (internal tolerance, `of`, bytes).
+fn points(passes: &[SamplePass], of: impl Fn(&SamplePass) -> f64) -> Vec<Pass> {
+    passes
+        .iter()
+        .map(|p| (p.internal_db, of(p), p.bytes))
+        .collect()
 }
 
 /// `of` at internal tolerance `t`, linear between the passes nearest it on either side
