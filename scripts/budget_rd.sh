@@ -23,33 +23,7 @@ budgets=${BUDGETS:-32 35 38 41 44 47}
 if [ ! -f "$out/unseen-spring/manifest.json" ]; then
     mkdir -p "$out/unseen2"
     python3 scripts/synthetic_dem.py "$out/unseen2/fractal.png" --seed 23
-    cat >"$out/unseen2/fractal.toml" <<'TOML'
-name = "fractal-spring"
-heightfield = "fractal.png"
-latitude = 34.0
-day_of_year = 95
-frames = 240
-size = 512
-fps = "1/6"
-albedo = 0.3
-[sun]
-angular_diameter_deg = 0.6
-strength = 1.0
-[sky]
-strength = 0.12
-glow = 0.1
-[obscurance]
-enabled = true
-l_max_cells = 16
-modulate_interreflection = true
-[clouds]
-enabled = true
-coverage = 0.5
-height_m = 1200.0
-[view]
-vertical_exaggeration = 2.0
-snow_line = 0.9
-TOML
+    cp scripts/scenes/fractal-spring.toml "$out/unseen2/fractal.toml"
     "$NEW" bake "$out/unseen2/fractal.toml" --out "$out/unseen-spring" >/dev/null
 fi
 seqs="jacksboro-clear jacksboro-cloudy aletsch-clear aletsch-cloudy unseen-winter unseen-spring"

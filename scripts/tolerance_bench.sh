@@ -42,33 +42,7 @@ fi
 if [ ! -f "$out/unseen/fractal.toml" ]; then
     mkdir -p "$out/unseen"
     python3 scripts/synthetic_dem.py "$out/unseen/fractal.png"
-    cat >"$out/unseen/fractal.toml" <<'TOML'
-name = "fractal-winter"
-heightfield = "fractal.png"
-latitude = 58.0
-day_of_year = 20
-frames = 240
-size = 512
-fps = "1/6"
-albedo = 0.4
-[sun]
-angular_diameter_deg = 1.0
-strength = 1.15
-[sky]
-strength = 0.09
-glow = 0.14
-[obscurance]
-enabled = true
-l_max_cells = 16
-modulate_interreflection = true
-[clouds]
-enabled = true
-coverage = 0.3
-height_m = 1800.0
-[view]
-vertical_exaggeration = 3.0
-snow_line = 0.8
-TOML
+    cp scripts/scenes/fractal-winter.toml "$out/unseen/fractal.toml"
 fi
 bake unseen-winter "$out/unseen/fractal.toml"
 seqs="jacksboro-clear jacksboro-cloudy aletsch-clear aletsch-cloudy jacksboro-png8 jacksboro-grey unseen-winter"
