@@ -218,9 +218,16 @@ pub struct BenchPlotArgs {
     /// Output PNG.
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Plot title.
-    #[arg(long, default_value = "Rate against distortion")]
-    pub title: String,
+    /// Plot title [default: what the plot shows].
+    #[arg(long)]
+    pub title: Option<String>,
+}
+
+impl BenchPlotArgs {
+    /// The title given, else `default`.
+    pub fn title_or(&self, default: &str) -> String {
+        self.title.clone().unwrap_or_else(|| default.to_string())
+    }
 }
 
 #[derive(Args)]

@@ -152,7 +152,7 @@ pub(super) fn plot_rd(a: BenchPlotArgs) -> Result<(), String> {
         Ok((f[0].to_string(), (bpp, psnr)))
     })?;
     // Lossless points (99 dB) would squash the axis: named in the title instead.
-    let mut title = a.title.clone();
+    let mut title = a.title_or("Rate against distortion");
     for s in series
         .iter()
         .filter(|s| s.points.iter().all(|p| p.1 >= 99.0))
@@ -188,7 +188,7 @@ pub(super) fn plot_tolerance(a: BenchPlotArgs) -> Result<(), String> {
     }
     crate::plot::lines(
         &a.out,
-        &a.title,
+        &a.title_or("Mean PSNR delivered against the tolerance asked"),
         "tolerance asked, dB",
         "mean PSNR delivered − asked, dB (protocol metric)",
         &series,
@@ -230,7 +230,7 @@ pub(super) fn plot_reuse(a: BenchPlotArgs) -> Result<(), String> {
     }
     crate::plot::lines(
         &a.out,
-        &a.title,
+        &a.title_or("The runtime's GPU time against the error shown"),
         "GPU time per displayed frame ÷ the reference blend's (same run)",
         "mean PSNR of the shown frames against the true state, dB",
         &series,
@@ -264,7 +264,7 @@ pub(super) fn plot_size(a: BenchPlotArgs) -> Result<(), String> {
     );
     crate::plot::lines(
         &a.out,
-        &a.title,
+        &a.title_or("Peak resident memory against size"),
         "texels per frame (log)",
         "peak resident memory, GB",
         &series,
