@@ -327,7 +327,10 @@ fn solve(
     run: &mut impl FnMut(f64) -> Result<SamplePass, EncodeError>,
 ) -> Result<f64, EncodeError> {
     loop {
-        let pts = points(passes, &of);
+        let pts: Vec<Pass> = passes
+            .iter()
+            .map(|p| (p.internal_db, of(p), p.bytes))
+            .collect();
         let closest = pts
             .iter()
             .min_by(|a, b| (a.1 - goal).abs().total_cmp(&(b.1 - goal).abs()));
@@ -348,14 +351,6 @@ fn solve(
         }
         passes.push(run(next)?);
     }
-}
-
-/// The passes as (internal tolerance, `of`, bytes).
-fn points(passes: &[SamplePass], of: impl Fn(&SamplePass) -> f64) -> Vec<Pass> {
-    passes
-        .iter()
-        .map(|p| (p.internal_db, of(p), p.bytes))
-        .collect()
 }
 
 /// `of` at internal tolerance `t`, linear between the passes nearest it on either side

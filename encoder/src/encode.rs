@@ -566,24 +566,17 @@ impl<'a> Window<'a> {
         let frames: Vec<(u32, f32)> = reach::weights(len, false)
             .map(|(j, w)| (n - len + j, w))
             .collect();
-        let mut out = Vec::with_capacity(frames.len());
-        for group in frames.chunks(self.plan.readers.max(1)) {
-            let read: Vec<(f32, Vec<f32>)> = group
-                .par_iter()
-                .map(|&(i, w)| {
-                    if let Some(f) = self.subs.get(&i) {
-                        return Ok((w, f.sens.clone()));
-                    }
-                    let f = self.read_full(i)?;
-                    let (_, sens) = self
-                        .dom
-                        .subsample(&f.planes, &f.sens, self.tile, self.stride);
-                    Ok((w, sens))
-                })
-                .collect::<Result<_, EncodeError>>()?;
-            out.extend(read);
-        }
-        Ok(out)
+        crate::plan::read_frames(frames.len(), self.plan.readers, |k| {
+            let (i, w) = frames[k];
+            if let Some(f) = self.subs.get(&i) {
+                return Ok((w, f.sens.clone()));
+            }
+            let f = self.read_full(i)?;
+            let (_, sens) = self
+                .dom
+                .subsample(&f.planes, &f.sens, self.tile, self.stride);
+            Ok((w, sens))
+        })
     }
 
     /// Drops the subsampled planes of `frames`, keeping their sensitivity.

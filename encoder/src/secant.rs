@@ -31,15 +31,12 @@ pub(crate) fn next_tolerance(passes: &[Pass], lo: f64, hi: f64) -> f64 {
             // Two passes closer together than the encoder's own noise (its segment
             // lengths move in steps) give a slope of noise, even a negative one: then the
             // slope across the widest span of passes.
-            // (NaN, from two passes at one tolerance, is noise too.)
+            // (A slope that is not finite, from two passes at one tolerance, is noise too.)
             let mut s = slope(passes[n - 2], passes[n - 1]);
-            if s.is_nan() || s < MIN_SLOPE {
+            if !s.is_finite() || s < MIN_SLOPE {
                 s = span_slope(passes).unwrap_or(1.0);
             }
-            match s >= MIN_SLOPE && s.is_finite() {
-                true => internal + (aim - p) / s,
-                false => internal + (aim - p),
-            }
+            internal + (aim - p) / s
         }
     }
 }
