@@ -21,6 +21,12 @@ pub struct Domain {
 
 const LUT: usize = 4096;
 
+/// The table's entry for code value `c` in a table over `0..=max`.
+#[inline]
+fn lut_index(c: f32, max: f32) -> i32 {
+    ((c / max).clamp(0.0, 1.0) * (LUT - 1) as f32) as i32
+}
+
 impl Domain {
     pub fn new(
         transfer: Transfer,
@@ -60,7 +66,27 @@ impl Domain {
     /// Metric units per coded unit at coded value `c`.
     #[inline]
     pub fn sensitivity(&self, c: f32) -> f32 {
-        let i = ((c / self.lut_max).clamp(0.0, 1.0) * (LUT - 1) as f32) as usize;
+        self.sensitivity_at(self.sensitivity_index(c))
+    }
+
+    /// Where [`Domain::sensitivity`] looks up code value `c`.
+    #[inline]
+    fn sensitivity_index(&self, c: f32) -> usize {
+        lut_index(c, self.lut_max) as usize
+    }
+
+    /// [`Domain::sensitivity_at`]'s indices for code values `v − e`, a run at a time (the
+    /// arithmetic side by side, the lookups apart).
+    pub fn sensitivity_indices(&self, v: &[f32], e: &[f64], out: &mut [i32]) {
+        let max = self.lut_max;
+        for ((o, &v), &e) in out.iter_mut().zip(v).zip(e) {
+            *o = lut_index(v - e as f32, max);
+        }
+    }
+
+    /// The sensitivity at a [`Domain::sensitivity_index`].
+    #[inline]
+    pub fn sensitivity_at(&self, i: usize) -> f32 {
         self.lut[i]
     }
 

@@ -42,9 +42,20 @@ impl Projectors {
 
 /// Weighted squared fit error of one tile for each number of bubbles 0..=nb and each
 /// interior frame (`[slot · frames + frame]`), summed over its texels, per plane group
-/// (luma, chroma). Optionally keeps z = Qᵀr per texel and plane (for the coefficients).
+/// (luma, chroma); with `every_slot` false only slot nb (all bubbles) is summed, the others
+/// stay 0 (the segment search needs no more, and summing every slot was half its time).
+/// Optionally keeps z = Qᵀr per texel and plane (for the coefficients).
 /// The keyframes cover the frame; the inner frames may be a band of it, starting at
 /// texel `inner_at` of the frame.
+///
+/// The tile's values in every frame are read first, as runs of its rows (reading a
+/// texel's values frame by frame missed the cache at every frame: a sixth of the
+/// encode); then a row at a time, the arithmetic runs across the row's texels, each
+/// texel's in the order of the sums (so the results are those of one texel at a time,
+/// bit for bit).
+/// Sums of a tile's errors added side by side (independent chains of additions).
+const LANES: usize = 8;
+
 #[allow(clippy::too_many_arguments)]
 fn tile_errors(
     dom: &Domain,
@@ -56,77 +67,157 @@ fn tile_errors(
     inner: &[&CodedFrame],
     inner_at: usize,
     p: &Projector,
+    every_slot: bool,
     mut keep_z: Option<&mut Vec<f64>>,
 ) -> ([Vec<f64>; 2], usize) {
     let m = inner.len();
     let nb = p.bubbles;
+    let planes = dom.channels;
+    let slots = nb + 1;
+    let first_slot = if every_slot { 0 } else { nb };
     let len = (m + 1) as f64;
-    let mut err = [vec![0.0; (nb + 1) * m], vec![0.0; (nb + 1) * m]];
-    // A texel's source value and sensitivity in each inner frame, gathered once: the
-    // frames are planes of their own, and reading them again for every number of bubbles
-    // was a fifth of the encode.
-    let mut src = vec![0.0f32; m];
-    let mut sens = vec![0.0f32; m];
-    let mut r = vec![0.0f64; m];
-    let mut e = vec![0.0f64; m];
-    let mut z = vec![0.0f64; nb];
+    let mut err = [vec![0.0; slots * m], vec![0.0; slots * m]];
     // The bubbles' columns of Q, each contiguous, and the keyframes' weights.
     let q: Vec<Vec<f64>> = (0..nb)
         .map(|k| (0..m).map(|j| p.q[j * nb + k]).collect())
         .collect();
     let hat: Vec<f64> = (0..m).map(|j| (j + 1) as f64 / len).collect();
-    let mut count = 0;
-    let pw = dom.pw;
-    for ty in (0..ts).step_by(stride) {
-        for tx in (0..ts).step_by(stride) {
-            let i = (tile.1 * ts + ty) * pw + tile.0 * ts + tx;
-            let bi = i - inner_at;
-            count += 1;
-            for (s, f) in sens.iter_mut().zip(inner) {
-                *s = f.sens[bi];
+    let xs: Vec<usize> = (0..ts).step_by(stride).collect();
+    let n = xs.len();
+    // The tile's values first, frame by frame and plane by plane, row after row: a
+    // constant stride the cache's prefetch follows (read a row at a time between the
+    // arithmetic, the frames' values missed the cache one after another). Per row:
+    // [plane][frame][texel] and the sensitivity [frame][texel].
+    let ys: Vec<usize> = (0..ts).step_by(stride).collect();
+    let (per_row, sens_row) = (planes * m * n, m * n);
+    let mut src_tile = vec![0.0f32; ys.len() * per_row];
+    let mut sens_tile = vec![0.0f32; ys.len() * sens_row];
+    let gather = |to: &mut [f32], from: &[f32], at: usize| match stride {
+        1 => to.copy_from_slice(&from[at..at + n]),
+        _ => to.iter_mut().zip(&xs).for_each(|(d, &x)| *d = from[at + x]),
+    };
+    let row_at = |ty: usize| (tile.1 * ts + ty) * dom.pw + tile.0 * ts;
+    for (j, f) in inner.iter().enumerate() {
+        for (ri, &ty) in ys.iter().enumerate() {
+            let to = &mut sens_tile[ri * sens_row + j * n..][..n];
+            gather(to, &f.sens, row_at(ty) - inner_at);
+        }
+        for pl in 0..planes {
+            for (ri, &ty) in ys.iter().enumerate() {
+                let to = &mut src_tile[ri * per_row + (pl * m + j) * n..][..n];
+                gather(to, &f.planes[pl].data, row_at(ty) - inner_at);
             }
-            for pl in 0..dom.channels {
-                let (a, b) = (k0[pl].data[i] as f64, k1[pl].data[i] as f64);
-                for (v, f) in src.iter_mut().zip(inner) {
-                    *v = f.planes[pl].data[bi];
+        }
+    }
+    // Per plane of a row, the residual and what remains of it ([frame][texel]), z
+    // ([plane][bubble][texel]) and each slot's weighted squared error
+    // ([plane][slot][frame][texel]).
+    let mut r = vec![0.0f64; m * n];
+    let mut e = vec![0.0f64; m * n];
+    let mut z = vec![0.0f64; planes * nb * n];
+    let mut c = vec![0.0f64; planes * slots * m * n];
+    let (mut a, mut b) = (vec![0.0f64; n], vec![0.0f64; n]);
+    let (mut lut_at, mut lut_s) = (vec![0i32; n], vec![0f32; n]);
+    let mut count = 0;
+    for (ri, &ty) in ys.iter().enumerate() {
+        let row = row_at(ty);
+        let src = &src_tile[ri * per_row..(ri + 1) * per_row];
+        let sens = &sens_tile[ri * sens_row..(ri + 1) * sens_row];
+        for pl in 0..planes {
+            for (i, &x) in xs.iter().enumerate() {
+                a[i] = k0[pl].data[row + x] as f64;
+                b[i] = k1[pl].data[row + x] as f64;
+            }
+            let src = &src[pl * m * n..(pl + 1) * m * n];
+            for j in 0..m {
+                let u = hat[j];
+                let (rj, vj) = (&mut r[j * n..(j + 1) * n], &src[j * n..(j + 1) * n]);
+                for i in 0..n {
+                    rj[i] = vj[i] as f64 - (a[i] * (1.0 - u) + b[i] * u);
                 }
-                for ((rj, &v), &u) in r.iter_mut().zip(&src).zip(&hat) {
-                    *rj = v as f64 - (a * (1.0 - u) + b * u);
+            }
+            let zp = &mut z[pl * nb * n..(pl + 1) * nb * n];
+            for (k, qk) in q.iter().enumerate() {
+                // As `Sum` folds: from −0, frame by frame.
+                let zk = &mut zp[k * n..(k + 1) * n];
+                zk.fill(-0.0);
+                for (j, &qj) in qk.iter().enumerate() {
+                    for (zi, &ri) in zk.iter_mut().zip(&r[j * n..(j + 1) * n]) {
+                        *zi += qj * ri;
+                    }
                 }
-                for (zk, qk) in z.iter_mut().zip(&q) {
-                    *zk = qk.iter().zip(&r).map(|(q, r)| q * r).sum();
-                }
-                let g = if pl == 0 { 0 } else { 1 };
-                let w = PLANE_WEIGHT[pl];
-                let acc = |err: &mut [f64], e: &[f64]| {
+            }
+            let w = PLANE_WEIGHT[pl];
+            let cp = &mut c[pl * slots * m * n..(pl + 1) * slots * m * n];
+            // A slot's errors, [frame][texel].
+            let mut slot = |cs: &mut [f64], e: &[f64]| {
+                for j in 0..m {
+                    let cj = &mut cs[j * n..(j + 1) * n];
+                    let (ej, sj) = (&e[j * n..(j + 1) * n], &sens[j * n..(j + 1) * n]);
                     if pl == 0 {
                         // The sensitivity at the source value alone understates a large
                         // luma error: a curve that misses a jump out of the metric's
                         // saturated range (dawn under a night-set exposure) lands where
-                        // the metric is steep. Take the larger of the two ends.
-                        for (((acc, &v), &s), &x) in err.iter_mut().zip(e).zip(&sens).zip(&src) {
-                            let s = s.max(dom.sensitivity(x - v as f32));
-                            *acc += w * (v * s as f64).powi(2);
+                        // the metric is steep. Take the larger of the two ends. (The
+                        // lookups apart: the arithmetic around them then runs side by side.)
+                        dom.sensitivity_indices(&src[j * n..(j + 1) * n], ej, &mut lut_at);
+                        for ((s, &l), &own) in lut_s.iter_mut().zip(&lut_at).zip(sj) {
+                            *s = own.max(dom.sensitivity_at(l as usize));
+                        }
+                        for ((c, &ei), &s) in cj.iter_mut().zip(ej).zip(&lut_s) {
+                            *c = w * (ei * s as f64).powi(2);
                         }
                     } else {
-                        for ((acc, &v), &s) in err.iter_mut().zip(e).zip(&sens) {
-                            *acc += w * (v * s as f64).powi(2);
+                        for ((c, &ei), &s) in cj.iter_mut().zip(ej).zip(sj) {
+                            *c = w * (ei * s as f64).powi(2);
                         }
                     }
-                };
-                e.copy_from_slice(&r);
-                acc(&mut err[g][..m], &e);
-                for (k, (zk, qk)) in z.iter().zip(&q).enumerate() {
-                    for (ej, qj) in e.iter_mut().zip(qk) {
-                        *ej -= zk * qj;
-                    }
-                    acc(&mut err[g][(k + 1) * m..(k + 2) * m], &e);
                 }
-                if let Some(zs) = keep_z.as_deref_mut() {
-                    zs.extend_from_slice(&z);
+            };
+            e.copy_from_slice(&r);
+            if first_slot == 0 {
+                slot(&mut cp[..m * n], &e);
+            }
+            for (k, qk) in q.iter().enumerate() {
+                let zk = &zp[k * n..(k + 1) * n];
+                for (j, &qj) in qk.iter().enumerate() {
+                    for (ei, &zi) in e[j * n..(j + 1) * n].iter_mut().zip(zk) {
+                        *ei -= zi * qj;
+                    }
+                }
+                if k + 1 >= first_slot {
+                    slot(&mut cp[(k + 1) * m * n..(k + 2) * m * n], &e);
                 }
             }
         }
+        // Summed texel by texel, plane by plane, as one texel at a time would: each sum
+        // a chain of additions in that order, eight sums side by side.
+        for (g, group) in [(0, 0..1), (1, 1..planes)] {
+            for s in first_slot..slots {
+                let sums = &mut err[g][s * m..(s + 1) * m];
+                for (block, j0) in sums.chunks_mut(LANES).zip((0..m).step_by(LANES)) {
+                    let mut acc = [0.0f64; LANES];
+                    acc[..block.len()].copy_from_slice(block);
+                    for i in 0..n {
+                        for pl in group.clone() {
+                            let cs = &c[((pl * slots + s) * m + j0) * n + i..];
+                            for (l, a) in acc[..block.len()].iter_mut().enumerate() {
+                                *a += cs[l * n];
+                            }
+                        }
+                    }
+                    block.copy_from_slice(&acc[..block.len()]);
+                }
+            }
+        }
+        if let Some(zs) = keep_z.as_deref_mut() {
+            for i in 0..n {
+                for pl in 0..planes {
+                    zs.extend((0..nb).map(|k| z[(pl * nb + k) * n + i]));
+                }
+            }
+        }
+        count += n;
     }
     (err, count)
 }
@@ -148,8 +239,19 @@ pub fn fit_error(
     let (sum, max, frames_sq, count) = (0..tx * ty)
         .into_par_iter()
         .map(|t| {
-            let (err, count) =
-                tile_errors(dom, (t % tx, t / tx), ts, stride, k0, k1, inner, 0, p, None);
+            let (err, count) = tile_errors(
+                dom,
+                (t % tx, t / tx),
+                ts,
+                stride,
+                k0,
+                k1,
+                inner,
+                0,
+                p,
+                false,
+                None,
+            );
             let all = p.bubbles * m..(p.bubbles + 1) * m;
             let pf: Vec<f64> = err[0][all.clone()]
                 .iter()
@@ -310,6 +412,7 @@ where
                     &inner,
                     at,
                     &p,
+                    true,
                     Some(&mut zs),
                 );
                 let (dl, dc) = choose_degrees(&err, count, m, nb, planes, sp.fit_budget);
@@ -486,4 +589,193 @@ pub fn code_keyframe(
         chunk::MODE_INTRA
     };
     chunk::write_keyframe(mode, &steps, &blocks)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vbim_format::metrics::Metric;
+    use vbim_format::Transfer;
+
+    /// `tile_errors` as it was written first: one texel at a time, each texel's values
+    /// read frame by frame. The row-wise version must give the same sums, bit for bit.
+    #[allow(clippy::too_many_arguments)]
+    fn one_texel_at_a_time(
+        dom: &Domain,
+        tile: (usize, usize),
+        ts: usize,
+        stride: usize,
+        k0: &[Plane],
+        k1: &[Plane],
+        inner: &[&CodedFrame],
+        inner_at: usize,
+        p: &Projector,
+        keep_z: &mut Vec<f64>,
+    ) -> ([Vec<f64>; 2], usize) {
+        let m = inner.len();
+        let nb = p.bubbles;
+        let len = (m + 1) as f64;
+        let mut err = [vec![0.0; (nb + 1) * m], vec![0.0; (nb + 1) * m]];
+        let q: Vec<Vec<f64>> = (0..nb)
+            .map(|k| (0..m).map(|j| p.q[j * nb + k]).collect())
+            .collect();
+        let hat: Vec<f64> = (0..m).map(|j| (j + 1) as f64 / len).collect();
+        let mut count = 0;
+        for ty in (0..ts).step_by(stride) {
+            for tx in (0..ts).step_by(stride) {
+                let i = (tile.1 * ts + ty) * dom.pw + tile.0 * ts + tx;
+                let bi = i - inner_at;
+                count += 1;
+                let sens: Vec<f32> = inner.iter().map(|f| f.sens[bi]).collect();
+                for pl in 0..dom.channels {
+                    let (a, b) = (k0[pl].data[i] as f64, k1[pl].data[i] as f64);
+                    let src: Vec<f32> = inner.iter().map(|f| f.planes[pl].data[bi]).collect();
+                    let r: Vec<f64> = (0..m)
+                        .map(|j| src[j] as f64 - (a * (1.0 - hat[j]) + b * hat[j]))
+                        .collect();
+                    let z: Vec<f64> = q
+                        .iter()
+                        .map(|qk| qk.iter().zip(&r).map(|(q, r)| q * r).sum())
+                        .collect();
+                    let (g, w) = (pl.min(1), PLANE_WEIGHT[pl]);
+                    let acc = |err: &mut [f64], e: &[f64]| {
+                        for j in 0..m {
+                            let s = match pl {
+                                0 => sens[j].max(dom.sensitivity(src[j] - e[j] as f32)),
+                                _ => sens[j],
+                            };
+                            err[j] += w * (e[j] * s as f64).powi(2);
+                        }
+                    };
+                    let mut e = r.clone();
+                    acc(&mut err[g][..m], &e);
+                    for (k, (zk, qk)) in z.iter().zip(&q).enumerate() {
+                        for (ej, qj) in e.iter_mut().zip(qk) {
+                            *ej -= zk * qj;
+                        }
+                        acc(&mut err[g][(k + 1) * m..(k + 2) * m], &e);
+                    }
+                    keep_z.extend_from_slice(&z);
+                }
+            }
+        }
+        (err, count)
+    }
+
+    #[test]
+    fn tile_errors_row_by_row_are_those_of_one_texel_at_a_time() {
+        // HDR, so that luma's sensitivity is looked up at both ends of the error.
+        let (w, h, ts) = (48, 32, 16);
+        let e = 0.5;
+        let transfer = Transfer::LogToe {
+            v0: (2.0f32).powi(-10) / e,
+        };
+        let dom = Domain::new(transfer, Metric::Hdr { exposure: e }, 3, w, h, ts);
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // Frames of smooth light with noise on top; the inner frames a band of 16 rows
+        // starting at row 16.
+        let mut frame = |t: f32, rows: std::ops::Range<usize>| {
+            let data: Vec<f32> = rows
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .flat_map(|(x, y)| {
+                    let v = 40.0 * (1.0 + (t + 0.1 * (x + y) as f32).sin());
+                    [v, 0.8 * v, 0.6 * v]
+                })
+                .map(|v| v * (0.9 + 0.2 * next()))
+                .collect();
+            data
+        };
+        let whole = |t: f32, frame: &mut dyn FnMut(f32, std::ops::Range<usize>) -> Vec<f32>| {
+            let (planes, sens) = dom.code(&frame(t, 0..h));
+            CodedFrame { planes, sens }
+        };
+        let k0 = whole(0.0, &mut frame);
+        let k1 = whole(1.0, &mut frame);
+        for m in [1usize, 3, 7] {
+            let inner: Vec<CodedFrame> = (1..=m)
+                .map(|j| {
+                    let f = whole(j as f32 / (m + 1) as f32, &mut frame);
+                    let band = 16 * w..32 * w;
+                    CodedFrame {
+                        planes: f
+                            .planes
+                            .iter()
+                            .map(|p| Plane {
+                                w: p.w,
+                                h: 16,
+                                data: p.data[band.clone()].to_vec(),
+                            })
+                            .collect(),
+                        sens: f.sens[band.clone()].to_vec(),
+                    }
+                })
+                .collect();
+            let inner: Vec<&CodedFrame> = inner.iter().collect();
+            let p = Projector::new(m as u32 + 1, 4);
+            for (tile, stride) in [((0, 1), 1), ((2, 1), 1), ((1, 1), 3)] {
+                let mut z_rows = Vec::new();
+                let mut z_one = Vec::new();
+                let args = (&dom, tile, ts, stride, &k0.planes, &k1.planes);
+                let rows = tile_errors(
+                    args.0,
+                    args.1,
+                    args.2,
+                    args.3,
+                    args.4,
+                    args.5,
+                    &inner,
+                    16 * w,
+                    &p,
+                    true,
+                    Some(&mut z_rows),
+                );
+                let one = one_texel_at_a_time(
+                    args.0,
+                    args.1,
+                    args.2,
+                    args.3,
+                    args.4,
+                    args.5,
+                    &inner,
+                    16 * w,
+                    &p,
+                    &mut z_one,
+                );
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(rows.1, one.1);
+                for g in 0..2 {
+                    assert_eq!(
+                        bits(&rows.0[g]),
+                        bits(&one.0[g]),
+                        "m {m}, {tile:?}, group {g}"
+                    );
+                }
+                assert_eq!(bits(&z_rows), bits(&z_one), "m {m}, {tile:?}");
+                // The search's sums: slot nb alone, the same bits.
+                let last = tile_errors(
+                    args.0,
+                    args.1,
+                    args.2,
+                    args.3,
+                    args.4,
+                    args.5,
+                    &inner,
+                    16 * w,
+                    &p,
+                    false,
+                    None,
+                );
+                let all = p.bubbles * m..(p.bubbles + 1) * m;
+                for g in 0..2 {
+                    assert_eq!(bits(&last.0[g][all.clone()]), bits(&one.0[g][all.clone()]));
+                }
+            }
+        }
+    }
 }
