@@ -3,7 +3,7 @@
 //! tolerance (T + 4.8 dB on the benchmark day at T = 40.5). Here the file is encoded,
 //! measured with the reference decoder, and encoded again with a corrected internal
 //! budget (secant steps on internal tolerance → delivered PSNR, which rises with it but in
-//! steps, then bisection once T is bracketed) until the delivered mean PSNR lands in
+//! steps, then regula falsi kept off the bracket's ends once T is bracketed) until the delivered mean PSNR lands in
 //! [T, T + BAND_DB]. Each pass costs one encode and one verification; the smallest file
 //! that meets T is kept. The first pass starts from the budget that `aim` finds on a
 //! sample for the band's middle, which usually lands in the band at once.
