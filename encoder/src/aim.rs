@@ -251,12 +251,7 @@ pub(crate) fn aim(
             .map(|f| estimate[f] + (next[f] - raise[f]) * bought(f))
             .collect();
         let lift = pooled(&lifted) - pooled(&estimate);
-        let slope = span_slope(
-            &at.iter()
-                .map(|p| (p.internal_db, p.mean_db, p.bytes))
-                .collect::<Vec<_>>(),
-        )
-        .unwrap_or(FIRST_SLOPE);
+        let slope = span_slope(&points(&at, mean)).unwrap_or(FIRST_SLOPE);
         let start = match lift.is_finite() && lift > 0.0 {
             true => internal_db - lift / slope,
             false => internal_db,
@@ -299,11 +294,7 @@ pub(crate) fn aim(
             Some(p) => (p.round, p.internal_db, p.mean_db),
             None => {
                 let plain = &passes[..mean_passes];
-                let pts: Vec<Pass> = plain
-                    .iter()
-                    .map(|p| (p.internal_db, p.mean_db, p.bytes))
-                    .collect();
-                let t = interpolate(&pts, target + WORST_RAISE_DB)
+                let t = interpolate(&points(plain, mean), target + WORST_RAISE_DB)
                     .map_or(for_the_mean, |t| t.max(for_the_mean));
                 (0, t, along(plain, t, mean))
             }
@@ -363,10 +354,7 @@ fn solve(
     run: &mut impl FnMut(f64) -> Result<SamplePass, EncodeError>,
 ) -> Result<f64, EncodeError> {
     loop {
-        let pts: Vec<Pass> = passes
-            .iter()
-            .map(|p| (p.internal_db, of(p), p.bytes))
-            .collect();
+        let pts = points(passes, &of);
         let closest = pts
             .iter()
             .min_by(|a, b| (a.1 - goal).abs().total_cmp(&(b.1 - goal).abs()));
@@ -387,6 +375,14 @@ fn solve(
         }
         passes.push(run(next)?);
     }
+}
+
+/// The passes as (internal tolerance, `of`, bytes): what the secant steps read.
+fn points(passes: &[SamplePass], of: impl Fn(&SamplePass) -> f64) -> Vec<Pass> {
+    passes
+        .iter()
+        .map(|p| (p.internal_db, of(p), p.bytes))
+        .collect()
 }
 
 /// `of` at internal tolerance `t`, linear between the passes nearest it on either side

@@ -82,28 +82,28 @@ fn tile_errors(
         .map(|k| (0..m).map(|j| p.q[j * nb + k]).collect())
         .collect();
     let hat: Vec<f64> = (0..m).map(|j| (j + 1) as f64 / len).collect();
+    // The texels read along a row, and the rows read: the same steps.
     let xs: Vec<usize> = (0..ts).step_by(stride).collect();
     let n = xs.len();
     // The tile's values first, frame by frame and plane by plane, row after row: a
     // constant stride the cache's prefetch follows (read a row at a time between the
     // arithmetic, the frames' values missed the cache one after another). Per row:
     // [plane][frame][texel] and the sensitivity [frame][texel].
-    let ys: Vec<usize> = (0..ts).step_by(stride).collect();
     let (per_row, sens_row) = (planes * m * n, m * n);
-    let mut src_tile = vec![0.0f32; ys.len() * per_row];
-    let mut sens_tile = vec![0.0f32; ys.len() * sens_row];
+    let mut src_tile = vec![0.0f32; xs.len() * per_row];
+    let mut sens_tile = vec![0.0f32; xs.len() * sens_row];
     let gather = |to: &mut [f32], from: &[f32], at: usize| match stride {
         1 => to.copy_from_slice(&from[at..at + n]),
         _ => to.iter_mut().zip(&xs).for_each(|(d, &x)| *d = from[at + x]),
     };
     let row_at = |ty: usize| (tile.1 * ts + ty) * dom.pw + tile.0 * ts;
     for (j, f) in inner.iter().enumerate() {
-        for (ri, &ty) in ys.iter().enumerate() {
+        for (ri, &ty) in xs.iter().enumerate() {
             let to = &mut sens_tile[ri * sens_row + j * n..][..n];
             gather(to, &f.sens, row_at(ty) - inner_at);
         }
         for pl in 0..planes {
-            for (ri, &ty) in ys.iter().enumerate() {
+            for (ri, &ty) in xs.iter().enumerate() {
                 let to = &mut src_tile[ri * per_row + (pl * m + j) * n..][..n];
                 gather(to, &f.planes[pl].data, row_at(ty) - inner_at);
             }
@@ -119,7 +119,7 @@ fn tile_errors(
     let (mut a, mut b) = (vec![0.0f64; n], vec![0.0f64; n]);
     let (mut lut_at, mut lut_s) = (vec![0i32; n], vec![0f32; n]);
     let mut count = 0;
-    for (ri, &ty) in ys.iter().enumerate() {
+    for (ri, &ty) in xs.iter().enumerate() {
         let row = row_at(ty);
         let src = &src_tile[ri * per_row..(ri + 1) * per_row];
         let sens = &sens_tile[ri * sens_row..(ri + 1) * sens_row];

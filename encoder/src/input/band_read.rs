@@ -68,6 +68,7 @@ pub fn exr_rows(path: &Path, rows: Option<Range<usize>>) -> Result<Option<Frame>
     // A line of one channel as f32 (converted a line at a time: a call per value was a
     // tenth of a small frame's encode).
     let mut line: Vec<f32> = Vec::new();
+    let mut halves: Vec<half::f16> = Vec::new();
     let filtered = reader
         .filter_chunks(false, |_, _, block| {
             let y = block.pixel_position.1;
@@ -101,12 +102,14 @@ pub fn exr_rows(path: &Path, rows: Option<Range<usize>>) -> Result<Option<Frame>
                     match ch.sample_type {
                         SampleType::F16 => {
                             use half::slice::HalfFloatSliceExt;
-                            let h: Vec<half::f16> = bytes
-                                .chunks_exact(2)
-                                .map(|s| half::f16::from_ne_bytes([s[0], s[1]]))
-                                .collect();
+                            halves.clear();
+                            halves.extend(
+                                bytes
+                                    .chunks_exact(2)
+                                    .map(|s| half::f16::from_ne_bytes([s[0], s[1]])),
+                            );
                             line.resize(bw, 0.0);
-                            h.convert_to_f32_slice(&mut line);
+                            halves.convert_to_f32_slice(&mut line);
                         }
                         SampleType::F32 => line.extend(
                             bytes
