@@ -14,7 +14,9 @@
 # and grey days are left out: their sensitivity is constant, so the quantiser's reach
 # cannot change them), and a second day the project does not ship, baked here: another
 # fractal terrain (seed 23) at 34° N in early April under half cloud cover. Writes
-# OUT/budget_old.csv, OUT/budget_new.csv and prints the comparison.
+# OUT/budget_old.csv, OUT/budget_new.csv and prints the comparison. VBIM_FLAGS adds flags to
+# every encode (`--format-version 2`); SIDES="new" keeps OUT/budget_old.csv from a run
+# before and encodes with NEW only.
 set -euo pipefail
 out=${1:-out/tolerance}
 : "${OLD:?OLD=path to the build to compare against}"
@@ -27,14 +29,14 @@ if [ ! -f "$out/unseen-spring/manifest.json" ]; then
     "$NEW" bake "$out/unseen2/fractal.toml" --out "$out/unseen-spring" >/dev/null
 fi
 seqs="jacksboro-clear jacksboro-cloudy aletsch-clear aletsch-cloudy unseen-winter unseen-spring"
-for which in old new; do
+for which in ${SIDES:-old new}; do
     bin=$OLD
     [ "$which" = new ] && bin=$NEW
     csv="$out/budget_$which.csv"
     echo "sequence,budget,delivered,worst,bytes" >"$csv"
     for s in $seqs; do
         for b in $budgets; do
-            "$bin" encode "$out/$s" -o "$out/b.vbim" --no-aim --tolerance "$b" --fps 24/1 \
+            "$bin" encode "$out/$s" -o "$out/b.vbim" --no-aim --tolerance "$b" --fps 24/1 ${VBIM_FLAGS:-} \
                 --report "$out/b.json" >/dev/null 2>&1
             python3 - "$out/b.json" "$s" "$b" >>"$csv" <<'PY'
 import json, sys

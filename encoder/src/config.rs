@@ -83,8 +83,15 @@ pub struct EncoderConfig {
     /// Tile rows per band, overriding what `memory_limit` would choose (the output does
     /// not depend on it either; tests and benchmarks compare the two).
     pub band_tiles: Option<usize>,
-    /// Dead zone of the quantiser, in steps beyond the half step.
-    pub deadzone: f32,
+    /// Dead zone of the quantiser, in steps beyond the half step; `None`: the default
+    /// ([`EncoderConfig::deadzone`]).
+    pub deadzone: Option<f32>,
+    /// Versions 2 and 3: squared quantiser steps a bit is worth to the rate-aware
+    /// quantiser, which drops a block's ±1 coefficients whose bits (as version 2's coder
+    /// counts them) cost more than the error they save; 0: off. `None`: the version's
+    /// default ([`EncoderConfig::rate_lambda`]). Version 1's pairs through zstd are not
+    /// what it counts, and it bought nothing there (measured): version 1 ignores it.
+    pub rate_lambda: Option<f32>,
     /// Chroma steps relative to luma.
     pub chroma_step_factor: f32,
     /// Extra accuracy asked of single frames, dB above `tolerance_db`'s budget, one value
@@ -121,7 +128,8 @@ impl EncoderConfig {
             search_stride: 4,
             memory_limit: DEFAULT_MEMORY_LIMIT,
             band_tiles: None,
-            deadzone: 0.2,
+            deadzone: None,
+            rate_lambda: None,
             chroma_step_factor: 1.5,
             frame_raise_db: Vec::new(),
         };
@@ -189,6 +197,15 @@ impl EncoderConfig {
         {
             return Err(ConfigError::FrameRaise { frame, raise });
         }
+        if let Some(d) = self.deadzone.filter(|d| !(0.0..0.5).contains(d)) {
+            return Err(ConfigError::Deadzone(d));
+        }
+        if let Some(l) = self
+            .rate_lambda
+            .filter(|l| !(0.0..=MAX_RATE_LAMBDA).contains(l))
+        {
+            return Err(ConfigError::RateLambda(l));
+        }
         if self.threads > max_threads() {
             return Err(ConfigError::Threads {
                 threads: self.threads,
@@ -201,11 +218,32 @@ impl EncoderConfig {
         Ok(())
     }
 
+    /// The dead zone used: as set, else 0.2, or 0.15 with the rate-aware quantiser on,
+    /// which drops what a wider dead zone would (BENCHMARKS.md, "Rate-aware
+    /// quantisation"). So with it off, versions 2 and 3 code the integers of version 1.
+    pub fn deadzone(&self) -> f32 {
+        self.deadzone
+            .unwrap_or(if self.rate_lambda() > 0.0 { 0.15 } else { 0.2 })
+    }
+
+    /// The rate-aware quantiser's price of a bit in squared steps: as set (0 in version
+    /// 1, which ignores it), else 0.1 in versions 2 and 3.
+    pub fn rate_lambda(&self) -> f32 {
+        match self.format {
+            FormatVersion::V1 => 0.0,
+            _ => self.rate_lambda.unwrap_or(0.1),
+        }
+    }
+
     /// The intra interval in frames (at least 1).
     pub fn intra_interval_frames(&self) -> u32 {
         ((self.intra_interval_s * self.rate.0 as f64 / self.rate.1 as f64).floor() as u32).max(1)
     }
 }
+
+/// The highest price of a bit the rate-aware quantiser takes ([`EncoderConfig::rate_lambda`]),
+/// squared steps: at 1 it already drops nearly every ±1 (a ±1 costs a few bits).
+pub const MAX_RATE_LAMBDA: f32 = 10.0;
 
 /// The most extra accuracy a frame may be asked for ([`EncoderConfig::frame_raise_db`]), dB.
 pub const MAX_FRAME_RAISE_DB: f64 = 40.0;
@@ -273,6 +311,14 @@ pub enum ConfigError {
         /// Frames in the sequence.
         frames: usize,
     },
+    /// `deadzone` outside 0 to 0.5 (not included).
+    #[error("dead zone {0} is outside 0 to 0.5 steps")]
+    Deadzone(f32),
+    /// `rate_lambda` outside 0 to [`MAX_RATE_LAMBDA`].
+    #[error(
+        "rate-aware quantiser's price {0} is outside 0 to {MAX_RATE_LAMBDA} squared steps a bit"
+    )]
+    RateLambda(f32),
     /// The worker pool could not be started.
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads {
@@ -317,6 +363,11 @@ mod tests {
                 threads: 100_000,
                 ..
             }
+        ));
+        assert_eq!(bad(&|c| c.deadzone = Some(0.5)), ConfigError::Deadzone(0.5));
+        assert!(matches!(
+            bad(&|c| c.rate_lambda = Some(f32::NAN)),
+            ConfigError::RateLambda(l) if l.is_nan()
         ));
         let mut c = ok.clone();
         c.threads = max_threads();

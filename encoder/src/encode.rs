@@ -141,13 +141,15 @@ pub(crate) fn code_sequence(
         fit_budget: FIT_SHARE * eps,
         quant_budget: BUBBLE_SHARE * eps,
         chroma_step_factor: cfg.chroma_step_factor,
-        deadzone: cfg.deadzone,
+        deadzone: cfg.deadzone(),
+        rate_lambda: cfg.rate_lambda(),
         zstd_level: cfg.zstd_level,
     };
     let kp = KeyParams {
         budget: KEY_SHARE * eps,
         chroma_step_factor: cfg.chroma_step_factor,
-        deadzone: cfg.deadzone,
+        deadzone: cfg.deadzone(),
+        rate_lambda: cfg.rate_lambda(),
     };
     let started = Instant::now();
 

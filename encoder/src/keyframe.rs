@@ -28,6 +28,8 @@ pub(crate) struct KeyParams {
     pub budget: f64,
     pub chroma_step_factor: f32,
     pub deadzone: f32,
+    /// Squared steps a bit is worth to the rate-aware quantiser (0: off).
+    pub rate_lambda: f32,
 }
 
 /// Codes `frame` as a keyframe of the stream described by `header`. `prev`: the decoded
@@ -49,6 +51,7 @@ pub(crate) fn code(
             sens_rms,
             p.chroma_step_factor,
             p.deadzone,
+            p.rate_lambda,
         )
     };
     // Both quantise with the same step, but a residual carries the reference's

@@ -32,6 +32,7 @@ mod model;
 mod output;
 mod payloads;
 mod plan;
+mod rdoq;
 mod reach;
 mod report;
 mod run;

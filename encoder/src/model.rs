@@ -12,6 +12,7 @@ use vbim_format::dct::N;
 use vbim_format::plane::{self, Plane};
 
 use crate::domain::Domain;
+use crate::rdoq::Costs;
 use crate::sparse::SparseBlocks;
 use crate::EncodeError;
 
@@ -302,6 +303,8 @@ pub struct SegmentParams {
     pub quant_budget: f64,
     pub chroma_step_factor: f32,
     pub deadzone: f32,
+    /// Squared steps a bit is worth to the rate-aware quantiser (`rdoq`; 0: off).
+    pub rate_lambda: f32,
     pub zstd_level: i32,
 }
 
@@ -466,16 +469,22 @@ where
                     let members: Vec<usize> = (band * tx..band_end * tx)
                         .filter(|&t| tiles.degree(pl, t) as usize >= k)
                         .collect();
-                    let q: Vec<[i32; N * N]> = members
+                    let c: Vec<[f32; N * N]> = members
                         .par_iter()
                         .flat_map_iter(|&t| plane::tile_blocks(t, tx, ts).collect::<Vec<_>>())
                         .map(|(bx, by)| {
-                            let b = src.read_block(bx, by - band * ts / N);
-                            plane::quantize_block(&b, step, sp.deadzone)
+                            plane::coefficients(&src.read_block(bx, by - band * ts / N))
                         })
                         .collect();
+                    let q = quantize(&c, step, sp.deadzone, 0.0);
                     let s = &mut streams[(k - 2) * planes + pl];
-                    q.iter().for_each(|b| s.push(b));
+                    match sp.rate_lambda > 0.0 {
+                        // Refined once the segment's every band is in (below).
+                        true => q.iter().zip(&c).for_each(|(q, c)| {
+                            s.push_rated(q, &c.map(|v| v / step));
+                        }),
+                        false => q.iter().for_each(|b| s.push(b)),
+                    }
                 }
             }
         }
@@ -486,7 +495,12 @@ where
     for s in &steps {
         raw.extend_from_slice(&s.to_le_bytes());
     }
-    for s in variants[dmax].iter().flatten() {
+    // The rate-aware quantiser prices a stream's tokens by the whole stream, so it runs
+    // once every band is in: the file does not depend on where the bands fall.
+    for s in variants[dmax].iter_mut().flatten() {
+        if sp.rate_lambda > 0.0 {
+            s.refine(sp.rate_lambda);
+        }
         s.write(&mut raw);
     }
     Ok(SegmentCode {
@@ -541,6 +555,24 @@ fn choose_degrees(
     ((best.0 + 1) as u8, (dc + 1) as u8)
 }
 
+/// A plane's blocks (zig-zag DCT coefficients) quantised with a dead zone, then — with
+/// `rate_lambda` > 0 — refined by what their bits cost at the plane's own token costs
+/// (`rdoq`).
+fn quantize(c: &[[f32; N * N]], step: f32, deadzone: f32, rate_lambda: f32) -> Vec<[i32; N * N]> {
+    let mut q: Vec<[i32; N * N]> = c
+        .par_iter()
+        .map(|c| plane::quantize_coefficients(c, step, deadzone))
+        .collect();
+    if rate_lambda > 0.0 {
+        let costs = Costs::learn(q.iter().copied());
+        q.par_iter_mut().zip(c).for_each(|(q, c)| {
+            let ones = crate::rdoq::ones(q, &c.map(|v| v / step));
+            crate::rdoq::refine(q, &ones, &costs, rate_lambda);
+        });
+    }
+    q
+}
+
 /// Codes a keyframe: intra, or as the difference from the previous decoded keyframe, with
 /// its error `budget` (metric units) weighed at RMS sensitivity `sens_rms` (that of the
 /// frames it reaches, `reach::keyframe`). Returns the payload before its coding for the
@@ -552,6 +584,7 @@ pub fn code_keyframe(
     sens_rms: f64,
     chroma_step_factor: f32,
     deadzone: f32,
+    rate_lambda: f32,
 ) -> Vec<u8> {
     let base = ((12.0f64).sqrt() * budget / sens_rms.max(1e-9)) as f32;
     let mut steps = Vec::new();
@@ -577,10 +610,11 @@ pub fn code_keyframe(
             None => plane_src.clone(),
         };
         let origins: Vec<(usize, usize)> = plane::all_blocks(&target).collect();
-        let q: Vec<[i32; N * N]> = origins
+        let c: Vec<[f32; N * N]> = origins
             .par_iter()
-            .map(|&(bx, by)| plane::quantize_block(&target.read_block(bx, by), step, deadzone))
+            .map(|&(bx, by)| plane::coefficients(&target.read_block(bx, by)))
             .collect();
+        let q = quantize(&c, step, deadzone, rate_lambda);
         blocks.push(q);
     }
     let mode = if prev.is_some() {

@@ -12,6 +12,10 @@ pub struct SparseBlocks {
     dc: Vec<i32>,
     /// Non-zero AC terms as (block, zig-zag index, value), in block order.
     ac: Vec<(u32, u8, i32)>,
+    /// The ±1 AC terms the rate-aware quantiser may drop, with their coefficients'
+    /// magnitudes in steps, as (block, zig-zag index, |c|), in block order
+    /// ([`SparseBlocks::push_rated`]; empty once [`SparseBlocks::refine`] ran).
+    ones: Vec<(u32, u8, f32)>,
 }
 
 impl SparseBlocks {
@@ -24,6 +28,83 @@ impl SparseBlocks {
                 self.ac.push((b, f as u8, v));
             }
         }
+    }
+
+    /// Appends a block `q` quantised from the coefficients `c` (zig-zag, in steps),
+    /// keeping what [`SparseBlocks::refine`] needs.
+    pub fn push_rated(&mut self, q: &[i32; N * N], c: &[f32; N * N]) {
+        let b = self.dc.len() as u32;
+        self.ones
+            .extend(crate::rdoq::ones(q, c).into_iter().map(|(i, a)| (b, i, a)));
+        self.push(q);
+    }
+
+    /// Runs the rate-aware quantiser over every block pushed with
+    /// [`SparseBlocks::push_rated`], at the token costs of all the stream's blocks: a
+    /// segment coded in bands learns them from the whole segment, as one coded whole.
+    pub fn refine(&mut self, lambda: f32) {
+        use rayon::prelude::*;
+        let costs = crate::rdoq::Costs::learn(self.blocks());
+        let ones = std::mem::take(&mut self.ones);
+        // Blocks with candidates, each refined alone.
+        let mut spans = Vec::new();
+        let mut at = 0;
+        while at < ones.len() {
+            let b = ones[at].0;
+            let end = at + ones[at..].iter().take_while(|t| t.0 == b).count();
+            spans.push((b, at..end));
+            at = end;
+        }
+        let mut want = spans.iter().map(|s| s.0).peekable();
+        let picked: Vec<[i32; N * N]> = self
+            .blocks()
+            .enumerate()
+            .filter_map(|(b, q)| want.next_if(|&w| w == b as u32).map(|_| q))
+            .collect();
+        let changed: Vec<(u32, [i32; N * N])> = spans
+            .par_iter()
+            .zip(picked)
+            .filter_map(|((b, span), before)| {
+                let mut q = before;
+                let cand: Vec<(u8, f32)> = ones[span.clone()].iter().map(|t| (t.1, t.2)).collect();
+                crate::rdoq::refine(&mut q, &cand, &costs, lambda);
+                (q != before).then_some((*b, q))
+            })
+            .collect();
+        if changed.is_empty() {
+            return;
+        }
+        // The AC terms again, with the changed blocks' own.
+        let mut next = changed.iter().peekable();
+        let mut ac = Vec::with_capacity(self.ac.len());
+        let mut i = 0;
+        while i < self.ac.len() {
+            let b = self.ac[i].0;
+            let n = self.ac[i..].iter().take_while(|t| t.0 == b).count();
+            match next.next_if(|c| c.0 == b) {
+                Some((_, q)) => ac.extend(
+                    (1..N * N)
+                        .filter(|&f| q[f] != 0)
+                        .map(|f| (b, f as u8, q[f])),
+                ),
+                None => ac.extend_from_slice(&self.ac[i..i + n]),
+            }
+            i += n;
+        }
+        self.ac = ac;
+    }
+
+    /// The blocks, dense, in stream order.
+    pub fn blocks(&self) -> impl Iterator<Item = [i32; N * N]> + '_ {
+        let mut ac = self.ac.iter().peekable();
+        self.dc.iter().enumerate().map(move |(b, &dc)| {
+            let mut q = [0; N * N];
+            q[0] = dc;
+            while let Some(&(_, f, v)) = ac.next_if(|t| t.0 == b as u32) {
+                q[f as usize] = v;
+            }
+            q
+        })
     }
 
     /// Writes the stream exactly as `write_coefficients` writes the same blocks dense.
@@ -74,6 +155,7 @@ mod tests {
             let mut sparse = Vec::new();
             s.write(&mut sparse);
             assert_eq!(sparse, dense, "{n} blocks");
+            assert_eq!(s.blocks().collect::<Vec<_>>(), b, "{n} blocks back");
         }
         // All zeros: one run.
         let z = vec![[0i32; N * N]; 10];
@@ -83,5 +165,43 @@ mod tests {
         z.iter().for_each(|q| s.push(q));
         s.write(&mut sparse);
         assert_eq!(sparse, dense);
+    }
+
+    #[test]
+    fn a_stream_refined_sparse_is_the_blocks_refined_dense() {
+        // Blocks of a few low terms, some with ±1s further out; coefficients a little
+        // off their integers.
+        let b: Vec<[i32; N * N]> = blocks(400, 7)
+            .into_iter()
+            .map(|mut q| {
+                for (i, v) in q.iter_mut().enumerate().skip(1) {
+                    *v = if i < 4 {
+                        (*v).clamp(-3, 3)
+                    } else {
+                        (*v).clamp(-1, 1) * (i % 3 == 0) as i32
+                    };
+                }
+                q
+            })
+            .collect();
+        let c: Vec<[f32; N * N]> = b.iter().map(|q| q.map(|v| v as f32 * 0.8 + 0.05)).collect();
+        let mut s = SparseBlocks::default();
+        b.iter().zip(&c).for_each(|(q, c)| s.push_rated(q, c));
+        s.refine(0.2);
+        let costs = crate::rdoq::Costs::learn(b.iter().copied());
+        let dense: Vec<[i32; N * N]> = b
+            .iter()
+            .zip(&c)
+            .map(|(q, c)| {
+                let (mut q, ones) = (*q, crate::rdoq::ones(q, c));
+                crate::rdoq::refine(&mut q, &ones, &costs, 0.2);
+                q
+            })
+            .collect();
+        assert!(
+            dense != b,
+            "nothing dropped: the test would not see a difference"
+        );
+        assert_eq!(s.blocks().collect::<Vec<_>>(), dense);
     }
 }

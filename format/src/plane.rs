@@ -553,15 +553,28 @@ pub const SPARSE_MAX: usize = 6;
 /// from zero only past `(0.5 + deadzone) · step`. Used by the encoder; here so that its
 /// rounding rule sits beside the decoder's inverse.
 pub fn quantize_block(block: &[f32; N * N], step: f32, deadzone: f32) -> [i32; N * N] {
+    quantize_coefficients(&coefficients(block), step, deadzone)
+}
+
+/// Spatial block → its DCT coefficients in zig-zag order.
+pub fn coefficients(block: &[f32; N * N]) -> [f32; N * N] {
     let mut b = *block;
     dct::forward(&mut b);
-    let z = dct::zigzag();
+    let mut c = [0f32; N * N];
+    for (c, &pos) in c.iter_mut().zip(dct::zigzag()) {
+        *c = b[pos];
+    }
+    c
+}
+
+/// Zig-zag DCT coefficients → quantised integers, with [`quantize_block`]'s dead zone.
+pub fn quantize_coefficients(c: &[f32; N * N], step: f32, deadzone: f32) -> [i32; N * N] {
     let mut q = [0i32; N * N];
-    for (i, &pos) in z.iter().enumerate() {
-        let a = b[pos].abs() / step;
+    for (i, (q, &c)) in q.iter_mut().zip(c).enumerate() {
+        let a = c.abs() / step;
         let dz = if i == 0 { 0.0 } else { deadzone };
         let m = if a < 0.5 + dz { 0.0 } else { (a - dz).round() };
-        q[i] = (m.min(1e9) as i32) * if b[pos] < 0.0 { -1 } else { 1 };
+        *q = (m.min(1e9) as i32) * if c < 0.0 { -1 } else { 1 };
     }
     q
 }
