@@ -480,9 +480,7 @@ where
                     let s = &mut streams[(k - 2) * planes + pl];
                     match sp.rate_lambda > 0.0 {
                         // Refined once the segment's every band is in (below).
-                        true => q.iter().zip(&c).for_each(|(q, c)| {
-                            s.push_rated(q, &c.map(|v| v / step));
-                        }),
+                        true => q.iter().zip(&c).for_each(|(q, c)| s.push_rated(q, c, step)),
                         false => q.iter().for_each(|b| s.push(b)),
                     }
                 }
@@ -566,7 +564,7 @@ fn quantize(c: &[[f32; N * N]], step: f32, deadzone: f32, rate_lambda: f32) -> V
     if rate_lambda > 0.0 {
         let costs = Costs::learn(q.iter().copied());
         q.par_iter_mut().zip(c).for_each(|(q, c)| {
-            let ones = crate::rdoq::ones(q, &c.map(|v| v / step));
+            let ones = crate::rdoq::ones(q, c, step);
             crate::rdoq::refine(q, &ones, &costs, rate_lambda);
         });
     }

@@ -87,12 +87,12 @@ fn symbols(q: &[i32; N * N], mut f: impl FnMut(Option<usize>, u32)) {
     }
 }
 
-/// The ±1 AC coefficients of `q` (the quantised `c`, in steps) as (zig-zag position,
-/// |c|): what [`refine`] may drop.
-pub(crate) fn ones(q: &[i32; N * N], c: &[f32; N * N]) -> Vec<(u8, f32)> {
+/// The ±1 AC coefficients of `q` (`c` quantised with `step`) as (zig-zag position,
+/// |c| in steps): what [`refine`] may drop.
+pub(crate) fn ones(q: &[i32; N * N], c: &[f32; N * N], step: f32) -> Vec<(u8, f32)> {
     (1..N * N)
         .filter(|&i| q[i].abs() == 1)
-        .map(|i| (i as u8, c[i].abs()))
+        .map(|i| (i as u8, c[i].abs() / step))
         .collect()
 }
 
@@ -147,11 +147,11 @@ mod tests {
         let mut c = [0f32; N * N];
         (c[1], c[2], c[40]) = (3.1, -0.9, 0.8);
         let mut q = lone;
-        refine(&mut q, &ones(&lone, &c), &costs, 0.15);
+        refine(&mut q, &ones(&lone, &c, 1.0), &costs, 0.15);
         assert_eq!(q, block(&[(1, 3), (2, -1)]), "the lone one is dropped");
         // Without a price on bits nothing is worth an error.
         let mut q = lone;
-        refine(&mut q, &ones(&lone, &c), &costs, 0.0);
+        refine(&mut q, &ones(&lone, &c, 1.0), &costs, 0.0);
         assert_eq!(q, lone);
     }
 

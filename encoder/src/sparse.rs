@@ -23,19 +23,18 @@ impl SparseBlocks {
     pub fn push(&mut self, q: &[i32; N * N]) {
         let b = self.dc.len() as u32;
         self.dc.push(q[0]);
-        for (f, &v) in q.iter().enumerate().skip(1) {
-            if v != 0 {
-                self.ac.push((b, f as u8, v));
-            }
-        }
+        self.ac.extend(ac_terms(b, q));
     }
 
-    /// Appends a block `q` quantised from the coefficients `c` (zig-zag, in steps),
+    /// Appends a block `q` quantised from the coefficients `c` (zig-zag) with `step`,
     /// keeping what [`SparseBlocks::refine`] needs.
-    pub fn push_rated(&mut self, q: &[i32; N * N], c: &[f32; N * N]) {
+    pub fn push_rated(&mut self, q: &[i32; N * N], c: &[f32; N * N], step: f32) {
         let b = self.dc.len() as u32;
-        self.ones
-            .extend(crate::rdoq::ones(q, c).into_iter().map(|(i, a)| (b, i, a)));
+        self.ones.extend(
+            crate::rdoq::ones(q, c, step)
+                .into_iter()
+                .map(|(i, a)| (b, i, a)),
+        );
         self.push(q);
     }
 
@@ -46,50 +45,32 @@ impl SparseBlocks {
         use rayon::prelude::*;
         let costs = crate::rdoq::Costs::learn(self.blocks());
         let ones = std::mem::take(&mut self.ones);
-        // Blocks with candidates, each refined alone.
-        let mut spans = Vec::new();
-        let mut at = 0;
-        while at < ones.len() {
-            let b = ones[at].0;
-            let end = at + ones[at..].iter().take_while(|t| t.0 == b).count();
-            spans.push((b, at..end));
-            at = end;
-        }
-        let mut want = spans.iter().map(|s| s.0).peekable();
+        // The blocks with candidates, each refined alone.
+        let each: Vec<&[(u32, u8, f32)]> = ones.chunk_by(|a, b| a.0 == b.0).collect();
+        let mut want = each.iter().map(|o| o[0].0).peekable();
         let picked: Vec<[i32; N * N]> = self
             .blocks()
             .enumerate()
             .filter_map(|(b, q)| want.next_if(|&w| w == b as u32).map(|_| q))
             .collect();
-        let changed: Vec<(u32, [i32; N * N])> = spans
+        let changed: Vec<(u32, [i32; N * N])> = each
             .par_iter()
             .zip(picked)
-            .filter_map(|((b, span), before)| {
+            .filter_map(|(o, before)| {
                 let mut q = before;
-                let cand: Vec<(u8, f32)> = ones[span.clone()].iter().map(|t| (t.1, t.2)).collect();
+                let cand: Vec<(u8, f32)> = o.iter().map(|t| (t.1, t.2)).collect();
                 crate::rdoq::refine(&mut q, &cand, &costs, lambda);
-                (q != before).then_some((*b, q))
+                (q != before).then_some((o[0].0, q))
             })
             .collect();
-        if changed.is_empty() {
-            return;
-        }
-        // The AC terms again, with the changed blocks' own.
+        // The AC terms again, the changed blocks' their own.
         let mut next = changed.iter().peekable();
         let mut ac = Vec::with_capacity(self.ac.len());
-        let mut i = 0;
-        while i < self.ac.len() {
-            let b = self.ac[i].0;
-            let n = self.ac[i..].iter().take_while(|t| t.0 == b).count();
-            match next.next_if(|c| c.0 == b) {
-                Some((_, q)) => ac.extend(
-                    (1..N * N)
-                        .filter(|&f| q[f] != 0)
-                        .map(|f| (b, f as u8, q[f])),
-                ),
-                None => ac.extend_from_slice(&self.ac[i..i + n]),
+        for run in self.ac.chunk_by(|a, b| a.0 == b.0) {
+            match next.next_if(|c| c.0 == run[0].0) {
+                Some((b, q)) => ac.extend(ac_terms(*b, q)),
+                None => ac.extend_from_slice(run),
             }
-            i += n;
         }
         self.ac = ac;
     }
@@ -111,6 +92,13 @@ impl SparseBlocks {
     pub fn write(&self, out: &mut Vec<u8>) {
         vbim_format::plane::write_sparse(&self.dc, self.ac.iter().copied(), out);
     }
+}
+
+/// Block `b`'s non-zero AC terms as (block, zig-zag index, value).
+fn ac_terms(b: u32, q: &[i32; N * N]) -> impl Iterator<Item = (u32, u8, i32)> + '_ {
+    (1..N * N)
+        .filter(|&f| q[f] != 0)
+        .map(move |f| (b, f as u8, q[f]))
 }
 
 #[cfg(test)]
@@ -186,14 +174,14 @@ mod tests {
             .collect();
         let c: Vec<[f32; N * N]> = b.iter().map(|q| q.map(|v| v as f32 * 0.8 + 0.05)).collect();
         let mut s = SparseBlocks::default();
-        b.iter().zip(&c).for_each(|(q, c)| s.push_rated(q, c));
+        b.iter().zip(&c).for_each(|(q, c)| s.push_rated(q, c, 1.0));
         s.refine(0.2);
         let costs = crate::rdoq::Costs::learn(b.iter().copied());
         let dense: Vec<[i32; N * N]> = b
             .iter()
             .zip(&c)
             .map(|(q, c)| {
-                let (mut q, ones) = (*q, crate::rdoq::ones(q, c));
+                let (mut q, ones) = (*q, crate::rdoq::ones(q, c, 1.0));
                 crate::rdoq::refine(&mut q, &ones, &costs, 0.2);
                 q
             })

@@ -121,15 +121,21 @@ fn bands_match_whole(dir: &Path, cfg: EncoderConfig) {
     );
 }
 
-#[test]
-fn an_hdr_sequence_coded_in_bands_is_the_whole_frame_file() {
+/// The HDR day (the sweep in the lower rows: the first bands are the simple ones) and
+/// its settings without the aim.
+fn hdr_day() -> (tempfile::TempDir, EncoderConfig) {
     let dir = tempfile::tempdir().unwrap();
-    // The sweep in the lower rows: the first bands are the simple ones.
     write_hdr(dir.path(), (70, H));
     let cfg = EncoderConfig {
         aim: false,
         ..EncoderConfig::preset(Preset::Default)
     };
+    (dir, cfg)
+}
+
+#[test]
+fn an_hdr_sequence_coded_in_bands_is_the_whole_frame_file() {
+    let (dir, cfg) = hdr_day();
     bands_match_whole(dir.path(), cfg);
 }
 
@@ -137,12 +143,10 @@ fn an_hdr_sequence_coded_in_bands_is_the_whole_frame_file() {
 fn a_format_2_sequence_coded_in_bands_is_the_whole_frame_file() {
     // Version 2's rate-aware quantiser prices a segment's tokens: by what its own bands
     // hold, the file would change with the bands.
-    let dir = tempfile::tempdir().unwrap();
-    write_hdr(dir.path(), (70, H));
+    let (dir, cfg) = hdr_day();
     let cfg = EncoderConfig {
-        aim: false,
         format: FormatVersion::V2,
-        ..EncoderConfig::preset(Preset::Default)
+        ..cfg
     };
     let off = EncoderConfig {
         rate_lambda: Some(0.0),
