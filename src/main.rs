@@ -81,6 +81,18 @@ fn main() -> ExitCode {
     }
     #[cfg(unix)]
     quiet_mesa();
+    // glibc maps a block at or above its mmap threshold with fresh pages, which the kernel
+    // zeroes, and unmaps it when freed; the threshold moves with the blocks freed, and
+    // the heap is trimmed beyond twice it. Fixed at its largest (32 MB, and trimming
+    // beyond 64 MB as the moving rule would), a 2048² encode's frame-sized blocks are
+    // reused from the heap: 0.92× the time, the same peak (BENCHMARKS.md, "Bake and
+    // encode at size"). (The threshold fixed alone trims the heap at 128 KiB: 512²'s
+    // encode then took 3–4× the page faults.)
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 64 << 20);
+    }
     // Ctrl-C or SIGTERM: remove the files being written (a frame's or a stream's temporary,
     // the passes of `--exact`), then exit as a shell expects of an interrupted command.
     let _ = ctrlc::set_handler(|| {
