@@ -586,6 +586,22 @@ fn walk(
                 }
                 out.count[b] = nz as u8;
                 out.first[b] = out.terms.len() as u32;
+                // An odd block's coefficient at position i is coded in a context of how
+                // many of its neighbours have one there, h of n: none, up to half, or more
+                // (⌈2h / n⌉ capped at 2). Per position, as two masks: any, and more than
+                // half.
+                let (any, most) = if odd {
+                    let m: [u64; 4] = std::array::from_fn(|k| four.get(k).map_or(0, |&j| mask[j]));
+                    let most = match four.len() {
+                        1 => m[0],
+                        2 => m[0] & m[1],
+                        3 => (m[0] & m[1]) | (m[0] & m[2]) | (m[1] & m[2]),
+                        _ => (m[0] & m[1] & (m[2] | m[3])) | (m[2] & m[3] & (m[0] | m[1])),
+                    };
+                    (m[0] | m[1] | m[2] | m[3], most)
+                } else {
+                    (0, 0)
+                };
                 let mut left = nz;
                 let mut i = 1;
                 while left > 0 {
@@ -596,8 +612,8 @@ fn walk(
                     }
                     let ctx = left_bucket(left) * 12 + band(i);
                     let ctx = if odd {
-                        let hits = four.iter().filter(|&&j| mask[j] >> i & 1 != 0).count();
-                        AC_ODD + (2 * hits).div_ceil(four.len()).min(2) * 120 + ctx
+                        let level = (any >> i & 1) + (most >> i & 1);
+                        AC_ODD + level as usize * 120 + ctx
                     } else {
                         AC_EVEN + ctx
                     };

@@ -365,19 +365,10 @@ impl LanesGpu {
 }
 
 /// A histogram's slot table as `lanes.wgsl`'s `slots` builds it for a chunk's own
-/// histograms: for each of the 4096 slots, its token (the specification's), the token's
-/// frequency and the slot's offset from the token's first, packed as token | frequency << 7
-/// | offset << 20, so that a symbol takes one load.
+/// histograms (token | frequency << 7 | offset << 20, [`Histogram::slot_table`]), so that
+/// a symbol takes one load.
 pub(super) fn slot_table(h: &Histogram) -> Vec<u32> {
-    h.slot_tokens()
-        .iter()
-        .enumerate()
-        .map(|(slot, &t)| {
-            let t = t as usize;
-            let offset = slot as u32 - h.cumulative(t).min(slot as u32);
-            t as u32 | h.frequency(t) << 7 | offset << 20
-        })
-        .collect()
+    h.slot_table()
 }
 
 /// The lane passes' bindings: the job, the segment's words, the scratch, the dense plane
