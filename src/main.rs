@@ -85,7 +85,7 @@ fn main() -> ExitCode {
     // zeroes, and unmaps it when freed; the threshold moves with the blocks freed, and
     // the heap is trimmed beyond twice it. Fixed at its largest (32 MB, and trimming
     // beyond 64 MB as the moving rule would), a 2048² encode's frame-sized blocks are
-    // reused from the heap: 0.92× the time, the same peak (BENCHMARKS.md, "Bake and
+    // reused from the heap: 0.93× the time, the same peak (BENCHMARKS.md, "Bake and
     // encode at size"). (The threshold fixed alone trims the heap at 128 KiB: 512²'s
     // encode then took 3–4× the page faults.)
     #[cfg(all(target_os = "linux", target_env = "gnu"))]

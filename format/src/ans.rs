@@ -69,12 +69,11 @@ pub struct Histogram {
     freq: Vec<u16>,
     /// The token whose frequency is what the others leave (not written).
     implied: u8,
-    cum: Vec<u16>,
     /// The token of each of the 4096 slots: shared by clones (a file's 96 histograms in its
     /// header are cloned with the header and into every chunk that uses them).
     slot: std::sync::Arc<[u8]>,
-    /// Each token's frequency and first slot, frequency | first << 16 (0 past the last):
-    /// what a decoded symbol's step reads, in one load from beside the token table. (A
+    /// Each token's frequency and first slot (the sum of the frequencies before it),
+    /// frequency | first << 16 (0 past the last): what a decoded symbol's step reads, in one load from beside the token table. (A
     /// slot table of both, four bytes a slot, made the CPU's decode slower: 16 KiB a
     /// histogram leave the cache.)
     steps: [u32; TOKENS],
@@ -115,12 +114,10 @@ impl Histogram {
     }
 
     fn from_freq(freq: Vec<u16>, implied: usize) -> Histogram {
-        let mut cum = Vec::with_capacity(freq.len());
         let mut slot = vec![0u8; SCALE as usize];
         let mut steps = [0u32; TOKENS];
         let mut at = 0u16;
         for (t, &f) in freq.iter().enumerate() {
-            cum.push(at);
             slot[at as usize..(at + f) as usize].fill(t as u8);
             steps[t] = f as u32 | (at as u32) << 16;
             at += f;
@@ -128,7 +125,6 @@ impl Histogram {
         Histogram {
             freq,
             implied: implied as u8,
-            cum,
             slot: slot.into(),
             steps,
         }
@@ -157,7 +153,10 @@ impl Histogram {
 
     /// Where `token`'s slots start among the 4096 (the sum of the frequencies before it).
     pub fn cumulative(&self, token: usize) -> u32 {
-        self.cum.get(token).map_or(SCALE, |&c| c as u32)
+        match token < self.freq.len() {
+            true => self.steps[token] >> 16,
+            false => SCALE,
+        }
     }
 
     /// Bits to code `token` with this histogram.
@@ -271,7 +270,7 @@ pub fn encode(symbols: &[Symbol], histograms: &[Histogram]) -> Vec<u16> {
             Symbol::Token { histogram, token } => {
                 let h = &histograms[histogram as usize];
                 let t = token as usize;
-                put(&mut x, h.freq[t] as u32, h.cum[t] as u32);
+                put(&mut x, h.freq[t] as u32, h.cumulative(t));
             }
             Symbol::Raw { value, bits } => {
                 // Pieces of at most 12 bits, the last piece coded first (it is read last).
@@ -520,7 +519,7 @@ mod tests {
             let h = i % 2;
             let r = lcg(&mut seed) % 4096;
             let t = (0..40)
-                .find(|&t| r < hs[h].cum[t] as u32 + hs[h].freq[t] as u32)
+                .find(|&t| r < hs[h].cumulative(t) + hs[h].freq[t] as u32)
                 .unwrap();
             ideal += hs[h].cost(t);
             symbols.push(Symbol::Token {

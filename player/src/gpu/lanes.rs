@@ -10,7 +10,6 @@
 //! plane. A larger stream's sections go to the GPU as pairs, decoded by the decoder
 //! thread ([`decodes_lanes`]).
 
-use vbim_format::ans::Histogram;
 use vbim_format::plane2::{
     file_histograms, ContextMap, CONTEXTS, FAMILIES, GROUP, MAX_STATES, REGION,
 };
@@ -297,7 +296,7 @@ impl LanesGpu {
             .collect();
         queue.write_buffer(&tables, 0, bytemuck::cast_slice(&of));
         let slots: Vec<u32> = file_histograms(maps)
-            .flat_map(|(_, _, hist)| slot_table(hist))
+            .flat_map(|(_, _, hist)| hist.slot_table())
             .collect();
         if !slots.is_empty() {
             queue.write_buffer(&tables, plan.slots * 4, bytemuck::cast_slice(&slots));
@@ -362,13 +361,6 @@ impl LanesGpu {
             group(&self.layouts[1], &slots),
         ]);
     }
-}
-
-/// A histogram's slot table as `lanes.wgsl`'s `slots` builds it for a chunk's own
-/// histograms (token | frequency << 7 | offset << 20, [`Histogram::slot_table`]), so that
-/// a symbol takes one load.
-pub(super) fn slot_table(h: &Histogram) -> Vec<u32> {
-    h.slot_table()
 }
 
 /// The lane passes' bindings: the job, the segment's words, the scratch, the dense plane
