@@ -48,7 +48,7 @@ pub struct EncoderConfig {
     pub segment: SegmentMode,
     /// The format version written: version 1 (the default, every player reads it),
     /// version 2 (0.69–0.90× the bytes; the player's decoder thread decodes its sections
-    /// to version 1's pairs at 13–29× version 1's CPU time) or version 3 (version 2 with
+    /// to version 1's pairs at 10–14× version 1's CPU time) or version 3 (version 2 with
     /// several rANS states a lane, for a GPU decoder; about 2% more bytes than 2).
     pub format: FormatVersion,
     /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
@@ -113,7 +113,7 @@ impl EncoderConfig {
             max_degree: 4,
             // Longer segments fit the budget but cost more than they save (measured).
             segment: SegmentMode::Auto { max: 32 },
-            // Version 1: version 2's sections cost the player's decoder thread 13–29×
+            // Version 1: version 2's sections cost the player's decoder thread 10–14×
             // version 1's CPU time (to pairs), and decoded on an H100 as coded they took
             // 10–18× the pairs' GPU time (BENCHMARKS.md, "Format 2 on the GPU").
             format: FormatVersion::V1,

@@ -41,8 +41,8 @@ pub struct DecodeShape {
     /// a serial chain of symbols (40 000–72 000 per segment along the longest lanes of
     /// the benchmark streams), and an H100 took 22, 32 and 61 ms per 512², 2048² and
     /// 4096² segment that way, against 1.7, 1.8 and 6.2 ms for the same sections as
-    /// pairs (BENCHMARKS.md, "Format 2 on the GPU"); lavapipe 224 ms against 37 ms at
-    /// 512². Planes larger than the dense plane (about
+    /// pairs (BENCHMARKS.md, "Format 2 on the GPU"); lavapipe 49–60 ms against 22 ms at
+    /// 512² (with the lane fields below). Planes larger than the dense plane (about
     /// 5800² texels) always go as pairs.
     pub lanes: bool,
     /// Keep the DCT tables that the keyframe passes and the reconstruction index per
@@ -60,6 +60,19 @@ pub struct DecodeShape {
     /// smooth days; on lavapipe the frame was 15–25% slower with it (BENCHMARKS.md, "On a
     /// hardware GPU").
     pub wide_reconstruct: bool,
+    /// States of a lane decoded side by side in one workgroup of the lane passes
+    /// ([`DecodeShape::lanes`]), 1 to 64. On a GPU one: a state is a serial chain whose
+    /// branches follow its own symbols, so states that share a warp wait for each other
+    /// (an H100 took twice as long with eight). On a CPU adapter eight, whose SIMD runs a
+    /// workgroup's invocations in lockstep: a 512² segment of the demo in version 3 took
+    /// 49 ms on lavapipe against 74 ms with one (BENCHMARKS.md, "Format 2 on the GPU").
+    pub lane_group: u32,
+    /// The lane passes read their job from a storage buffer rather than a uniform one. On
+    /// a CPU adapter a storage buffer: lavapipe (Mesa 22.3) optimises a shader whose loops
+    /// test a uniform again, with the uniform's value put in, every time the bound value
+    /// changes — every plane's dispatches —, and a 512² segment's lanes took 210–281 ms
+    /// that way against 49 ms. On a GPU the uniform buffer the lanes were measured with.
+    pub lane_job_storage: bool,
 }
 
 impl DecodeShape {
@@ -68,7 +81,8 @@ impl DecodeShape {
     /// and whole groups (the wide parse's scans and more workgroups are work there: a
     /// 512² segment took 105 ms with the wide parse against 91 ms), no cost per step,
     /// version 2's sections decoded to pairs by the decoder thread, the DCT tables in a
-    /// uniform buffer, a quad per invocation of the reconstruction.
+    /// uniform buffer, a quad per invocation of the reconstruction; should the lanes be
+    /// turned on, eight states a workgroup and their job in a storage buffer.
     pub const CPU: DecodeShape = DecodeShape {
         slice_groups: 32,
         wide_parse: false,
@@ -78,6 +92,8 @@ impl DecodeShape {
         lanes: false,
         storage_tables: false,
         wide_reconstruct: false,
+        lane_group: 8,
+        lane_job_storage: true,
     };
 
     /// For a GPU, as measured on an H100: slices of 2048 workgroups (a 4096² segment
@@ -88,7 +104,8 @@ impl DecodeShape {
     /// its work), and a block of the budget's unit about 0.58 ns ([`PassWeights::H100`]);
     /// version 2's sections decoded to pairs by the decoder thread (`lanes`); the DCT
     /// tables in a storage buffer and two quads per invocation of the reconstruction
-    /// (measured on an H200).
+    /// (measured on an H200); should the lanes be turned on, a state a workgroup and
+    /// their job in a uniform buffer.
     pub const GPU: DecodeShape = DecodeShape {
         slice_groups: 2048,
         wide_parse: true,
@@ -98,6 +115,8 @@ impl DecodeShape {
         lanes: false,
         storage_tables: true,
         wide_reconstruct: true,
+        lane_group: 1,
+        lane_job_storage: false,
     };
 
     /// [`DecodeShape::CPU`] on a CPU adapter, [`DecodeShape::GPU`] on any other.
@@ -155,10 +174,11 @@ impl PassWeights {
         key_add: 12,
         key_pack: 2,
         bubble_gather: 3,
-        // 13.5 µs a word of the longest lane (`bench decode --gpu --lanes true --fit` on
-        // the demo in 2.0): llvmpipe runs a workgroup's lanes in lockstep, so the other
-        // lanes' symbols add to the longest's.
-        lane_word: 220,
+        // 4.1 µs a word of the longest lane (`bench decode --gpu --lanes true --fit` on
+        // the demo in 2.0, eight states a workgroup, the job in a storage buffer): llvmpipe
+        // runs a workgroup's states side by side, so the other states' symbols add to the
+        // longest's.
+        lane_word: 55,
         lane_block: 1,
     };
 

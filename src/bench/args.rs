@@ -341,6 +341,15 @@ pub struct ShapeArgs {
     /// (`DecodeShape::wide_reconstruct`; true on a GPU, false on a CPU adapter)
     #[arg(long)]
     pub wide_reconstruct: Option<bool>,
+    /// With `--lanes true`: states decoded side by side in one workgroup of the lane passes
+    /// (`DecodeShape::lane_group`; 1 on a GPU, 8 on a CPU adapter)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub lane_group: Option<u32>,
+    /// With `--lanes true`: the lane passes read their job from a storage buffer (true) or
+    /// a uniform one (false) (`DecodeShape::lane_job_storage`; false on a GPU, true on a
+    /// CPU adapter)
+    #[arg(long)]
+    pub lane_job_storage: Option<bool>,
 }
 
 /// The measured pass weights (`vbim_player::PassWeights`).
@@ -367,6 +376,8 @@ impl ShapeArgs {
             lanes: self.lanes.unwrap_or(base.lanes),
             storage_tables: self.storage_tables.unwrap_or(base.storage_tables),
             wide_reconstruct: self.wide_reconstruct.unwrap_or(base.wide_reconstruct),
+            lane_group: self.lane_group.unwrap_or(base.lane_group),
+            lane_job_storage: self.lane_job_storage.unwrap_or(base.lane_job_storage),
         }
     }
 }

@@ -232,7 +232,7 @@ fn each_payload(
 /// A decode shape in words, for the benchmarks' first line.
 fn describe(s: &vbim_player::DecodeShape) -> String {
     format!(
-        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}, DCT tables in a {} buffer, {} an invocation of the reconstruction",
+        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}, DCT tables in a {} buffer, {} an invocation of the reconstruction{}",
         s.slice_groups,
         if s.wide_parse { "wide" } else { "serial" },
         s.group_split,
@@ -240,7 +240,15 @@ fn describe(s: &vbim_player::DecodeShape) -> String {
         if s.weights == vbim_player::PassWeights::H100 { "H100" } else if s.weights == vbim_player::PassWeights::LAVAPIPE { "lavapipe" } else { "own" },
         if s.lanes { "as coded" } else { "as pairs" },
         if s.storage_tables { "storage" } else { "uniform" },
-        if s.wide_reconstruct { "two quads" } else { "a quad" }
+        if s.wide_reconstruct { "two quads" } else { "a quad" },
+        match s.lanes {
+            true => format!(
+                ", {} lane states a workgroup, their job in a {} buffer",
+                s.lane_group,
+                if s.lane_job_storage { "storage" } else { "uniform" }
+            ),
+            false => String::new(),
+        }
     )
 }
 

@@ -75,8 +75,8 @@ pub(crate) struct Target {
 impl Gpu {
     /// Shapes the decodes planned from then on ([`DecodeShape`]): the slice rounded up to
     /// a multiple of [`SLICE_GROUPS`] (at most [`MAX_SLICE_GROUPS`]), the group split
-    /// down to a power of two (at most [`GROUP_BLOCKS`]). Its `lanes`, `storage_tables`
-    /// and `wide_reconstruct` choose pipelines, which [`Gpu::for_stream`] builds once:
+    /// down to a power of two (at most [`GROUP_BLOCKS`]), the lane group to 1–64. Its
+    /// `lanes`, `storage_tables`, `wide_reconstruct` and lane fields choose pipelines, which [`Gpu::for_stream`] builds once:
     /// they take effect there.
     pub fn set_decode_shape(&mut self, shape: DecodeShape) {
         self.slice_span = shape
@@ -85,6 +85,7 @@ impl Gpu {
             .div_ceil(SLICE_GROUPS);
         self.shape = DecodeShape {
             group_split: 1 << shape.group_split.clamp(1, GROUP_BLOCKS).ilog2(),
+            lane_group: shape.lane_group.clamp(1, 64),
             ..shape
         };
     }
@@ -269,7 +270,10 @@ impl Gpu {
             self.jobs = self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("vbim decode jobs"),
                 size: grown(jobs),
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                // (STORAGE: the lane passes' job, `DecodeShape::lane_job_storage`.)
+                usage: wgpu::BufferUsages::UNIFORM
+                    | wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             self.bind_decode();

@@ -19,9 +19,6 @@ use super::ops::Op;
 use super::Gpu;
 use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
 
-/// Lanes per workgroup of the lane passes (`LANE_GROUP` in lanes.wgsl, which says why one).
-const LANE_GROUP: u32 = 1;
-
 /// One pass of a lanes decode (an entry point of `lanes.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum LanePass {
@@ -234,6 +231,8 @@ super::job::uniform_struct! {
 
 /// The lanes decode's pipelines and state.
 pub(crate) struct LanesGpu {
+    /// States a workgroup of the lane passes (`DecodeShape::lane_group`).
+    group: u32,
     /// The lane passes' bind group layout, and `slots`' (which writes the tables).
     layouts: [wgpu::BindGroupLayout; 2],
     pipelines: Vec<wgpu::ComputePipeline>,
@@ -251,23 +250,31 @@ impl LanesGpu {
     /// The pipelines and scratch for planes of `geometry` (texels, and tile side) coded
     /// with `maps` (`None` where they go as pairs, [`Scratch::new`]), with the file's maps
     /// and histograms written; the sets of the dense plane start at byte `sets` of its
-    /// mask buffer.
+    /// mask buffer. `shape` gives the states a workgroup and where the job is read from.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        geometry: ([u32; 2], u32),
-        maps: &[ContextMap],
-        sets: u64,
+        (geometry, maps, sets): (([u32; 2], u32), &[ContextMap], u64),
+        shape: &crate::DecodeShape,
     ) -> Option<LanesGpu> {
         let plan = Scratch::new(geometry, maps)?;
+        let group = shape.lane_group.clamp(1, 64);
+        let job = match shape.lane_job_storage {
+            true => wgpu::BufferBindingType::Storage { read_only: true },
+            false => wgpu::BufferBindingType::Uniform,
+        };
         let layouts = [
-            layout(device, &LANE_BINDINGS),
-            layout(device, &SLOT_BINDINGS),
+            layout(device, job, &LANE_BINDINGS),
+            layout(device, job, &SLOT_BINDINGS),
         ];
+        let space = match shape.lane_job_storage {
+            true => "storage, read",
+            false => "uniform",
+        };
         let source = format!(
-            "{}{LANE_JOB_WGSL}{}",
+            "{}const LANE_GROUP: u32 = {group}u;\n{LANE_JOB_WGSL}{}",
             plan.constants(sets),
-            include_str!("lanes.wgsl")
+            include_str!("lanes.wgsl").replace("var<JOB>", &format!("var<{space}>"))
         );
         let pipelines = LanePass::ALL
             .iter()
@@ -302,6 +309,7 @@ impl LanesGpu {
             queue.write_buffer(&tables, plan.slots * 4, bytemuck::cast_slice(&slots));
         }
         Some(LanesGpu {
+            group,
             layouts,
             pipelines,
             tables,
@@ -363,10 +371,9 @@ impl LanesGpu {
     }
 }
 
-/// The lane passes' bindings: the job, the segment's words, the scratch, the dense plane
-/// (coefficients, masks) and the tables, read-only.
-const LANE_BINDINGS: [(u32, wgpu::BufferBindingType); 6] = [
-    (0, wgpu::BufferBindingType::Uniform),
+/// The lane passes' bindings after the job's (binding 0): the segment's words, the
+/// scratch, the dense plane (coefficients, masks) and the tables, read-only.
+const LANE_BINDINGS: [(u32, wgpu::BufferBindingType); 5] = [
     (1, wgpu::BufferBindingType::Storage { read_only: true }),
     (2, wgpu::BufferBindingType::Storage { read_only: false }),
     (3, wgpu::BufferBindingType::Storage { read_only: false }),
@@ -374,16 +381,18 @@ const LANE_BINDINGS: [(u32, wgpu::BufferBindingType); 6] = [
     (5, wgpu::BufferBindingType::Storage { read_only: true }),
 ];
 
-/// `slots`' bindings: the job, the segment's words and the tables, which it writes.
-const SLOT_BINDINGS: [(u32, wgpu::BufferBindingType); 3] = [
-    (0, wgpu::BufferBindingType::Uniform),
+/// `slots`' bindings after the job's: the segment's words and the tables, which it
+/// writes.
+const SLOT_BINDINGS: [(u32, wgpu::BufferBindingType); 2] = [
     (1, wgpu::BufferBindingType::Storage { read_only: true }),
     (6, wgpu::BufferBindingType::Storage { read_only: false }),
 ];
 
-/// A bind group layout of `bindings` (the job's, binding 0, at a dynamic offset).
+/// A bind group layout of the job's binding (0, of type `job`, at a dynamic offset) and
+/// `bindings`.
 fn layout(
     device: &wgpu::Device,
+    job: wgpu::BufferBindingType,
     bindings: &[(u32, wgpu::BufferBindingType)],
 ) -> wgpu::BindGroupLayout {
     let entry = |binding: u32, ty| wgpu::BindGroupLayoutEntry {
@@ -396,7 +405,10 @@ fn layout(
         },
         count: None,
     };
-    let entries: Vec<_> = bindings.iter().map(|&(b, ty)| entry(b, ty)).collect();
+    let entries: Vec<_> = std::iter::once((0, job))
+        .chain(bindings.iter().copied())
+        .map(|(b, ty)| entry(b, ty))
+        .collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("vbim lanes"),
         entries: &entries,
@@ -466,7 +478,9 @@ impl Gpu {
         let sets = 2 * span.blocks.div_ceil(64);
         let cells = (gw * gh).max(tiles_x * tiles_y).max(span.blocks);
         let cells = cells.max(lanes.count).max(sets);
-        let by_lane = lanes.count.div_ceil(LANE_GROUP);
+        let by_lane = lanes
+            .count
+            .div_ceil(self.lanes.as_ref().map_or(1, |l| l.group));
         let blocks = span.blocks as u64;
         // A lane pass takes as long as its longest lane (a serial chain; the others run
         // beside it).

@@ -25,8 +25,10 @@
 // word read, the state back at 2^16) sets FAULT.
 
 // `struct LaneJob`, the passes' parameters, is declared before this file
-// (player/src/gpu/lanes.rs, from the Rust struct's fields).
-@group(0) @binding(0) var<uniform> prm: LaneJob;
+// (player/src/gpu/lanes.rs, from the Rust struct's fields), in a uniform buffer on a GPU
+// and a storage one on a CPU adapter (`var<JOB>`: `DecodeShape::lane_job_storage` says
+// why).
+@group(0) @binding(0) var<JOB> prm: LaneJob;
 // The segment's words (player/src/coded.rs).
 @group(0) @binding(1) var<storage, read> seg: array<u32>;
 // The decode's own state, at the offsets below (player/src/gpu/lanes.rs sizes it).
@@ -58,11 +60,12 @@ const HIST_OF: u32 = MAPS + FAMILIES * CONTEXTS;
 // HISTOGRAMS, FILE_HISTOGRAMS, SETS, and CONTEXTS, a family's: `vbim_format::plane2`'s.)
 
 const NONE: u32 = 0xFFFFFFFFu;
-// Lanes per workgroup of the lane passes (`flags`, `middle`, `blocks`): one. A lane is a
-// serial chain whose branches follow its own symbols, so lanes that share a warp wait for
-// each other: on an H100, eight to a workgroup took twice as long (a 2048² segment 61.9 ms
-// against 31.5). (On lavapipe, where the lanes are off, one costs 1.3 times eight.)
-const LANE_GROUP: u32 = 1u;
+// LANE_GROUP, the states per workgroup of the lane passes (`flags`, `middle`, `blocks`),
+// is declared before this file: one on a GPU, where a state is a serial chain whose
+// branches follow its own symbols and states that share a warp wait for each other (on an
+// H100 eight to a workgroup took twice as long: a 2048² segment 61.9 ms against 31.5);
+// eight on a CPU adapter, whose SIMD runs a workgroup's invocations side by side
+// (`DecodeShape::lane_group`).
 const FAMILIES: u32 = 6u;
 const FLAG: u32 = 0u;
 const DC: u32 = 6u;
@@ -578,28 +581,32 @@ fn block(b: u32, bx: u32, by: u32, parity: u32) {
     scratch[INFO + 2u * b + 1u] = nz;
     var mask = vec2<u32>(0u, 0u);
     var left = nz;
-    // The neighbours' masks, read once (unused slots are NONE: no bits).
-    var m0 = vec2<u32>(0u, 0u);
-    var m1 = m0;
-    var m2 = m0;
-    var m3 = m0;
+    // An odd block's coefficient at position i is coded in a context of how many of its
+    // neighbours have one there, h of n4: none, up to half, or more (⌈2h / n4⌉ capped at
+    // 2). Per position, as two masks made once per block: any, and more than half.
+    var any = vec2<u32>(0u, 0u);
+    var most = any;
     if (odd && nz > 0u) {
-        m0 = mask_of(four[0]);
-        m1 = mask_of(four[1]);
-        m2 = mask_of(four[2]);
-        m3 = mask_of(four[3]);
-    }
-    for (var i = 1u; i < 64u && left > 0u; i = i + 1u) {
-        var ctx = left_bucket(left) * 12u + band(i);
-        if (odd) {
-            let half = i / 32u;
-            let bit = i % 32u;
-            let hits = ((m0[half] >> bit) & 1u) + ((m1[half] >> bit) & 1u)
-                + ((m2[half] >> bit) & 1u) + ((m3[half] >> bit) & 1u);
-            ctx = AC_ODD + min((2u * hits + n4 - 1u) / n4, 2u) * 120u + ctx;
-        } else {
-            ctx = AC_EVEN + ctx;
+        // The neighbours' masks (unused slots are NONE: no bits).
+        let m0 = mask_of(four[0]);
+        let m1 = mask_of(four[1]);
+        let m2 = mask_of(four[2]);
+        let m3 = mask_of(four[3]);
+        any = m0 | m1 | m2 | m3;
+        switch (n4) {
+            case 1u: { most = m0; }
+            case 2u: { most = m0 & m1; }
+            case 3u: { most = (m0 & m1) | (m0 & m2) | (m1 & m2); }
+            default: { most = (m0 & m1 & (m2 | m3)) | (m2 & m3 & (m0 | m1)); }
         }
+    }
+    let base = select(AC_EVEN, AC_ODD, odd);
+    for (var i = 1u; i < 64u && left > 0u; i = i + 1u) {
+        // (For an even block, any and most are 0: level 0.)
+        let half = i / 32u;
+        let bit = i % 32u;
+        let level = ((any[half] >> bit) & 1u) + ((most[half] >> bit) & 1u);
+        let ctx = base + level * 120u + left_bucket(left) * 12u + band(i);
         let v = unpack(symbol(ctx));
         if (v != 0) {
             coefs[b * 64u + i] = v;

@@ -54,7 +54,12 @@ impl Gpu {
     pub(super) fn decode_lanes(&mut self, maps: &[vbim_format::plane2::ContextMap]) {
         let geometry = (self.plane, self.per * 8);
         let sets = groups_offset(self.part);
-        self.lanes = super::lanes::LanesGpu::new(&self.device, &self.queue, geometry, maps, sets);
+        self.lanes = super::lanes::LanesGpu::new(
+            &self.device,
+            &self.queue,
+            (geometry, maps, sets),
+            &self.shape,
+        );
         self.bind_decode();
     }
 
@@ -219,7 +224,8 @@ impl Gpu {
         let jobs = buffer(
             "vbim decode jobs",
             64 * JOB_STRIDE,
-            B::UNIFORM | B::COPY_DST,
+            // (STORAGE: the lane passes' job, `DecodeShape::lane_job_storage`.)
+            B::UNIFORM | B::STORAGE | B::COPY_DST,
         );
         let words = buffer("vbim coefficients", grown(0), B::STORAGE | B::COPY_DST);
         // Enough slices for a block pass over a whole part; grown if a pass needs more.
