@@ -4,7 +4,8 @@
 # 60 Hz display), where it goes, pass by pass (`--passes`, one run: its frames include the
 # timestamps' own cost) and a segment's GPU decode by pass (`vbim bench decode --gpu
 # --fit`, with the card's latency per dispatch and cost per unit of each pass; for a
-# format 2.0 or 3.0 file also with its sections decoded on the GPU as coded, `--lanes true`);
+# format 2.0 or 3.0 file also with its sections decoded on the GPU as coded, `--lanes true`,
+# and so with the lanes' job in a storage buffer);
 # then the speed–accuracy trade on the first stream (scripts/reuse_bench.sh). Everything goes to
 # OUT/device.log (the adapter's name first), OUT/reuse.csv and each stream's frames
 # (the last run of `bench render --csv`) in OUT/render-NAME.csv.
@@ -43,6 +44,10 @@ for f in "${streams[@]}"; do
     # (sed reads all of it: no broken pipe for `pipefail` to report.)
     if [[ "$("$vbim" inspect "$f" | sed -n 1p)" == *".vbim "[23]"."* ]]; then
         "$vbim" bench decode "$f" --gpu --fit --runs "$runs" --lanes true 2>&1 | tee -a "$log"
+        # The lanes' job in a storage buffer, as a CPU adapter reads it: whether a GPU
+        # minds (DecodeShape::lane_job_storage).
+        "$vbim" bench decode "$f" --gpu --runs "$runs" --lanes true --lane-job-storage true \
+            2>&1 | tee -a "$log"
     fi
 done
 if [ "${REUSE:-1}" != 0 ]; then
