@@ -34,6 +34,11 @@
 //!   (2 × the folded residual + 1 if it has; in D's DC context × whether an odd block's
 //!   neighbours have any), then its count less one only where it has one: a block with
 //!   nothing but its DC is one symbol, not two, and a GPU lane's time is its symbols;
+//! - **R**: G with each non-zero coefficient and the zeros before it as one symbol (the
+//!   run, whether the value is beyond ±1 and its sign: a token of its own for each run up
+//!   to 30, four more for longer runs with the run less 31 in 5 raw bits), in E's context
+//!   of the run's first position, then |v| − 2 by band where it is beyond ±1: JPEG's
+//!   run–level coding in E's contexts, for half the symbols;
 //! - **C, serial neighbours**: the left and upper blocks' counts and residual sizes, as a
 //!   CPU coder would use them (the reference: what parallelism costs).
 //!
@@ -73,10 +78,12 @@ const DC_F: usize = AC_ODD + 360; // F: keyframe DC pyramid, 1 + 6 levels × 2 �
 const DC_FB: usize = DC_F + 49; // F: bubble planes' DC as DC_D
 const JOINT_G: usize = DC_FB + 5; // G: 10, DC_D's × whether a neighbour has a coefficient
 const NZ_G: usize = JOINT_G + 10; // G: as NZ_D, the count less one where there is any
-const CONTEXTS: usize = NZ_G + 11;
+const RUN_R: usize = NZ_G + 11; // R: E's coefficient contexts (120 even, 360 odd) at a run's start
+const BIG_R: usize = RUN_R + 480; // R: 12, |v| − 2 of a coefficient beyond ±1, by band
+const CONTEXTS: usize = BIG_R + 12;
 
 /// The contexts each design reads, besides the shared AC ones.
-const DESIGNS: [(&str, &[std::ops::Range<usize>]); 7] = [
+const DESIGNS: [(&str, &[std::ops::Range<usize>]); 8] = [
     (
         "A, within the block",
         &[DC_A..DC_A + 1, NZ_A..NZ_A + 3, AC..AC + 120],
@@ -121,6 +128,10 @@ const DESIGNS: [(&str, &[std::ops::Range<usize>]); 7] = [
         ],
     ),
     (
+        "R, G with each non-zero coefficient and the zeros before it in one symbol",
+        &[GROUP_D..GROUP_D + 6, JOINT_G..NZ_G + 11, RUN_R..BIG_R + 12],
+    ),
+    (
         "C, serial neighbours",
         &[DC_C..DC_C + 4, NZ_C..NZ_C + 11, AC..AC + 120],
     ),
@@ -152,6 +163,8 @@ struct ChunkCounts {
     raw_f: i64,
     /// Design G's raw bits less the others' (its joint DC symbols and counts less one).
     raw_g: i64,
+    /// Design R's raw bits less G's (its runs' raw bits and signs against the coefficients').
+    raw_r: i64,
     /// Blocks of each plane stream (for the lanes' states).
     planes: Vec<usize>,
     /// Bytes outside the coefficient streams, kept as they are.
@@ -174,6 +187,7 @@ impl Study {
             raw_bits: 0,
             raw_f: 0,
             raw_g: 0,
+            raw_r: 0,
             planes: Vec::new(),
             other,
             stored,
@@ -244,8 +258,13 @@ impl Study {
         // (Each design codes the DC and the count once: their raw bits are counted with
         // design A's symbol only; G's difference is kept apart.)
         let mut raw_g = 0i64;
+        let mut raw_r = 0i64;
         let mut put = |ctx: usize, v: u32, raw_too: bool| {
-            let (t, raw) = hybrid_uint(v);
+            // (R's run symbols are their own tokens.)
+            let (t, raw) = match (RUN_R..BIG_R).contains(&ctx) {
+                true => (v as usize, 0),
+                false => hybrid_uint(v),
+            };
             c.counts[(base + ctx) * TOKENS + t] += 1;
             if raw_too {
                 c.raw_bits += raw as u64;
@@ -353,24 +372,53 @@ impl Study {
                 }
             }
             let mut left = nz[b];
+            // E's context of position i (an odd block knows its four neighbours'
+            // coefficients, all even), with `left` coefficients to come.
+            let e_ctx = |i: usize, left: usize| {
+                let ctx = left_bucket(left) * 12 + band(i);
+                if odd && !four.is_empty() {
+                    let hits = four.iter().filter(|&&j| p.blocks[j][i] != 0).count();
+                    let class = (2 * hits).div_ceil(four.len()).min(2);
+                    120 + class * 120 + ctx
+                } else {
+                    ctx
+                }
+            };
+            let mut start = 1;
             for (i, &v) in p.blocks[b].iter().enumerate().skip(1) {
                 if left == 0 {
                     break;
                 }
                 let ctx = left_bucket(left) * 12 + band(i);
                 put(AC + ctx, pack_signed(v), true);
-                // E: an odd block knows its four neighbours' coefficients (all even).
-                if odd && !four.is_empty() {
-                    let hits = four.iter().filter(|&&j| p.blocks[j][i] != 0).count();
-                    let class = (2 * hits).div_ceil(four.len()).min(2);
-                    put(AC_ODD + class * 120 + ctx, pack_signed(v), false);
-                } else {
-                    put(AC_EVEN + ctx, pack_signed(v), false);
+                put(AC_EVEN + e_ctx(i, left), pack_signed(v), false);
+                raw_r -= hybrid_uint(pack_signed(v)).1 as i64;
+                if v != 0 {
+                    // R: the zeros since the last non-zero one, whether this one is beyond
+                    // ±1 and its sign, in E's context of the run's first position (a token
+                    // of its own for each run up to 30; longer runs four tokens and the
+                    // run less 31 in 5 raw bits); beyond ±1, |v| − 2 by band.
+                    let big = v.unsigned_abs() > 1;
+                    let run = i - start;
+                    let low = (big as usize) << 1 | (v < 0) as usize;
+                    let (t, raw) = match run < 31 {
+                        true => (run * 4 + low, 0),
+                        false => (124 + low, 5),
+                    };
+                    put(RUN_R + e_ctx(start, left), t as u32, false);
+                    raw_r += raw;
+                    if big {
+                        let m = v.unsigned_abs() - 2;
+                        put(BIG_R + band(i), m, false);
+                        raw_r += hybrid_uint(m).1 as i64;
+                    }
+                    start = i + 1;
                 }
                 left -= (v != 0) as usize;
             }
         }
         c.raw_g += raw_g;
+        c.raw_r += raw_r;
     }
 
     /// The report's rows: for each design and number of histograms per family, the bytes
@@ -436,6 +484,7 @@ impl Study {
                         let f = match name.as_bytes()[0] {
                             b'F' => c.raw_f,
                             b'G' => c.raw_g,
+                            b'R' => c.raw_g + c.raw_r,
                             _ => 0,
                         };
                         *b += (c.raw_bits as i64 + f) as f64 / 8.0 + c.other as f64;
@@ -827,6 +876,49 @@ mod tests {
     }
 
     #[test]
+    fn r_codes_each_non_zero_coefficient_with_the_zeros_before_it() {
+        // One 8 × 8 keyframe plane of one block: terms at zig-zag 1 (1), 5 (−3) and 40 (2),
+        // so runs of 0, 3 and 34 zeros.
+        let mut q = [0; N * N];
+        (q[0], q[1], q[5], q[40]) = (7, 1, -3, 2);
+        let mut study = Study::default();
+        study.start_chunk(0, 1000, 0);
+        study.plane(&PlaneStream {
+            kind: 0,
+            chroma: false,
+            blocks: &[q],
+            order: &[(0, 0)],
+            grid: (1, 1),
+            tile: None,
+        });
+        let c = &study.chunks[0];
+        let tokens = |ctxs: std::ops::Range<usize>| -> Vec<(usize, u32)> {
+            let mut t: Vec<(usize, u32)> = ctxs
+                .flat_map(|ctx| (0..TOKENS).map(move |t| (ctx, t)))
+                .filter(|&(ctx, t)| c.counts[ctx * TOKENS + t] > 0)
+                .map(|(ctx, t)| (t, c.counts[ctx * TOKENS + t]))
+                .collect();
+            t.sort();
+            t
+        };
+        // Run 0 of +1; run 3 beyond ±1, negative; run 34, beyond ±1, positive: a long run.
+        assert_eq!(tokens(RUN_R..BIG_R), [(0, 1), (3 * 4 + 3, 1), (124 + 2, 1)]);
+        // |v| − 2 of the two beyond ±1: 1 and 0.
+        assert_eq!(tokens(BIG_R..BIG_R + 12), [(0, 1), (1, 1)]);
+        // E coded every position up to the last term: 40 symbols; R three and two.
+        assert_eq!(
+            tokens(AC_EVEN..AC_ODD + 360)
+                .iter()
+                .map(|t| t.1)
+                .sum::<u32>(),
+            40
+        );
+        // Its raw bits against the coefficients' (none for values this small): the long
+        // run's 5.
+        assert_eq!(c.raw_r, 5);
+    }
+
+    #[test]
     fn signed_values_fold_onto_the_naturals() {
         assert_eq!(
             (-3..=3).map(pack_signed).collect::<Vec<_>>(),
@@ -867,6 +959,7 @@ mod tests {
             raw_bits: 0,
             raw_f: 0,
             raw_g: 0,
+            raw_r: 0,
             planes: vec![],
             other: 0,
             stored: 0,
