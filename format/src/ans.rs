@@ -73,9 +73,9 @@ pub struct Histogram {
     /// header are cloned with the header and into every chunk that uses them).
     slot: std::sync::Arc<[u8]>,
     /// Each token's frequency and first slot (the sum of the frequencies before it),
-    /// frequency | first << 16 (0 past the last): what a decoded symbol's step reads, in one load from beside the token table. (A
-    /// slot table of both, four bytes a slot, made the CPU's decode slower: 16 KiB a
-    /// histogram leave the cache.)
+    /// frequency | first << 16 (0 past the last): what a decoded symbol's step reads, in
+    /// one load from beside the token table. (A slot table of both, four bytes a slot,
+    /// made the CPU's decode slower: 16 KiB a histogram leave the cache.)
     steps: [u32; TOKENS],
 }
 

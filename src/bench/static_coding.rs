@@ -163,7 +163,8 @@ struct ChunkCounts {
     raw_f: i64,
     /// Design G's raw bits less the others' (its joint DC symbols and counts less one).
     raw_g: i64,
-    /// Design R's raw bits less G's (its runs' raw bits and signs against the coefficients').
+    /// Design R's raw bits less G's (its long runs' and its |v| − 2's against the
+    /// coefficients').
     raw_r: i64,
     /// Blocks of each plane stream (for the lanes' states).
     planes: Vec<usize>,

@@ -76,8 +76,8 @@ impl Gpu {
     /// Shapes the decodes planned from then on ([`DecodeShape`]): the slice rounded up to
     /// a multiple of [`SLICE_GROUPS`] (at most [`MAX_SLICE_GROUPS`]), the group split
     /// down to a power of two (at most [`GROUP_BLOCKS`]), the lane group to 1–64. Its
-    /// `lanes`, `storage_tables`, `wide_reconstruct` and lane fields choose pipelines, which [`Gpu::for_stream`] builds once:
-    /// they take effect there.
+    /// `lanes`, `storage_tables`, `wide_reconstruct` and lane fields choose pipelines,
+    /// which [`Gpu::for_stream`] builds once: they take effect there.
     pub fn set_decode_shape(&mut self, shape: DecodeShape) {
         self.slice_span = shape
             .slice_groups

@@ -250,7 +250,8 @@ impl LanesGpu {
     /// The pipelines and scratch for planes of `geometry` (texels, and tile side) coded
     /// with `maps` (`None` where they go as pairs, [`Scratch::new`]), with the file's maps
     /// and histograms written; the sets of the dense plane start at byte `sets` of its
-    /// mask buffer. `shape` gives the states a workgroup and where the job is read from.
+    /// mask buffer. `shape` (as [`Gpu::set_decode_shape`] keeps it) gives the states a
+    /// workgroup and where the job is read from.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -258,19 +259,18 @@ impl LanesGpu {
         shape: &crate::DecodeShape,
     ) -> Option<LanesGpu> {
         let plan = Scratch::new(geometry, maps)?;
-        let group = shape.lane_group.clamp(1, 64);
-        let job = match shape.lane_job_storage {
-            true => wgpu::BufferBindingType::Storage { read_only: true },
-            false => wgpu::BufferBindingType::Uniform,
+        let group = shape.lane_group;
+        let (job, space) = match shape.lane_job_storage {
+            true => (
+                wgpu::BufferBindingType::Storage { read_only: true },
+                "storage, read",
+            ),
+            false => (wgpu::BufferBindingType::Uniform, "uniform"),
         };
         let layouts = [
             layout(device, job, &LANE_BINDINGS),
             layout(device, job, &SLOT_BINDINGS),
         ];
-        let space = match shape.lane_job_storage {
-            true => "storage, read",
-            false => "uniform",
-        };
         let source = format!(
             "{}const LANE_GROUP: u32 = {group}u;\n{LANE_JOB_WGSL}{}",
             plan.constants(sets),
