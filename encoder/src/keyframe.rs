@@ -71,10 +71,50 @@ pub(crate) fn code(
         None => (false, payload(None)),
     };
     let reference = if predicted { prev } else { None };
+    #[cfg(feature = "bench")]
+    tap_keyframe(frame, reference, &p, sens_rms);
     let decoded = Arc::new(chunk::read_keyframe_raw(header, &raw, reference)?);
     Ok(CodedKeyframe {
         bytes: raw,
         decoded,
         intra: !predicted,
     })
+}
+
+/// Records the planes the quantiser was handed for the mode kept (`crate::tap`).
+#[cfg(feature = "bench")]
+fn tap_keyframe(frame: &CodedFrame, reference: Option<&[Plane]>, p: &KeyParams, sens_rms: f64) {
+    use crate::tap::{PlaneKind, TappedPlane};
+    if !crate::tap::active() {
+        return;
+    }
+    // The step `model::code_keyframe` derives.
+    let base = ((12.0f64).sqrt() * p.budget / sens_rms.max(1e-9)) as f32;
+    for (pl, src) in frame.planes.iter().enumerate() {
+        let data = match reference {
+            Some(r) => src
+                .data
+                .iter()
+                .zip(&r[pl].data)
+                .map(|(a, b)| a - b)
+                .collect(),
+            None => src.data.clone(),
+        };
+        crate::tap::record(TappedPlane {
+            kind: match reference {
+                Some(_) => PlaneKind::PredictedKeyframe,
+                None => PlaneKind::IntraKeyframe,
+            },
+            plane: pl,
+            w: src.w,
+            h: src.h,
+            data,
+            step: if pl == 0 {
+                base
+            } else {
+                base * p.chroma_step_factor
+            },
+            deadzone: p.deadzone,
+        });
+    }
 }

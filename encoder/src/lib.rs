@@ -39,6 +39,8 @@ mod run;
 mod secant;
 mod segment;
 mod sparse;
+#[cfg(feature = "bench")]
+mod tap;
 
 use std::path::PathBuf;
 
@@ -59,6 +61,10 @@ pub use vbim_files::Progress;
 #[cfg(feature = "bench")]
 pub mod bench {
     pub use crate::payloads::{cluster, HISTOGRAMS};
+    /// What the quantiser is handed, recorded for `vbim bench transforms`.
+    pub mod tap {
+        pub use crate::tap::{start, take, PlaneKind, TappedPlane};
+    }
 }
 
 /// Why an encode failed.

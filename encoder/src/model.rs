@@ -394,6 +394,9 @@ where
         .map(|d| (d >= 2).then(|| vec![SparseBlocks::default(); (d - 1) * planes]))
         .collect();
     let mut dmax = 1usize;
+    // Bubble planes as the quantiser saw them, for `crate::tap`: (highest degree, plane).
+    #[cfg(feature = "bench")]
+    let mut tapped: Vec<(usize, crate::tap::TappedPlane)> = Vec::new();
     for band in (0..ty).step_by(band_tiles.max(1)) {
         let band_end = (band + band_tiles.max(1)).min(ty);
         let r = rows(band * ts..band_end * ts)?;
@@ -477,6 +480,13 @@ where
                         })
                         .collect();
                     let q = quantize(&c, step, sp.deadzone, 0.0);
+                    #[cfg(feature = "bench")]
+                    if crate::tap::active() {
+                        tapped.push((
+                            d,
+                            tap_bubble(src, &members, (tx, ts, band), (k, pl), step, sp.deadzone),
+                        ));
+                    }
                     let s = &mut streams[(k - 2) * planes + pl];
                     match sp.rate_lambda > 0.0 {
                         // Refined once the segment's every band is in (below).
@@ -488,6 +498,10 @@ where
         }
     }
     debug_assert_eq!(dmax, tiles.max_degree() as usize);
+    #[cfg(feature = "bench")]
+    for (_, p) in tapped.into_iter().filter(|(d, _)| *d == dmax) {
+        crate::tap::record(p);
+    }
     let steps = steps_for(dmax);
     let mut raw = vec![dmax as u8, if dmax > 1 { planes as u8 } else { 0 }, 0, 0];
     for s in &steps {
@@ -510,6 +524,37 @@ where
         coeff_bytes: raw,
         tiles,
     })
+}
+
+/// A band's bubble plane `src` (term k, plane pl) as `crate::tap` records it: its member
+/// tiles side by side in one row.
+#[cfg(feature = "bench")]
+fn tap_bubble(
+    src: &Plane,
+    members: &[usize],
+    (tx, ts, band): (usize, usize, usize),
+    (k, pl): (usize, usize),
+    step: f32,
+    deadzone: f32,
+) -> crate::tap::TappedPlane {
+    let w = members.len() * ts;
+    let mut data = vec![0f32; w * ts];
+    for (i, &t) in members.iter().enumerate() {
+        let (ox, oy) = ((t % tx) * ts, (t / tx - band) * ts);
+        for y in 0..ts {
+            let row = &src.data[(oy + y) * src.w + ox..][..ts];
+            data[y * w + i * ts..][..ts].copy_from_slice(row);
+        }
+    }
+    crate::tap::TappedPlane {
+        kind: crate::tap::PlaneKind::Bubble { term: k },
+        plane: pl,
+        w,
+        h: ts,
+        data,
+        step,
+        deadzone,
+    }
 }
 
 /// The cheapest (luma, chroma) degrees within budget — on average over the segment's

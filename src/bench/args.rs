@@ -60,6 +60,28 @@ pub enum BenchCommand {
     /// of `PackagePlayer::irradiance` per call on one core (10 000 queries at scattered
     /// positions and normals, two frames mixed and, mid-fade, four).
     Objects(BenchObjectsArgs),
+    /// What larger transforms would make of the planes the encoder quantises: the frames
+    /// encoded once with the encoder's tap on, then every keyframe and bubble plane coded
+    /// in 8 × 8 blocks (the format's), 16 × 16, 32 × 32 or a choice per 16 × 16 region, by
+    /// one adaptive model: bytes at equal error, and the terms a texel's reconstruction
+    /// sums. A research harness for the format's next coding tool.
+    Transforms(BenchTransformsArgs),
+}
+
+#[derive(Args)]
+pub struct BenchTransformsArgs {
+    /// The frames (a directory of numbered EXR or PNG frames, as `vbim encode` takes).
+    pub frames: String,
+    /// The budget, in dB, encoded at as it is (`--tolerance T --no-aim`).
+    #[arg(long, default_value_t = 41.0)]
+    pub tolerance: f64,
+    /// The frame rate the frames are encoded at.
+    #[arg(long, default_value = "24/1", value_parser = crate::units::parse_rate)]
+    pub fps: (u32, u32),
+    /// Multiples of each plane's step to code at: each way's bytes are read off the line
+    /// through them at the 8 × 8 blocks' error at 1 (keep 1 among them).
+    #[arg(long, default_value = "0.9,1,1.12,1.25,1.4", value_delimiter = ',')]
+    pub steps: Vec<f32>,
 }
 
 #[derive(Args)]

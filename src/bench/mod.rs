@@ -8,7 +8,8 @@
 //! times each displayed frame's GPU work and the reference blend),
 //! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
 //! and `entropy` (what a context-adaptive coder would save: a research harness for the
-//! format's next coding); `fit` fits a GPU's decode costs from its timestamps; `objects`
+//! format's next coding); `transforms` (what larger transforms would make of the planes the
+//! encoder quantises: the harness for its next coding tool); `fit` fits a GPU's decode costs from its timestamps; `objects`
 //! measures the light for objects (irradiance tracks and the CPU query).
 
 mod args;
@@ -21,6 +22,7 @@ mod offline;
 mod runtime;
 mod scale;
 mod static_coding;
+mod transforms;
 
 pub use args::*;
 
@@ -40,6 +42,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::Changes(a) => changes::run(a),
         BenchCommand::Entropy(a) => entropy::run(a),
         BenchCommand::Objects(a) => objects::run(a),
+        BenchCommand::Transforms(a) => transforms::run(a),
     }
 }
 

@@ -1,0 +1,640 @@
+//! `vbim bench transforms FRAMES`: what larger transforms would make of the planes the
+//! encoder quantises — a research harness for the format's next coding tool, as `bench
+//! entropy` was for format 2's coding.
+//!
+//! The frames are encoded once (format 2, `--no-aim` at the tolerance given) with the
+//! encoder's tap on (`vbim_encoder::bench::tap`), which records every keyframe plane
+//! (the target of the mode kept) and every bubble plane's member tiles with their steps
+//! and dead zone. Each recorded plane is then transformed by an orthonormal DCT of 8 × 8
+//! (what the format does), 16 × 16 or 32 × 32 blocks, or a choice per 16 × 16 region of one
+//! 16 × 16 block or four 8 × 8 ones (the smaller `D + λ·R`, λ = `LAMBDA`·step², bits from
+//! the whole day's statistics of each size), quantised with the plane's step scaled by
+//! each of `--steps` and its dead zone, and coded by one adaptive model for all of them:
+//! per block the DC's residual against the planar prediction (left + up − up-left) in a
+//! context of its neighbours' residual sizes, the count of non-zero AC terms in a context
+//! of that residual's size and whether the left and upper blocks have any, then the AC
+//! terms in zig-zag order until the count is reached, each in a context of how many are
+//! left and of its frequency band (for a larger block, the band of the 8 × 8 frequency it
+//! scales down to); tokens are JPEG XL's hybrid-uint (16 direct, then exponent and two
+//! bits, the rest raw), each context's tokens counted as they come (a Krichevsky–Trofimov
+//! estimate: the ideal length of an adaptive arithmetic coder). A choice's regions cost
+//! one flag each in a context of the left and upper regions' choices.
+//!
+//! Rates are compared at equal distortion: each way's bytes are fitted against its summed
+//! squared error (each plane weighted as the metric weighs it) in log–log over the steps,
+//! and read at the 8 × 8 blocks' error at the step as coded. The distortion is the coded
+//! domain's squared error, not the metric's PSNR (the steps are uniform over a plane, so
+//! the two move together). Also printed: how many terms a texel's reconstruction sums (a
+//! block's non-zero terms, DC included, over the texels it covers), what the player's
+//! keyframe pass (per segment) and bubble reconstruction (per displayed frame) would pay.
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+use vbim_encoder::bench::tap::{self, PlaneKind, TappedPlane};
+use vbim_encoder::{encode, EncoderConfig, FrameSet, Preset};
+
+use super::args::BenchTransformsArgs;
+
+/// λ of the per-region choice, in squared steps per bit.
+const LAMBDA: f64 = 0.12;
+/// Each plane's weight in the metric's squared error (luma, Co, Cg).
+const PLANE_WEIGHT: [f64; 3] = [1.0, 2.0 / 3.0, 1.0];
+/// The tokens of the hybrid-uint code (values to 2^32).
+const TOKENS: usize = 128;
+
+/// Which recorded planes a row of the table is about.
+type Pick = fn(PlaneKind) -> bool;
+
+/// How a plane's blocks are chosen.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Way {
+    /// Every block n × n.
+    Size(usize),
+    /// Per 16 × 16 region, one 16 × 16 block or four 8 × 8.
+    Choice,
+}
+
+impl Way {
+    fn label(self) -> String {
+        match self {
+            Way::Size(n) => format!("{n} × {n}"),
+            Way::Choice => "8 or 16, per region".into(),
+        }
+    }
+}
+
+pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
+    let planes = tapped_planes(&a.frames, a.tolerance, a.fps)?;
+    let groups: [(&str, Pick); 3] = [
+        ("intra keyframes", |k| k == PlaneKind::IntraKeyframe),
+        ("predicted keyframes", |k| k == PlaneKind::PredictedKeyframe),
+        ("bubble planes", |k| matches!(k, PlaneKind::Bubble { .. })),
+    ];
+    println!(
+        "transforms: {}, encoded at --tolerance {} --no-aim in format 2; bytes at the 8 × 8 \
+         blocks' error (steps × {:?}), one adaptive model for every way",
+        a.frames, a.tolerance, a.steps
+    );
+    println!("| planes | way | bytes at step × 1 | error | at the 8 × 8 error: bytes | ratio | terms a texel sums |");
+    println!("|---|---|---:|---:|---:|---:|---:|");
+    // Per way, the bytes of every group it could code (at each group's 8 × 8 error).
+    let mut totals: HashMap<String, f64> = HashMap::new();
+    for (name, pick) in groups {
+        let set: Vec<&TappedPlane> = planes.iter().filter(|p| pick(p.kind)).collect();
+        if set.is_empty() {
+            continue;
+        }
+        let ways = [Way::Size(8), Way::Size(16), Way::Size(32), Way::Choice];
+        // The 8 × 8 blocks' error at step × 1, and their bytes there on their own line.
+        let mut base: Option<(f64, f64)> = None;
+        for way in ways {
+            if set
+                .iter()
+                .any(|p| p.w % block_of(way) != 0 || p.h % block_of(way) != 0)
+            {
+                continue;
+            }
+            let points: Vec<Coded> = a.steps.iter().map(|&m| code_all(&set, way, m)).collect();
+            let at1 = a
+                .steps
+                .iter()
+                .position(|&m| m == 1.0)
+                .map_or(&points[0], |i| &points[i]);
+            let (b8, d8) =
+                *base.get_or_insert_with(|| (at_distortion(&points, at1.dist), at1.dist));
+            let bytes = at_distortion(&points, d8);
+            *totals.entry(format!("{way:?}")).or_insert(0.0) += bytes;
+            *totals.entry("base".into()).or_insert(0.0) +=
+                if way == Way::Size(8) { bytes } else { 0.0 };
+            println!(
+                "| {name} ({} planes) | {} | {:.0} | {:.4e} | {:.0} | {:.3} | {:.2} |",
+                set.len(),
+                way.label(),
+                at1.bytes,
+                at1.dist,
+                bytes,
+                bytes / b8,
+                at1.terms / at1.texels
+            );
+        }
+    }
+    let base = totals.get("base").copied().unwrap_or(0.0);
+    for way in [Way::Size(16), Way::Choice] {
+        if let Some(t) = totals.get(&format!("{way:?}")) {
+            println!(
+                "every plane, {}: {:.0} bytes against {:.0} in 8 × 8 blocks, {:.3}",
+                way.label(),
+                t,
+                base,
+                t / base
+            );
+        }
+    }
+    Ok(())
+}
+
+fn block_of(way: Way) -> usize {
+    match way {
+        Way::Size(n) => n,
+        Way::Choice => 16,
+    }
+}
+
+/// Encodes the frames with the tap on; returns what the quantiser was handed.
+fn tapped_planes(
+    frames: &str,
+    tolerance: f64,
+    fps: (u32, u32),
+) -> Result<Vec<TappedPlane>, String> {
+    let fs = FrameSet::open(frames).map_err(|e| e.to_string())?;
+    let cfg = EncoderConfig {
+        rate: fps,
+        tolerance_db: tolerance,
+        aim: false,
+        format: vbim_encoder::FormatVersion::V2,
+        ..EncoderConfig::preset(Preset::Default)
+    };
+    let stages = crate::progress::Stages::new();
+    let progress = |s: &str, d: u64, t: u64| stages.report(s, d, t);
+    tap::start();
+    let coded = encode(&fs, &cfg, std::io::Cursor::new(Vec::new()), &progress);
+    let planes = tap::take();
+    stages.finish();
+    coded.map_err(|e| e.to_string())?;
+    Ok(planes)
+}
+
+/// A set of planes coded one way at one step.
+#[derive(Default)]
+struct Coded {
+    bytes: f64,
+    dist: f64,
+    terms: f64,
+    texels: f64,
+}
+
+/// The bytes at distortion `d`: a line through the points in log–log (least squares).
+fn at_distortion(points: &[Coded], d: f64) -> f64 {
+    let xs: Vec<f64> = points.iter().map(|p| p.dist.ln()).collect();
+    let ys: Vec<f64> = points.iter().map(|p| p.bytes.ln()).collect();
+    let n = xs.len() as f64;
+    let (mx, my) = (xs.iter().sum::<f64>() / n, ys.iter().sum::<f64>() / n);
+    let sxx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+    let sxy: f64 = xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    (my + slope * (d.ln() - mx)).exp()
+}
+
+/// A symbol: its context (a model of its own) and value.
+type Symbol = (u32, u32);
+
+/// One block quantised: its squared error, its non-zero terms (DC included) and its
+/// symbols in coding order.
+struct Block {
+    dist: f64,
+    terms: u32,
+    /// Texels it covers.
+    area: usize,
+    symbols: Vec<Symbol>,
+}
+
+/// Every plane of `set` coded `way` with its step × `mult`.
+fn code_all(set: &[&TappedPlane], way: Way, mult: f32) -> Coded {
+    // Per plane, the blocks in coding order (their contexts already family-tagged).
+    let coded: Vec<(f64, Vec<Block>)> = set
+        .par_iter()
+        .map(|p| {
+            let family = family(p);
+            let step = p.step * mult;
+            let blocks = match way {
+                Way::Size(n) => tag(quantise_plane(p, n, step), family, n),
+                Way::Choice => choose(p, step, family),
+            };
+            (PLANE_WEIGHT[p.plane.min(2)], blocks)
+        })
+        .collect();
+    let mut model = Model::default();
+    let mut out = Coded::default();
+    for ((weight, blocks), p) in coded.iter().zip(set) {
+        for b in blocks {
+            out.dist += weight * b.dist;
+            out.terms += b.terms as f64 * b.area as f64;
+            for &(ctx, v) in &b.symbols {
+                out.bytes += model.code(ctx, v) / 8.0;
+            }
+        }
+        out.texels += (p.w * p.h) as f64;
+    }
+    out
+}
+
+/// The model family of a plane: luma or chroma, times its kind.
+fn family(p: &TappedPlane) -> u32 {
+    let kind = match p.kind {
+        PlaneKind::IntraKeyframe => 0,
+        PlaneKind::PredictedKeyframe => 1,
+        PlaneKind::Bubble { term } => 2 + (term.min(4) - 2) as u32,
+    };
+    kind * 2 + (p.plane > 0) as u32
+}
+
+/// Tags the block-local contexts with the family and the block size (top bits), so that
+/// each (family, size) learns its own statistics.
+fn tag(blocks: Vec<Block>, family: u32, n: usize) -> Vec<Block> {
+    let size = match n {
+        16 => 1,
+        32 => 2,
+        _ => 0,
+    };
+    blocks
+        .into_iter()
+        .map(|mut b| {
+            for s in &mut b.symbols {
+                s.0 |= (size << 28) | (family << 20);
+            }
+            b
+        })
+        .collect()
+}
+
+/// A plane's n × n blocks quantised and turned into symbols, in raster order.
+fn quantise_plane(p: &TappedPlane, n: usize, step: f32) -> Vec<Block> {
+    let (bw, bh) = (p.w / n, p.h / n);
+    let t = Transform::new(n);
+    let q: Vec<(Vec<i32>, f64)> = (0..bw * bh)
+        .map(|b| {
+            let (bx, by) = (b % bw, b / bw);
+            let mut block = vec![0f64; n * n];
+            for y in 0..n {
+                for x in 0..n {
+                    block[y * n + x] = p.data[(by * n + y) * p.w + bx * n + x] as f64;
+                }
+            }
+            t.quantise(&block, step as f64, p.deadzone as f64)
+        })
+        .collect();
+    let dc: Vec<i32> = q.iter().map(|(c, _)| c[0]).collect();
+    let count: Vec<u32> = q
+        .iter()
+        .map(|(c, _)| c[1..].iter().filter(|&&v| v != 0).count() as u32)
+        .collect();
+    let at = |x: isize, y: isize, v: &[i32]| -> i32 {
+        if x < 0 || y < 0 {
+            0
+        } else {
+            v[y as usize * bw + x as usize]
+        }
+    };
+    let residual: Vec<i32> = (0..bw * bh)
+        .map(|b| {
+            let (x, y) = ((b % bw) as isize, (b / bw) as isize);
+            dc[b] - (at(x - 1, y, &dc) + at(x, y - 1, &dc) - at(x - 1, y - 1, &dc))
+        })
+        .collect();
+    (0..bw * bh)
+        .map(|b| {
+            let (x, y) = ((b % bw) as isize, (b / bw) as isize);
+            let (coefs, dist) = &q[b];
+            let r = residual[b];
+            let near = |f: &dyn Fn(isize, isize) -> u32| f(x - 1, y) + f(x, y - 1);
+            let size_at = |x: isize, y: isize| -> u32 {
+                if x < 0 || y < 0 {
+                    0
+                } else {
+                    size_class(residual[y as usize * bw + x as usize])
+                }
+            };
+            let busy_at = |x: isize, y: isize| -> u32 {
+                (x >= 0 && y >= 0 && count[y as usize * bw + x as usize] > 0) as u32
+            };
+            let mut symbols = vec![
+                (near(&size_at).min(3), fold(r)),
+                (10 + size_class(r) * 3 + near(&busy_at), count[b]),
+            ];
+            let mut left = count[b];
+            for (i, &v) in coefs.iter().enumerate().skip(1) {
+                if left == 0 {
+                    break;
+                }
+                symbols.push((100 + left_bucket(left) * 12 + t.band[i], fold(v)));
+                left -= (v != 0) as u32;
+            }
+            Block {
+                dist: *dist,
+                terms: count[b] + (coefs[0] != 0) as u32,
+                area: n * n,
+                symbols,
+            }
+        })
+        .collect()
+}
+
+/// Per 16 × 16 region, one 16 × 16 block or four 8 × 8 ones: the smaller `D + λ·R`, each
+/// symbol's bits from the plane's own statistics of its size; a flag per region in a
+/// context of its left and upper regions' choices. (The DC residuals and neighbour
+/// contexts of each size are those of its own grid, as if the whole plane had that size:
+/// the study's approximation of a mixed grid.)
+fn choose(p: &TappedPlane, step: f32, family: u32) -> Vec<Block> {
+    let small = tag(quantise_plane(p, 8, step), family, 8);
+    let large = tag(quantise_plane(p, 16, step), family, 16);
+    let cost_small = static_costs(&small);
+    let cost_large = static_costs(&large);
+    let bits = |b: &Block, costs: &HashMap<Symbol, f64>| -> f64 {
+        b.symbols.iter().map(|s| costs[s]).sum()
+    };
+    let (rw, rh) = (p.w / 16, p.h / 16);
+    let lambda = LAMBDA * (step as f64).powi(2);
+    let mut small = small.into_iter().map(Some).collect::<Vec<_>>();
+    let mut out = Vec::new();
+    let mut chose = vec![false; rw * rh];
+    for (r, large) in large.into_iter().enumerate() {
+        let (rx, ry) = (r % rw, r / rw);
+        let quad: Vec<usize> = (0..4)
+            .map(|i| (ry * 2 + i / 2) * (rw * 2) + rx * 2 + i % 2)
+            .collect();
+        let j_small: f64 = quad
+            .iter()
+            .map(|&i| {
+                let b = small[i].as_ref().unwrap();
+                b.dist + lambda * bits(b, &cost_small)
+            })
+            .sum();
+        let j_large = large.dist + lambda * bits(&large, &cost_large);
+        let near = (rx > 0 && chose[r - 1]) as u32 + (ry > 0 && chose[r - rw]) as u32;
+        let flag_ctx = (3 << 28) | (family << 20) | near;
+        if j_large < j_small {
+            chose[r] = true;
+            let mut b = large;
+            b.symbols.insert(0, (flag_ctx, 1));
+            out.push(b);
+        } else {
+            for (k, &i) in quad.iter().enumerate() {
+                let mut b = small[i].take().unwrap();
+                if k == 0 {
+                    b.symbols.insert(0, (flag_ctx, 0));
+                }
+                out.push(b);
+            }
+        }
+    }
+    out
+}
+
+/// Each symbol's ideal length in bits under its context's own statistics over `blocks`.
+fn static_costs(blocks: &[Block]) -> HashMap<Symbol, f64> {
+    let mut count: HashMap<(u32, u32), f64> = HashMap::new();
+    let mut total: HashMap<u32, f64> = HashMap::new();
+    for s in blocks.iter().flat_map(|b| &b.symbols) {
+        let (tok, _) = token(s.1);
+        *count.entry((s.0, tok)).or_default() += 1.0;
+        *total.entry(s.0).or_default() += 1.0;
+    }
+    let mut out = HashMap::new();
+    for s in blocks.iter().flat_map(|b| &b.symbols) {
+        let (tok, raw) = token(s.1);
+        out.entry(*s)
+            .or_insert_with(|| -(count[&(s.0, tok)] / total[&s.0]).log2() + raw as f64);
+    }
+    out
+}
+
+/// An adaptive model: per context, each token's count so far and their sum. A context is
+/// (size: 2 bits) << 28 | (family: 8 bits) << 20 | the block-local context (8 bits).
+struct Model {
+    counts: Vec<([f32; TOKENS], f32)>,
+}
+
+impl Default for Model {
+    fn default() -> Model {
+        Model {
+            counts: vec![([0.0; TOKENS], 0.0); 4 << 16],
+        }
+    }
+}
+
+impl Model {
+    /// The bits `v` costs in context `ctx` (Krichevsky–Trofimov), then counted.
+    fn code(&mut self, ctx: u32, v: u32) -> f64 {
+        let (tok, raw) = token(v);
+        let i = (((ctx >> 28) << 16) | (((ctx >> 20) & 0xFF) << 8) | (ctx & 0xFF)) as usize;
+        let (counts, total) = &mut self.counts[i];
+        let p = (counts[tok as usize] as f64 + 0.5) / (*total as f64 + 0.5 * TOKENS as f64);
+        let bits = -p.log2();
+        counts[tok as usize] += 1.0;
+        *total += 1.0;
+        bits + raw as f64
+    }
+}
+
+/// JPEG XL's hybrid-uint token of `v` (4-2-0) and its raw bits.
+fn token(v: u32) -> (u32, u32) {
+    if v < 16 {
+        return (v, 0);
+    }
+    let n = 31 - v.leading_zeros();
+    let m = (v >> (n - 2)) & 3;
+    (16 + 4 * (n - 4) + m, n - 2)
+}
+
+fn fold(v: i32) -> u32 {
+    if v >= 0 {
+        2 * v as u32
+    } else {
+        2 * v.unsigned_abs() - 1
+    }
+}
+
+fn size_class(r: i32) -> u32 {
+    match r.unsigned_abs() {
+        0 => 0,
+        1..=2 => 1,
+        _ => 2,
+    }
+}
+
+/// Buckets of how many non-zero terms are left (format 2's, extended for larger blocks).
+fn left_bucket(n: u32) -> u32 {
+    match n {
+        0..=4 => n.saturating_sub(1),
+        5..=6 => 4,
+        7..=8 => 5,
+        9..=12 => 6,
+        13..=16 => 7,
+        17..=24 => 8,
+        25..=32 => 9,
+        33..=64 => 10,
+        65..=128 => 11,
+        _ => 12,
+    }
+}
+
+/// Format 2's frequency bands of an 8 × 8 block's zig-zag index.
+fn band8(i: usize) -> u32 {
+    match i {
+        0..=5 => i as u32,
+        6..=7 => 6,
+        8..=10 => 7,
+        11..=15 => 8,
+        16..=23 => 9,
+        24..=35 => 10,
+        _ => 11,
+    }
+}
+
+/// The zig-zag order of an n × n block: (x, y) of each index.
+fn zigzag(n: usize) -> Vec<(usize, usize)> {
+    let mut v: Vec<(usize, usize)> = (0..n * n).map(|i| (i % n, i / n)).collect();
+    v.sort_by_key(|&(x, y)| {
+        let d = x + y;
+        (d, if d % 2 == 1 { x } else { y })
+    });
+    v
+}
+
+/// An orthonormal n × n DCT with its zig-zag order and each index's band.
+struct Transform {
+    n: usize,
+    basis: Vec<f64>,
+    order: Vec<(usize, usize)>,
+    band: Vec<u32>,
+}
+
+impl Transform {
+    fn new(n: usize) -> Transform {
+        let mut basis = vec![0.0; n * n];
+        for k in 0..n {
+            let scale = if k == 0 {
+                (1.0 / n as f64).sqrt()
+            } else {
+                (2.0 / n as f64).sqrt()
+            };
+            for i in 0..n {
+                basis[k * n + i] = scale
+                    * (std::f64::consts::PI * (2 * i + 1) as f64 * k as f64 / (2 * n) as f64).cos();
+            }
+        }
+        let order = zigzag(n);
+        let of8: HashMap<(usize, usize), usize> = zigzag(8)
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| (p, i))
+            .collect();
+        let band = order
+            .iter()
+            .map(|&(x, y)| band8(of8[&(x * 8 / n, y * 8 / n)]))
+            .collect();
+        Transform {
+            n,
+            basis,
+            order,
+            band,
+        }
+    }
+
+    /// The block's coefficients (zig-zag), quantised with format 2's dead zone (the DC
+    /// without), and the squared error of the quantised ones.
+    fn quantise(&self, block: &[f64], step: f64, deadzone: f64) -> (Vec<i32>, f64) {
+        let n = self.n;
+        // Rows, then columns.
+        let mut rows = vec![0.0; n * n];
+        for y in 0..n {
+            for k in 0..n {
+                rows[y * n + k] = (0..n)
+                    .map(|x| self.basis[k * n + x] * block[y * n + x])
+                    .sum();
+            }
+        }
+        let mut out = Vec::with_capacity(n * n);
+        let mut dist = 0.0;
+        for (i, &(kx, ky)) in self.order.iter().enumerate() {
+            let c: f64 = (0..n)
+                .map(|y| self.basis[ky * n + y] * rows[y * n + kx])
+                .sum();
+            let a = c.abs() / step;
+            let dz = if i == 0 { 0.0 } else { deadzone };
+            let m = if a < 0.5 + dz { 0.0 } else { (a - dz).round() };
+            let q = (m.min(1e9) as i32) * if c < 0.0 { -1 } else { 1 };
+            dist += (c - q as f64 * step).powi(2);
+            out.push(q);
+        }
+        (out, dist)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> TappedPlane {
+        TappedPlane {
+            kind: PlaneKind::IntraKeyframe,
+            plane: 0,
+            w,
+            h,
+            data: (0..w * h).map(|i| f(i % w, i / w)).collect(),
+            step: 0.05,
+            deadzone: 0.15,
+        }
+    }
+
+    #[test]
+    fn the_transforms_keep_energy_and_a_fine_step_keeps_the_block() {
+        for n in [8, 16, 32] {
+            let t = Transform::new(n);
+            let block: Vec<f64> = (0..n * n)
+                .map(|i| ((i * 7919) % 101) as f64 / 10.0)
+                .collect();
+            let energy: f64 = block.iter().map(|v| v * v).sum();
+            let (q, dist) = t.quantise(&block, 1e-4, 0.0);
+            let coded: f64 = q.iter().map(|&v| (v as f64 * 1e-4).powi(2)).sum();
+            assert!(
+                (coded - energy).abs() < 1e-3 * energy,
+                "{n}: {coded} against {energy}"
+            );
+            assert!(dist < 1e-6 * n as f64 * n as f64);
+            assert_eq!(t.band.len(), n * n);
+            assert_eq!(t.band[0], 0);
+        }
+    }
+
+    #[test]
+    fn a_smooth_plane_costs_fewer_bytes_in_larger_blocks_at_equal_error() {
+        // A gentle curved ramp with a little texture: what a keyframe's sky-lit slopes are.
+        let p = plane(128, 128, |x, y| {
+            let (u, v) = (x as f32 / 128.0, y as f32 / 128.0);
+            3.0 * u + 2.0 * v * v + 0.02 * ((x * 13 + y * 7) % 5) as f32
+        });
+        let set = [&p];
+        let steps = [0.8, 1.0, 1.25, 1.6];
+        let curve = |way| {
+            steps
+                .iter()
+                .map(|&m| code_all(&set, way, m))
+                .collect::<Vec<_>>()
+        };
+        let small = curve(Way::Size(8));
+        let large = curve(Way::Size(16));
+        let chosen = curve(Way::Choice);
+        let d8 = small[1].dist;
+        assert!(at_distortion(&large, d8) < 0.9 * small[1].bytes);
+        assert!(at_distortion(&chosen, d8) < 0.95 * small[1].bytes);
+        // Larger blocks sum more terms a texel.
+        assert!(large[1].terms / large[1].texels > small[1].terms / small[1].texels);
+    }
+
+    #[test]
+    fn hybrid_tokens_cover_their_values() {
+        for v in [0u32, 1, 15, 16, 17, 31, 32, 1000, 65_535, 1 << 30] {
+            let (t, raw) = token(v);
+            assert!((t as usize) < TOKENS, "{v}");
+            if v >= 16 {
+                let n = 31 - v.leading_zeros();
+                assert_eq!(raw, n - 2);
+            }
+        }
+        assert_eq!(fold(0), 0);
+        assert_eq!(fold(-1), 1);
+        assert_eq!(fold(1), 2);
+    }
+}
