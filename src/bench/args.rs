@@ -82,6 +82,11 @@ pub struct BenchTransformsArgs {
     /// through them at the 8 × 8 blocks' error at 1 (keep 1 among them).
     #[arg(long, default_value = "0.9,1,1.12,1.25,1.4", value_delimiter = ',')]
     pub steps: Vec<f32>,
+    /// What the choices charge for the reconstruction's work: bits per term a texel's
+    /// reconstruction sums, in units of an 8 × 8 block's term (a 16 × 16 block's term counts
+    /// four). 0: bytes and error alone.
+    #[arg(long, default_value_t = 0.0)]
+    pub term_bits: f64,
 }
 
 #[derive(Args)]

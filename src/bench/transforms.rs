@@ -6,9 +6,11 @@
 //! encoder's tap on (`vbim_encoder::bench::tap`), which records every keyframe plane
 //! (the target of the mode kept) and every bubble plane's member tiles with their steps
 //! and dead zone. Each recorded plane is then transformed by an orthonormal DCT of 8 × 8
-//! (what the format does), 16 × 16 or 32 × 32 blocks, or a choice per 16 × 16 region of one
-//! 16 × 16 block or four 8 × 8 ones (the smaller `D + λ·R`, λ = `LAMBDA`·step², bits from
-//! the whole day's statistics of each size), quantised with the plane's step scaled by
+//! (what the format does), 16 × 16 or 32 × 32 blocks, or chosen per region: per 16 × 16
+//! region one 16 × 16 block or four 8 × 8 ones, or a quadtree from 32 × 32 down to 8 × 8
+//! (the smaller `D + λ·(R + term_bits · T)`, λ = `LAMBDA`·step², bits from the plane's
+//! statistics of each size, T the terms its texels sum: `--term-bits` prices the
+//! reconstruction's work), quantised with the plane's step scaled by
 //! each of `--steps` and its dead zone, and coded by one adaptive model for all of them:
 //! per block the DC's residual against the planar prediction (left + up − up-left) in a
 //! context of its neighbours' residual sizes, the count of non-zero AC terms in a context
@@ -17,8 +19,8 @@
 //! left and of its frequency band (for a larger block, the band of the 8 × 8 frequency it
 //! scales down to); tokens are JPEG XL's hybrid-uint (16 direct, then exponent and two
 //! bits, the rest raw), each context's tokens counted as they come (a Krichevsky–Trofimov
-//! estimate: the ideal length of an adaptive arithmetic coder). A choice's regions cost
-//! one flag each in a context of the left and upper regions' choices.
+//! estimate: the ideal length of an adaptive arithmetic coder). A choice codes a flag per
+//! node that could split, in a context of its size.
 //!
 //! Rates are compared at equal distortion: each way's bytes are fitted against its summed
 //! squared error (each plane weighted as the metric weighs it) in log–log over the steps,
@@ -53,6 +55,8 @@ enum Way {
     Size(usize),
     /// Per 16 × 16 region, one 16 × 16 block or four 8 × 8.
     Choice,
+    /// Per 32 × 32 region, one 32 × 32 block or four regions chosen as `Choice` does.
+    Quadtree,
 }
 
 impl Way {
@@ -60,6 +64,7 @@ impl Way {
         match self {
             Way::Size(n) => format!("{n} × {n}"),
             Way::Choice => "8 or 16, per region".into(),
+            Way::Quadtree => "8, 16 or 32, a quadtree".into(),
         }
     }
 }
@@ -73,8 +78,9 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
     ];
     println!(
         "transforms: {}, encoded at --tolerance {} --no-aim in format 2; bytes at the 8 × 8 \
-         blocks' error (steps × {:?}), one adaptive model for every way",
-        a.frames, a.tolerance, a.steps
+         blocks' error (steps × {:?}), one adaptive model for every way; a term a texel sums \
+         priced at {} bits in the choices",
+        a.frames, a.tolerance, a.steps, a.term_bits
     );
     println!("| planes | way | bytes at step × 1 | error | at the 8 × 8 error: bytes | ratio | terms a texel sums |");
     println!("|---|---|---:|---:|---:|---:|---:|");
@@ -85,7 +91,13 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
         if set.is_empty() {
             continue;
         }
-        let ways = [Way::Size(8), Way::Size(16), Way::Size(32), Way::Choice];
+        let ways = [
+            Way::Size(8),
+            Way::Size(16),
+            Way::Size(32),
+            Way::Choice,
+            Way::Quadtree,
+        ];
         // The 8 × 8 blocks' error at step × 1, and their bytes there on their own line.
         let mut base: Option<(f64, f64)> = None;
         for way in ways {
@@ -93,9 +105,18 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
                 .iter()
                 .any(|p| p.w % block_of(way) != 0 || p.h % block_of(way) != 0)
             {
+                // (A quadtree's total counts these planes as the choice codes them.)
+                if way == Way::Quadtree {
+                    let choice = totals.get("choice here").copied().unwrap_or(0.0);
+                    *totals.entry(format!("{way:?}")).or_insert(0.0) += choice;
+                }
                 continue;
             }
-            let points: Vec<Coded> = a.steps.iter().map(|&m| code_all(&set, way, m)).collect();
+            let points: Vec<Coded> = a
+                .steps
+                .iter()
+                .map(|&m| code_all(&set, way, m, a.term_bits))
+                .collect();
             let at1 = a
                 .steps
                 .iter()
@@ -105,6 +126,9 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
                 *base.get_or_insert_with(|| (at_distortion(&points, at1.dist), at1.dist));
             let bytes = at_distortion(&points, d8);
             *totals.entry(format!("{way:?}")).or_insert(0.0) += bytes;
+            if way == Way::Choice {
+                totals.insert("choice here".into(), bytes);
+            }
             *totals.entry("base".into()).or_insert(0.0) +=
                 if way == Way::Size(8) { bytes } else { 0.0 };
             println!(
@@ -120,7 +144,7 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
         }
     }
     let base = totals.get("base").copied().unwrap_or(0.0);
-    for way in [Way::Size(16), Way::Choice] {
+    for way in [Way::Size(16), Way::Choice, Way::Quadtree] {
         if let Some(t) = totals.get(&format!("{way:?}")) {
             println!(
                 "every plane, {}: {:.0} bytes against {:.0} in 8 × 8 blocks, {:.3}",
@@ -138,6 +162,7 @@ fn block_of(way: Way) -> usize {
     match way {
         Way::Size(n) => n,
         Way::Choice => 16,
+        Way::Quadtree => 32,
     }
 }
 
@@ -200,7 +225,7 @@ struct Block {
 }
 
 /// Every plane of `set` coded `way` with its step × `mult`.
-fn code_all(set: &[&TappedPlane], way: Way, mult: f32) -> Coded {
+fn code_all(set: &[&TappedPlane], way: Way, mult: f32, term_bits: f64) -> Coded {
     // Per plane, the blocks in coding order (their contexts already family-tagged).
     let coded: Vec<(f64, Vec<Block>)> = set
         .par_iter()
@@ -209,7 +234,8 @@ fn code_all(set: &[&TappedPlane], way: Way, mult: f32) -> Coded {
             let step = p.step * mult;
             let blocks = match way {
                 Way::Size(n) => tag(quantise_plane(p, n, step), family, n),
-                Way::Choice => choose(p, step, family),
+                Way::Choice => choose(p, step, family, &[8, 16], term_bits),
+                Way::Quadtree => choose(p, step, family, &[8, 16, 32], term_bits),
             };
             (PLANE_WEIGHT[p.plane.min(2)], blocks)
         })
@@ -330,52 +356,71 @@ fn quantise_plane(p: &TappedPlane, n: usize, step: f32) -> Vec<Block> {
         .collect()
 }
 
-/// Per 16 × 16 region, one 16 × 16 block or four 8 × 8 ones: the smaller `D + λ·R`, each
-/// symbol's bits from the plane's own statistics of its size; a flag per region in a
-/// context of its left and upper regions' choices. (The DC residuals and neighbour
-/// contexts of each size are those of its own grid, as if the whole plane had that size:
-/// the study's approximation of a mixed grid.)
-fn choose(p: &TappedPlane, step: f32, family: u32) -> Vec<Block> {
-    let small = tag(quantise_plane(p, 8, step), family, 8);
-    let large = tag(quantise_plane(p, 16, step), family, 16);
-    let cost_small = static_costs(&small);
-    let cost_large = static_costs(&large);
-    let bits = |b: &Block, costs: &HashMap<Symbol, f64>| -> f64 {
-        b.symbols.iter().map(|s| costs[s]).sum()
-    };
-    let (rw, rh) = (p.w / 16, p.h / 16);
+/// One size of a quadtree: its blocks (taken as they are chosen), each one's cost, and the
+/// width of its grid.
+type Level = (Vec<Option<Block>>, Vec<f64>, usize);
+
+/// A quadtree over the sizes `sizes` (smallest first, each twice the one before): per
+/// region of the largest size, the block of that size or its four quarters, each chosen
+/// the same way down to the smallest, by the smaller `D + λ·(R + term_bits · T)`: each
+/// symbol's bits from the plane's own statistics of its size, T the terms the block's
+/// texels sum in units of an 8 × 8 block's (its non-zero terms times its area over 64),
+/// so that `term_bits` prices the reconstruction's work. A node that could split codes a
+/// flag, in a context of its size. (The DC residuals and neighbour contexts of each size
+/// are those of its own grid, as if the whole plane had that size: the study's
+/// approximation of a mixed grid.)
+fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], term_bits: f64) -> Vec<Block> {
     let lambda = LAMBDA * (step as f64).powi(2);
-    let mut small = small.into_iter().map(Some).collect::<Vec<_>>();
-    let mut out = Vec::new();
-    let mut chose = vec![false; rw * rh];
-    for (r, large) in large.into_iter().enumerate() {
-        let (rx, ry) = (r % rw, r / rw);
-        let quad: Vec<usize> = (0..4)
-            .map(|i| (ry * 2 + i / 2) * (rw * 2) + rx * 2 + i % 2)
-            .collect();
-        let j_small: f64 = quad
-            .iter()
-            .map(|&i| {
-                let b = small[i].as_ref().unwrap();
-                b.dist + lambda * bits(b, &cost_small)
-            })
-            .sum();
-        let j_large = large.dist + lambda * bits(&large, &cost_large);
-        let near = (rx > 0 && chose[r - 1]) as u32 + (ry > 0 && chose[r - rw]) as u32;
-        let flag_ctx = (3 << 28) | (family << 20) | near;
-        if j_large < j_small {
-            chose[r] = true;
-            let mut b = large;
-            b.symbols.insert(0, (flag_ctx, 1));
-            out.push(b);
+    // Per size: its blocks (taken as chosen), their costs J, and its grid's width.
+    let mut levels: Vec<Level> = sizes
+        .iter()
+        .map(|&n| {
+            let blocks = tag(quantise_plane(p, n, step), family, n);
+            let costs = static_costs(&blocks);
+            let j = blocks
+                .iter()
+                .map(|b| {
+                    let bits: f64 = b.symbols.iter().map(|s| costs[s]).sum();
+                    let terms = b.terms as f64 * b.area as f64 / 64.0;
+                    b.dist + lambda * (bits + term_bits * terms)
+                })
+                .collect();
+            (blocks.into_iter().map(Some).collect(), j, p.w / n)
+        })
+        .collect();
+    // The best cost of cell (x, y) of level l, and the (level, block) it is coded with.
+    fn best(levels: &[Level], l: usize, x: usize, y: usize) -> (f64, Vec<(usize, usize)>) {
+        let (_, j, w) = &levels[l];
+        let own = (j[y * w + x], vec![(l, y * w + x)]);
+        if l == 0 {
+            return own;
+        }
+        let mut split = (0.0, Vec::new());
+        for i in 0..4 {
+            let (c, picks) = best(levels, l - 1, 2 * x + i % 2, 2 * y + i / 2);
+            split.0 += c;
+            split.1.extend(picks);
+        }
+        if own.0 <= split.0 {
+            own
         } else {
-            for (k, &i) in quad.iter().enumerate() {
-                let mut b = small[i].take().unwrap();
-                if k == 0 {
-                    b.symbols.insert(0, (flag_ctx, 0));
-                }
-                out.push(b);
+            split
+        }
+    }
+    let top = sizes.len() - 1;
+    let (tw, th) = (levels[top].2, p.h / sizes[top]);
+    let mut out = Vec::new();
+    for r in 0..tw * th {
+        let (_, picks) = best(&levels, top, r % tw, r / tw);
+        for (l, i) in picks {
+            let mut b = levels[l].0[i].take().expect("each block picked once");
+            // The flags of the nodes above it (a block coded whole at level l below the
+            // top answered "split" at each level above and, if it could split, "whole").
+            if l > 0 {
+                b.symbols
+                    .insert(0, ((3 << 28) | (family << 20) | l as u32, 0));
             }
+            out.push(b);
         }
     }
     out
@@ -610,7 +655,7 @@ mod tests {
         let curve = |way| {
             steps
                 .iter()
-                .map(|&m| code_all(&set, way, m))
+                .map(|&m| code_all(&set, way, m, 0.0))
                 .collect::<Vec<_>>()
         };
         let small = curve(Way::Size(8));
@@ -621,6 +666,26 @@ mod tests {
         assert!(at_distortion(&chosen, d8) < 0.95 * small[1].bytes);
         // Larger blocks sum more terms a texel.
         assert!(large[1].terms / large[1].texels > small[1].terms / small[1].texels);
+        let quad = curve(Way::Quadtree);
+        assert!(at_distortion(&quad, d8) < 0.95 * small[1].bytes);
+    }
+
+    #[test]
+    fn pricing_the_terms_picks_smaller_blocks() {
+        // A ramp with a sharp shadow edge: large blocks win the ramp, lose at the edge.
+        let p = plane(128, 128, |x, y| {
+            let edge = if x + y / 2 > 70 { 1.0 } else { 0.2 };
+            edge + 0.01 * x as f32 + 0.005 * y as f32
+        });
+        let terms = |bits| {
+            let c = code_all(&[&p], Way::Quadtree, 1.0, bits);
+            c.terms / c.texels
+        };
+        let free = terms(0.0);
+        let priced = terms(64.0);
+        let small = code_all(&[&p], Way::Size(8), 1.0, 0.0);
+        assert!(priced < free, "{priced} against {free}");
+        assert!(priced <= free.min(small.terms / small.texels * 1.5));
     }
 
     #[test]
