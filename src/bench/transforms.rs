@@ -365,8 +365,8 @@ type Level = (Vec<Option<Block>>, Vec<f64>, usize);
 /// the same way down to the smallest, by the smaller `D + λ·(R + term_bits · T)`: each
 /// symbol's bits from the plane's own statistics of its size, T the terms the block's
 /// texels sum in units of an 8 × 8 block's (its non-zero terms times its area over 64),
-/// so that `term_bits` prices the reconstruction's work. A node that could split codes a
-/// flag, in a context of its size. (The DC residuals and neighbour contexts of each size
+/// so that `term_bits` prices the reconstruction's work. Every node that could split codes
+/// whether it did, in a context of its size, before the first block under it. (The DC residuals and neighbour contexts of each size
 /// are those of its own grid, as if the whole plane had that size: the study's
 /// approximation of a mixed grid.)
 fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], term_bits: f64) -> Vec<Block> {
@@ -388,14 +388,19 @@ fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], term_bits: f
             (blocks.into_iter().map(Some).collect(), j, p.w / n)
         })
         .collect();
-    // The best cost of cell (x, y) of level l, and the (level, block) it is coded with.
-    fn best(levels: &[Level], l: usize, x: usize, y: usize) -> (f64, Vec<(usize, usize)>) {
+    // The best cost of cell (x, y) of level l, and how it is coded: the blocks (level,
+    // index) in order, each after the split flags (level, split) of the nodes opened
+    // since the block before.
+    fn best(levels: &[Level], l: usize, x: usize, y: usize) -> (f64, Vec<Coding>) {
         let (_, j, w) = &levels[l];
-        let own = (j[y * w + x], vec![(l, y * w + x)]);
         if l == 0 {
-            return own;
+            return (j[y * w + x], vec![Coding::Block(l, y * w + x)]);
         }
-        let mut split = (0.0, Vec::new());
+        let own = (
+            j[y * w + x],
+            vec![Coding::Flag(l, 0), Coding::Block(l, y * w + x)],
+        );
+        let mut split = (0.0, vec![Coding::Flag(l, 1)]);
         for i in 0..4 {
             let (c, picks) = best(levels, l - 1, 2 * x + i % 2, 2 * y + i / 2);
             split.0 += c;
@@ -412,18 +417,28 @@ fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], term_bits: f
     let mut out = Vec::new();
     for r in 0..tw * th {
         let (_, picks) = best(&levels, top, r % tw, r / tw);
-        for (l, i) in picks {
-            let mut b = levels[l].0[i].take().expect("each block picked once");
-            // The flags of the nodes above it (a block coded whole at level l below the
-            // top answered "split" at each level above and, if it could split, "whole").
-            if l > 0 {
-                b.symbols
-                    .insert(0, ((3 << 28) | (family << 20) | l as u32, 0));
+        let mut flags = Vec::new();
+        for pick in picks {
+            match pick {
+                Coding::Flag(l, split) => {
+                    flags.push(((3 << 28) | (family << 20) | l as u32, split));
+                }
+                Coding::Block(l, i) => {
+                    let mut b = levels[l].0[i].take().expect("each block picked once");
+                    b.symbols.splice(0..0, flags.drain(..));
+                    out.push(b);
+                }
             }
-            out.push(b);
         }
     }
     out
+}
+
+/// One step of a quadtree's coding: a node's split flag (its level, 1 if split), or a
+/// block (its level and index in that level's grid).
+enum Coding {
+    Flag(usize, u32),
+    Block(usize, usize),
 }
 
 /// Each symbol's ideal length in bits under its context's own statistics over `blocks`.
