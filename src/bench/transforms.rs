@@ -513,32 +513,15 @@ fn size_class(r: i32) -> u32 {
     }
 }
 
-/// Buckets of how many non-zero terms are left (format 2's, extended for larger blocks).
+/// Buckets of how many non-zero terms are left: format 2's up to 32, then more for larger
+/// blocks.
 fn left_bucket(n: u32) -> u32 {
     match n {
-        0..=4 => n.saturating_sub(1),
-        5..=6 => 4,
-        7..=8 => 5,
-        9..=12 => 6,
-        13..=16 => 7,
-        17..=24 => 8,
-        25..=32 => 9,
+        0 => 0,
+        1..=32 => vbim_format::plane2::left_bucket(n as usize) as u32,
         33..=64 => 10,
         65..=128 => 11,
         _ => 12,
-    }
-}
-
-/// Format 2's frequency bands of an 8 × 8 block's zig-zag index.
-fn band8(i: usize) -> u32 {
-    match i {
-        0..=5 => i as u32,
-        6..=7 => 6,
-        8..=10 => 7,
-        11..=15 => 8,
-        16..=23 => 9,
-        24..=35 => 10,
-        _ => 11,
     }
 }
 
@@ -582,7 +565,7 @@ impl Transform {
             .collect();
         let band = order
             .iter()
-            .map(|&(x, y)| band8(of8[&(x * 8 / n, y * 8 / n)]))
+            .map(|&(x, y)| vbim_format::plane2::band(of8[&(x * 8 / n, y * 8 / n)]) as u32)
             .collect();
         Transform {
             n,
