@@ -60,6 +60,7 @@ pub use vbim_files::Progress;
 /// What `vbim bench` measures of the encoder's internals (the `bench` feature).
 #[cfg(feature = "bench")]
 pub mod bench {
+    pub use crate::model::PLANE_WEIGHT;
     pub use crate::payloads::{cluster, HISTOGRAMS};
     /// What the quantiser is handed, recorded for `vbim bench transforms`.
     pub mod tap {

@@ -34,16 +34,15 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 use vbim_encoder::bench::tap::{self, PlaneKind, TappedPlane};
+use vbim_encoder::bench::PLANE_WEIGHT;
 use vbim_encoder::{encode, EncoderConfig, FrameSet, Preset};
+use vbim_format::ans::{self, TOKENS};
+use vbim_format::plane2;
 
 use super::args::BenchTransformsArgs;
 
 /// λ of the per-region choice, in squared steps per bit.
 const LAMBDA: f64 = 0.12;
-/// Each plane's weight in the metric's squared error (luma, Co, Cg).
-const PLANE_WEIGHT: [f64; 3] = [1.0, 2.0 / 3.0, 1.0];
-/// The tokens of the hybrid-uint code (values to 2^32).
-const TOKENS: usize = 128;
 
 /// Which recorded planes a row of the table is about.
 type Pick = fn(PlaneKind) -> bool;
@@ -59,7 +58,24 @@ enum Way {
     Quadtree,
 }
 
+/// Every way, 8 × 8 (today's) first.
+const WAYS: [Way; 5] = [
+    Way::Size(8),
+    Way::Size(16),
+    Way::Size(32),
+    Way::Choice,
+    Way::Quadtree,
+];
+
 impl Way {
+    /// The way whose bytes stand for this one's on planes it cannot code.
+    fn fallback(self) -> Way {
+        match self {
+            Way::Quadtree => Way::Choice,
+            _ => Way::Size(8),
+        }
+    }
+
     fn label(self) -> String {
         match self {
             Way::Size(n) => format!("{n} × {n}"),
@@ -84,32 +100,21 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
     );
     println!("| planes | way | bytes at step × 1 | error | at the 8 × 8 error: bytes | ratio | terms a texel sums |");
     println!("|---|---|---:|---:|---:|---:|---:|");
-    // Per way, the bytes of every group it could code (at each group's 8 × 8 error).
-    let mut totals: HashMap<String, f64> = HashMap::new();
+    // Per way (in `WAYS`' order), the bytes of every group at each group's 8 × 8 error.
+    let mut totals = [0.0; WAYS.len()];
     for (name, pick) in groups {
         let set: Vec<&TappedPlane> = planes.iter().filter(|p| pick(p.kind)).collect();
         if set.is_empty() {
             continue;
         }
-        let ways = [
-            Way::Size(8),
-            Way::Size(16),
-            Way::Size(32),
-            Way::Choice,
-            Way::Quadtree,
-        ];
-        // The 8 × 8 blocks' error at step × 1, and their bytes there on their own line.
+        // The 8 × 8 blocks' bytes on their own line and their error, at step × 1.
         let mut base: Option<(f64, f64)> = None;
-        for way in ways {
+        let mut bytes_of = [None; WAYS.len()];
+        for (w, way) in WAYS.into_iter().enumerate() {
             if set
                 .iter()
                 .any(|p| p.w % block_of(way) != 0 || p.h % block_of(way) != 0)
             {
-                // (A quadtree's total counts these planes as the choice codes them.)
-                if way == Way::Quadtree {
-                    let choice = totals.get("choice here").copied().unwrap_or(0.0);
-                    *totals.entry(format!("{way:?}")).or_insert(0.0) += choice;
-                }
                 continue;
             }
             let points: Vec<Coded> = a
@@ -125,12 +130,7 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
             let (b8, d8) =
                 *base.get_or_insert_with(|| (at_distortion(&points, at1.dist), at1.dist));
             let bytes = at_distortion(&points, d8);
-            *totals.entry(format!("{way:?}")).or_insert(0.0) += bytes;
-            if way == Way::Choice {
-                totals.insert("choice here".into(), bytes);
-            }
-            *totals.entry("base".into()).or_insert(0.0) +=
-                if way == Way::Size(8) { bytes } else { 0.0 };
+            bytes_of[w] = Some(bytes);
             println!(
                 "| {name} ({} planes) | {} | {:.0} | {:.4e} | {:.0} | {:.3} | {:.2} |",
                 set.len(),
@@ -142,16 +142,23 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
                 at1.terms / at1.texels
             );
         }
+        // A way that cannot code these planes counts them as its fallback codes them (a
+        // quadtree's bubble planes of 16-texel tiles: as the choice).
+        for (w, way) in WAYS.into_iter().enumerate() {
+            let fallback = WAYS.iter().position(|&f| f == way.fallback());
+            totals[w] += bytes_of[w]
+                .or(fallback.and_then(|f| bytes_of[f]))
+                .unwrap_or(0.0);
+        }
     }
-    let base = totals.get("base").copied().unwrap_or(0.0);
-    for way in [Way::Size(16), Way::Choice, Way::Quadtree] {
-        if let Some(t) = totals.get(&format!("{way:?}")) {
+    for (w, way) in WAYS.into_iter().enumerate() {
+        if matches!(way, Way::Size(16) | Way::Choice | Way::Quadtree) {
             println!(
                 "every plane, {}: {:.0} bytes against {:.0} in 8 × 8 blocks, {:.3}",
                 way.label(),
-                t,
-                base,
-                t / base
+                totals[w],
+                totals[0],
+                totals[w] / totals[0]
             );
         }
     }
@@ -335,7 +342,7 @@ fn quantise_plane(p: &TappedPlane, n: usize, step: f32) -> Vec<Block> {
                 (x >= 0 && y >= 0 && count[y as usize * bw + x as usize] > 0) as u32
             };
             let mut symbols = vec![
-                (near(&size_at).min(3), fold(r)),
+                (near(&size_at).min(3), plane2::pack(r)),
                 (10 + size_class(r) * 3 + near(&busy_at), count[b]),
             ];
             let mut left = count[b];
@@ -343,7 +350,7 @@ fn quantise_plane(p: &TappedPlane, n: usize, step: f32) -> Vec<Block> {
                 if left == 0 {
                     break;
                 }
-                symbols.push((100 + left_bucket(left) * 12 + t.band[i], fold(v)));
+                symbols.push((100 + left_bucket(left) * 12 + t.band[i], plane2::pack(v)));
                 left -= (v != 0) as u32;
             }
             Block {
@@ -366,9 +373,9 @@ type Level = (Vec<Option<Block>>, Vec<f64>, usize);
 /// symbol's bits from the plane's own statistics of its size, T the terms the block's
 /// texels sum in units of an 8 × 8 block's (its non-zero terms times its area over 64),
 /// so that `term_bits` prices the reconstruction's work. Every node that could split codes
-/// whether it did, in a context of its size, before the first block under it. (The DC residuals and neighbour contexts of each size
-/// are those of its own grid, as if the whole plane had that size: the study's
-/// approximation of a mixed grid.)
+/// whether it did, in a context of its size, before the first block under it. (The DC
+/// residuals and neighbour contexts of each size are those of its own grid, as if the
+/// whole plane had that size: the study's approximation of a mixed grid.)
 fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], term_bits: f64) -> Vec<Block> {
     let lambda = LAMBDA * (step as f64).powi(2);
     // Per size: its blocks (taken as chosen), their costs J, and its grid's width.
@@ -487,30 +494,14 @@ impl Model {
     }
 }
 
-/// JPEG XL's hybrid-uint token of `v` (4-2-0) and its raw bits.
+/// Format 2's hybrid-uint token of `v` and its raw bits' count.
 fn token(v: u32) -> (u32, u32) {
-    if v < 16 {
-        return (v, 0);
-    }
-    let n = 31 - v.leading_zeros();
-    let m = (v >> (n - 2)) & 3;
-    (16 + 4 * (n - 4) + m, n - 2)
-}
-
-fn fold(v: i32) -> u32 {
-    if v >= 0 {
-        2 * v as u32
-    } else {
-        2 * v.unsigned_abs() - 1
-    }
+    let (t, raw, _) = ans::hybrid_uint(v);
+    (t as u32, raw)
 }
 
 fn size_class(r: i32) -> u32 {
-    match r.unsigned_abs() {
-        0 => 0,
-        1..=2 => 1,
-        _ => 2,
-    }
+    plane2::size_class(r) as u32
 }
 
 /// Buckets of how many non-zero terms are left: format 2's up to 32, then more for larger
@@ -518,7 +509,7 @@ fn size_class(r: i32) -> u32 {
 fn left_bucket(n: u32) -> u32 {
     match n {
         0 => 0,
-        1..=32 => vbim_format::plane2::left_bucket(n as usize) as u32,
+        1..=32 => plane2::left_bucket(n as usize) as u32,
         33..=64 => 10,
         65..=128 => 11,
         _ => 12,
@@ -565,7 +556,7 @@ impl Transform {
             .collect();
         let band = order
             .iter()
-            .map(|&(x, y)| vbim_format::plane2::band(of8[&(x * 8 / n, y * 8 / n)]) as u32)
+            .map(|&(x, y)| plane2::band(of8[&(x * 8 / n, y * 8 / n)]) as u32)
             .collect();
         Transform {
             n,
@@ -696,8 +687,8 @@ mod tests {
                 assert_eq!(raw, n - 2);
             }
         }
-        assert_eq!(fold(0), 0);
-        assert_eq!(fold(-1), 1);
-        assert_eq!(fold(1), 2);
+        assert_eq!(plane2::pack(0), 0);
+        assert_eq!(plane2::pack(-1), 1);
+        assert_eq!(plane2::pack(1), 2);
     }
 }
