@@ -88,18 +88,7 @@ fn tap_keyframe(frame: &CodedFrame, reference: Option<&[Plane]>, p: &KeyParams, 
     if !crate::tap::active() {
         return;
     }
-    // The step `model::code_keyframe` derives.
-    let base = ((12.0f64).sqrt() * p.budget / sens_rms.max(1e-9)) as f32;
     for (pl, src) in frame.planes.iter().enumerate() {
-        let data = match reference {
-            Some(r) => src
-                .data
-                .iter()
-                .zip(&r[pl].data)
-                .map(|(a, b)| a - b)
-                .collect(),
-            None => src.data.clone(),
-        };
         crate::tap::record(TappedPlane {
             kind: match reference {
                 Some(_) => PlaneKind::PredictedKeyframe,
@@ -108,12 +97,8 @@ fn tap_keyframe(frame: &CodedFrame, reference: Option<&[Plane]>, p: &KeyParams, 
             plane: pl,
             w: src.w,
             h: src.h,
-            data,
-            step: if pl == 0 {
-                base
-            } else {
-                base * p.chroma_step_factor
-            },
+            data: model::keyframe_target(frame, reference, pl).data,
+            step: model::keyframe_step(p.budget, sens_rms, p.chroma_step_factor, pl),
             deadzone: p.deadzone,
         });
     }

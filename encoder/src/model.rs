@@ -620,6 +620,35 @@ fn quantize(c: &[[f32; N * N]], step: f32, deadzone: f32, rate_lambda: f32) -> V
 /// its error `budget` (metric units) weighed at RMS sensitivity `sens_rms` (that of the
 /// frames it reaches, `reach::keyframe`). Returns the payload before its coding for the
 /// file's version; the caller decodes it with the reference decoder (closed loop).
+/// The quantiser's step of a keyframe's plane `pl`: the budget's error at the RMS
+/// sensitivity the keyframe is weighed by, chroma's scaled.
+pub(crate) fn keyframe_step(budget: f64, sens_rms: f64, chroma_step_factor: f32, pl: usize) -> f32 {
+    let base = ((12.0f64).sqrt() * budget / sens_rms.max(1e-9)) as f32;
+    if pl == 0 {
+        base
+    } else {
+        base * chroma_step_factor
+    }
+}
+
+/// What a keyframe's plane `pl` codes: the frame's plane, or its difference from `prev`'s.
+pub(crate) fn keyframe_target(src: &CodedFrame, prev: Option<&[Plane]>, pl: usize) -> Plane {
+    let plane_src = &src.planes[pl];
+    match prev {
+        Some(p) => Plane {
+            w: plane_src.w,
+            h: plane_src.h,
+            data: plane_src
+                .data
+                .iter()
+                .zip(&p[pl].data)
+                .map(|(a, b)| a - b)
+                .collect(),
+        },
+        None => plane_src.clone(),
+    }
+}
+
 pub fn code_keyframe(
     src: &CodedFrame,
     prev: Option<&[Plane]>,
@@ -629,29 +658,12 @@ pub fn code_keyframe(
     deadzone: f32,
     rate_lambda: f32,
 ) -> Vec<u8> {
-    let base = ((12.0f64).sqrt() * budget / sens_rms.max(1e-9)) as f32;
     let mut steps = Vec::new();
     let mut blocks = Vec::new();
-    for (pl, plane_src) in src.planes.iter().enumerate() {
-        let step = if pl == 0 {
-            base
-        } else {
-            base * chroma_step_factor
-        };
+    for pl in 0..src.planes.len() {
+        let step = keyframe_step(budget, sens_rms, chroma_step_factor, pl);
         steps.push(step);
-        let target: Plane = match prev {
-            Some(p) => Plane {
-                w: plane_src.w,
-                h: plane_src.h,
-                data: plane_src
-                    .data
-                    .iter()
-                    .zip(&p[pl].data)
-                    .map(|(a, b)| a - b)
-                    .collect(),
-            },
-            None => plane_src.clone(),
-        };
+        let target = keyframe_target(src, prev, pl);
         let origins: Vec<(usize, usize)> = plane::all_blocks(&target).collect();
         let c: Vec<[f32; N * N]> = origins
             .par_iter()
