@@ -2,9 +2,11 @@
 //! same frames as in version 1,
 //! in fewer bytes, and `convert` turns either into the other byte for byte.
 
+mod common;
+
 use std::io::Cursor;
 
-use vbim_encoder::{convert, encode, EncoderConfig, FormatVersion, InputKind, MemorySource};
+use vbim_encoder::{convert, encode, EncoderConfig, FormatVersion, MemorySource};
 use vbim_encoder::{Preset, SegmentMode};
 use vbim_format::decode::{Decoder, Output};
 use vbim_format::{ChunkKind, Reader};
@@ -15,26 +17,7 @@ const FRAMES: usize = 30;
 
 /// A smooth day with a moving shadow edge and some fine, periodic texture.
 fn source() -> MemorySource {
-    let frames = (0..FRAMES)
-        .map(|t| {
-            let s = t as f32 / FRAMES as f32;
-            (0..W * H)
-                .flat_map(|i| {
-                    let (x, y) = ((i % W) as f32, (i / W) as f32);
-                    let sun = (3.0 * s).sin().max(0.05);
-                    let edge = if x + 0.5 * y > 10.0 + 30.0 * s {
-                        1.0
-                    } else {
-                        0.3
-                    };
-                    let grain = 0.02 * ((x * 7.3 + y * 3.1).sin());
-                    let v = sun * edge * (0.6 + 0.004 * x) + grain + 0.05;
-                    [v, v * 0.9, v * 0.7 + 0.01 * y / H as f32]
-                })
-                .collect()
-        })
-        .collect();
-    MemorySource::new("versions", W, H, 3, InputKind::Hdr, frames)
+    common::moving_edge_day("versions", W, H, FRAMES)
 }
 
 /// The sequence coded in `format`, with the rate-aware quantiser off (versions 2 and 3

@@ -2,34 +2,19 @@
 //! keyframe plane and every bubble plane the quantiser is handed, and nothing when off.
 #![cfg(feature = "bench")]
 
+mod common;
+
 use std::io::Cursor;
 
 use vbim_encoder::bench::tap::{self, PlaneKind};
-use vbim_encoder::{encode, EncoderConfig, InputKind, MemorySource, Preset, SegmentMode};
+use vbim_encoder::{encode, EncoderConfig, MemorySource, Preset, SegmentMode};
 
 const W: usize = 64;
 const H: usize = 48;
 const FRAMES: usize = 24;
 
 fn source() -> MemorySource {
-    let frames = (0..FRAMES)
-        .map(|t| {
-            let s = t as f32 / FRAMES as f32;
-            (0..W * H)
-                .flat_map(|i| {
-                    let (x, y) = ((i % W) as f32, (i / W) as f32);
-                    let edge = if x + 0.5 * y > 10.0 + 30.0 * s {
-                        1.0
-                    } else {
-                        0.3
-                    };
-                    let v = (3.0 * s).sin().max(0.05) * edge * (0.6 + 0.004 * x) + 0.05;
-                    [v, v * 0.9, v * 0.7 + 0.01 * y]
-                })
-                .collect()
-        })
-        .collect();
-    MemorySource::new("tap", W, H, 3, InputKind::Hdr, frames)
+    common::moving_edge_day("tap", W, H, FRAMES)
 }
 
 #[test]
