@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The runtime's GPU figures on a hardware GPU, in one short run: for every stream in DIR,
 # the GPU time of a displayed frame against a reference blend (`vbim bench render`, a
-# 60 Hz display), where it goes, pass by pass (`--passes`, one run: its frames include the
+# 60 Hz display, with a game's own GPU work of GAME_LOAD ms (8 by default) before each
+# frame, as a game keeps its card's clock up, and without it), where it goes, pass by pass (`--passes`, one run: its frames include the
 # timestamps' own cost) and a segment's GPU decode by pass (`vbim bench decode --gpu
 # --fit`, with the card's latency per dispatch and cost per unit of each pass; for a
 # format 2.0 or 3.0 file also with its sections decoded on the GPU as coded, `--lanes true`,
@@ -27,6 +28,7 @@ out=${2:?usage: scripts/device_bench.sh DIR OUT}
 vbim=${VBIM:-target/release/vbim}
 frames=${FRAMES:-240}
 runs=${RUNS:-3}
+load=${GAME_LOAD:-8}
 mkdir -p "$out"
 log="$out/device.log"
 : >"$log"
@@ -35,10 +37,13 @@ streams=("$dir"/*.vbim)
 for f in "${streams[@]}"; do
     echo "== $f" | tee -a "$log"
     "$vbim" inspect "$f" 2>&1 | sed -n 1,4p | tee -a "$log"
-    # The frame as a game pays it, then where its time goes (the timestamps between
-    # passes add their own cost to that run's frames).
+    # The frame as a game pays it (the card busy with the game's own work for about
+    # GAME_LOAD ms of each display period, then idle between frames as a bare benchmark
+    # leaves it), then where its time goes (the timestamps between passes add their own
+    # cost to that run's frames).
+    "$vbim" bench render "$f" --frames "$frames" --runs "$runs" --game-load "$load" 2>&1 | tee -a "$log"
     "$vbim" bench render "$f" --frames "$frames" --runs "$runs" 2>&1 | tee -a "$log"
-    "$vbim" bench render "$f" --frames "$frames" --runs 1 --passes \
+    "$vbim" bench render "$f" --frames "$frames" --runs 1 --passes --game-load "$load" \
         --csv "$out/render-$(basename "$f" .vbim).csv" 2>&1 | tee -a "$log"
     "$vbim" bench decode "$f" --gpu --fit --runs "$runs" 2>&1 | tee -a "$log"
     # (sed reads all of it: no broken pipe for `pipefail` to report.)

@@ -178,6 +178,11 @@ pub struct BenchRenderArgs {
     /// and print where the frames' GPU time goes: each decode kind and the reconstruction.
     #[arg(long)]
     pub passes: bool,
+    /// A game's own GPU work: a compute pass of about this many milliseconds submitted
+    /// before each displayed frame, untimed (0: none), so that a hardware GPU keeps the
+    /// clock a game keeps it at rather than idling between frames.
+    #[arg(long, default_value_t = 0.0)]
+    pub game_load: f64,
 }
 
 #[derive(Args)]

@@ -5,7 +5,7 @@
 //!
 //! `args` (the flags), `offline` (the baker, the lossless baseline, the plots of the
 //! scripts' CSVs), `runtime` (the decoder, drift under bandwidth caps, the render thread; `frame_gpu`
-//! times each displayed frame's GPU work and the reference blend),
+//! times each displayed frame's GPU work and the reference blend, `game_load` stands in for a game's own GPU work),
 //! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
 //! and `entropy` (what a context-adaptive coder would save: a research harness for the
 //! format's next coding); `transforms` (what larger transforms would make of the planes the
@@ -17,6 +17,7 @@ mod changes;
 mod entropy;
 mod fit;
 mod frame_gpu;
+mod game_load;
 mod objects;
 mod offline;
 mod runtime;

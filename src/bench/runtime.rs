@@ -232,7 +232,7 @@ fn each_payload(
 /// A decode shape in words, for the benchmarks' first line.
 fn describe(s: &vbim_player::DecodeShape) -> String {
     format!(
-        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}, DCT tables in a {} buffer, {} an invocation of the reconstruction{}",
+        "dispatches of {} workgroups, {} parse, groups of blocks split in up to {}, {} blocks per step, {} weights, version 2 sections {}, DCT tables in a {} buffer, {} an invocation of the reconstruction, {}",
         s.slice_groups,
         if s.wide_parse { "wide" } else { "serial" },
         s.group_split,
@@ -510,6 +510,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         }
         let timer = FrameTimer::new(&device, &queue, (header.width, header.height));
         timed = timer.is_some();
+        let load = super::game_load::GameLoad::new(&device, &queue, a.game_load);
         h = Some(header);
         let mut series: [Vec<f64>; 8] = Default::default();
         let mut rows = String::from(
@@ -523,6 +524,11 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             let wall = start.elapsed().as_nanos() as u64;
             if t > wall {
                 std::thread::sleep(std::time::Duration::from_nanos(t - wall));
+            }
+            if let Some(load) = &load {
+                let mut enc = device.create_command_encoder(&Default::default());
+                load.record(&mut enc);
+                queue.submit([enc.finish()]);
             }
             let (c0, t0) = (thread_cpu_ns(), Instant::now());
             // The display's pace; the media advances `slow` times slower.
@@ -616,13 +622,21 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         );
     };
     println!(
-        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode shape: {}, reuse share {}; median over runs (min–max)",
+        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode shape: {}, reuse share {}{}; median over runs (min–max)",
         h.width, h.height, h.rate_num, h.rate_den,
         if a.slow > 1 { format!(" played {}× slower", a.slow) } else { String::new() },
         a.frames, runs.len(), info.name, info.backend,
         a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame")),
         describe(&a.shape.shape(&info)),
-        a.reuse_share
+        a.reuse_share,
+        if a.game_load > 0.0 {
+            format!(
+                ", a game's load of about {} ms before each frame (its time is in the wall clock's \"submission to completion\" of the frame, not in the timestamps)",
+                a.game_load
+            )
+        } else {
+            String::new()
+        }
     );
     line(
         "render thread CPU time, advance = plan + record + submit",
