@@ -194,6 +194,8 @@ impl Gpu {
         if let Some(slot) = target.pack_first {
             pack(self, ops, slot);
         }
+        // The next slot of the ring of masks a parse takes (0: the ring is cleared first).
+        let mut ring = 0;
         let last = seg.steps.len().saturating_sub(1);
         for (n, st) in seg.steps.iter().enumerate() {
             if n == last {
@@ -204,8 +206,9 @@ impl Gpu {
             for p in 0..ch {
                 let span = &seg.planes[st.plane + p as usize];
                 for job in self.part_jobs(span, p) {
+                    let job = self.mask_slot(ops, job, span, &mut ring);
                     let blocks = job.hi - job.lo.min(job.hi);
-                    self.coef_ops(ops, (span, &seg.sections), job, blocks, p);
+                    self.coef_ops(ops, (span, &seg.sections), job, p);
                     // A predicted keyframe is added onto the head (the keyframe it
                     // follows); an intra one is written over it, zeros and all.
                     let intra = st.intra as u32;
@@ -242,7 +245,8 @@ impl Gpu {
                     if blocks == 0 {
                         continue;
                     }
-                    self.coef_ops(ops, (span, &seg.sections), job, blocks, 0);
+                    let job = self.mask_slot(ops, job, span, &mut ring);
+                    self.coef_ops(ops, (span, &seg.sections), job, 0);
                     let units = (blocks as u64, 64);
                     let groups = blocks.div_ceil(64);
                     self.sliced(ops, Kind::BubbleGather, job, groups, set, units);
@@ -426,21 +430,49 @@ impl Gpu {
         ops: &mut Vec<Op>,
         (span, sections): (&crate::coded::PlaneSpan, &[crate::coded::SectionSpan]),
         job: Job,
-        blocks: u32,
         channel: u32,
     ) {
         match span.lanes {
             Some(lanes) => self.lane_ops(ops, (span, lanes), sections, channel),
-            None => self.parse_ops(ops, job, blocks, channel),
+            None => self.parse_ops(ops, job, channel),
         }
     }
 
-    /// The masks and sets of the dense plane's first `blocks` blocks cleared, then the
-    /// part of `job` parsed into it from its entry points. (The coefficients themselves
-    /// need no clearing: only those whose mask bit the parse sets are ever read.)
-    fn parse_ops(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
-        let bytes = groups_offset(self.part) + group_bytes(blocks);
-        ops.push(Op::clear(bytes, channel));
+    /// `job` with the slot of the ring of masks its part's parse fills and its block pass
+    /// reads: the next one, the whole ring cleared first when `*ring` has come round to
+    /// the first. A version 2 plane decoded as coded takes the first slot, which its own
+    /// first pass clears (`lanes.wgsl`, `prepare`), and leaves the ring where it was: the
+    /// slot is the next parse's only right after the ring's clear.
+    fn mask_slot(
+        &self,
+        ops: &mut Vec<Op>,
+        job: Job,
+        span: &crate::coded::PlaneSpan,
+        ring: &mut u32,
+    ) -> Job {
+        let slot = if span.lanes.is_some() {
+            0
+        } else {
+            if *ring == 0 {
+                ops.push(Op::clear(self.masks.size(), 0));
+            }
+            let slot = *ring;
+            *ring = (*ring + 1) % self.mask_slots;
+            slot
+        };
+        let at = slot as u64 * slot_bytes(self.part);
+        Job {
+            masks_at: (at / 4) as u32,
+            sets_at: ((at + groups_offset(self.part)) / 4) as u32,
+            ..job
+        }
+    }
+
+    /// The part of `job` parsed into the dense plane from its entry points, its masks and
+    /// sets into the job's slot of the ring (cleared before: [`Gpu::mask_slot`]). (The
+    /// coefficients themselves need no clearing: only those whose mask bit the parse sets
+    /// are ever read.)
+    fn parse_ops(&mut self, ops: &mut Vec<Op>, job: Job, channel: u32) {
         // An invocation per piece, 64 to a workgroup; or a workgroup per piece.
         let (kind, groups, per_group) = match self.shape.wide_parse {
             false => (Kind::Parse, job.count.div_ceil(64), 64),

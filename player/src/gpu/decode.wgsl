@@ -32,10 +32,12 @@
 // The previous keyframe's range per region of REGION² texels and plane: (lowest value,
 // step), region (x, y) of plane p at (p · regions.y + y) · regions.x + x.
 @group(0) @binding(5) var<storage, read_write> ranges: array<vec2<f32>>;
-// The dense plane `parse` filled: block d's coefficients at 64 · d …, its mask at d.
+// The dense plane `parse` filled: block d's coefficients at 64 · d …, its mask at d of
+// the part's slot of the ring of masks (`job.masks_at`, in words).
 @group(0) @binding(6) var<storage, read> coefs: array<i32>;
 @group(0) @binding(7) var<storage, read> masks: array<vec2<u32>>;
-// Per group of GROUP_BLOCKS blocks, which have a coefficient (a 64-bit set, from `parse`):
+// Per group of GROUP_BLOCKS blocks, which have a coefficient (a 64-bit set, from `parse`,
+// at `job.sets_at` in words):
 // a workgroup visits only those. (Checking every block in every invocation cost lavapipe,
 // which runs a workgroup's invocations eight at a time, more than decoding the blocks of
 // a sparse predicted keyframe; so did sharing the check through workgroup memory, whose
@@ -104,7 +106,7 @@ fn first_span(first: u32) -> u32 {
 
 // Block d's mask (in the part).
 fn mask(d: u32) -> vec2<u32> {
-    return masks[d];
+    return masks[job.masks_at / 2u + d];
 }
 
 // The sums at texels (x, y) and, with `pair`, (x + 1, y) of block d (in the part) onto
@@ -162,7 +164,7 @@ fn group_share(wg: vec3<u32>) -> Share {
     let first = job.lo + g * GROUP_BLOCKS;
     let n = select(0u, min(job.hi - first, GROUP_BLOCKS), first < job.hi);
     let inside = vec2<u32>(bits_between(0u, min(n, 32u)), bits_between(0u, max(n, 32u) - 32u));
-    return Share(g, bits_of(groups[g] & keep), bits_of(keep & inside));
+    return Share(g, bits_of(groups[job.sets_at / 2u + g] & keep), bits_of(keep & inside));
 }
 
 // A keyframe plane's blocks added onto what the plane holds (the reference keyframe) for

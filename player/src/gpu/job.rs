@@ -80,9 +80,11 @@ uniform_struct! {
     term: u32 => "u32",
     /// `bubble_gather`: the word of the degrees buffer that counts the set's terms.
     counter: u32 => "u32",
+    /// The first word of the part's masks in the ring of masks ([`super::plan::MaskRing`]).
+    masks_at: u32 => "u32",
+    /// The first word of the part's sets of blocks with a coefficient in the ring.
+    sets_at: u32 => "u32",
     /// (A uniform struct's size is a multiple of 16 bytes.)
-    pad0: u32 => "u32",
-    pad1: u32 => "u32",
     pad2: u32 => "u32",
 }
 

@@ -86,11 +86,14 @@ pub(crate) struct Gpu {
     words: wgpu::Buffer,
     /// Each slice's first workgroup (`resources::slice_buffer`); grows with the longest pass.
     slices: wgpu::Buffer,
-    /// The dense plane: `part` blocks of 64 i32 coefficients; their masks, then per group
-    /// of [`GROUP_BLOCKS`] blocks which have a coefficient ([`groups_offset`]). The masks
-    /// and sets are cleared before each parse.
+    /// The dense plane: `part` blocks of 64 i32 coefficients; and the ring of masks,
+    /// `mask_slots` slots ([`plan::mask_slots`]) each with a part's masks, then per group
+    /// of [`GROUP_BLOCKS`] blocks which have a coefficient ([`groups_offset`]). A segment's
+    /// decode clears the ring before its first parse, and again each time it comes round;
+    /// the coefficients are never cleared (only those a mask names are read).
     coefs: wgpu::Buffer,
     masks: wgpu::Buffer,
+    mask_slots: u32,
     part: u32,
     /// Each reconstruction tile's generation and weights, in two copies, and its bounds
     /// (reconstruct.wgsl).

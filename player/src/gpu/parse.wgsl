@@ -3,12 +3,13 @@
 // stream and what reads the dense plane).
 
 // The dense plane of the part's coefficients, block d's at 64 · d …, and a 64-bit mask
-// of each block's non-zero coefficients. (Atomic here, where invocations parsing
-// different frequencies of a block set its bits; plain in decode.wgsl, which reads them.)
+// of each block's non-zero coefficients, in the part's slot of the ring of masks (from
+// word `job.masks_at`). (Atomic here, where invocations parsing different frequencies of
+// a block set its bits; plain in decode.wgsl, which reads them.)
 @group(0) @binding(6) var<storage, read_write> coefs: array<i32>;
 @group(0) @binding(7) var<storage, read_write> masks: array<atomic<u32>>;
-// Per group of 64 blocks, which have a coefficient (a 64-bit set): the block passes visit
-// only those.
+// Per group of 64 blocks, which have a coefficient (a 64-bit set, from word
+// `job.sets_at`): the block passes visit only those.
 @group(0) @binding(10) var<storage, read_write> groups: array<atomic<u32>>;
 
 // The stream word that holds the bytes being read, and its index: one load per four
@@ -54,7 +55,7 @@ var<private> pending: u32 = 0u;
 
 fn flush_groups() {
     if (pending != 0u) {
-        atomicOr(&groups[pending_at], pending);
+        atomicOr(&groups[job.sets_at + pending_at], pending);
         pending = 0u;
     }
 }
@@ -64,7 +65,7 @@ fn flush_groups() {
 // one that does not is sent and forgotten.
 fn put_coef(d: u32, f: u32, v: i32) {
     coefs[d * 64u + f] = v;
-    atomicOr(&masks[d * 2u + f / 32u], 1u << (f % 32u));
+    atomicOr(&masks[job.masks_at + d * 2u + f / 32u], 1u << (f % 32u));
 }
 
 // Coefficient f of block b, if the block is in this part and the value is not zero.
@@ -357,5 +358,5 @@ fn put_wide(b: u32, f: u32, v: i32) {
     }
     let d = b - job.lo;
     put_coef(d, f, v);
-    atomicOr(&groups[d / 32u], 1u << (d % 32u));
+    atomicOr(&groups[job.sets_at + d / 32u], 1u << (d % 32u));
 }

@@ -1,6 +1,6 @@
 //! The memory plan: what the GPU state holds for a stream, in bytes, known before anything
 //! of that size is created (so that a stream is refused first), and the layout of the
-//! dense plane and its masks.
+//! dense plane and its ring of masks.
 
 use super::Gpu;
 
@@ -25,9 +25,25 @@ pub(super) fn groups_offset(part: u32) -> u64 {
     (part as u64 * 8).next_multiple_of(256)
 }
 
-/// Bytes of the mask buffer of a dense plane of `part` blocks: masks, then sets.
+/// Bytes of the masks and sets of a dense plane of `part` blocks: masks, then sets.
 pub(super) fn mask_bytes(part: u32) -> u64 {
     groups_offset(part) + group_bytes(part)
+}
+
+/// The ring of masks: one slot of [`mask_bytes`] (at a storage offset's alignment) for
+/// each plane a segment's decode parses, so that a segment clears them all in one step
+/// before its first parse rather than a plane's before each: on a GPU a step costs about
+/// 17 µs whatever its work, and a segment's twelve clears were a third of its steps
+/// (BENCHMARKS.md, "On a hardware GPU"). As many slots as a segment has planes without a
+/// chain of keyframes (its keyframe's and its bubble terms': channels × degree); a
+/// segment with more clears the ring again when it comes round.
+pub(super) fn mask_slots(max_degree: u32, channels: u32) -> u32 {
+    channels.max(1) * max_degree.max(1)
+}
+
+/// Bytes between two slots of the ring of masks.
+pub(super) fn slot_bytes(part: u32) -> u64 {
+    mask_bytes(part).next_multiple_of(256)
 }
 
 pub(super) use crate::coded::part_blocks;
@@ -211,7 +227,7 @@ pub(crate) fn planned_texture_bytes(
         .sum::<u64>()
         + range_bytes(plane, channels)
         + part_blocks(plane) as u64 * 256
-        + mask_bytes(part_blocks(plane))
+        + mask_slots(max_degree, channels) as u64 * slot_bytes(part_blocks(plane))
         + BUBBLE_SETS as u64 * FIRST_TERM_BYTES
         + tile_bytes(size).0
         + tile_bytes(size).1

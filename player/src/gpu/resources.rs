@@ -191,9 +191,10 @@ impl Gpu {
             part as u64 * 256,
             B::STORAGE | B::COPY_SRC,
         );
+        let mask_slots = mask_slots(max_degree, channels);
         let masks = buffer(
-            "vbim coefficient masks and sets",
-            mask_bytes(part),
+            "vbim ring of coefficient masks and sets",
+            mask_slots as u64 * slot_bytes(part),
             B::STORAGE | B::COPY_DST | B::COPY_SRC,
         );
         // Zeroed at creation: generation 0, which no frame has.
@@ -253,6 +254,7 @@ impl Gpu {
             slices,
             coefs,
             masks,
+            mask_slots,
             part,
             tiles,
             peaks,
@@ -378,22 +380,15 @@ impl Gpu {
                 binding: 6,
                 resource: self.coefs.as_entire_binding(),
             });
-            let sets = groups_offset(self.part);
+            // The ring of masks, whole, twice: its masks and its sets (each job says
+            // where its slot's are).
             entries.push(wgpu::BindGroupEntry {
                 binding: 7,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &self.masks,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(self.part as u64 * 8),
-                }),
+                resource: self.masks.as_entire_binding(),
             });
             entries.push(wgpu::BindGroupEntry {
                 binding: 10,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &self.masks,
-                    offset: sets,
-                    size: wgpu::BufferSize::new(group_bytes(self.part)),
-                }),
+                resource: self.masks.as_entire_binding(),
             });
             self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vbim decode"),
