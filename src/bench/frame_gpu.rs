@@ -28,6 +28,48 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 "#;
 
+/// The compute pipeline of `source`'s `main`, its layout taken from the shader (the
+/// benchmarks' own passes: the reference blend, a game's load).
+pub(super) fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// A bind group of `pipeline`'s group 0 with `resources` at bindings 0, 1, 2 …
+pub(super) fn bind_group(
+    device: &wgpu::Device,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    resources: &[wgpu::BindingResource],
+) -> wgpu::BindGroup {
+    let entries: Vec<_> = (0u32..)
+        .zip(resources)
+        .map(|(binding, r)| wgpu::BindGroupEntry {
+            binding,
+            resource: r.clone(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
 impl FrameTimer {
     /// A timer for `width × height` lightmaps, if `device` has timestamp queries.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, (w, h): (u32, u32)) -> Option<Self> {
@@ -54,38 +96,19 @@ impl FrameTimer {
         let texture = |usage| device.create_texture(&vbim_player::lightmap_descriptor(w, h, usage));
         let (a, b) = (texture(U::TEXTURE_BINDING), texture(U::TEXTURE_BINDING));
         let out = texture(U::STORAGE_BINDING);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("reference blend"),
-            source: wgpu::ShaderSource::Wgsl(BLEND_WGSL.into()),
-        });
-        let blend = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("reference blend"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let blend = compute_pipeline(device, "reference blend", BLEND_WGSL);
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (va, vb, vo) = (view(&a), view(&b), view(&out));
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("reference blend"),
-            layout: &blend.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&va),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&vb),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&vo),
-                },
+        let group = bind_group(
+            device,
+            "reference blend",
+            &blend,
+            &[
+                wgpu::BindingResource::TextureView(&va),
+                wgpu::BindingResource::TextureView(&vb),
+                wgpu::BindingResource::TextureView(&vo),
             ],
-        });
+        );
         Some(FrameTimer {
             set,
             resolved,

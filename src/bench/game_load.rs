@@ -37,18 +37,7 @@ impl GameLoad {
         if ms <= 0.0 {
             return None;
         }
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("game load"),
-            source: wgpu::ShaderSource::Wgsl(LOAD_WGSL.into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("game load"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = super::frame_gpu::compute_pipeline(device, "game load", LOAD_WGSL);
         let acc = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("game load"),
             size: GROUPS as u64 * 256 * 16,
@@ -61,20 +50,12 @@ impl GameLoad {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("game load"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: acc.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: params.as_entire_binding(),
-                },
-            ],
-        });
+        let group = super::frame_gpu::bind_group(
+            device,
+            "game load",
+            &pipeline,
+            &[acc.as_entire_binding(), params.as_entire_binding()],
+        );
         let load = GameLoad {
             pipeline,
             group,
