@@ -9,6 +9,8 @@
 #
 #   scripts/reuse_bench.sh [FILE] [OUT.csv]   (defaults: out/demo/jacksboro.vbim, out/reuse.csv)
 #   CLOCK=timestamps scripts/reuse_bench.sh ...   (a hardware GPU: its timestamps, not the wall clock)
+#   GAME_LOAD=8 ...   (a game's 8 ms of GPU work before each frame, `bench render --game-load`:
+#                      a hardware GPU then keeps the clock a game keeps it at)
 #   target/release/vbim bench plot-reuse OUT.csv -o docs/images/reuse.png --title "..."
 set -euo pipefail
 file=${1:-out/demo/jacksboro.vbim}
@@ -21,7 +23,7 @@ for slow in 1 144; do
     if [ "$slow" = 1 ]; then start=0 dur=4s; else start=120 dur=2s; fi
     for share in 0 0.25 1 4 16; do
         r=$("$vbim" bench render "$file" --frames 120 --runs 1 --reuse-share "$share" \
-            --slow "$slow" --start "$start")
+            --slow "$slow" --start "$start" --game-load "${GAME_LOAD:-0}")
         # GPU timestamps where the adapter has them inside a frame (a hardware GPU); the
         # wall clock from submission to completion on lavapipe, whose timestamps do not
         # bracket its work.
