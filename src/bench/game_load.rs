@@ -11,6 +11,8 @@ pub(super) struct GameLoad {
     group: wgpu::BindGroup,
     params: wgpu::Buffer,
     queue: wgpu::Queue,
+    /// What the calibrated load took: the fastest of three submissions, to completion, ms.
+    pub took_ms: f64,
 }
 
 /// One wave of a large GPU: 1024 workgroups of 256 invocations, a vec4 each.
@@ -56,18 +58,16 @@ impl GameLoad {
             &pipeline,
             &[acc.as_entire_binding(), params.as_entire_binding()],
         );
-        let load = GameLoad {
+        let mut load = GameLoad {
             pipeline,
             group,
             params,
             queue: queue.clone(),
+            took_ms: 0.0,
         };
-        // The loop count, scaled towards the time asked from the fastest of three timed
-        // submissions, five times over (a card's clock climbs under the load itself).
-        let mut n = 1024f64;
-        for _ in 0..5 {
-            load.set(n);
-            let best = (0..3)
+        // The fastest of three timed submissions of the load as it is set.
+        let time = |load: &GameLoad| {
+            (0..3)
                 .map(|_| {
                     let t = std::time::Instant::now();
                     let mut enc = device.create_command_encoder(&Default::default());
@@ -76,10 +76,17 @@ impl GameLoad {
                     let _ = device.poll(wgpu::PollType::wait_indefinitely());
                     t.elapsed().as_secs_f64() * 1e3
                 })
-                .fold(f64::INFINITY, f64::min);
-            n = (n * ms / best.max(1e-3)).clamp(1.0, 4e9);
+                .fold(f64::INFINITY, f64::min)
+        };
+        // The loop count, scaled towards the time asked, five times over (a card's clock
+        // climbs under the load itself).
+        let mut n = 1024f64;
+        for _ in 0..5 {
+            load.set(n);
+            n = (n * ms / time(&load).max(1e-3)).clamp(1.0, 4e9);
         }
         load.set(n);
+        load.took_ms = time(&load);
         Some(load)
     }
 

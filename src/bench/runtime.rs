@@ -486,6 +486,8 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
     // Each frame against the blend after it, over every run: the frames that recorded no
     // decode work (the reconstruction alone), then those that did.
     let mut by_decode: [Vec<f64>; 2] = Default::default();
+    // What each run's game load took once calibrated (ms).
+    let mut load_took = Vec::new();
     // Frames whose data was late (held, catching up, waiting), over every run: their GPU
     // time is not the stream's.
     let mut late: std::collections::BTreeMap<&'static str, usize> = Default::default();
@@ -511,6 +513,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         let timer = FrameTimer::new(&device, &queue, (header.width, header.height));
         timed = timer.is_some();
         let load = super::game_load::GameLoad::new(&device, &queue, a.game_load);
+        load_took.extend(load.as_ref().map(|l| l.took_ms));
         h = Some(header);
         let mut series: [Vec<f64>; 8] = Default::default();
         let mut rows = String::from(
@@ -631,8 +634,13 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         a.reuse_share,
         if a.game_load > 0.0 {
             format!(
-                ", a game's load of about {} ms before each frame (its time is in the wall clock's \"submission to completion\" of the frame, not in the timestamps)",
-                a.game_load
+                ", a game's load of about {} ms before each frame ({} ms once calibrated; its time is in the wall clock's \"submission to completion\" of the frame, not in the timestamps)",
+                a.game_load,
+                load_took
+                    .iter()
+                    .map(|t| format!("{t:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )
         } else {
             String::new()
