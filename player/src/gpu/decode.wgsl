@@ -12,9 +12,10 @@
 // refused malformed streams: the pairs seen here are well-formed.
 //
 // `parse` writes every non-zero coefficient into a dense plane of i32 coefficients, 64 per
-// block, and sets its bit in the block's 64-bit mask; the plane was cleared before it
-// (`clear_buffer`, a memset on lavapipe: putting each block back to zero after use in the
-// shaders needed barriers, which cost lavapipe more). The passes after it visit only a
+// block, and sets its bit in the block's 64-bit mask, in the plane's slot of a ring of
+// masks that the segment's decode cleared before its first parse (`clear_buffer`, a
+// memset on lavapipe: putting each block back to zero after use in the shaders needed
+// barriers, which cost lavapipe more; one clear a plane cost a GPU a step each). The passes after it visit only a
 // block's set bits, in increasing zig-zag order: each texel sums
 // (value · step · T[ky][y]) · T[kx][x] in that order, as the reference decoder's sparse
 // path does (`key_add` here, the reconstruction for the bubble terms).
