@@ -107,6 +107,16 @@ pub struct PlayerConfig {
     /// larger shares trade accuracy for GPU time (BENCHMARKS.md). The output texture must
     /// keep what the player wrote into it.
     pub reuse_share: f32,
+    /// Where the last frame that decided which tiles to keep ([`reuse_share`]) kept under
+    /// one tile in 16, the frames after it evaluate every tile without deciding (the
+    /// decision reads each tile's state and bounds: overhead where nothing is kept, as at
+    /// a file's own 24 fps), and every this many frames, and right after the first frame of
+    /// new keyframes or bubble planes, one decides again. Default 8: on lavapipe 3–4% off
+    /// the demo's frame at 24 fps, the same at a day's pace (BENCHMARKS.md, "The runtime's
+    /// speed–accuracy trade"). 0: every frame decides.
+    ///
+    /// [`reuse_share`]: PlayerConfig::reuse_share
+    pub reuse_probe: u32,
     /// The memory the stream may take, GPU and CPU together ([`Player::open`] refuses a
     /// stream that could need more, before creating anything for it).
     ///
@@ -128,6 +138,7 @@ impl Default for PlayerConfig {
             decode_budget: None,
             decode_shape: None,
             reuse_share: 0.25,
+            reuse_probe: 8,
             limits: Limits::default(),
         }
     }

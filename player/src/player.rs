@@ -207,7 +207,8 @@ impl<R: Read + Seek + Send + 'static> Player<R> {
                 (min_array_layers(device), shape.lanes),
             ),
         )?;
-        let gpu = Gpu::for_stream(device, queue, &header, shape);
+        let mut gpu = Gpu::for_stream(device, queue, &header, shape);
+        gpu.reuse_probe = cfg.reuse_probe;
         let pipeline = Pipeline::start(device, src, &header, &layout, &entries, &cfg, ring_bytes)?;
         let display = Display::new(cfg.policy, cfg.catch_up_ns, preroll);
         let reuse = reuse_threshold(cfg.reuse_share, header.transfer);

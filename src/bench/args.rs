@@ -183,6 +183,10 @@ pub struct BenchRenderArgs {
     /// clock a game keeps it at rather than idling between frames.
     #[arg(long, default_value_t = 0.0)]
     pub game_load: f64,
+    /// `PlayerConfig::reuse_probe`: where the last deciding frame kept under one tile in
+    /// 16, decide again only every this many frames (0: every frame decides).
+    #[arg(long, default_value_t = 8)]
+    pub reuse_probe: u32,
 }
 
 #[derive(Args)]

@@ -497,6 +497,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
             decode_budget: a.budget,
             decode_shape: Some(a.shape.shape(&info)),
             reuse_share: a.reuse_share,
+            reuse_probe: a.reuse_probe,
             ..PlayerConfig::default()
         };
         let mut player = Player::open(&device, &queue, std::io::BufReader::new(f), cfg)
@@ -625,13 +626,14 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         );
     };
     println!(
-        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode shape: {}, reuse share {}{}; median over runs (min–max)",
+        "render benchmark: {name}, {}×{} at {}/{} fps{}, 60 Hz, {} frames × {} runs on {} ({:?}), decode budget {}, decode shape: {}, reuse share {} (deciding every {} frames where few tiles are kept){}; median over runs (min–max)",
         h.width, h.height, h.rate_num, h.rate_den,
         if a.slow > 1 { format!(" played {}× slower", a.slow) } else { String::new() },
         a.frames, runs.len(), info.name, info.backend,
         a.budget.map_or("spread (default)".to_string(), |b| format!("{b} blocks per frame")),
         describe(&a.shape.shape(&info)),
         a.reuse_share,
+        a.reuse_probe,
         if a.game_load > 0.0 {
             format!(
                 ", a game's load of about {} ms before each frame ({} ms once calibrated; its time is in the wall clock's \"submission to completion\" of the frame, not in the timestamps)",

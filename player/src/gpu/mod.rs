@@ -104,6 +104,14 @@ pub(crate) struct Gpu {
     last_params: Option<Params>,
     /// Which copy of the tiles' state the next reconstruction writes.
     parity: u32,
+    /// Frames reconstructed, and every how many a frame decides which tiles to keep
+    /// whatever the last deciding frame kept (0: every frame decides;
+    /// `PlayerConfig::reuse_probe`).
+    frames: u64,
+    pub(crate) reuse_probe: u32,
+    /// Frames since the last that decided, and whether the last was a generation's first.
+    since_probe: u64,
+    after_first: bool,
     /// The chain's head keyframe K_{s+1}, f32.
     keys: wgpu::Texture,
     /// One view per plane of the head, for the decode passes.

@@ -43,7 +43,12 @@ pub(crate) struct Params {
     pub tiles: u32,
     /// The first word of the bubble set's tile degrees (set by [`Gpu::reconstruct`]).
     pub degrees: u32,
-    pub _pad: [u32; 3],
+    /// The frame's place in a cycle of three, whether it decides which tiles to keep
+    /// (1), and whether the feedback from the kept count is on (set by
+    /// [`Gpu::reconstruct`]).
+    pub frame3: u32,
+    pub probe: u32,
+    pub feedback: u32,
 }
 
 /// A texture given to [`Player::set_output`](crate::Player::set_output) that the player
@@ -149,9 +154,25 @@ impl Gpu {
             self.gen = self.gen.wrapping_add(1).max(1);
             params.gen = self.gen;
         }
-        self.last_params = Some(params);
+        let strip_frame = |p: &Params| Params {
+            frame3: 0,
+            probe: 0,
+            ..*p
+        };
+        self.last_params = Some(strip_frame(&params));
         self.parity ^= 1;
         params.parity = self.parity;
+        params.frame3 = (self.frames % 3) as u32;
+        params.feedback = (self.reuse_probe > 0) as u32;
+        // A frame decides every `reuse_probe` frames, and right after the first of a
+        // generation (which keeps no tile, so its count says nothing).
+        let probe = self.reuse_probe == 0
+            || self.since_probe + 1 >= self.reuse_probe as u64
+            || self.after_first;
+        params.probe = probe as u32;
+        self.since_probe = if probe { 0 } else { self.since_probe + 1 };
+        self.after_first = first;
+        self.frames += 1;
         // The first frame of a generation evaluates every tile and finds the tiles'
         // bounds (atomic maxima, cleared first); the others may keep tiles.
         let pipeline = if first && params.reuse > 0.0 {

@@ -8,7 +8,9 @@
 // enough to change it by more than `reuse` since it last was: the tile keeps the weights
 // it was evaluated with and bounds of what its terms hold, so the change is bounded
 // without reading them. Otherwise the lightmap keeps what it has there and the tile costs
-// its decision: about 80 bytes read and 40 written. No barrier and no workgroup memory
+// its decision: about 80 bytes read and 40 written. Where the last frame that decided kept
+// under one tile in 16, a frame that is not a probe (`PlayerConfig::reuse_probe`)
+// evaluates every tile without deciding. No barrier and no workgroup memory
 // (whose zeroing is a barrier): lavapipe pays about as much for one as for the evaluation.
 
 struct Params {
@@ -47,9 +49,13 @@ struct Params {
     tiles: u32,
     // The first word of the bubble set's tile degrees.
     degrees: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    // The frame's place in a cycle of three (which counter of kept tiles it adds to; the
+    // one before it reads, the one after it clears), whether it decides which tiles to
+    // keep (1) or may skip deciding when the last deciding frame kept few (0), and
+    // whether the feedback is on at all (`PlayerConfig::reuse_probe`).
+    frame3: u32,
+    probe: u32,
+    feedback: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -389,11 +395,37 @@ fn main(
     var go = true;
     if (p.reuse > 0.0) {
         let tile = wg.y * groups.x + wg.x;
-        let at = state_at(tile, groups.x * groups.y);
-        // Every invocation decides alike: it reads what no invocation of this frame writes.
-        go = p.blend == 1u || tiles[at.x] != p.gen || tile_change(at.x, tile * PEAK_WORDS) > p.reuse;
-        if (li == 0u) {
-            keep_state(at, go);
+        let count = groups.x * groups.y;
+        let at = state_at(tile, count);
+        // The counters of kept tiles, after the tiles' bounds: this frame's, the last
+        // frame's (what the last deciding frame kept), and the next frame's, which this
+        // frame clears (the frame before last added to it, the last frame read it).
+        let counters = count * PEAK_WORDS;
+        let mine = counters + p.frame3;
+        let last = atomicLoad(&peaks[counters + (p.frame3 + 2u) % 3u]);
+        let first = wg.x == 0u && wg.y == 0u && li == 0u;
+        if (p.feedback == 1u && first) {
+            atomicStore(&peaks[counters + (p.frame3 + 1u) % 3u], 0u);
+        }
+        if (p.feedback == 1u && p.probe == 0u && last * 16u < count) {
+            // The last deciding frame kept under one tile in 16: evaluate every tile
+            // without deciding, pass the count on, and mark the tile evaluated under no
+            // generation, so that the next deciding frame evaluates it and records it.
+            if (first) {
+                atomicStore(&peaks[mine], last);
+            }
+            if (li == 0u) {
+                tiles[at.y] = 0u;
+            }
+        } else {
+            // Every invocation decides alike: it reads what no invocation of this frame writes.
+            go = p.blend == 1u || tiles[at.x] != p.gen || tile_change(at.x, tile * PEAK_WORDS) > p.reuse;
+            if (li == 0u) {
+                keep_state(at, go);
+                if (!go && p.feedback == 1u) {
+                    atomicAdd(&peaks[mine], 1u);
+                }
+            }
         }
     }
     let xy = vec2<i32>(i32(id.x * 2u * QUADS), i32(id.y * 2u));
