@@ -104,10 +104,10 @@ pub(crate) struct Gpu {
     last_params: Option<Params>,
     /// Which copy of the tiles' state the next reconstruction writes.
     parity: u32,
-    /// Frames reconstructed, and every how many a frame decides which tiles to keep
-    /// whatever the last deciding frame kept (0: every frame decides;
-    /// `PlayerConfig::reuse_probe`).
-    frames: u64,
+    /// The next frame's place in the cycle of three counters of kept tiles, and every how
+    /// many frames one decides which tiles to keep whatever the last deciding frame kept
+    /// (0: every frame decides; `PlayerConfig::reuse_probe`).
+    frame3: u32,
     pub(crate) reuse_probe: u32,
     /// Frames since the last that decided, and whether the last was a generation's first.
     since_probe: u64,

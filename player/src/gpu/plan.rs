@@ -240,7 +240,8 @@ pub(super) fn tile_count((w, h): (u32, u32)) -> u64 {
 }
 
 /// Bytes of the reconstruction's tile state, and of its tiles' bounds: two copies of 10
-/// words, and 9 words, per tile (reconstruct.wgsl, `STATE_WORDS`, `PEAK_WORDS`).
+/// words, and 9 words, per tile (reconstruct.wgsl, `STATE_WORDS`, `PEAK_WORDS`); after
+/// the bounds, the three counters of kept tiles (and a word of padding).
 pub(super) fn tile_bytes(size: (u32, u32)) -> (u64, u64) {
     (tile_count(size) * 2 * 10 * 4, tile_count(size) * 9 * 4 + 16)
 }

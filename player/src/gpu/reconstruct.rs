@@ -154,15 +154,12 @@ impl Gpu {
             self.gen = self.gen.wrapping_add(1).max(1);
             params.gen = self.gen;
         }
-        let strip_frame = |p: &Params| Params {
-            frame3: 0,
-            probe: 0,
-            ..*p
-        };
-        self.last_params = Some(strip_frame(&params));
+        // (Stored before the fields that change every frame are set.)
+        self.last_params = Some(params);
         self.parity ^= 1;
         params.parity = self.parity;
-        params.frame3 = (self.frames % 3) as u32;
+        params.frame3 = self.frame3;
+        self.frame3 = (self.frame3 + 1) % 3;
         params.feedback = (self.reuse_probe > 0) as u32;
         // A frame decides every `reuse_probe` frames, and right after the first of a
         // generation (which keeps no tile, so its count says nothing).
@@ -172,7 +169,6 @@ impl Gpu {
         params.probe = probe as u32;
         self.since_probe = if probe { 0 } else { self.since_probe + 1 };
         self.after_first = first;
-        self.frames += 1;
         // The first frame of a generation evaluates every tile and finds the tiles'
         // bounds (atomic maxima, cleared first); the others may keep tiles.
         let pipeline = if first && params.reuse > 0.0 {

@@ -261,7 +261,7 @@ impl Gpu {
             gen: 0,
             last_params: None,
             parity: 0,
-            frames: 0,
+            frame3: 0,
             reuse_probe: 0,
             since_probe: 0,
             after_first: false,
