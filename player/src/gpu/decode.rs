@@ -3,7 +3,7 @@
 //! and recorded a few at a time, so that the player can spread a segment's decode over the
 //! frames before it is shown ([`Op`], [`Gpu::plan_decode`], [`Gpu::record`]).
 
-use super::job::{Job, JOB_STRIDE};
+use super::job::{Job, BATCH_PLANES, JOB_BINDING, JOB_STRIDE};
 use super::ops::{Kind, Op};
 use super::plan::*;
 use super::resources::slice_buffer;
@@ -172,21 +172,25 @@ impl Gpu {
         ops.push(Op::new(Kind::Upload, 0, [0; 3], 0, 0));
         let [rx, ry] = self.regions;
         let pack = |gpu: &mut Gpu, ops: &mut Vec<Op>, slot: u32| {
-            // Per plane, each region's range found and its texels packed in one pass: an
-            // invocation per row of a region, 64 per workgroup; 8 units (1/16 of a
-            // region each) per region.
+            // Every plane's regions found and packed in one dispatch (plane
+            // `workgroup_id.z`, each with its job): an invocation per row of a region, 64
+            // per workgroup; 8 units (1/16 of a region each) per region.
             let n = ops.len();
             let regions = rx * ry;
+            let mut jobs = std::mem::take(&mut gpu.batch);
+            jobs.clear();
             for p in 0..ch {
-                let job = Job {
+                jobs.push(Job {
                     layer: slot * ch + p,
                     size: [pw, ph],
                     ..gpu.base_job()
-                };
-                let groups = (regions * REGION).div_ceil(64);
-                let units = (regions as u64 * 8, 16);
-                gpu.sliced(ops, Kind::KeyPack, job, groups, p, units);
+                });
             }
+            let at = gpu.push_jobs(&jobs);
+            let groups = (regions * REGION).div_ceil(64);
+            let plane = |_: &Job| (groups, regions as u64 * 8);
+            gpu.sliced_batch(ops, Kind::KeyPack, at, &jobs, plane, (1, 16), 0);
+            gpu.batch = jobs;
             for op in &mut ops[n..] {
                 op.packs = true;
             }
@@ -206,7 +210,7 @@ impl Gpu {
             for p in 0..ch {
                 let span = &seg.planes[st.plane + p as usize];
                 for job in self.part_jobs(span, p) {
-                    let job = self.mask_slot(ops, job, span, &mut ring);
+                    let job = self.mask_slot(ops, job, span.lanes.is_some(), &mut ring);
                     let blocks = job.hi - job.lo.min(job.hi);
                     self.coef_ops(ops, (span, &seg.sections), job, p);
                     // A predicted keyframe is added onto the head (the keyframe it
@@ -226,6 +230,16 @@ impl Gpu {
                 bytes: stride as u64 * 4,
             };
             ops.push(Op::new(degrees, 0, [0; 3], 0, 0));
+            // Planes parsed from pairs whose blocks fit the dense plane together go in
+            // batches: a parse and a gather each over the batch's planes at once (the
+            // plane `workgroup_id.z`), each plane at its own place in the dense plane and
+            // in one slot of the ring of masks. On a GPU every step costs a latency of
+            // about 17–24 µs whatever its work, and a 2048² segment's bubble planes were
+            // two steps each.
+            // (The batch's vector is the GPU state's, kept between segments: planning a
+            // segment allocates nothing once the player runs.)
+            let mut batch = std::mem::take(&mut self.batch);
+            batch.clear();
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let n = (i - seg.bubbles) as u32;
                 let layer = set * self.set_layers + n;
@@ -234,6 +248,7 @@ impl Gpu {
                 let (term, p) = (n / ch + 2, n % ch);
                 let base = set * stride + p * self.tile_count;
                 let counter = set * stride + ch * self.tile_count;
+                let alone = span.lanes.is_some() || parts(span.blocks, self.part) > 1;
                 for job in self.part_jobs(span, layer) {
                     let job = Job {
                         term,
@@ -245,13 +260,23 @@ impl Gpu {
                     if blocks == 0 {
                         continue;
                     }
-                    let job = self.mask_slot(ops, job, span, &mut ring);
+                    if !alone {
+                        if !fits_batch(&batch, blocks, self.part) {
+                            self.batch_ops(ops, &mut batch, set, &mut ring);
+                            batch.clear();
+                        }
+                        batch.push(job);
+                        continue;
+                    }
+                    let job = self.mask_slot(ops, job, span.lanes.is_some(), &mut ring);
                     self.coef_ops(ops, (span, &seg.sections), job, 0);
                     let units = (blocks as u64, 64);
                     let groups = blocks.div_ceil(64);
                     self.sliced(ops, Kind::BubbleGather, job, groups, set, units);
                 }
             }
+            self.batch_ops(ops, &mut batch, set, &mut ring);
+            self.batch = batch;
         }
         let slices = ops
             .iter()
@@ -269,11 +294,13 @@ impl Gpu {
             op.cost = (op.units * op.kind.weight(&self.shape.weights) as u64).div_ceil(4)
                 + self.shape.step_cost;
         }
+        // (A dispatch binds BATCH_PLANES jobs from its own: room for them after the last.)
         let jobs = self.job_bytes.len() as u64;
-        if jobs > self.jobs.size() {
+        let room = jobs + JOB_BINDING - JOB_STRIDE;
+        if room > self.jobs.size() {
             self.jobs = self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("vbim decode jobs"),
-                size: grown(jobs),
+                size: grown(room),
                 // (STORAGE: the lane passes' job, `DecodeShape::lane_job_storage`.)
                 usage: wgpu::BufferUsages::UNIFORM
                     | wgpu::BufferUsages::STORAGE
@@ -362,7 +389,7 @@ impl Gpu {
             Kind::ParseWide => (&self.parse_wide, self.parse_group.as_ref()),
             Kind::Parse => (&self.parse, self.parse_group.as_ref()),
             Kind::KeyAdd => (&self.key_add, key),
-            Kind::KeyPack => (&self.key_pack, key),
+            Kind::KeyPack => (&self.key_pack, self.pack_group.as_ref()),
             Kind::BubbleGather => (
                 &self.bubble_gather,
                 self.bubble_groups.get(op.channel as usize),
@@ -440,17 +467,11 @@ impl Gpu {
 
     /// `job` with the slot of the ring of masks its part's parse fills and its block pass
     /// reads: the next one, the whole ring cleared first when `*ring` has come round to
-    /// the first. A version 2 plane decoded as coded takes the first slot, which its own
-    /// first pass clears (`lanes.wgsl`, `prepare`), and leaves the ring where it was: the
-    /// slot is the next parse's only right after the ring's clear.
-    fn mask_slot(
-        &self,
-        ops: &mut Vec<Op>,
-        job: Job,
-        span: &crate::coded::PlaneSpan,
-        ring: &mut u32,
-    ) -> Job {
-        let slot = if span.lanes.is_some() {
+    /// the first. A version 2 plane decoded as coded (`lanes`) takes the first slot, which
+    /// its own first pass clears (`lanes.wgsl`, `prepare`), and leaves the ring where it
+    /// was: the slot is the next parse's only right after the ring's clear.
+    fn mask_slot(&self, ops: &mut Vec<Op>, job: Job, lanes: bool, ring: &mut u32) -> Job {
+        let slot = if lanes {
             0
         } else {
             if *ring == 0 {
@@ -466,6 +487,32 @@ impl Gpu {
             sets_at: ((at + groups_offset(self.part)) / 4) as u32,
             ..job
         }
+    }
+
+    /// A batch of bubble planes' parts ([`fits_batch`]) parsed into one slot of the ring
+    /// and the dense plane, each at its place there (`Job::dense_at`), and gathered into
+    /// set `set`: a dispatch of each pass covers them all, one job a plane.
+    fn batch_ops(&mut self, ops: &mut Vec<Op>, batch: &mut [Job], set: u32, ring: &mut u32) {
+        let Some(&first) = batch.first() else {
+            return;
+        };
+        let slot = self.mask_slot(ops, first, false, ring);
+        let mut dense = 0;
+        for job in batch.iter_mut() {
+            job.dense_at = dense;
+            job.masks_at = slot.masks_at + 2 * dense;
+            job.sets_at = slot.sets_at + dense / 32;
+            dense = batch_end(dense, job.hi - job.lo);
+        }
+        let at = self.push_jobs(batch);
+        let (kind, per_group) = match self.shape.wide_parse {
+            false => (Kind::Parse, 64),
+            true => (Kind::ParseWide, 1),
+        };
+        let parse = |j: &Job| (j.count.div_ceil(per_group as u32), j.count as u64);
+        self.sliced_batch(ops, kind, at, batch, parse, (PARSE_SPAN, per_group), 0);
+        let gather = |j: &Job| ((j.hi - j.lo).div_ceil(64), (j.hi - j.lo) as u64);
+        self.sliced_batch(ops, Kind::BubbleGather, at, batch, gather, (1, 64), set);
     }
 
     /// The part of `job` parsed into the dense plane from its entry points, its masks and
@@ -531,13 +578,41 @@ impl Gpu {
         (units, per_group): (u64, u64),
     ) {
         let at = self.push_job(job);
+        let plane = |_: &Job| (groups, units);
+        let one = std::slice::from_ref(&job);
+        self.sliced_batch(ops, kind, at, one, plane, (span, per_group), channel);
+    }
+
+    /// [`Gpu::sliced_by`] over `jobs`, pushed one after another from `at`, one a plane:
+    /// `plane` gives each one's workgroups and units; a dispatch covers its slice of each
+    /// plane (`workgroup_id.z`), the workgroups past a plane's own doing nothing.
+    #[allow(clippy::too_many_arguments)]
+    fn sliced_batch(
+        &mut self,
+        ops: &mut Vec<Op>,
+        kind: Kind,
+        at: u32,
+        jobs: &[Job],
+        plane: impl Fn(&Job) -> (u32, u64),
+        (span, per_group): (u32, u64),
+        channel: u32,
+    ) {
         let span = span.max(self.cheap_span(kind, per_group)) * self.slice_span;
         let size = span * SLICE_GROUPS;
+        let groups = jobs.iter().map(|j| plane(j).0).max().unwrap_or(0);
+        let z = jobs.len() as u32;
         for k in 0..groups.div_ceil(size) {
             let from = k * size;
             let n = (groups - from).min(size);
-            let work = (n as u64 * per_group).min(units.saturating_sub(from as u64 * per_group));
-            ops.push(Op::new(kind, at, [n, 1, 1], channel, work).in_slice(k * span));
+            let work = jobs
+                .iter()
+                .map(|j| {
+                    let (g, units) = plane(j);
+                    let mine = g.saturating_sub(from).min(n) as u64 * per_group;
+                    mine.min(units.saturating_sub(from as u64 * per_group))
+                })
+                .sum();
+            ops.push(Op::new(kind, at, [n, 1, z], channel, work).in_slice(k * span));
         }
     }
 
@@ -568,6 +643,18 @@ impl Gpu {
         self.push_job_bytes(bytemuck::bytes_of(&job))
     }
 
+    /// Appends `jobs`, one after another [`JOB_STRIDE`] apart (a batch's, which its
+    /// dispatches read by `workgroup_id.z`); returns the first's offset.
+    fn push_jobs(&mut self, jobs: &[Job]) -> u32 {
+        let at = self.job_bytes.len();
+        for job in jobs {
+            let from = self.job_bytes.len();
+            self.job_bytes.extend_from_slice(bytemuck::bytes_of(job));
+            self.job_bytes.resize(from + JOB_STRIDE as usize, 0);
+        }
+        at as u32
+    }
+
     /// Appends a job's bytes (a [`Job`] or a lanes job) to the jobs of the decode being
     /// planned, [`JOB_STRIDE`] apart; returns its offset.
     pub(super) fn push_job_bytes(&mut self, job: &[u8]) -> u32 {
@@ -592,4 +679,20 @@ impl Gpu {
                 .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.words));
         }
     }
+}
+
+/// Where the next plane of a batch starts in the dense plane after one of `blocks` blocks
+/// at `at`: at a multiple of 64 blocks, so that a group of 64 (a block pass's workgroup,
+/// a word pair of the sets) is one plane's.
+fn batch_end(at: u32, blocks: u32) -> u32 {
+    (at + blocks).next_multiple_of(GROUP_BLOCKS)
+}
+
+/// Whether a plane's part of `blocks` blocks joins `batch` in a dense plane of `part`
+/// blocks: at most [`BATCH_PLANES`] planes, each from a multiple of 64 blocks.
+fn fits_batch(batch: &[Job], blocks: u32, part: u32) -> bool {
+    let end = batch
+        .iter()
+        .fold(0, |at, j| batch_end(at, j.hi - j.lo));
+    batch.len() < BATCH_PLANES as usize && end as u64 + blocks as u64 <= part as u64
 }

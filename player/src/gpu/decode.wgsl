@@ -28,6 +28,8 @@
 @group(0) @binding(1) var<TABLES> tables: Tables;
 // A plane of the chain's head keyframe (f32).
 @group(0) @binding(3) var key_plane: texture_storage_2d<r32float, read_write>;
+// The head keyframe whole, a plane a layer (`key_pack`, whose dispatch covers them all).
+@group(0) @binding(14) var key_planes: texture_2d_array<f32>;
 // The 16-bit keyframes, two texels per R32Uint texel (`key_pack`).
 @group(0) @binding(4) var planes16: texture_storage_2d_array<r32uint, write>;
 // The previous keyframe's range per region of REGION² texels and plane: (lowest value,
@@ -110,6 +112,12 @@ fn mask(d: u32) -> vec2<u32> {
     return masks[job.masks_at / 2u + d];
 }
 
+// Coefficient i (zig-zag) of block d (in the part), from the job's place in the dense
+// plane.
+fn coef(d: u32, i: u32) -> i32 {
+    return coefs[(job.dense_at + d) * 64u + i];
+}
+
 // The sums at texels (x, y) and, with `pair`, (x + 1, y) of block d (in the part) onto
 // `acc` and 0.
 fn block_sum(d: u32, m: vec2<u32>, x: u32, y: u32, acc: f32, pair: bool) -> vec2<f32> {
@@ -123,7 +131,7 @@ fn block_sum(d: u32, m: vec2<u32>, x: u32, y: u32, acc: f32, pair: bool) -> vec2
         }
         let pos = zigzag(i);
         let kx = pos % 8u;
-        let c = f32(coefs[d * 64u + i]) * job.step * basis(pos / 8u, y);
+        let c = f32(coef(d, i)) * job.step * basis(pos / 8u, y);
         a = a + c * basis(kx, x);
         if (pair) {
             b = b + c * basis(kx, x + 1u);
@@ -178,6 +186,7 @@ fn key_add(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_id) l: vec3<u32>,
 ) {
+    take_job(wg);
     let share = group_share(wg);
     let first = job.lo + share.group * GROUP_BLOCKS;
     var present = share.present;
@@ -221,6 +230,7 @@ var<workgroup> run_start: u32;
 
 @compute @workgroup_size(64)
 fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    take_job(wg);
     let first = job.lo + group_index(wg) * 64u;
     let b = first + li;
     let inside = b < job.hi;
@@ -240,7 +250,7 @@ fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
             if (i == 64u) {
                 break;
             }
-            let v = coefs[d * 64u + i];
+            let v = coef(d, i);
             wide = wide || v < -32768 || v > 32767;
         }
     }
@@ -281,7 +291,7 @@ fn bubble_gather(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
         if (i == 64u) {
             break;
         }
-        let v = coefs[d * 64u + i];
+        let v = coef(d, i);
         if (k == 0u) {
             first_term = bitcast<u32>(f32(v) * job.step);
         } else if (wide) {
@@ -372,6 +382,9 @@ var<workgroup> extents: array<atomic<u32>, 4>;
 
 @compute @workgroup_size(64)
 fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    // One dispatch packs every plane of the head, plane workgroup_id.z with its own job.
+    take_job(wg);
+    let plane = wg.z;
     let regions = (job.size + vec2<u32>(REGION - 1u)) / REGION;
     let rr = region_row(wg, li);
     let region = vec2<u32>(rr.x % regions.x, rr.x / regions.x);
@@ -384,7 +397,7 @@ fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_inde
         var lo = 3.4e38;
         var hi = -3.4e38;
         for (var x = origin.x; x < end; x = x + 1u) {
-            let v = textureLoad(key_plane, vec2<u32>(x, y)).x;
+            let v = textureLoad(key_planes, vec2<u32>(x, y), plane, 0).x;
             lo = min(lo, v);
             hi = max(hi, v);
         }
@@ -407,8 +420,8 @@ fn key_pack(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_inde
     }
     // Planes are whole tiles, so a region's width is even: texels go in pairs.
     for (var x = origin.x; x < end; x = x + 2u) {
-        let a = textureLoad(key_plane, vec2<u32>(x, y)).x;
-        let b = textureLoad(key_plane, vec2<u32>(x + 1u, y)).x;
+        let a = textureLoad(key_planes, vec2<u32>(x, y), plane, 0).x;
+        let b = textureLoad(key_planes, vec2<u32>(x + 1u, y), plane, 0).x;
         let qa = u32(clamp(round((a - lo) * inv), 0.0, 65535.0));
         let qb = u32(clamp(round((b - lo) * inv), 0.0, 65535.0));
         textureStore(planes16, vec2<u32>(x / 2u, y), job.layer, vec4<u32>(qa | (qb << 16u), 0u, 0u, 0u));

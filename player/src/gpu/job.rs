@@ -84,8 +84,10 @@ uniform_struct! {
     masks_at: u32 => "u32",
     /// The first word of the part's sets of blocks with a coefficient in the ring.
     sets_at: u32 => "u32",
-    /// (A uniform struct's size is a multiple of 16 bytes.)
-    pad2: u32 => "u32",
+    /// Where the part's block 0 lies in the dense plane, in blocks: 0, or for a plane of
+    /// a batch parsed and gathered together, its place among the batch's (a multiple of
+    /// 64, so that a group of 64 blocks is one plane's).
+    dense_at: u32 => "u32",
 }
 
 /// Bytes between two jobs in the jobs buffer: WebGPU's default
@@ -95,8 +97,23 @@ pub(super) const JOB_STRIDE: u64 = 256;
 /// The WGSL source of a decode shader: the `Job` declaration, what the decode passes
 /// share (`job.wgsl`), then `body`.
 pub(super) fn decode_source(body: &str) -> String {
-    format!("{JOB_WGSL}{}{body}", include_str!("job.wgsl"))
+    format!(
+        "{JOB_WGSL}const BATCH_PLANES: u32 = {BATCH_PLANES}u;\n{}{body}",
+        include_str!("job.wgsl")
+    )
 }
+
+/// The most planes one dispatch covers (`workgroup_id.z`, each with its own job): a batch
+/// of a segment's bubble planes ([`super::Gpu::plan_decode`]). The decode passes bind
+/// this many jobs from a job's offset, so the jobs buffer holds that much past the last.
+pub(super) const BATCH_PLANES: u32 = 16;
+
+// job.wgsl pads a job to the stride with 160 bytes (naga's GL output ignored an
+// `@size(256)` there, and a batch's second plane read the first's padding).
+const _: () = assert!(std::mem::size_of::<Job>() + 160 == JOB_STRIDE as usize);
+
+/// Bytes the decode passes' job binding covers: [`BATCH_PLANES`] jobs.
+pub(super) const JOB_BINDING: u64 = BATCH_PLANES as u64 * JOB_STRIDE;
 
 #[cfg(test)]
 /// The WGSL struct has the Rust struct's fields in the same order at the same offsets:

@@ -7,6 +7,8 @@ pub(super) struct Layouts {
     pub reconstruct: wgpu::BindGroupLayout,
     pub hold: wgpu::BindGroupLayout,
     pub key: wgpu::BindGroupLayout,
+    /// `key_pack`'s: the head read whole (every channel in one dispatch).
+    pub pack: wgpu::BindGroupLayout,
     pub bubble: wgpu::BindGroupLayout,
     pub parse: wgpu::BindGroupLayout,
 }
@@ -144,6 +146,22 @@ pub(super) fn layouts(device: &wgpu::Device, tables: TablesIn) -> Layouts {
             entry(10, storage(true)),
         ],
     });
+    let pack_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("vbim keyframe pack"),
+        entries: &[
+            entry(0, uniform(true)),
+            entry(11, uniform(true)),
+            entry(
+                14,
+                sampled(
+                    wgpu::TextureSampleType::Float { filterable: false },
+                    D2Array,
+                ),
+            ),
+            planes16,
+            entry(5, storage(false)),
+        ],
+    });
     let bubble_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("vbim bubble decode"),
         entries: &[
@@ -176,6 +194,7 @@ pub(super) fn layouts(device: &wgpu::Device, tables: TablesIn) -> Layouts {
         reconstruct: bgl,
         hold: hold_layout,
         key: key_layout,
+        pack: pack_layout,
         bubble: bubble_layout,
         parse: parse_layout,
     }

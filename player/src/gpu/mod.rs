@@ -76,12 +76,16 @@ pub(crate) struct Gpu {
     key_pack: wgpu::ComputePipeline,
     bubble_gather: wgpu::ComputePipeline,
     key_layout: wgpu::BindGroupLayout,
+    pack_layout: wgpu::BindGroupLayout,
     bubble_layout: wgpu::BindGroupLayout,
     parse_layout: wgpu::BindGroupLayout,
     params: wgpu::Buffer,
     tables: wgpu::Buffer,
     /// Decode pass parameters, `JOB_STRIDE` apart; grows with the longest keyframe chain.
     jobs: wgpu::Buffer,
+    /// A batch of bubble planes' jobs being planned (`Gpu::plan_decode`), kept so that
+    /// planning allocates nothing.
+    batch: Vec<job::Job>,
     /// A segment's streams, entry points and member spans; grows with the largest segment.
     words: wgpu::Buffer,
     /// Each slice's first workgroup (`resources::slice_buffer`); grows with the longest pass.
@@ -145,6 +149,8 @@ pub(crate) struct Gpu {
     /// Decode bind groups (per keyframe layer, and per bubble set): remade when `words`,
     /// `jobs` or a set's `terms` grow.
     key_groups: Vec<wgpu::BindGroup>,
+    /// `key_pack`'s bind group (the head whole).
+    pack_group: Option<wgpu::BindGroup>,
     bubble_groups: Vec<wgpu::BindGroup>,
     parse_group: Option<wgpu::BindGroup>,
     /// Scratch for the jobs of one segment (kept: no allocation per segment).

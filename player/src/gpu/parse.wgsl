@@ -64,7 +64,7 @@ fn flush_groups() {
 // a GPU an atomic that returns a value stalls the invocation for a round trip to memory,
 // one that does not is sent and forgotten.
 fn put_coef(d: u32, f: u32, v: i32) {
-    coefs[d * 64u + f] = v;
+    coefs[(job.dense_at + d) * 64u + f] = v;
     atomicOr(&masks[job.masks_at + d * 2u + f / 32u], 1u << (f % 32u));
 }
 
@@ -89,6 +89,7 @@ fn put(b: u32, f: u32, v: i32) {
 // most FILL_BLOCKS blocks whose DC a zero run repeats), or to the end.
 @compute @workgroup_size(64)
 fn parse(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    take_job(wg);
     let e = group_index(wg) * 64u + li;
     if (e >= job.count) {
         return;
@@ -206,6 +207,7 @@ fn scan_lanes(li: u32, x: u32, wrap: bool) -> u32 {
 
 @compute @workgroup_size(64)
 fn parse_wide(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    take_job(wg);
     let e = group_index(wg);
     if (e >= job.count) {
         return;

@@ -4,7 +4,7 @@
 use wgpu::util::DeviceExt;
 
 use super::decode::SLICE_GROUPS;
-use super::job::{decode_source, Job, JOB_STRIDE};
+use super::job::{decode_source, JOB_BINDING, JOB_STRIDE};
 use super::layouts::{compute_pipeline, layouts, Layouts, TablesIn};
 use super::plan::*;
 use super::reconstruct::Params;
@@ -137,6 +137,7 @@ impl Gpu {
             reconstruct: bgl,
             hold: hold_layout,
             key: key_layout,
+            pack: pack_layout,
             bubble: bubble_layout,
             parse: parse_layout,
         } = layouts(device, tables_in);
@@ -168,7 +169,7 @@ impl Gpu {
         let parse = pipeline_for("vbim parse", parse_source, &parse_layout, "parse");
         let parse_wide = pipeline_for("vbim parse_wide", parse_source, &parse_layout, "parse_wide");
         let key_add = pipeline_for("vbim key_add", decode, &key_layout, "key_add");
-        let key_pack = pipeline_for("vbim key_pack", decode, &key_layout, "key_pack");
+        let key_pack = pipeline_for("vbim key_pack", decode, &pack_layout, "key_pack");
         let bubble_gather = pipeline_for(
             "vbim bubble_gather",
             decode,
@@ -245,6 +246,7 @@ impl Gpu {
             key_pack,
             bubble_gather,
             key_layout,
+            pack_layout,
             bubble_layout,
             parse_layout,
             params,
@@ -283,9 +285,11 @@ impl Gpu {
             held_view,
             output: None,
             key_groups: Vec::new(),
+            pack_group: None,
             bubble_groups: Vec::new(),
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
+            batch: Vec::with_capacity(super::job::BATCH_PLANES as usize),
             // (Set from the adapter below.)
             shape: crate::DecodeShape::CPU,
             slice_span: 1,
@@ -354,10 +358,11 @@ impl Gpu {
 
     /// (Re)makes the decode passes' bind groups over the current `jobs` and `words`.
     pub(super) fn bind_decode(&mut self) {
+        // A job and those after it: a dispatch over a batch of planes reads one each.
         let job = wgpu::BufferBinding {
             buffer: &self.jobs,
             offset: 0,
-            size: wgpu::BufferSize::new(std::mem::size_of::<Job>() as u64),
+            size: wgpu::BufferSize::new(JOB_BINDING),
         };
         // The job, the streams and the dense plane, then the layout's own bindings.
         let group = |layout: &wgpu::BindGroupLayout, more: &[wgpu::BindGroupEntry]| {
@@ -373,11 +378,7 @@ impl Gpu {
             ];
             entries.push(wgpu::BindGroupEntry {
                 binding: 11,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &self.slices,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(16),
-                }),
+                resource: slice_binding(&self.slices),
             });
             entries.extend_from_slice(more);
             entries.push(wgpu::BindGroupEntry {
@@ -428,6 +429,18 @@ impl Gpu {
                 )
             })
             .collect();
+        let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+        self.pack_group = Some(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vbim keyframe pack"),
+            layout: &self.pack_layout,
+            entries: &[
+                entry(0, wgpu::BindingResource::Buffer(job.clone())),
+                entry(11, slice_binding(&self.slices)),
+                entry(14, wgpu::BindingResource::TextureView(&self.keys_view)),
+                entry(4, wgpu::BindingResource::TextureView(&self.packed_view)),
+                entry(5, self.ranges.as_entire_binding()),
+            ],
+        }));
         let degrees = wgpu::BindGroupEntry {
             binding: 9,
             resource: self.degrees.as_entire_binding(),
@@ -452,6 +465,15 @@ impl Gpu {
             self.lanes = Some(lanes);
         }
     }
+}
+
+/// The slices buffer as a dispatch binds it (its slice's entry, at a dynamic offset).
+fn slice_binding(slices: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer: slices,
+        offset: 0,
+        size: wgpu::BufferSize::new(16),
+    })
 }
 
 /// The reconstruction's bind group: its parameters and the DCT tables, then the head

@@ -387,6 +387,81 @@ fn bubble_blocks_sum_to_the_reference_plane() {
     }
 }
 
+/// A segment's bubble planes whose blocks fit the dense plane together are parsed and
+/// gathered in batches, a dispatch covering each batch's planes (`workgroup_id.z`), each
+/// at its own place in the dense plane and the ring of masks: every plane's layer sums
+/// to its reference, with the dense plane whole (one plane alone, then three together)
+/// and smaller (the first plane in parts, the others in two batches), by either parse.
+#[test]
+fn bubble_planes_decoded_in_batches_match_the_reference() {
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph, ts) = (256u32, 64u32, 16usize);
+    let tiles_x = pw as usize / ts;
+    let tiles = tiles_x * (ph as usize / ts);
+    let per2 = (ts / 8) * (ts / 8);
+    // 256, 64, 52 and 36 blocks.
+    let members: [&dyn Fn(usize) -> bool; 4] =
+        [&|_| true, &|t| t % 4 == 0, &|t| t % 5 == 0, &|t| t % 7 == 1];
+    for (part, wide, batched) in [
+        (None, false, 3),
+        (None, true, 3),
+        (Some(128), false, 2),
+        (Some(128), true, 2),
+    ] {
+        let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 5, 1, ts as u32);
+        gpu.set_decode_shape(shape(wide));
+        if let Some(p) = part {
+            gpu.part = p;
+            gpu.bind_decode();
+        }
+        let mut c = Coded::default();
+        let mut seg = SegmentData::new();
+        seg.steps = Vec::new();
+        seg.bubbles = 1;
+        seg.layers = 2 + members.len();
+        let mut wants = Vec::new();
+        for (n, member) in members.iter().enumerate() {
+            let count = (0..tiles).filter(|&t| member(t)).count();
+            let step = 0.004 * (n + 1) as f32;
+            let blocks = random_blocks(count * per2, &mut (20 + n as u32));
+            let (span, parsed) = coded_plane(&mut c, step, &blocks, Some((tiles, member)));
+            if n == 0 {
+                // (The keyframe plane the segment has no step for.)
+                seg.planes.push(span);
+            }
+            seg.planes.push(span);
+            wants.push((bubble_reference(&parsed, member, (pw, ph, ts), step), step));
+        }
+        seg.data = c;
+        let target = decode::Target {
+            pack_first: None,
+            pack_before_last: None,
+            set: Some(0),
+        };
+        let mut ops = Vec::new();
+        gpu.plan_decode(&seg, target, &mut ops);
+        let most = ops.iter().map(|o| o.groups[2]).max();
+        assert_eq!(most, Some(batched), "parts {part:?}, GPU shape {wide}");
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        gpu.decode(&mut enc, &seg, true);
+        gpu.queue.submit([enc.finish()]);
+        for (n, (want, step)) in wants.iter().enumerate() {
+            let got = summed_bubble_layer(&gpu, n as u32, (pw, ph), *step);
+            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+                let (x, y) = (i % pw as usize, i / pw as usize);
+                if !members[n]((y / ts) * tiles_x + x / ts) {
+                    continue;
+                }
+                assert!(
+                    (g - w).abs() <= 1e-5 * peak,
+                    "parts {part:?}, GPU shape {wide}, plane {n}, texel ({x}, {y}): GPU {g} against {w}"
+                );
+            }
+        }
+    }
+}
+
 /// The set's tile degrees mark the tiles with a coefficient, found again for each
 /// segment: after a segment whose plane had every tile, the next one's degrees are its
 /// own, and where a tile's degree reaches the layer its blocks are this segment's (a
