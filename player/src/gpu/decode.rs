@@ -691,8 +691,6 @@ fn batch_end(at: u32, blocks: u32) -> u32 {
 /// Whether a plane's part of `blocks` blocks joins `batch` in a dense plane of `part`
 /// blocks: at most [`BATCH_PLANES`] planes, each from a multiple of 64 blocks.
 fn fits_batch(batch: &[Job], blocks: u32, part: u32) -> bool {
-    let end = batch
-        .iter()
-        .fold(0, |at, j| batch_end(at, j.hi - j.lo));
+    let end = batch.iter().fold(0, |at, j| batch_end(at, j.hi - j.lo));
     batch.len() < BATCH_PLANES as usize && end as u64 + blocks as u64 <= part as u64
 }
