@@ -340,6 +340,29 @@ fn summed_bubble_layer(gpu: &Gpu, layer: u32, (pw, ph): (u32, u32), step: f32) -
     out
 }
 
+/// The texels of `got` in member tiles (of `ts`² texels, `pw` texels across) match
+/// `want` within 1e-5 of its peak; `what` names the case.
+fn assert_members_match(
+    got: &[f32],
+    want: &Plane,
+    member: &dyn Fn(usize) -> bool,
+    (pw, ts): (u32, usize),
+    what: &str,
+) {
+    let tiles_x = pw as usize / ts;
+    let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+    for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
+        let (x, y) = (i % pw as usize, i / pw as usize);
+        if !member((y / ts) * tiles_x + x / ts) {
+            continue;
+        }
+        assert!(
+            (g - w).abs() <= 1e-5 * peak,
+            "{what}, texel ({x}, {y}): GPU {g} against {w}"
+        );
+    }
+}
+
 /// A bubble plane as the reconstruction sums it matches the reference decoder's within
 /// f32 rounding: tiles of columns 2–3 are not members, the plane is whole or in parts of
 /// 7 blocks, and the terms of blocks with many (up to 40) go to the set's term buffer.
@@ -373,17 +396,8 @@ fn bubble_blocks_sum_to_the_reference_plane() {
         let want = bubble_reference(&parsed, &member, (pw, ph, ts), step);
         decode_bubble_plane(&mut gpu, c, span);
         let got = summed_bubble_layer(&gpu, 0, (pw, ph), step);
-        let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
-        for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
-            let (x, y) = (i % pw as usize, i / pw as usize);
-            if !member((y / ts) * tiles_x + x / ts) {
-                continue;
-            }
-            assert!(
-                (g - w).abs() <= 1e-5 * peak,
-                "parts {part:?}, GPU shape {wide}, texel ({x}, {y}): GPU {g} against {w}"
-            );
-        }
+        let what = format!("parts {part:?}, GPU shape {wide}");
+        assert_members_match(&got, &want, &member, (pw, ts), &what);
     }
 }
 
@@ -447,17 +461,8 @@ fn bubble_planes_decoded_in_batches_match_the_reference() {
         gpu.queue.submit([enc.finish()]);
         for (n, (want, step)) in wants.iter().enumerate() {
             let got = summed_bubble_layer(&gpu, n as u32, (pw, ph), *step);
-            let peak = want.data.iter().fold(0f32, |m, v| m.max(v.abs()));
-            for (i, (g, w)) in got.iter().zip(&want.data).enumerate() {
-                let (x, y) = (i % pw as usize, i / pw as usize);
-                if !members[n]((y / ts) * tiles_x + x / ts) {
-                    continue;
-                }
-                assert!(
-                    (g - w).abs() <= 1e-5 * peak,
-                    "parts {part:?}, GPU shape {wide}, plane {n}, texel ({x}, {y}): GPU {g} against {w}"
-                );
-            }
+            let what = format!("parts {part:?}, GPU shape {wide}, plane {n}");
+            assert_members_match(&got, want, members[n], (pw, ts), &what);
         }
     }
 }
