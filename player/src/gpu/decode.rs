@@ -151,7 +151,8 @@ impl Gpu {
     /// the upload, is recorded). Fills `ops` with the ops, in the order they must be recorded, and
     /// returns the bytes the decode uploads (its streams and its jobs). Each keyframe plane is parsed into
     /// the dense plane, part by part, and added onto the head; each bubble plane's is
-    /// parsed and its terms gathered per block into the set. Nothing else may use the
+    /// parsed and its terms gathered per block into the set, in batches of planes that
+    /// fit the dense plane together (one dispatch of each pass a batch). Nothing else may use the
     /// dense plane or the stream buffer until the last op is recorded.
     pub fn plan_decode(&mut self, seg: &SegmentData, target: Target, ops: &mut Vec<Op>) -> u64 {
         let ch = self.channels;
