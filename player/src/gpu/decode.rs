@@ -262,10 +262,6 @@ impl Gpu {
                         continue;
                     }
                     if !alone {
-                        if !fits_batch(&batch, blocks, self.part) {
-                            self.batch_ops(ops, &mut batch, set, &mut ring);
-                            batch.clear();
-                        }
                         batch.push(job);
                         continue;
                     }
@@ -276,7 +272,7 @@ impl Gpu {
                     self.sliced(ops, Kind::BubbleGather, job, groups, set, units);
                 }
             }
-            self.batch_ops(ops, &mut batch, set, &mut ring);
+            self.batches(ops, &mut batch, set, &mut ring);
             self.batch = batch;
         }
         let slices = ops
@@ -490,7 +486,46 @@ impl Gpu {
         }
     }
 
-    /// A batch of bubble planes' parts ([`fits_batch`]) parsed into one slot of the ring
+    /// The bubble planes' parts in `planes` (each in one part), in batches that fit the
+    /// dense plane together: the largest left first, then each one after it that still
+    /// fits (first fit by decreasing size: at 512² and 4096² the cloudy days' planes are
+    /// a large one and smaller ones, which in their order took a batch more a segment).
+    fn batches(&mut self, ops: &mut Vec<Op>, planes: &mut [Job], set: u32, ring: &mut u32) {
+        if planes.is_empty() {
+            return;
+        }
+        planes.sort_unstable_by_key(|j| std::cmp::Reverse(j.hi - j.lo));
+        let mut batch = std::mem::take(&mut self.batch_out);
+        // The planes taken, a bit each (a segment has at most channels × degree of them).
+        assert!(
+            planes.len() <= 64,
+            "{} bubble planes in a segment",
+            planes.len()
+        );
+        let all = u64::MAX >> (64 - planes.len());
+        let mut taken = 0u64;
+        while taken != all {
+            batch.clear();
+            let mut end = 0;
+            for (k, job) in planes
+                .iter()
+                .enumerate()
+                .skip(taken.trailing_ones() as usize)
+            {
+                let blocks = job.hi - job.lo;
+                let fits = end as u64 + blocks as u64 <= self.part as u64;
+                if taken >> k & 1 == 0 && fits && batch.len() < BATCH_PLANES as usize {
+                    batch.push(*job);
+                    taken |= 1 << k;
+                    end = batch_end(end, blocks);
+                }
+            }
+            self.batch_ops(ops, &mut batch, set, ring);
+        }
+        self.batch_out = batch;
+    }
+
+    /// A batch of bubble planes' parts ([`Gpu::batches`]) parsed into one slot of the ring
     /// and the dense plane, each at its place there (`Job::dense_at`), and gathered into
     /// set `set`: a dispatch of each pass covers them all, one job a plane.
     fn batch_ops(&mut self, ops: &mut Vec<Op>, batch: &mut [Job], set: u32, ring: &mut u32) {
@@ -687,11 +722,4 @@ impl Gpu {
 /// a word pair of the sets) is one plane's.
 fn batch_end(at: u32, blocks: u32) -> u32 {
     (at + blocks).next_multiple_of(GROUP_BLOCKS)
-}
-
-/// Whether a plane's part of `blocks` blocks joins `batch` in a dense plane of `part`
-/// blocks: at most [`BATCH_PLANES`] planes, each from a multiple of 64 blocks.
-fn fits_batch(batch: &[Job], blocks: u32, part: u32) -> bool {
-    let end = batch.iter().fold(0, |at, j| batch_end(at, j.hi - j.lo));
-    batch.len() < BATCH_PLANES as usize && end as u64 + blocks as u64 <= part as u64
 }

@@ -86,6 +86,8 @@ pub(crate) struct Gpu {
     /// A batch of bubble planes' jobs being planned (`Gpu::plan_decode`), kept so that
     /// planning allocates nothing.
     batch: Vec<job::Job>,
+    /// The batch being planned from those (`Gpu::batches`).
+    batch_out: Vec<job::Job>,
     /// A segment's streams, entry points and member spans; grows with the largest segment.
     words: wgpu::Buffer,
     /// Each slice's first workgroup (`resources::slice_buffer`); grows with the longest pass.

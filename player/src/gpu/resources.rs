@@ -289,7 +289,8 @@ impl Gpu {
             bubble_groups: Vec::new(),
             parse_group: None,
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
-            batch: Vec::with_capacity(super::job::BATCH_PLANES as usize),
+            batch: Vec::with_capacity(64),
+            batch_out: Vec::with_capacity(super::job::BATCH_PLANES as usize),
             // (Set from the adapter below.)
             shape: crate::DecodeShape::CPU,
             slice_span: 1,
