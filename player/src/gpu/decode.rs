@@ -491,36 +491,28 @@ impl Gpu {
     /// fits (first fit by decreasing size: at 512² and 4096² the cloudy days' planes are
     /// a large one and smaller ones, which in their order took a batch more a segment).
     fn batches(&mut self, ops: &mut Vec<Op>, planes: &mut [Job], set: u32, ring: &mut u32) {
-        if planes.is_empty() {
-            return;
-        }
         planes.sort_unstable_by_key(|j| std::cmp::Reverse(j.hi - j.lo));
         let mut batch = std::mem::take(&mut self.batch_out);
-        // The planes taken, a bit each (a segment has at most channels × degree of them).
-        assert!(
-            planes.len() <= 64,
-            "{} bubble planes in a segment",
-            planes.len()
-        );
-        let all = u64::MAX >> (64 - planes.len());
-        let mut taken = 0u64;
-        while taken != all {
-            batch.clear();
-            let mut end = 0;
-            for (k, job) in planes
-                .iter()
-                .enumerate()
-                .skip(taken.trailing_ones() as usize)
-            {
-                let blocks = job.hi - job.lo;
-                let fits = end as u64 + blocks as u64 <= self.part as u64;
-                if taken >> k & 1 == 0 && fits && batch.len() < BATCH_PLANES as usize {
-                    batch.push(*job);
-                    taken |= 1 << k;
-                    end = batch_end(end, blocks);
+        // The planes taken, a bit each, 64 at a time (a segment has at most channels ×
+        // degree of them, 21).
+        for planes in planes.chunks(64) {
+            let all = u64::MAX >> (64 - planes.len());
+            let mut taken = 0u64;
+            while taken != all {
+                batch.clear();
+                let mut end = 0;
+                let first = taken.trailing_ones() as usize;
+                for (k, job) in planes.iter().enumerate().skip(first) {
+                    let blocks = job.hi - job.lo;
+                    let fits = end as u64 + blocks as u64 <= self.part as u64;
+                    if taken >> k & 1 == 0 && fits && batch.len() < BATCH_PLANES as usize {
+                        batch.push(*job);
+                        taken |= 1 << k;
+                        end = batch_end(end, blocks);
+                    }
                 }
+                self.batch_ops(ops, &mut batch, set, ring);
             }
-            self.batch_ops(ops, &mut batch, set, ring);
         }
         self.batch_out = batch;
     }
