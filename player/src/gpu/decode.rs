@@ -3,7 +3,7 @@
 //! and recorded a few at a time, so that the player can spread a segment's decode over the
 //! frames before it is shown ([`Op`], [`Gpu::plan_decode`], [`Gpu::record`]).
 
-use super::job::{Job, BATCH_PLANES, JOB_BINDING, JOB_STRIDE};
+use super::job::{Job, JOB_BINDING, JOB_STRIDE};
 use super::ops::{Kind, Op};
 use super::plan::*;
 use super::resources::slice_buffer;
@@ -34,7 +34,7 @@ const FILL_GROUPS: u32 = 4096;
 /// per dispatch as when a piece was 256 pairs, so that shorter pieces shorten each
 /// dispatch's serial chain without making more dispatches; for the wide parse (a
 /// workgroup per piece), 4096 pieces per dispatch at a GPU's slice of 2048.
-const PARSE_SPAN: u32 = (256 / vbim_format::chunk::ENTRY_PAIRS) as u32;
+pub(super) const PARSE_SPAN: u32 = (256 / vbim_format::chunk::ENTRY_PAIRS) as u32;
 const _: () = assert!(256 % vbim_format::chunk::ENTRY_PAIRS == 0);
 // The wide parse gives each of its 64 lanes a whole number of a piece's pairs.
 const _: () = assert!(vbim_format::chunk::ENTRY_PAIRS.is_multiple_of(64));
@@ -467,7 +467,13 @@ impl Gpu {
     /// the first. A version 2 plane decoded as coded (`lanes`) takes the first slot, which
     /// its own first pass clears (`lanes.wgsl`, `prepare`), and leaves the ring where it
     /// was: the slot is the next parse's only right after the ring's clear.
-    fn mask_slot(&self, ops: &mut Vec<Op>, job: Job, lanes: bool, ring: &mut u32) -> Job {
+    pub(super) fn mask_slot(
+        &self,
+        ops: &mut Vec<Op>,
+        job: Job,
+        lanes: bool,
+        ring: &mut u32,
+    ) -> Job {
         let slot = if lanes {
             0
         } else {
@@ -484,63 +490,6 @@ impl Gpu {
             sets_at: ((at + groups_offset(self.part)) / 4) as u32,
             ..job
         }
-    }
-
-    /// The bubble planes' parts in `planes` (each in one part), in batches that fit the
-    /// dense plane together: the largest left first, then each one after it that still
-    /// fits (first fit by decreasing size: at 512² and 4096² the cloudy days' planes are
-    /// a large one and smaller ones, which in their order took a batch more a segment).
-    fn batches(&mut self, ops: &mut Vec<Op>, planes: &mut [Job], set: u32, ring: &mut u32) {
-        planes.sort_unstable_by_key(|j| std::cmp::Reverse(j.hi - j.lo));
-        let mut batch = std::mem::take(&mut self.batch_out);
-        // The planes taken, a bit each, 64 at a time (a segment has at most channels ×
-        // degree of them, 21).
-        for planes in planes.chunks(64) {
-            let all = u64::MAX >> (64 - planes.len());
-            let mut taken = 0u64;
-            while taken != all {
-                batch.clear();
-                let mut end = 0;
-                let first = taken.trailing_ones() as usize;
-                for (k, job) in planes.iter().enumerate().skip(first) {
-                    let blocks = job.hi - job.lo;
-                    let fits = end as u64 + blocks as u64 <= self.part as u64;
-                    if taken >> k & 1 == 0 && fits && batch.len() < BATCH_PLANES as usize {
-                        batch.push(*job);
-                        taken |= 1 << k;
-                        end = batch_end(end, blocks);
-                    }
-                }
-                self.batch_ops(ops, &mut batch, set, ring);
-            }
-        }
-        self.batch_out = batch;
-    }
-
-    /// A batch of bubble planes' parts ([`Gpu::batches`]) parsed into one slot of the ring
-    /// and the dense plane, each at its place there (`Job::dense_at`), and gathered into
-    /// set `set`: a dispatch of each pass covers them all, one job a plane.
-    fn batch_ops(&mut self, ops: &mut Vec<Op>, batch: &mut [Job], set: u32, ring: &mut u32) {
-        let Some(&first) = batch.first() else {
-            return;
-        };
-        let slot = self.mask_slot(ops, first, false, ring);
-        let mut dense = 0;
-        for job in batch.iter_mut() {
-            job.dense_at = dense;
-            job.masks_at = slot.masks_at + 2 * dense;
-            job.sets_at = slot.sets_at + dense / 32;
-            dense = batch_end(dense, job.hi - job.lo);
-        }
-        let at = self.push_jobs(batch);
-        let (kind, per_group) = match self.shape.wide_parse {
-            false => (Kind::Parse, 64),
-            true => (Kind::ParseWide, 1),
-        };
-        let parse = |j: &Job| (j.count.div_ceil(per_group as u32), j.count as u64);
-        self.sliced_batch(ops, kind, at, batch, parse, (PARSE_SPAN, per_group), 0);
-        let gather = |j: &Job| ((j.hi - j.lo).div_ceil(64), (j.hi - j.lo) as u64);
-        self.sliced_batch(ops, Kind::BubbleGather, at, batch, gather, (1, 64), set);
     }
 
     /// The part of `job` parsed into the dense plane from its entry points, its masks and
@@ -615,7 +564,7 @@ impl Gpu {
     /// `plane` gives each one's workgroups and units; a dispatch covers its slice of each
     /// plane (`workgroup_id.z`), the workgroups past a plane's own doing nothing.
     #[allow(clippy::too_many_arguments)]
-    fn sliced_batch(
+    pub(super) fn sliced_batch(
         &mut self,
         ops: &mut Vec<Op>,
         kind: Kind,
@@ -673,7 +622,7 @@ impl Gpu {
 
     /// Appends `jobs`, one after another [`JOB_STRIDE`] apart (a batch's, which its
     /// dispatches read by `workgroup_id.z`); returns the first's offset.
-    fn push_jobs(&mut self, jobs: &[Job]) -> u32 {
+    pub(super) fn push_jobs(&mut self, jobs: &[Job]) -> u32 {
         let at = self.job_bytes.len();
         for job in jobs {
             let from = self.job_bytes.len();
@@ -707,11 +656,4 @@ impl Gpu {
                 .write_buffer(&self.words, 0, bytemuck::cast_slice(&data.words));
         }
     }
-}
-
-/// Where the next plane of a batch starts in the dense plane after one of `blocks` blocks
-/// at `at`: at a multiple of 64 blocks, so that a group of 64 (a block pass's workgroup,
-/// a word pair of the sets) is one plane's.
-fn batch_end(at: u32, blocks: u32) -> u32 {
-    (at + blocks).next_multiple_of(GROUP_BLOCKS)
 }

@@ -27,6 +27,7 @@
 //! (one step of a decode and its cost), `lanes` (version 2's sections decoded as coded,
 //! `lanes.wgsl`).
 
+mod batch;
 #[cfg(feature = "bench")]
 mod bench;
 mod decode;
