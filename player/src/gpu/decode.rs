@@ -623,13 +623,11 @@ impl Gpu {
     /// Appends `jobs`, one after another [`JOB_STRIDE`] apart (a batch's, which its
     /// dispatches read by `workgroup_id.z`); returns the first's offset.
     pub(super) fn push_jobs(&mut self, jobs: &[Job]) -> u32 {
-        let at = self.job_bytes.len();
+        let at = self.job_bytes.len() as u32;
         for job in jobs {
-            let from = self.job_bytes.len();
-            self.job_bytes.extend_from_slice(bytemuck::bytes_of(job));
-            self.job_bytes.resize(from + JOB_STRIDE as usize, 0);
+            self.append_job(bytemuck::bytes_of(job));
         }
-        at as u32
+        at
     }
 
     /// Appends a job's bytes (a [`Job`] or a lanes job) to the jobs of the decode being
@@ -642,6 +640,11 @@ impl Gpu {
                 return last as u32;
             }
         }
+        self.append_job(job)
+    }
+
+    /// Appends a job's bytes, padded to [`JOB_STRIDE`]; returns its offset.
+    fn append_job(&mut self, job: &[u8]) -> u32 {
         let at = self.job_bytes.len();
         self.job_bytes.extend_from_slice(job);
         self.job_bytes.resize(at + JOB_STRIDE as usize, 0);

@@ -127,10 +127,6 @@ pub(super) fn layouts(device: &wgpu::Device, tables: TablesIn) -> Layouts {
         ],
     });
     let words_entry = entry(2, storage(true));
-    let planes16 = entry(
-        4,
-        storage_texture(Access::WriteOnly, Format::R32Uint, D2Array),
-    );
     let key_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("vbim keyframe decode"),
         entries: &[
@@ -139,8 +135,6 @@ pub(super) fn layouts(device: &wgpu::Device, tables: TablesIn) -> Layouts {
             entry(1, tables.binding()),
             words_entry,
             entry(3, storage_texture(Access::ReadWrite, Format::R32Float, D2)),
-            planes16,
-            entry(5, storage(false)),
             entry(6, storage(true)),
             entry(7, storage(true)),
             entry(10, storage(true)),
@@ -158,7 +152,10 @@ pub(super) fn layouts(device: &wgpu::Device, tables: TablesIn) -> Layouts {
                     D2Array,
                 ),
             ),
-            planes16,
+            entry(
+                4,
+                storage_texture(Access::WriteOnly, Format::R32Uint, D2Array),
+            ),
             entry(5, storage(false)),
         ],
     });

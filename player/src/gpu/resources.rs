@@ -414,21 +414,7 @@ impl Gpu {
         self.key_groups = self
             .key_views
             .iter()
-            .map(|v| {
-                let ranges = wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: self.ranges.as_entire_binding(),
-                };
-                group(
-                    &self.key_layout,
-                    &[
-                        tables.clone(),
-                        view(3, v),
-                        view(4, &self.packed_view),
-                        ranges,
-                    ],
-                )
-            })
+            .map(|v| group(&self.key_layout, &[tables.clone(), view(3, v)]))
             .collect();
         let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
         self.pack_group = Some(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
