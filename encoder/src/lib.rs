@@ -62,7 +62,7 @@ pub use vbim_files::Progress;
 pub mod bench {
     pub use crate::model::PLANE_WEIGHT;
     pub use crate::payloads::{cluster, HISTOGRAMS};
-    /// What the quantiser is handed, recorded for `vbim bench transforms`.
+    /// What the quantiser is handed, recorded for `vbim bench transforms` and `bench intra`.
     pub mod tap {
         pub use crate::tap::{start, take, PlaneKind, TappedPlane};
     }

@@ -1,4 +1,4 @@
-//! What the quantiser is handed, recorded for `vbim bench transforms` (the `bench`
+//! What the quantiser is handed, recorded for `vbim bench transforms` and `bench intra` (the `bench`
 //! feature): each keyframe plane the encoder codes (the target of its chosen mode — the
 //! frame, or its difference from the keyframe before) and each bubble plane's member tiles,
 //! with the step and dead zone they are quantised with. A research harness for the next

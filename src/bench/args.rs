@@ -66,6 +66,28 @@ pub enum BenchCommand {
     /// one adaptive model: bytes at equal error, and the terms a texel's reconstruction
     /// sums. A research harness for the format's next coding tool.
     Transforms(BenchTransformsArgs),
+    /// What predicting a keyframe's blocks from what is decoded around them would make of
+    /// the planes the encoder quantises: a zero-mean surface through the neighbouring
+    /// blocks' DCs (a GPU still decodes every block at once), or AV1's texel modes from the
+    /// reconstructed texels above and to the left, each chosen per block against today's
+    /// coding, closed loop, by one adaptive model: bytes at equal error. A research harness.
+    Intra(BenchIntraArgs),
+}
+
+#[derive(Args)]
+pub struct BenchIntraArgs {
+    /// The frames (a directory of numbered EXR or PNG frames, as `vbim encode` takes).
+    pub frames: String,
+    /// The budget, in dB, encoded at as it is (`--tolerance T --no-aim`).
+    #[arg(long, default_value_t = 41.0)]
+    pub tolerance: f64,
+    /// The frame rate the frames are encoded at.
+    #[arg(long, default_value = "24/1", value_parser = crate::units::parse_rate)]
+    pub fps: (u32, u32),
+    /// Multiples of each plane's step to code at: each way's bytes are read off the line
+    /// through them at today's error at 1 (keep 1 among them).
+    #[arg(long, default_value = "0.9,1,1.12,1.25,1.4", value_delimiter = ',')]
+    pub steps: Vec<f32>,
 }
 
 #[derive(Args)]

@@ -9,7 +9,8 @@
 //! `scale` (the runtime as the lightmap grows), `changes` (what a displayed frame changes)
 //! and `entropy` (what a context-adaptive coder would save: a research harness for the
 //! format's next coding); `transforms` (what larger transforms would make of the planes the
-//! encoder quantises: the harness for its next coding tool); `fit` fits a GPU's decode costs from its timestamps; `objects`
+//! encoder quantises) and `intra` (what predicting a keyframe's blocks from their decoded
+//! neighbours would), the harnesses for its next coding tools, sharing `study`; `fit` fits a GPU's decode costs from its timestamps; `objects`
 //! measures the light for objects (irradiance tracks and the CPU query).
 
 mod args;
@@ -18,11 +19,13 @@ mod entropy;
 mod fit;
 mod frame_gpu;
 mod game_load;
+mod intra;
 mod objects;
 mod offline;
 mod runtime;
 mod scale;
 mod static_coding;
+mod study;
 mod transforms;
 
 pub use args::*;
@@ -44,6 +47,7 @@ pub fn run(c: BenchCommand) -> Result<(), String> {
         BenchCommand::Entropy(a) => entropy::run(a),
         BenchCommand::Objects(a) => objects::run(a),
         BenchCommand::Transforms(a) => transforms::run(a),
+        BenchCommand::Intra(a) => intra::run(a),
     }
 }
 
