@@ -109,6 +109,11 @@ pub struct BenchTransformsArgs {
     /// four). 0: bytes and error alone.
     #[arg(long, default_value_t = 0.0)]
     pub term_bits: f64,
+    /// Code every keyframe block, of every size, less the zero-mean quadratic surface
+    /// through its 3 × 3 blocks' decoded means (`bench intra`'s surface), to see what it
+    /// adds to larger blocks.
+    #[arg(long)]
+    pub surface: bool,
 }
 
 #[derive(Args)]

@@ -37,7 +37,8 @@ use vbim_format::plane2;
 
 use super::args::BenchIntraArgs;
 use super::study::{
-    at_distortion, family, left_bucket, size_class, tapped_planes, Coded, Model, Symbol, Transform,
+    at_distortion, dc_surface, family, left_bucket, size_class, tapped_planes, Coded, Model,
+    Symbol, Transform,
 };
 
 /// λ of the choices, in squared steps per bit (`bench transforms`' own).
@@ -466,27 +467,10 @@ fn predict(mode: Mode, e: &Edges, mean: impl Fn(isize, isize) -> f64) -> Option<
     match mode {
         Mode::None => {}
         Mode::Bilinear | Mode::Quadratic => {
-            let m: [[f64; 3]; 3] = std::array::from_fn(|j| {
+            let m = std::array::from_fn(|j| {
                 std::array::from_fn(|i| mean(i as isize - 1, j as isize - 1))
             });
-            // Texel x's offset from the block's centre, in blocks.
-            let at = |x: usize| (x as f64 + 0.5) / N as f64 - 0.5;
-            let weights = |u: f64| -> [f64; 3] {
-                if mode == Mode::Bilinear {
-                    [(-u).max(0.0), 1.0 - u.abs(), u.max(0.0)]
-                } else {
-                    [u * (u - 1.0) / 2.0, 1.0 - u * u, u * (u + 1.0) / 2.0]
-                }
-            };
-            fill(&mut p, &|x, y| {
-                let (wx, wy) = (weights(at(x)), weights(at(y)));
-                (0..3)
-                    .map(|j| (0..3).map(|i| wx[i] * wy[j] * m[j][i]).sum::<f64>())
-                    .sum()
-            });
-            // Zero-mean: the block's DC stays the DC coded as today.
-            let avg = p.iter().sum::<f64>() / (N * N) as f64;
-            p.iter_mut().for_each(|v| *v -= avg);
+            p.copy_from_slice(&dc_surface(N, &m, mode == Mode::Quadratic));
         }
         Mode::Dc => {
             let (mut s, mut n) = (0.0, 0.0);

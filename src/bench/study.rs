@@ -136,6 +136,33 @@ pub(super) fn left_bucket(n: u32) -> u32 {
     }
 }
 
+/// A zero-mean surface over an n × n block through the decoded means `m` of the 3 × 3
+/// blocks around it (`m[1][1]` its own, rows first), bilinear or quadratic (Lagrange
+/// through the blocks' centres): what a block less it leaves is its detail, a slope or a
+/// bend across blocks taken out; zero-mean, so that its DC stays the block's own.
+pub(super) fn dc_surface(n: usize, m: &[[f64; 3]; 3], quadratic: bool) -> Vec<f64> {
+    // Texel x's offset from the block's centre, in blocks.
+    let at = |x: usize| (x as f64 + 0.5) / n as f64 - 0.5;
+    let weights = |u: f64| -> [f64; 3] {
+        if quadratic {
+            [u * (u - 1.0) / 2.0, 1.0 - u * u, u * (u + 1.0) / 2.0]
+        } else {
+            [(-u).max(0.0), 1.0 - u.abs(), u.max(0.0)]
+        }
+    };
+    let mut p: Vec<f64> = (0..n * n)
+        .map(|i| {
+            let (wx, wy) = (weights(at(i % n)), weights(at(i / n)));
+            (0..3)
+                .map(|j| (0..3).map(|k| wx[k] * wy[j] * m[j][k]).sum::<f64>())
+                .sum()
+        })
+        .collect();
+    let avg = p.iter().sum::<f64>() / (n * n) as f64;
+    p.iter_mut().for_each(|v| *v -= avg);
+    p
+}
+
 /// The zig-zag order of an n × n block: (x, y) of each index.
 pub(super) fn zigzag(n: usize) -> Vec<(usize, usize)> {
     let mut v: Vec<(usize, usize)> = (0..n * n).map(|i| (i % n, i / n)).collect();

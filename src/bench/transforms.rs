@@ -29,6 +29,11 @@
 //! the two move together). Also printed: how many terms a texel's reconstruction sums (a
 //! block's non-zero terms, DC included, over the texels it covers), what the player's
 //! keyframe pass (per segment) and bubble reconstruction (per displayed frame) would pay.
+//!
+//! With `--surface`, every keyframe block of every size is coded less the zero-mean
+//! quadratic surface through its own grid's 3 × 3 decoded means (`bench intra`'s), and the
+//! ratios are against today's 8 × 8 blocks without it: what the surface adds beside
+//! larger blocks.
 
 use std::collections::HashMap;
 
@@ -38,8 +43,8 @@ use vbim_encoder::bench::PLANE_WEIGHT;
 use vbim_format::plane2;
 
 use super::study::{
-    at_distortion, family, left_bucket, size_class, tapped_planes, token, Block, Coded, Model,
-    Symbol, Transform,
+    at_distortion, dc_surface, family, left_bucket, size_class, tapped_planes, token, Block, Coded,
+    Model, Symbol, Transform,
 };
 
 use super::args::BenchTransformsArgs;
@@ -59,6 +64,23 @@ enum Way {
     Choice,
     /// Per 32 × 32 region, one 32 × 32 block or four regions chosen as `Choice` does.
     Quadtree,
+}
+
+/// What every way is run with.
+#[derive(Clone, Copy)]
+struct Options {
+    /// Bits a term a texel sums costs in the choices.
+    term_bits: f64,
+    /// Keyframe blocks less the quadratic surface through their neighbours' DCs.
+    surface: bool,
+}
+
+impl Options {
+    fn surface_on(self, p: &TappedPlane) -> bool {
+        // A bubble plane's tiles lie side by side in one row: their neighbours there are
+        // not the ones in the lightmap.
+        self.surface && !matches!(p.kind, PlaneKind::Bubble { .. })
+    }
 }
 
 /// Every way, 8 × 8 (today's) first.
@@ -90,6 +112,10 @@ impl Way {
 
 pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
     let planes = tapped_planes(&a.frames, a.tolerance, a.fps)?;
+    let opts = Options {
+        term_bits: a.term_bits,
+        surface: a.surface,
+    };
     let groups: [(&str, Pick); 3] = [
         ("intra keyframes", |k| k == PlaneKind::IntraKeyframe),
         ("predicted keyframes", |k| k == PlaneKind::PredictedKeyframe),
@@ -98,20 +124,50 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
     println!(
         "transforms: {}, encoded at --tolerance {} --no-aim in format 2; bytes at the 8 × 8 \
          blocks' error (steps × {:?}), one adaptive model for every way; a term a texel sums \
-         priced at {} bits in the choices",
-        a.frames, a.tolerance, a.steps, a.term_bits
+         priced at {} bits in the choices{}",
+        a.frames,
+        a.tolerance,
+        a.steps,
+        a.term_bits,
+        if a.surface {
+            "; keyframe blocks less the quadratic surface through their neighbours' DCs"
+        } else {
+            ""
+        }
     );
     println!("| planes | way | bytes at step × 1 | error | at the 8 × 8 error: bytes | ratio | terms a texel sums |");
     println!("|---|---|---:|---:|---:|---:|---:|");
     // Per way (in `WAYS`' order), the bytes of every group at each group's 8 × 8 error.
     let mut totals = [0.0; WAYS.len()];
+    // Today's coding of every group (8 × 8 blocks, no surface), at its own error.
+    let mut today = 0.0;
     for (name, pick) in groups {
         let set: Vec<&TappedPlane> = planes.iter().filter(|p| pick(p.kind)).collect();
         if set.is_empty() {
             continue;
         }
-        // The 8 × 8 blocks' bytes on their own line and their error, at step × 1.
+        // The 8 × 8 blocks' bytes on their own line and their error, at step × 1: today's
+        // coding, without the surface.
         let mut base: Option<(f64, f64)> = None;
+        if a.surface {
+            let plain = Options {
+                surface: false,
+                ..opts
+            };
+            let points: Vec<Coded> = a
+                .steps
+                .iter()
+                .map(|&m| code_all(&set, Way::Size(8), m, plain))
+                .collect();
+            let d = step_one(&a.steps, &points).dist;
+            base = Some((at_distortion(&points, d), d));
+            println!(
+                "| {name} ({} planes) | 8 × 8, no surface | {:.0} | {d:.4e} | {:.0} | 1.000 | |",
+                set.len(),
+                step_one(&a.steps, &points).bytes,
+                at_distortion(&points, d)
+            );
+        }
         let mut bytes_of = [None; WAYS.len()];
         for (w, way) in WAYS.into_iter().enumerate() {
             if set
@@ -123,13 +179,9 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
             let points: Vec<Coded> = a
                 .steps
                 .iter()
-                .map(|&m| code_all(&set, way, m, a.term_bits))
+                .map(|&m| code_all(&set, way, m, opts))
                 .collect();
-            let at1 = a
-                .steps
-                .iter()
-                .position(|&m| m == 1.0)
-                .map_or(&points[0], |i| &points[i]);
+            let at1 = step_one(&a.steps, &points);
             let (b8, d8) =
                 *base.get_or_insert_with(|| (at_distortion(&points, at1.dist), at1.dist));
             let bytes = at_distortion(&points, d8);
@@ -149,23 +201,34 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
         // quadtree's bubble planes of 16-texel tiles: as the choice).
         for (w, way) in WAYS.into_iter().enumerate() {
             let fallback = WAYS.iter().position(|&f| f == way.fallback());
+            if w == 0 {
+                today += base.map_or(0.0, |(b8, _)| b8);
+            }
             totals[w] += bytes_of[w]
                 .or(fallback.and_then(|f| bytes_of[f]))
                 .unwrap_or(0.0);
         }
     }
     for (w, way) in WAYS.into_iter().enumerate() {
-        if matches!(way, Way::Size(16) | Way::Choice | Way::Quadtree) {
+        if a.surface || matches!(way, Way::Size(16) | Way::Choice | Way::Quadtree) {
             println!(
-                "every plane, {}: {:.0} bytes against {:.0} in 8 × 8 blocks, {:.3}",
+                "every plane, {}{}: {:.0} bytes against {today:.0} in 8 × 8 blocks, {:.3}",
                 way.label(),
+                if a.surface { " with the surface" } else { "" },
                 totals[w],
-                totals[0],
-                totals[w] / totals[0]
+                totals[w] / today
             );
         }
     }
     Ok(())
+}
+
+/// The point coded at step × 1 (the first if 1 is not among the steps).
+fn step_one<'a>(steps: &[f32], points: &'a [Coded]) -> &'a Coded {
+    steps
+        .iter()
+        .position(|&m| m == 1.0)
+        .map_or(&points[0], |i| &points[i])
 }
 
 fn block_of(way: Way) -> usize {
@@ -177,7 +240,7 @@ fn block_of(way: Way) -> usize {
 }
 
 /// Every plane of `set` coded `way` with its step × `mult`.
-fn code_all(set: &[&TappedPlane], way: Way, mult: f32, term_bits: f64) -> Coded {
+fn code_all(set: &[&TappedPlane], way: Way, mult: f32, opts: Options) -> Coded {
     // Per plane, the blocks in coding order (their contexts already family-tagged).
     let coded: Vec<(f64, Vec<Block>)> = set
         .par_iter()
@@ -185,9 +248,9 @@ fn code_all(set: &[&TappedPlane], way: Way, mult: f32, term_bits: f64) -> Coded 
             let family = family(p);
             let step = p.step * mult;
             let blocks = match way {
-                Way::Size(n) => tag(quantise_plane(p, n, step), family, n),
-                Way::Choice => choose(p, step, family, &[8, 16], term_bits),
-                Way::Quadtree => choose(p, step, family, &[8, 16, 32], term_bits),
+                Way::Size(n) => tag(quantise_plane(p, n, step, opts.surface_on(p)), family, n),
+                Way::Choice => choose(p, step, family, &[8, 16], opts),
+                Way::Quadtree => choose(p, step, family, &[8, 16, 32], opts),
             };
             (PLANE_WEIGHT[p.plane.min(2)], blocks)
         })
@@ -226,20 +289,46 @@ fn tag(blocks: Vec<Block>, family: u32, n: usize) -> Vec<Block> {
         .collect()
 }
 
-/// A plane's n × n blocks quantised and turned into symbols, in raster order.
-fn quantise_plane(p: &TappedPlane, n: usize, step: f32) -> Vec<Block> {
+/// A plane's n × n blocks quantised and turned into symbols, in raster order; with
+/// `surface`, each block less the zero-mean quadratic surface through its 3 × 3 blocks'
+/// decoded means (`study::dc_surface`), which leaves its DC as it was.
+fn quantise_plane(p: &TappedPlane, n: usize, step: f32, surface: bool) -> Vec<Block> {
     let (bw, bh) = (p.w / n, p.h / n);
     let t = Transform::new(n);
+    let source = |b: usize| -> Vec<f64> {
+        let (bx, by) = (b % bw, b / bw);
+        (0..n * n)
+            .map(|i| p.data[(by * n + i / n) * p.w + bx * n + i % n] as f64)
+            .collect()
+    };
+    // The blocks' means as decoded (the orthonormal DC is the sum over n, quantised
+    // without a dead zone), which the surfaces read.
+    let step = step as f64;
+    let means: Vec<f64> = if surface {
+        (0..bw * bh)
+            .map(|b| (source(b).iter().sum::<f64>() / n as f64 / step).round() * step / n as f64)
+            .collect()
+    } else {
+        Vec::new()
+    };
     let q: Vec<(Vec<i32>, f64)> = (0..bw * bh)
         .map(|b| {
-            let (bx, by) = (b % bw, b / bw);
-            let mut block = vec![0f64; n * n];
-            for y in 0..n {
-                for x in 0..n {
-                    block[y * n + x] = p.data[(by * n + y) * p.w + bx * n + x] as f64;
+            let mut block = source(b);
+            if surface {
+                let (bx, by) = ((b % bw) as isize, (b / bw) as isize);
+                let mean = |dx: isize, dy: isize| {
+                    let x = (bx + dx).clamp(0, bw as isize - 1) as usize;
+                    let y = (by + dy).clamp(0, bh as isize - 1) as usize;
+                    means[y * bw + x]
+                };
+                let m = std::array::from_fn(|j| {
+                    std::array::from_fn(|i| mean(i as isize - 1, j as isize - 1))
+                });
+                for (v, s) in block.iter_mut().zip(dc_surface(n, &m, true)) {
+                    *v -= s;
                 }
             }
-            t.quantise(&block, step as f64, p.deadzone as f64)
+            t.quantise(&block, step, p.deadzone as f64)
         })
         .collect();
     let dc: Vec<i32> = q.iter().map(|(c, _)| c[0]).collect();
@@ -311,13 +400,14 @@ type Level = (Vec<Option<Block>>, Vec<f64>, usize);
 /// whether it did, in a context of its size, before the first block under it. (The DC
 /// residuals and neighbour contexts of each size are those of its own grid, as if the
 /// whole plane had that size: the study's approximation of a mixed grid.)
-fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], term_bits: f64) -> Vec<Block> {
+fn choose(p: &TappedPlane, step: f32, family: u32, sizes: &[usize], opts: Options) -> Vec<Block> {
+    let term_bits = opts.term_bits;
     let lambda = LAMBDA * (step as f64).powi(2);
     // Per size: its blocks (taken as chosen), their costs J, and its grid's width.
     let mut levels: Vec<Level> = sizes
         .iter()
         .map(|&n| {
-            let blocks = tag(quantise_plane(p, n, step), family, n);
+            let blocks = tag(quantise_plane(p, n, step, opts.surface_on(p)), family, n);
             let costs = static_costs(&blocks);
             let j = blocks
                 .iter()
@@ -405,6 +495,11 @@ fn static_costs(blocks: &[Block]) -> HashMap<Symbol, f64> {
 mod tests {
     use super::*;
 
+    const FREE: Options = Options {
+        term_bits: 0.0,
+        surface: false,
+    };
+
     fn plane(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> TappedPlane {
         TappedPlane {
             kind: PlaneKind::IntraKeyframe,
@@ -449,7 +544,7 @@ mod tests {
         let curve = |way| {
             steps
                 .iter()
-                .map(|&m| code_all(&set, way, m, 0.0))
+                .map(|&m| code_all(&set, way, m, FREE))
                 .collect::<Vec<_>>()
         };
         let small = curve(Way::Size(8));
@@ -465,6 +560,30 @@ mod tests {
     }
 
     #[test]
+    fn the_surface_takes_a_bend_out_of_small_blocks_and_leaves_bubble_planes_alone() {
+        let mut p = plane(128, 128, |x, y| {
+            let (u, v) = (x as f32 / 128.0, y as f32 / 128.0);
+            4.0 * u * u + 2.0 * v * v + 0.01 * ((x * 13 + y * 7) % 5) as f32
+        });
+        let with = Options {
+            term_bits: 0.0,
+            surface: true,
+        };
+        let plain = code_all(&[&p], Way::Size(8), 1.0, FREE);
+        let surfaced = code_all(&[&p], Way::Size(8), 1.0, with);
+        assert!(
+            surfaced.bytes < 0.95 * plain.bytes,
+            "{} against {}",
+            surfaced.bytes,
+            plain.bytes
+        );
+        p.kind = PlaneKind::Bubble { term: 2 };
+        let plain = code_all(&[&p], Way::Size(8), 1.0, FREE);
+        let surfaced = code_all(&[&p], Way::Size(8), 1.0, with);
+        assert_eq!(surfaced.bytes, plain.bytes);
+    }
+
+    #[test]
     fn pricing_the_terms_picks_smaller_blocks() {
         // A ramp with a sharp shadow edge: large blocks win the ramp, lose at the edge.
         let p = plane(128, 128, |x, y| {
@@ -472,12 +591,20 @@ mod tests {
             edge + 0.01 * x as f32 + 0.005 * y as f32
         });
         let terms = |bits| {
-            let c = code_all(&[&p], Way::Quadtree, 1.0, bits);
+            let c = code_all(
+                &[&p],
+                Way::Quadtree,
+                1.0,
+                Options {
+                    term_bits: bits,
+                    surface: false,
+                },
+            );
             c.terms / c.texels
         };
         let free = terms(0.0);
         let priced = terms(64.0);
-        let small = code_all(&[&p], Way::Size(8), 1.0, 0.0);
+        let small = code_all(&[&p], Way::Size(8), 1.0, FREE);
         assert!(priced < free, "{priced} against {free}");
         assert!(priced <= free.min(small.terms / small.texels * 1.5));
     }
