@@ -109,10 +109,12 @@ type Pick = fn(PlaneKind) -> bool;
 /// squared error and symbols.
 type Candidate = (f64, Mode, [f64; N * N], Vec<i32>, f64, Vec<Symbol>);
 
-/// A way of coding a plane: the modes its blocks choose from.
+/// A way of coding a plane: the modes its blocks choose from, and the regions (of so
+/// many blocks a side; 0: the plane) outside which a texel mode does not look.
 struct Way {
     label: &'static str,
     modes: &'static [Mode],
+    region: usize,
 }
 
 const TEXEL_MODES: &[Mode] = &[
@@ -127,30 +129,41 @@ const TEXEL_MODES: &[Mode] = &[
 ];
 
 /// Today's first.
-const WAYS: [Way; 6] = [
+const WAYS: [Way; 7] = [
     Way {
         label: "today (no prediction)",
         modes: &[Mode::None],
+        region: 0,
     },
     Way {
         label: "bilinear surface through the DCs, every block",
         modes: &[Mode::Bilinear],
+        region: 0,
     },
     Way {
         label: "quadratic surface through the DCs, every block",
         modes: &[Mode::Quadratic],
+        region: 0,
     },
     Way {
         label: "none, bilinear or quadratic, per block",
         modes: &[Mode::None, Mode::Bilinear, Mode::Quadratic],
+        region: 0,
     },
     Way {
         label: "texel intra (AV1's 7 modes or none), per block",
         modes: TEXEL_MODES,
+        region: 0,
     },
     Way {
         label: "texel intra, AV1's smooth mode or none, per block",
         modes: &[Mode::None, Mode::Smooth],
+        region: 0,
+    },
+    Way {
+        label: "texel intra, 7 modes or none, inside regions of 8 × 8 blocks",
+        modes: TEXEL_MODES,
+        region: 8,
     },
 ];
 
@@ -346,7 +359,7 @@ fn code_plane(
         let busy = left.is_some_and(|c| c.busy) as u32 + up.is_some_and(|c| c.busy) as u32;
         let mode_ctx =
             left.is_some_and(|c| c.predicted) as u32 + up.is_some_and(|c| c.predicted) as u32;
-        let edges = Edges::read(&recon, w, bw, bx, by);
+        let edges = Edges::read(&recon, (w, bw), (bx, by), way.region);
         let mut best: Option<Candidate> = None;
         for (m, &mode) in way.modes.iter().enumerate() {
             let Some(pred) = predict(mode, &edges, |dx, dy| {
@@ -426,12 +439,27 @@ struct Edges {
 }
 
 impl Edges {
-    fn read(recon: &[f64], w: usize, bw: usize, bx: usize, by: usize) -> Edges {
-        let above = (by > 0).then(|| {
+    /// Block (bx, by)'s edges in a plane `w` texels and `bw` blocks wide; with `region`
+    /// > 0, only those inside its region of `region`² blocks.
+    fn read(
+        recon: &[f64],
+        (w, bw): (usize, usize),
+        (bx, by): (usize, usize),
+        region: usize,
+    ) -> Edges {
+        let inside = |i: usize| {
+            if region == 0 {
+                i > 0
+            } else {
+                !i.is_multiple_of(region)
+            }
+        };
+        let right = bx + 1 < bw && (region == 0 || !(bx + 1).is_multiple_of(region));
+        let above = inside(by).then(|| {
             let row = (by * N - 1) * w;
             let mut a = [0.0; 2 * N];
             for (i, v) in a.iter_mut().enumerate() {
-                *v = if i < N || bx + 1 < bw {
+                *v = if i < N || right {
                     recon[row + bx * N + i]
                 } else {
                     recon[row + bx * N + N - 1]
@@ -439,8 +467,9 @@ impl Edges {
             }
             a
         });
-        let left = (bx > 0).then(|| std::array::from_fn(|j| recon[(by * N + j) * w + bx * N - 1]));
-        let corner = (bx > 0 && by > 0).then(|| recon[(by * N - 1) * w + bx * N - 1]);
+        let left =
+            inside(bx).then(|| std::array::from_fn(|j| recon[(by * N + j) * w + bx * N - 1]));
+        let corner = (inside(bx) && inside(by)).then(|| recon[(by * N - 1) * w + bx * N - 1]);
         Edges {
             above,
             left,
@@ -591,6 +620,37 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn inside_regions_a_block_reads_no_texel_of_another_region() {
+        let (w, bw) = (64, 8);
+        // Each texel holds its block's region (regions of 4 × 4 blocks).
+        let recon: Vec<f64> = (0..w * w)
+            .map(|i| ((i % w / N / 4) + 10 * (i / w / N / 4)) as f64)
+            .collect();
+        for by in 0..bw {
+            for bx in 0..bw {
+                let own = ((bx / 4) + 10 * (by / 4)) as f64;
+                let e = Edges::read(&recon, (w, bw), (bx, by), 4);
+                let seen = e
+                    .above
+                    .iter()
+                    .flatten()
+                    .chain(e.left.iter().flatten())
+                    .chain(&e.corner);
+                for &v in seen {
+                    assert_eq!(v, own, "block ({bx}, {by})");
+                }
+                assert_eq!(e.above.is_some(), by % 4 > 0);
+                assert_eq!(e.left.is_some(), bx % 4 > 0);
+            }
+        }
+        // Without regions, the plane's edge alone bounds them: block (4, 4) reads its
+        // left neighbour in region (0, 1) and its upper one in region (1, 0).
+        let e = Edges::read(&recon, (w, bw), (4, 4), 0);
+        assert_eq!(e.left.unwrap()[0], 10.0);
+        assert_eq!(e.above.unwrap()[0], 1.0);
     }
 
     #[test]
