@@ -76,6 +76,13 @@ pub enum BenchCommand {
 
 #[derive(Args)]
 pub struct BenchIntraArgs {
+    #[command(flatten)]
+    pub study: StudyArgs,
+}
+
+/// What the coding studies (`bench transforms`, `bench intra`) take.
+#[derive(Args)]
+pub struct StudyArgs {
     /// The frames (a directory of numbered EXR or PNG frames, as `vbim encode` takes).
     pub frames: String,
     /// The budget, in dB, encoded at as it is (`--tolerance T --no-aim`).
@@ -85,25 +92,15 @@ pub struct BenchIntraArgs {
     #[arg(long, default_value = "24/1", value_parser = crate::units::parse_rate)]
     pub fps: (u32, u32),
     /// Multiples of each plane's step to code at: each way's bytes are read off the line
-    /// through them at today's error at 1 (keep 1 among them).
+    /// through them at today's coding's error at 1 (keep 1 among them).
     #[arg(long, default_value = "0.9,1,1.12,1.25,1.4", value_delimiter = ',')]
     pub steps: Vec<f32>,
 }
 
 #[derive(Args)]
 pub struct BenchTransformsArgs {
-    /// The frames (a directory of numbered EXR or PNG frames, as `vbim encode` takes).
-    pub frames: String,
-    /// The budget, in dB, encoded at as it is (`--tolerance T --no-aim`).
-    #[arg(long, default_value_t = 41.0)]
-    pub tolerance: f64,
-    /// The frame rate the frames are encoded at.
-    #[arg(long, default_value = "24/1", value_parser = crate::units::parse_rate)]
-    pub fps: (u32, u32),
-    /// Multiples of each plane's step to code at: each way's bytes are read off the line
-    /// through them at the 8 × 8 blocks' error at 1 (keep 1 among them).
-    #[arg(long, default_value = "0.9,1,1.12,1.25,1.4", value_delimiter = ',')]
-    pub steps: Vec<f32>,
+    #[command(flatten)]
+    pub study: StudyArgs,
     /// What the choices charge for the reconstruction's work: bits per term a texel's
     /// reconstruction sums, in units of an 8 × 8 block's term (a 16 × 16 block's term counts
     /// four). 0: bytes and error alone.

@@ -168,11 +168,11 @@ const WAYS: [Way; 7] = [
 ];
 
 pub fn run(a: BenchIntraArgs) -> Result<(), String> {
-    let planes = tapped_planes(&a.frames, a.tolerance, a.fps)?;
+    let planes = tapped_planes(&a.study.frames, a.study.tolerance, a.study.fps)?;
     println!(
         "intra: {}, encoded at --tolerance {} --no-aim in format 2; 8 × 8 blocks, closed loop; \
          bytes at today's error (steps × {:?}), one adaptive model for every way",
-        a.frames, a.tolerance, a.steps
+        a.study.frames, a.study.tolerance, a.study.steps
     );
     println!("| planes | way | bytes at step × 1 | error | at today's error: bytes | ratio | blocks: none / surface / texel |");
     println!("|---|---|---:|---:|---:|---:|---|");
@@ -189,11 +189,13 @@ pub fn run(a: BenchIntraArgs) -> Result<(), String> {
         let mut today: Option<(f64, f64)> = None;
         for (w, way) in WAYS.iter().enumerate() {
             let points: Vec<(Coded, [f64; MODES.len()])> = a
+                .study
                 .steps
                 .par_iter()
                 .map(|&m| code_all(&set, way, m))
                 .collect();
             let at1 = a
+                .study
                 .steps
                 .iter()
                 .position(|&m| m == 1.0)
@@ -573,17 +575,7 @@ fn predict(mode: Mode, e: &Edges, mean: impl Fn(isize, isize) -> f64) -> Option<
 mod tests {
     use super::*;
 
-    fn plane(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> TappedPlane {
-        TappedPlane {
-            kind: PlaneKind::IntraKeyframe,
-            plane: 0,
-            w,
-            h,
-            data: (0..w * h).map(|i| f(i % w, i / w)).collect(),
-            step: 0.05,
-            deadzone: 0.15,
-        }
-    }
+    use crate::bench::study::test_plane as plane;
 
     fn bytes_at_todays_error(p: &TappedPlane, way: &Way) -> (f64, f64) {
         let steps = [0.8, 1.0, 1.25, 1.6];

@@ -270,6 +270,20 @@ impl Transform {
     }
 }
 
+/// A keyframe plane of `f(x, y)` for the studies' tests.
+#[cfg(test)]
+pub(super) fn test_plane(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> TappedPlane {
+    TappedPlane {
+        kind: PlaneKind::IntraKeyframe,
+        plane: 0,
+        w,
+        h,
+        data: (0..w * h).map(|i| f(i % w, i / w)).collect(),
+        step: 0.05,
+        deadzone: 0.15,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -111,7 +111,7 @@ impl Way {
 }
 
 pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
-    let planes = tapped_planes(&a.frames, a.tolerance, a.fps)?;
+    let planes = tapped_planes(&a.study.frames, a.study.tolerance, a.study.fps)?;
     let opts = Options {
         term_bits: a.term_bits,
         surface: a.surface,
@@ -125,9 +125,9 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
         "transforms: {}, encoded at --tolerance {} --no-aim in format 2; bytes at the 8 × 8 \
          blocks' error (steps × {:?}), one adaptive model for every way; a term a texel sums \
          priced at {} bits in the choices{}",
-        a.frames,
-        a.tolerance,
-        a.steps,
+        a.study.frames,
+        a.study.tolerance,
+        a.study.steps,
         a.term_bits,
         if a.surface {
             "; keyframe blocks less the quadratic surface through their neighbours' DCs"
@@ -155,16 +155,17 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
                 ..opts
             };
             let points: Vec<Coded> = a
+                .study
                 .steps
                 .iter()
                 .map(|&m| code_all(&set, Way::Size(8), m, plain))
                 .collect();
-            let d = step_one(&a.steps, &points).dist;
+            let d = step_one(&a.study.steps, &points).dist;
             base = Some((at_distortion(&points, d), d));
             println!(
                 "| {name} ({} planes) | 8 × 8, no surface | {:.0} | {d:.4e} | {:.0} | 1.000 | |",
                 set.len(),
-                step_one(&a.steps, &points).bytes,
+                step_one(&a.study.steps, &points).bytes,
                 at_distortion(&points, d)
             );
         }
@@ -177,11 +178,12 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
                 continue;
             }
             let points: Vec<Coded> = a
+                .study
                 .steps
                 .iter()
                 .map(|&m| code_all(&set, way, m, opts))
                 .collect();
-            let at1 = step_one(&a.steps, &points);
+            let at1 = step_one(&a.study.steps, &points);
             let (b8, d8) =
                 *base.get_or_insert_with(|| (at_distortion(&points, at1.dist), at1.dist));
             let bytes = at_distortion(&points, d8);
@@ -500,17 +502,7 @@ mod tests {
         surface: false,
     };
 
-    fn plane(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> TappedPlane {
-        TappedPlane {
-            kind: PlaneKind::IntraKeyframe,
-            plane: 0,
-            w,
-            h,
-            data: (0..w * h).map(|i| f(i % w, i / w)).collect(),
-            step: 0.05,
-            deadzone: 0.15,
-        }
-    }
+    use crate::bench::study::test_plane as plane;
 
     #[test]
     fn the_transforms_keep_energy_and_a_fine_step_keeps_the_block() {
