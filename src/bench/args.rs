@@ -109,8 +109,13 @@ pub struct BenchTransformsArgs {
     /// Code every keyframe block, of every size, less the zero-mean quadratic surface
     /// through its 3 × 3 blocks' decoded means (`bench intra`'s surface), to see what it
     /// adds to larger blocks.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "intra")]
     pub surface: bool,
+    /// Also code the quadtree with its keyframes' 8 × 8 blocks free to take `bench intra`'s
+    /// texel modes (closed loop, once the quadtree is chosen): what texel intra adds beside
+    /// larger blocks.
+    #[arg(long)]
+    pub intra: bool,
 }
 
 #[derive(Args)]

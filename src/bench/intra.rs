@@ -37,7 +37,7 @@ use vbim_format::plane2;
 
 use super::args::BenchIntraArgs;
 use super::study::{
-    at_distortion, dc_surface, family, left_bucket, size_class, tapped_planes, Coded, Model,
+    at_distortion, dc_surface, family, left_bucket, size_class, tapped_planes, Block, Coded, Model,
     Symbol, Transform,
 };
 
@@ -53,7 +53,7 @@ const SHARED_AC: bool = true;
 
 /// How a block is predicted.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-enum Mode {
+pub(super) enum Mode {
     /// Today's coding: nothing.
     None,
     /// A bilinear surface through the 3 × 3 blocks' means, less its own mean.
@@ -85,7 +85,7 @@ const MODES: [Mode; 10] = [
 ];
 
 impl Mode {
-    fn texel(self) -> bool {
+    pub(super) fn texel(self) -> bool {
         !matches!(self, Mode::None | Mode::Bilinear | Mode::Quadratic)
     }
 
@@ -120,7 +120,7 @@ struct Way {
     region: usize,
 }
 
-const TEXEL_MODES: &[Mode] = &[
+pub(super) const TEXEL_MODES: &[Mode] = &[
     Mode::None,
     Mode::Dc,
     Mode::Vertical,
@@ -364,7 +364,8 @@ fn code_plane(
         let busy = left.is_some_and(|c| c.busy) as u32 + up.is_some_and(|c| c.busy) as u32;
         let mode_ctx =
             left.is_some_and(|c| c.predicted) as u32 + up.is_some_and(|c| c.predicted) as u32;
-        let edges = Edges::read(&recon, (w, bw), (bx, by), way.region);
+        // In raster order the above-right block is decoded wherever there is one.
+        let edges = Edges::read(&recon, w, (bx, by), way.region, bx + 1 < bw);
         let mut best: Option<Candidate> = None;
         for (m, &mode) in way.modes.iter().enumerate() {
             let Some(pred) = predict(mode, &edges, |dx, dy| {
@@ -435,23 +436,133 @@ fn code_plane(
     out
 }
 
+/// A plane's blocks as a quadtree chose them (`bench transforms --intra`; in coding order,
+/// each with its split flags first), coded again closed loop, the 8 × 8 ones free to take
+/// a texel mode instead (by the smallest D + λR, R from `model`, which then codes them):
+/// the plane's squared error, its bits, how many blocks took a texel mode and its
+/// reconstruction. Every 8 × 8
+/// block codes its mode first; a texel mode's block codes its residual's DC as it is (in
+/// contexts of its own) and its count and AC terms in the 8 × 8 blocks' contexts; the
+/// other blocks keep their symbols (their DC
+/// residuals are against their grid's DCs as the quadtree had them: an approximation where
+/// a neighbour took a texel mode).
+pub(super) fn within_quadtree(
+    p: &TappedPlane,
+    step: f32,
+    family: u32,
+    blocks: &[Block],
+    model: &mut Model,
+) -> (f64, f64, usize, Vec<f64>) {
+    let step = step as f64;
+    let lambda = LAMBDA * step * step;
+    let w = p.w;
+    let cw = p.w / N;
+    let transforms: Vec<Transform> = [8, 16, 32].into_iter().map(Transform::new).collect();
+    let t8 = &transforms[0];
+    let mut recon = vec![0.0f64; p.w * p.h];
+    // Which 8 × 8 cells are decoded: a quadtree's order leaves the above-right one for
+    // later where it lies in the next quarter.
+    let mut ready = vec![false; cw * (p.h / N)];
+    let (mut dist, mut bits, mut taken) = (0.0, 0.0, 0);
+    let mode_ctx = (3 << 28) | (family << 20) | 20;
+    for b in blocks {
+        let (n, bx, by) = b.place;
+        let flags = b.symbols.iter().take_while(|s| s.0 >> 28 == 3).count();
+        let mut pick = (b.dist, Vec::new(), [0.0; N * N], b.coefs.clone(), false);
+        if n == N {
+            let right = bx + 1 < cw && by > 0 && ready[(by - 1) * cw + bx + 1];
+            let edges = Edges::read(&recon, w, (bx, by), 0, right);
+            let src: Vec<f64> = (0..N * N)
+                .map(|i| p.data[(by * N + i / N) * w + bx * N + i % N] as f64)
+                .collect();
+            // Today's coding, with the mode's symbol before its own.
+            let mut own = b.symbols[flags..].to_vec();
+            own.insert(0, (mode_ctx, 0));
+            let cost = |s: &[Symbol]| s.iter().map(|&(c, v)| model.cost(c, v)).sum::<f64>();
+            let mut best = b.dist + lambda * cost(&own);
+            pick.1 = own;
+            // The block's contexts as the quadtree coded it: its DC's, and whether its
+            // neighbours have terms (the count's context, less the residual's size).
+            let dc_local = b.symbols[flags].0 & 0xFF;
+            let busy = ((b.symbols[flags + 1].0 & 0xFF) - 10) % 3;
+            for (m, &mode) in TEXEL_MODES.iter().enumerate().skip(1) {
+                let Some(pred) = predict(mode, &edges, |_, _| 0.0) else {
+                    continue;
+                };
+                let residual: Vec<f64> = src.iter().zip(&pred).map(|(s, q)| s - q).collect();
+                let (q, d) = t8.quantise(&residual, step, p.deadzone as f64);
+                let count = q[1..].iter().filter(|&&v| v != 0).count() as u32;
+                // The 8 × 8 blocks' own contexts, the DC's apart.
+                let tag = |local: u32| (family << 20) | local;
+                let mut s = vec![
+                    (mode_ctx, m as u32),
+                    (((family | 0x80) << 20) | dc_local, plane2::pack(q[0])),
+                    (tag(10 + size_class(q[0]) * 3 + busy), count),
+                ];
+                let mut left = count;
+                for (i, &v) in q.iter().enumerate().skip(1) {
+                    if left == 0 {
+                        break;
+                    }
+                    s.push((
+                        tag(100 + left_bucket(left) * 12 + t8.band[i]),
+                        plane2::pack(v),
+                    ));
+                    left -= (v != 0) as u32;
+                }
+                let j = d + lambda * cost(&s);
+                if j < best {
+                    best = j;
+                    pick = (d, s, pred, q, true);
+                }
+            }
+        }
+        let (d, own, pred, q, texel) = pick;
+        for &(c, v) in b.symbols[..flags].iter().chain(if own.is_empty() {
+            &b.symbols[flags..]
+        } else {
+            &own[..]
+        }) {
+            bits += model.code(c, v);
+        }
+        dist += d;
+        taken += texel as usize;
+        let t = &transforms[n.trailing_zeros() as usize - 3];
+        let rest = t.inverse(&q, step);
+        for y in 0..n {
+            for x in 0..n {
+                let v = rest[y * n + x] + if texel { pred[y * N + x] } else { 0.0 };
+                recon[(by * n + y) * w + bx * n + x] = v;
+            }
+        }
+        for cy in by * n / N..(by + 1) * n / N {
+            for cx in bx * n / N..(bx + 1) * n / N {
+                ready[cy * cw + cx] = true;
+            }
+        }
+    }
+    (dist, bits, taken, recon)
+}
+
 /// The reconstructed texels around a block: 16 above (the block's and its above-right
 /// neighbour's, the last repeated where that one is not decoded yet), 8 to the left and
 /// the one above-left; `None` where the plane ends.
-struct Edges {
+pub(super) struct Edges {
     above: Option<[f64; 2 * N]>,
     left: Option<[f64; N]>,
     corner: Option<f64>,
 }
 
 impl Edges {
-    /// Block (bx, by)'s edges in a plane `w` texels and `bw` blocks wide; with `region`
-    /// > 0, only those inside its region of `region`² blocks.
-    fn read(
+    /// Block (bx, by)'s edges in a plane `w` texels wide, `right` if its above-right
+    /// neighbour is decoded; with `region` > 0, only those inside its region of
+    /// `region`² blocks.
+    pub(super) fn read(
         recon: &[f64],
-        (w, bw): (usize, usize),
+        w: usize,
         (bx, by): (usize, usize),
         region: usize,
+        right: bool,
     ) -> Edges {
         let inside = |i: usize| {
             if region == 0 {
@@ -460,7 +571,7 @@ impl Edges {
                 !i.is_multiple_of(region)
             }
         };
-        let right = bx + 1 < bw && (region == 0 || !(bx + 1).is_multiple_of(region));
+        let right = right && (region == 0 || !(bx + 1).is_multiple_of(region));
         let above = inside(by).then(|| {
             let row = (by * N - 1) * w;
             let mut a = [0.0; 2 * N];
@@ -490,7 +601,11 @@ const SMOOTH: [f64; N] = [255.0, 197.0, 146.0, 105.0, 73.0, 50.0, 37.0, 32.0];
 /// Mode `mode`'s prediction of the block, `None` where what it reads is not there.
 /// `mean(dx, dy)` is the decoded mean of the block that far away (the plane's edge
 /// repeated).
-fn predict(mode: Mode, e: &Edges, mean: impl Fn(isize, isize) -> f64) -> Option<[f64; N * N]> {
+pub(super) fn predict(
+    mode: Mode,
+    e: &Edges,
+    mean: impl Fn(isize, isize) -> f64,
+) -> Option<[f64; N * N]> {
     let mut p = [0.0; N * N];
     let fill = |p: &mut [f64; N * N], f: &dyn Fn(usize, usize) -> f64| {
         for y in 0..N {
@@ -628,7 +743,7 @@ mod tests {
         for by in 0..bw {
             for bx in 0..bw {
                 let own = ((bx / 4) + 10 * (by / 4)) as f64;
-                let e = Edges::read(&recon, (w, bw), (bx, by), 4);
+                let e = Edges::read(&recon, w, (bx, by), 4, bx + 1 < bw);
                 let seen = e
                     .above
                     .iter()
@@ -644,7 +759,7 @@ mod tests {
         }
         // Without regions, the plane's edge alone bounds them: block (4, 4) reads its
         // left neighbour in region (0, 1) and its upper one in region (1, 0).
-        let e = Edges::read(&recon, (w, bw), (4, 4), 0);
+        let e = Edges::read(&recon, w, (4, 4), 0, true);
         assert_eq!(e.left.unwrap()[0], 10.0);
         assert_eq!(e.above.unwrap()[0], 1.0);
     }

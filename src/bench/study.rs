@@ -65,6 +65,10 @@ pub(super) struct Block {
     /// Texels it covers.
     pub(super) area: usize,
     pub(super) symbols: Vec<Symbol>,
+    /// Its size n and place (bx, by) on the grid of n × n blocks.
+    pub(super) place: (usize, usize, usize),
+    /// Its quantised coefficients (zig-zag), for a decoder's reconstruction.
+    pub(super) coefs: Vec<i32>,
 }
 
 /// The model family of a plane: luma or chroma, times its kind.

@@ -33,7 +33,9 @@
 //! With `--surface`, every keyframe block of every size is coded less the zero-mean
 //! quadratic surface through its own grid's 3 × 3 decoded means (`bench intra`'s), and the
 //! ratios are against today's 8 × 8 blocks without it: what the surface adds beside
-//! larger blocks.
+//! larger blocks. With `--intra`, one more way: the quadtree as chosen, coded again closed
+//! loop with its keyframes' 8 × 8 blocks free to take `bench intra`'s texel modes
+//! (`intra::within_quadtree`): what texel intra adds beside larger blocks.
 
 use std::collections::HashMap;
 
@@ -64,6 +66,9 @@ enum Way {
     Choice,
     /// Per 32 × 32 region, one 32 × 32 block or four regions chosen as `Choice` does.
     Quadtree,
+    /// The quadtree's blocks, the 8 × 8 ones of keyframes free to take a texel mode of
+    /// `bench intra` (closed loop, once the quadtree is chosen).
+    QuadtreeIntra,
 }
 
 /// What every way is run with.
@@ -84,19 +89,20 @@ impl Options {
 }
 
 /// Every way, 8 × 8 (today's) first.
-const WAYS: [Way; 5] = [
+const WAYS: [Way; 6] = [
     Way::Size(8),
     Way::Size(16),
     Way::Size(32),
     Way::Choice,
     Way::Quadtree,
+    Way::QuadtreeIntra,
 ];
 
 impl Way {
     /// The way whose bytes stand for this one's on planes it cannot code.
     fn fallback(self) -> Way {
         match self {
-            Way::Quadtree => Way::Choice,
+            Way::Quadtree | Way::QuadtreeIntra => Way::Choice,
             _ => Way::Size(8),
         }
     }
@@ -106,6 +112,7 @@ impl Way {
             Way::Size(n) => format!("{n} × {n}"),
             Way::Choice => "8 or 16, per region".into(),
             Way::Quadtree => "8, 16 or 32, a quadtree".into(),
+            Way::QuadtreeIntra => "the quadtree, its 8 × 8 blocks with texel intra".into(),
         }
     }
 }
@@ -174,6 +181,7 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
             if set
                 .iter()
                 .any(|p| p.w % block_of(way) != 0 || p.h % block_of(way) != 0)
+                || (way == Way::QuadtreeIntra && !a.intra)
             {
                 continue;
             }
@@ -212,7 +220,12 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
         }
     }
     for (w, way) in WAYS.into_iter().enumerate() {
-        if a.surface || matches!(way, Way::Size(16) | Way::Choice | Way::Quadtree) {
+        let shown = match way {
+            Way::QuadtreeIntra => a.intra,
+            Way::Size(8) | Way::Size(32) => a.surface,
+            _ => true,
+        };
+        if shown {
             println!(
                 "every plane, {}{}: {:.0} bytes against {today:.0} in 8 × 8 blocks, {:.3}",
                 way.label(),
@@ -237,7 +250,7 @@ fn block_of(way: Way) -> usize {
     match way {
         Way::Size(n) => n,
         Way::Choice => 16,
-        Way::Quadtree => 32,
+        Way::Quadtree | Way::QuadtreeIntra => 32,
     }
 }
 
@@ -252,7 +265,7 @@ fn code_all(set: &[&TappedPlane], way: Way, mult: f32, opts: Options) -> Coded {
             let blocks = match way {
                 Way::Size(n) => tag(quantise_plane(p, n, step, opts.surface_on(p)), family, n),
                 Way::Choice => choose(p, step, family, &[8, 16], opts),
-                Way::Quadtree => choose(p, step, family, &[8, 16, 32], opts),
+                Way::Quadtree | Way::QuadtreeIntra => choose(p, step, family, &[8, 16, 32], opts),
             };
             (PLANE_WEIGHT[p.plane.min(2)], blocks)
         })
@@ -260,13 +273,24 @@ fn code_all(set: &[&TappedPlane], way: Way, mult: f32, opts: Options) -> Coded {
     let mut model = Model::default();
     let mut out = Coded::default();
     for ((weight, blocks), p) in coded.iter().zip(set) {
-        for b in blocks {
-            out.dist += weight * b.dist;
-            out.terms += b.terms as f64 * b.area as f64;
-            for &(ctx, v) in &b.symbols {
-                out.bytes += model.code(ctx, v) / 8.0;
+        if way == Way::QuadtreeIntra && !matches!(p.kind, PlaneKind::Bubble { .. }) {
+            let (dist, bits, _, _) =
+                super::intra::within_quadtree(p, p.step * mult, family(p), blocks, &mut model);
+            out.dist += weight * dist;
+            out.bytes += bits / 8.0;
+        } else {
+            for b in blocks {
+                out.dist += weight * b.dist;
+                for &(ctx, v) in &b.symbols {
+                    out.bytes += model.code(ctx, v) / 8.0;
+                }
             }
         }
+        // (A texel mode's block counts the terms the quadtree gave it.)
+        out.terms += blocks
+            .iter()
+            .map(|b| b.terms as f64 * b.area as f64)
+            .sum::<f64>();
         out.texels += (p.w * p.h) as f64;
     }
     out
@@ -384,6 +408,8 @@ fn quantise_plane(p: &TappedPlane, n: usize, step: f32, surface: bool) -> Vec<Bl
                 terms: count[b] + (coefs[0] != 0) as u32,
                 area: n * n,
                 symbols,
+                place: (n, b % bw, b / bw),
+                coefs: coefs.clone(),
             }
         })
         .collect()
@@ -573,6 +599,60 @@ mod tests {
         let plain = code_all(&[&p], Way::Size(8), 1.0, FREE);
         let surfaced = code_all(&[&p], Way::Size(8), 1.0, with);
         assert_eq!(surfaced.bytes, plain.bytes);
+    }
+
+    #[test]
+    fn texel_intra_beside_the_quadtree_codes_stripes_in_fewer_bytes() {
+        // Vertical stripes a texel wide, of random heights, with the terms priced so that
+        // the quadtree keeps 8 × 8 blocks: the vertical mode continues them.
+        let col = |x: usize| ((x * 2_654_435_761) % 97) as f32 / 20.0;
+        let p = plane(64, 64, |x, _| col(x));
+        let small = Options {
+            term_bits: 64.0,
+            surface: false,
+        };
+        let quad = code_all(&[&p], Way::Quadtree, 1.0, small);
+        let intra = code_all(&[&p], Way::QuadtreeIntra, 1.0, small);
+        assert!(
+            intra.bytes < 0.8 * quad.bytes,
+            "{} against {}",
+            intra.bytes,
+            quad.bytes
+        );
+        assert!(
+            intra.dist <= 1.5 * quad.dist,
+            "{} against {}",
+            intra.dist,
+            quad.dist
+        );
+    }
+
+    #[test]
+    fn texel_intra_beside_the_quadtree_counts_the_error_it_reconstructs() {
+        // Ramps, edges and texture, so that every size and several modes are taken.
+        let p = plane(128, 96, |x, y| {
+            let edge = if 2 * x + y > 150 { 1.0 } else { 0.1 };
+            edge + 0.02 * x as f32 + 0.3 * ((x * 7 + y * 13) % 11) as f32 / 11.0
+        });
+        for step in [0.02, 0.1] {
+            let blocks = choose(&p, step, 0, &[8, 16, 32], FREE);
+            let sizes: Vec<usize> = blocks.iter().map(|b| b.place.0).collect();
+            let (dist, _, taken, recon) =
+                super::super::intra::within_quadtree(&p, step, 0, &blocks, &mut Model::default());
+            let seen: f64 = recon
+                .iter()
+                .zip(&p.data)
+                .map(|(r, &s)| (r - s as f64).powi(2))
+                .sum();
+            assert!(
+                (seen - dist).abs() <= 1e-6 * seen,
+                "at {step}: {seen} against {dist}"
+            );
+            assert!(
+                taken > 0 && sizes.contains(&16),
+                "at {step}: {taken} {sizes:?}"
+            );
+        }
     }
 
     #[test]
