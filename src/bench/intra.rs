@@ -37,19 +37,14 @@ use vbim_format::plane2;
 
 use super::args::BenchIntraArgs;
 use super::study::{
-    at_distortion, dc_surface, family, left_bucket, size_class, tapped_planes, Block, Coded, Model,
-    Symbol, Transform,
+    around, at_distortion, dc_surface, decoded_means, family, left_bucket, size_class, step_index,
+    tapped_planes, Block, Coded, Model, Pick, Symbol, Transform,
 };
 
 /// λ of the choices, in squared steps per bit (`bench transforms`' own).
 const LAMBDA: f64 = 0.12;
 /// The block's side.
 const N: usize = 8;
-/// Whether every kind of prediction codes its counts and AC terms in the same contexts.
-/// Apart, each kind's contexts start cold, a choice priced by them picks today's coding
-/// ever more often, and the texel modes saved nothing (Jacksboro cloudy's keyframes 1.003×
-/// today's, against 0.938× shared).
-const SHARED_AC: bool = true;
 
 /// How a block is predicted.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -92,21 +87,7 @@ impl Mode {
     fn surface(self) -> bool {
         matches!(self, Mode::Bilinear | Mode::Quadratic)
     }
-
-    /// The top bits of its blocks' contexts: each kind of prediction learns its own.
-    fn kind(self) -> u32 {
-        if self.texel() {
-            1
-        } else if self.surface() {
-            2
-        } else {
-            0
-        }
-    }
 }
-
-/// Which recorded planes a row of the table is about.
-type Pick = fn(PlaneKind) -> bool;
 
 /// A block's best candidate so far: its cost J, mode, prediction, quantised coefficients,
 /// squared error and symbols.
@@ -197,12 +178,7 @@ pub fn run(a: BenchIntraArgs) -> Result<(), String> {
                 .par_iter()
                 .map(|&m| code_all(&set, way, m))
                 .collect();
-            let at1 = a
-                .study
-                .steps
-                .iter()
-                .position(|&m| m == 1.0)
-                .map_or(&points[0], |i| &points[i]);
+            let at1 = &points[step_index(&a.study.steps)];
             let coded: Vec<Coded> = points.iter().map(|(c, _)| c.clone()).collect();
             let (b0, d0) = *today.get_or_insert_with(|| {
                 let d = at1.0.dist;
@@ -331,16 +307,7 @@ fn code_plane(
         }
         b
     };
-    // Every block's DC level as today quantises it (no dead zone), which the surfaces read:
-    // the orthonormal DC is the sum over 8.
-    let dcq: Vec<i32> = (0..bw * bh)
-        .map(|b| (source(b % bw, b / bw).iter().sum::<f64>() / 8.0 / step).round() as i32)
-        .collect();
-    let mean = |bx: isize, by: isize| -> f64 {
-        let x = bx.clamp(0, bw as isize - 1) as usize;
-        let y = by.clamp(0, bh as isize - 1) as usize;
-        dcq[y * bw + x] as f64 * step / 8.0
-    };
+    let means = decoded_means(p, N, step);
     let mut recon = vec![0.0f64; p.w * p.h];
     let mut done = vec![Coded8::default(); bw * bh];
     let mut out = Plane {
@@ -368,9 +335,7 @@ fn code_plane(
         let edges = Edges::read(&recon, w, (bx, by), way.region, bx + 1 < bw);
         let mut best: Option<Candidate> = None;
         for (m, &mode) in way.modes.iter().enumerate() {
-            let Some(pred) = predict(mode, &edges, |dx, dy| {
-                mean(bx as isize + dx, by as isize + dy)
-            }) else {
+            let Some(pred) = predict(mode, &edges, &around(&means, (bw, bh), (bx, by))) else {
                 continue;
             };
             let residual: Vec<f64> = src.iter().zip(&pred).map(|(s, q)| s - q).collect();
@@ -384,7 +349,11 @@ fn code_plane(
             let r = if mode.texel() { q[0] } else { q[0] - planar };
             let count = q[1..].iter().filter(|&&v| v != 0).count() as u32;
             let dc_kind = mode.texel() as u32;
-            let ac_kind = if SHARED_AC { 0 } else { mode.kind() };
+            // Every kind of prediction codes its count and AC terms in today's contexts:
+            // apart, each kind's contexts start cold, a choice priced by them picks today's
+            // coding ever more often, and the texel modes saved nothing (Jacksboro cloudy's
+            // keyframes 1.003× today's, against 0.938× shared).
+            let ac_kind = 0;
             symbols.push((tag(dc_kind, sizes), plane2::pack(r)));
             symbols.push((tag(ac_kind, 10 + size_class(r) * 3 + busy), count));
             let mut left_n = count;
@@ -486,7 +455,7 @@ pub(super) fn within_quadtree(
             let dc_local = b.symbols[flags].0 & 0xFF;
             let busy = ((b.symbols[flags + 1].0 & 0xFF) - 10) % 3;
             for (m, &mode) in TEXEL_MODES.iter().enumerate().skip(1) {
-                let Some(pred) = predict(mode, &edges, |_, _| 0.0) else {
+                let Some(pred) = predict(mode, &edges, &[[0.0; 3]; 3]) else {
                     continue;
                 };
                 let residual: Vec<f64> = src.iter().zip(&pred).map(|(s, q)| s - q).collect();
@@ -599,13 +568,9 @@ impl Edges {
 const SMOOTH: [f64; N] = [255.0, 197.0, 146.0, 105.0, 73.0, 50.0, 37.0, 32.0];
 
 /// Mode `mode`'s prediction of the block, `None` where what it reads is not there.
-/// `mean(dx, dy)` is the decoded mean of the block that far away (the plane's edge
-/// repeated).
-pub(super) fn predict(
-    mode: Mode,
-    e: &Edges,
-    mean: impl Fn(isize, isize) -> f64,
-) -> Option<[f64; N * N]> {
+/// `means` are the decoded means of the 3 × 3 blocks around it (`study::around`), which
+/// the surfaces read.
+pub(super) fn predict(mode: Mode, e: &Edges, means: &[[f64; 3]; 3]) -> Option<[f64; N * N]> {
     let mut p = [0.0; N * N];
     let fill = |p: &mut [f64; N * N], f: &dyn Fn(usize, usize) -> f64| {
         for y in 0..N {
@@ -617,10 +582,7 @@ pub(super) fn predict(
     match mode {
         Mode::None => {}
         Mode::Bilinear | Mode::Quadratic => {
-            let m = std::array::from_fn(|j| {
-                std::array::from_fn(|i| mean(i as isize - 1, j as isize - 1))
-            });
-            p.copy_from_slice(&dc_surface(N, &m, mode == Mode::Quadratic));
+            p.copy_from_slice(&dc_surface(N, means, mode == Mode::Quadratic));
         }
         Mode::Dc => {
             let (mut s, mut n) = (0.0, 0.0);

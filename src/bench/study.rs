@@ -167,6 +167,45 @@ pub(super) fn dc_surface(n: usize, m: &[[f64; 3]; 3], quadratic: bool) -> Vec<f6
     p
 }
 
+/// Which recorded planes a row of a study's table is about.
+pub(super) type Pick = fn(PlaneKind) -> bool;
+
+/// Where step × 1 is among a study's steps (the first if it is not among them).
+pub(super) fn step_index(steps: &[f32]) -> usize {
+    steps.iter().position(|&m| m == 1.0).unwrap_or(0)
+}
+
+/// Each n × n block's mean as a decoder has it (the orthonormal DC is the sum over n,
+/// quantised at `step` without a dead zone), in raster order: what the surfaces read.
+pub(super) fn decoded_means(p: &TappedPlane, n: usize, step: f64) -> Vec<f64> {
+    let bw = p.w / n;
+    (0..bw * (p.h / n))
+        .map(|b| {
+            let (bx, by) = (b % bw, b / bw);
+            let sum: f64 = (0..n * n)
+                .map(|i| p.data[(by * n + i / n) * p.w + bx * n + i % n] as f64)
+                .sum();
+            (sum / n as f64 / step).round() * step / n as f64
+        })
+        .collect()
+}
+
+/// The means of the 3 × 3 blocks around block (bx, by) of a grid `bw` × `bh` (rows
+/// first), the grid's edge repeated: a surface's input.
+pub(super) fn around(
+    means: &[f64],
+    (bw, bh): (usize, usize),
+    (bx, by): (usize, usize),
+) -> [[f64; 3]; 3] {
+    std::array::from_fn(|j| {
+        std::array::from_fn(|i| {
+            let x = (bx + i).saturating_sub(1).min(bw - 1);
+            let y = (by + j).saturating_sub(1).min(bh - 1);
+            means[y * bw + x]
+        })
+    })
+}
+
 /// The zig-zag order of an n × n block: (x, y) of each index.
 pub(super) fn zigzag(n: usize) -> Vec<(usize, usize)> {
     let mut v: Vec<(usize, usize)> = (0..n * n).map(|i| (i % n, i / n)).collect();

@@ -45,17 +45,14 @@ use vbim_encoder::bench::PLANE_WEIGHT;
 use vbim_format::plane2;
 
 use super::study::{
-    at_distortion, dc_surface, family, left_bucket, size_class, tapped_planes, token, Block, Coded,
-    Model, Symbol, Transform,
+    around, at_distortion, dc_surface, decoded_means, family, left_bucket, size_class, step_index,
+    tapped_planes, token, Block, Coded, Model, Pick, Symbol, Transform,
 };
 
 use super::args::BenchTransformsArgs;
 
 /// λ of the per-region choice, in squared steps per bit.
 const LAMBDA: f64 = 0.12;
-
-/// Which recorded planes a row of the table is about.
-type Pick = fn(PlaneKind) -> bool;
 
 /// How a plane's blocks are chosen.
 #[derive(Clone, Copy, PartialEq, Debug)]
@@ -240,10 +237,7 @@ pub fn run(a: BenchTransformsArgs) -> Result<(), String> {
 
 /// The point coded at step × 1 (the first if 1 is not among the steps).
 fn step_one<'a>(steps: &[f32], points: &'a [Coded]) -> &'a Coded {
-    steps
-        .iter()
-        .position(|&m| m == 1.0)
-        .map_or(&points[0], |i| &points[i])
+    &points[step_index(steps)]
 }
 
 fn block_of(way: Way) -> usize {
@@ -327,13 +321,9 @@ fn quantise_plane(p: &TappedPlane, n: usize, step: f32, surface: bool) -> Vec<Bl
             .map(|i| p.data[(by * n + i / n) * p.w + bx * n + i % n] as f64)
             .collect()
     };
-    // The blocks' means as decoded (the orthonormal DC is the sum over n, quantised
-    // without a dead zone), which the surfaces read.
     let step = step as f64;
-    let means: Vec<f64> = if surface {
-        (0..bw * bh)
-            .map(|b| (source(b).iter().sum::<f64>() / n as f64 / step).round() * step / n as f64)
-            .collect()
+    let means = if surface {
+        decoded_means(p, n, step)
     } else {
         Vec::new()
     };
@@ -341,15 +331,7 @@ fn quantise_plane(p: &TappedPlane, n: usize, step: f32, surface: bool) -> Vec<Bl
         .map(|b| {
             let mut block = source(b);
             if surface {
-                let (bx, by) = ((b % bw) as isize, (b / bw) as isize);
-                let mean = |dx: isize, dy: isize| {
-                    let x = (bx + dx).clamp(0, bw as isize - 1) as usize;
-                    let y = (by + dy).clamp(0, bh as isize - 1) as usize;
-                    means[y * bw + x]
-                };
-                let m = std::array::from_fn(|j| {
-                    std::array::from_fn(|i| mean(i as isize - 1, j as isize - 1))
-                });
+                let m = around(&means, (bw, bh), (b % bw, b / bw));
                 for (v, s) in block.iter_mut().zip(dc_surface(n, &m, true)) {
                     *v -= s;
                 }
