@@ -208,13 +208,17 @@ pub fn encode(
     Ok(out)
 }
 
-/// A version 2 or 3 payload's lanes' steps and states, plane by plane
+/// A version 2 or 3 payload's planes: each one's blocks, and its lanes' steps and states
 /// ([`plane2::lane_symbols`]).
-pub fn lane_symbols(h: &Header, what: Payload, bytes: &[u8]) -> Result<Vec<Vec<(u64, usize)>>> {
+pub fn lane_symbols(h: &Header, what: Payload, bytes: &[u8]) -> Result<Vec<PlaneLanes>> {
     let (maps, layout, head, shapes) = coded(h, what, bytes)?;
     let geometries: Vec<plane2::Plane> = shapes.iter().map(|s| geometry(h, s)).collect();
-    plane2::lane_symbols(&bytes[head..], &geometries, maps, layout)
+    let lanes = plane2::lane_symbols(&bytes[head..], &geometries, maps, layout)?;
+    Ok(shapes.iter().map(|s| s.order.len()).zip(lanes).collect())
 }
+
+/// A plane's blocks, and each of its lanes' steps and states ([`lane_symbols`]).
+pub type PlaneLanes = (usize, Vec<(u64, usize)>);
 
 /// What decoding a version 2 or 3 payload's section needs: the file's context maps, its
 /// lanes' layout, the head's length (within `bytes`: [`section_planes`] refuses a payload

@@ -42,8 +42,12 @@ pub struct DecodeShape {
     /// the benchmark streams), and an H100 took 22, 32 and 61 ms per 512², 2048² and
     /// 4096² segment that way, against 1.7, 1.8 and 6.2 ms for the same sections as
     /// pairs (BENCHMARKS.md, "Format 2 on the GPU"); lavapipe 49–60 ms against 22 ms at
-    /// 512² (with the lane fields below). Planes larger than the dense plane (about
-    /// 5800² texels) always go as pairs.
+    /// 512² (with the lane fields below). Since, a keyframe's planes and a segment's
+    /// bubble planes go in batches that share each dispatch: 2.3–2.9 times shorter chains
+    /// and a third of the dispatches, for 8 B/texel more GPU memory with the lanes on
+    /// (a dense plane of a keyframe's planes); not yet measured on hardware
+    /// (BENCHMARKS.md, "A chunk's planes side by side"). Planes larger than the dense
+    /// plane (about 5800² texels) always go as pairs.
     pub lanes: bool,
     /// Keep the DCT tables that the keyframe passes and the reconstruction index per
     /// invocation (each at its own texel and term) in a storage buffer rather than a

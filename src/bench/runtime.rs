@@ -120,21 +120,26 @@ pub(super) fn bench_decode(a: BenchDecodeArgs) -> Result<(), String> {
         let n = h.segment_count.max(1) as f64;
         let c = lane_symbols(&h, &entries, &chunks)?;
         println!(
-            "lanes           per segment {:.0} rANS states; the longest lane of each plane, summed: {:.0} steps (the serial chains a GPU decodes plane after plane: with one state a lane, its symbols; with several, per pass its busiest state's); a chunk's planes side by side: {:.0} steps",
+            "lanes           per segment {:.0} rANS states; the longest lane of each plane, summed: {:.0} steps (the serial chains a GPU decodes plane after plane: with one state a lane, its symbols; with several, per pass its busiest state's); a chunk's planes side by side: {:.0} steps; as the player dispatches them (a chunk's planes in batches that fit its dense plane, side by side): {:.0} steps",
             c.states as f64 / n,
             c.longest as f64 / n,
             c.shared as f64 / n,
+            c.player as f64 / n,
         );
     }
     if !pairs_t.is_empty() {
         let (pm, p0, p1) = stats(&mut pairs_t);
         println!("full, to pairs  median {pm:.3} s (min {p0:.3}, max {p1:.3}) = {:.2}% of one core in real time (the decoder thread's work where the GPU parses pairs: a CPU adapter)", 100.0 * pm / duration);
     }
-    if let Some((adapter, mut times, boxes, passes, (names, samples, key_add))) = gpu {
+    if let Some((adapter, mut times, boxes, passes, (names, samples, key_add), bytes)) = gpu {
         let (gm, g0, g1) = stats(&mut times);
         println!(
             "GPU decode      median {gm:.3} s (min {g0:.3}, max {g1:.3}) for {boxes} segments, {:.1} ms each, on {adapter}",
             1e3 * gm / boxes.max(1) as f64,
+        );
+        println!(
+            "GPU memory      {bytes} bytes (the player's GPU state, textures included): {:.2} B/texel",
+            bytes as f64 / (h.width as f64 * h.height as f64).max(1.0)
         );
         if passes.is_empty() {
             println!(
@@ -171,6 +176,9 @@ struct Chains {
     longest: u64,
     /// The sum over chunks of each one's longest lane (a chunk's planes side by side).
     shared: u64,
+    /// As the player dispatches them: a chunk's planes in the player's batches
+    /// ([`vbim_player::bench::lane_batches`]), each batch's side by side.
+    player: u64,
 }
 
 /// A version 2 or 3 file's lanes' serial chains
@@ -184,12 +192,33 @@ fn lane_symbols(
         states: 0,
         longest: 0,
         shared: 0,
+        player: 0,
     };
+    // The player's room for a batch: the lanes' dense plane, and as many planes' most
+    // states in the scratch.
+    let (pw, ph) = vbim_format::chunk::padded_size(h);
+    let (bw, bh) = (pw as u32 / 8, ph as u32 / 8);
+    let dense = vbim_player::bench::lane_blocks([pw as u32, ph as u32], h.channels as u32);
+    let region = vbim_format::plane2::REGION as u32;
+    let regions = (bw.div_ceil(region) * bh.div_ceil(region)) as u64;
+    let planes = (dense as u64).div_ceil((bw * bh).max(1) as u64);
+    let room = (
+        dense,
+        regions * vbim_format::plane2::MAX_STATES as u64 * planes,
+    );
     each_payload(h, entries, chunks, |what, bytes| {
-        let planes =
+        let mut planes =
             vbim_format::payload2::lane_symbols(h, what, bytes).map_err(|e| e.to_string())?;
-        c.shared += planes.iter().flatten().map(|l| l.0).max().unwrap_or(0);
-        for lanes in planes {
+        let longest = |p: &vbim_format::payload2::PlaneLanes| p.1.iter().map(|l| l.0).max();
+        c.shared += planes.iter().filter_map(longest).max().unwrap_or(0);
+        planes.sort_by_key(|p| std::cmp::Reverse(p.0));
+        let states = |p: &vbim_format::payload2::PlaneLanes| p.1.iter().map(|l| l.1 as u64).sum();
+        let size = |k: usize| (planes[k].0 as u32, states(&planes[k]), 0);
+        vbim_player::bench::lane_batches(planes.len(), size, room, |batch| {
+            let most = batch.iter().filter_map(|&k| longest(&planes[k])).max();
+            c.player += most.unwrap_or(0);
+        });
+        for (_, lanes) in planes {
             c.longest += lanes.iter().map(|l| l.0).max().unwrap_or(0);
             c.states += lanes.iter().map(|l| l.1 as u64).sum::<u64>();
         }
@@ -253,14 +282,16 @@ fn describe(s: &vbim_player::DecodeShape) -> String {
 }
 
 /// The adapter in words, each run's time, the segments decoded, the time by pass per
-/// segment (ns; empty where the adapter has no timestamps inside passes), and each
-/// dispatch timed (the pass names, then (pass, work, ns) for the fit).
+/// segment (ns; empty where the adapter has no timestamps inside passes), each dispatch
+/// timed (the pass names, then (pass, work, ns) for the fit), and the GPU memory the
+/// decode state holds after the last segment.
 type GpuTimes = (
     String,
     Vec<f64>,
     usize,
     Vec<(&'static str, f64)>,
     (Vec<&'static str>, Vec<super::fit::Sample>, u32),
+    u64,
 );
 
 /// The GPU decode of every segment of a stream, `runs` times.
@@ -327,7 +358,15 @@ fn gpu_decode(
     let per = (runs.max(1) * boxes.max(1)) as f64;
     let passes = passes.into_iter().map(|(l, ns)| (l, ns / per)).collect();
     let key_add = shape.weights.key_add;
-    Ok((adapter, times, boxes, passes, (names, samples, key_add)))
+    let bytes = gpu.gpu_bytes();
+    Ok((
+        adapter,
+        times,
+        boxes,
+        passes,
+        (names, samples, key_add),
+        bytes,
+    ))
 }
 
 /// Adds `ns` to `label`'s entry of `into` with `merge` (a sum, a maximum), or appends the

@@ -53,6 +53,13 @@ impl GpuDecoder {
         GpuDecoder(gpu)
     }
 
+    /// GPU memory the decode state holds, bytes (what [`Player::gpu_bytes`] counts).
+    ///
+    /// [`Player::gpu_bytes`]: crate::Player::gpu_bytes
+    pub fn gpu_bytes(&self) -> u64 {
+        self.0.bytes()
+    }
+
     /// The GPU time between the marks of the last decode, each to the pass it ends (ns;
     /// empty unless the device has timestamps inside passes: [`timing_device`]). Call it
     /// after each [`GpuDecoder::decode`]: the query set holds one decode's marks.

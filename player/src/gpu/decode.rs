@@ -3,7 +3,9 @@
 //! and recorded a few at a time, so that the player can spread a segment's decode over the
 //! frames before it is shown ([`Op`], [`Gpu::plan_decode`], [`Gpu::record`]).
 
+use super::batch::Then;
 use super::job::{Job, JOB_BINDING, JOB_STRIDE};
+use super::lanes::LaneMember;
 use super::ops::{Kind, Op};
 use super::plan::*;
 use super::resources::slice_buffer;
@@ -208,18 +210,27 @@ impl Gpu {
                     pack(self, ops, slot);
                 }
             }
+            // A predicted keyframe is added onto the head (the keyframe it follows); an
+            // intra one is written over it, zeros and all.
+            let intra = st.intra as u32;
+            // Planes decoded as coded go in batches, side by side (`Gpu::lane_batches`).
+            let mut lanes = std::mem::take(&mut self.lane_planes);
+            lanes.clear();
             for p in 0..ch {
                 let span = &seg.planes[st.plane + p as usize];
                 for job in self.part_jobs(span, p) {
+                    if span.lanes.is_some() && self.lanes.is_some() {
+                        lanes.push((Job { intra, ..job }, *span));
+                        continue;
+                    }
                     let job = self.mask_slot(ops, job, span.lanes.is_some(), &mut ring);
                     let blocks = job.hi - job.lo.min(job.hi);
                     self.coef_ops(ops, (span, &seg.sections), job, p);
-                    // A predicted keyframe is added onto the head (the keyframe it
-                    // follows); an intra one is written over it, zeros and all.
-                    let intra = st.intra as u32;
                     self.key_add_pass(ops, Job { intra, ..job }, blocks, p);
                 }
             }
+            self.lane_batches(ops, &mut lanes, &seg.sections, (Then::KeyAdd, &mut ring));
+            self.lane_planes = lanes;
         }
         if let Some(set) = target.set {
             self.hold_terms(set, self.term_need(seg));
@@ -241,6 +252,9 @@ impl Gpu {
             // segment allocates nothing once the player runs.)
             let mut batch = std::mem::take(&mut self.batch);
             batch.clear();
+            // Planes decoded as coded go in batches of their own (`Gpu::lane_batches`).
+            let mut lanes = std::mem::take(&mut self.lane_planes);
+            lanes.clear();
             for (i, span) in seg.planes.iter().enumerate().skip(seg.bubbles) {
                 let n = (i - seg.bubbles) as u32;
                 let layer = set * self.set_layers + n;
@@ -249,7 +263,7 @@ impl Gpu {
                 let (term, p) = (n / ch + 2, n % ch);
                 let base = set * stride + p * self.tile_count;
                 let counter = set * stride + ch * self.tile_count;
-                let alone = span.lanes.is_some() || parts(span.blocks, self.part) > 1;
+                let alone = parts(span.blocks, self.part) > 1;
                 for job in self.part_jobs(span, layer) {
                     let job = Job {
                         term,
@@ -261,17 +275,24 @@ impl Gpu {
                     if blocks == 0 {
                         continue;
                     }
+                    if span.lanes.is_some() && self.lanes.is_some() {
+                        lanes.push((job, *span));
+                        continue;
+                    }
                     if !alone {
                         batch.push(job);
                         continue;
                     }
-                    let job = self.mask_slot(ops, job, span.lanes.is_some(), &mut ring);
+                    let job = self.mask_slot(ops, job, false, &mut ring);
                     self.coef_ops(ops, (span, &seg.sections), job, 0);
                     let units = (blocks as u64, 64);
                     let groups = blocks.div_ceil(64);
                     self.sliced(ops, Kind::BubbleGather, job, groups, set, units);
                 }
             }
+            let then = Then::Gather(set);
+            self.lane_batches(ops, &mut lanes, &seg.sections, (then, &mut ring));
+            self.lane_planes = lanes;
             self.batches(ops, &mut batch, set, &mut ring);
             self.batch = batch;
         }
@@ -457,16 +478,27 @@ impl Gpu {
         channel: u32,
     ) {
         match span.lanes {
-            Some(lanes) => self.lane_ops(ops, (span, lanes), sections, channel),
+            Some(lanes) => {
+                let one = LaneMember {
+                    span: *span,
+                    lanes,
+                    dense_at: 0,
+                };
+                self.lane_ops(ops, &[one], sections, channel)
+            }
             None => self.parse_ops(ops, job, channel),
         }
     }
 
     /// `job` with the slot of the ring of masks its part's parse fills and its block pass
     /// reads: the next one, the whole ring cleared first when `*ring` has come round to
-    /// the first. A version 2 plane decoded as coded (`lanes`) takes the first slot, which
-    /// its own first pass clears (`lanes.wgsl`, `prepare`), and leaves the ring where it
-    /// was: the slot is the next parse's only right after the ring's clear.
+    /// the first. Planes decoded as coded (`lanes`) take the lanes' dense plane, from the
+    /// ring's start (its masks) and at [`Scratch::sets_offset`] (its sets), which their own
+    /// first pass clears (`lanes.wgsl`, `prepare`), and leave the ring where it was: a
+    /// stream's planes are all decoded as coded or all parsed, so no parse's slot is in
+    /// use then.
+    ///
+    /// [`Scratch::sets_offset`]: super::lanes::Scratch::sets_offset
     pub(super) fn mask_slot(
         &self,
         ops: &mut Vec<Op>,
@@ -474,16 +506,20 @@ impl Gpu {
         lanes: bool,
         ring: &mut u32,
     ) -> Job {
-        let slot = if lanes {
-            0
-        } else {
-            if *ring == 0 {
-                ops.push(Op::clear(self.masks.size(), 0));
-            }
-            let slot = *ring;
-            *ring = (*ring + 1) % self.mask_slots;
-            slot
-        };
+        let lanes = self.lanes.as_ref().filter(|_| lanes);
+        if let Some(l) = lanes {
+            // The lanes' dense plane: its masks from the start, its sets after them.
+            return Job {
+                masks_at: 0,
+                sets_at: (l.plan.sets_offset() / 4) as u32,
+                ..job
+            };
+        }
+        if *ring == 0 {
+            ops.push(Op::clear(self.masks.size(), 0));
+        }
+        let slot = *ring;
+        *ring = (*ring + 1) % self.mask_slots;
         let at = slot as u64 * slot_bytes(self.part);
         Job {
             masks_at: (at / 4) as u32,
@@ -508,7 +544,7 @@ impl Gpu {
 
     /// The keyframe block pass (`key_add`) over `blocks` blocks of `job`: a workgroup per
     /// group of [`GROUP_BLOCKS`], or [`DecodeShape::group_split`] workgroups per group.
-    fn key_add_pass(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
+    pub(super) fn key_add_pass(&mut self, ops: &mut Vec<Op>, job: Job, blocks: u32, channel: u32) {
         // Split only as far as the pass needs to fill a large GPU: on an H100 splitting in
         // 8 took a 512² segment's `key_add` from 0.33 to 0.09 ms, and a 4096² one's from
         // 0.45 to 0.97 ms, where 4096 groups of 64 blocks already fill it.
@@ -644,7 +680,7 @@ impl Gpu {
     }
 
     /// Appends a job's bytes, padded to [`JOB_STRIDE`]; returns its offset.
-    fn append_job(&mut self, job: &[u8]) -> u32 {
+    pub(super) fn append_job(&mut self, job: &[u8]) -> u32 {
         let at = self.job_bytes.len();
         self.job_bytes.extend_from_slice(job);
         self.job_bytes.resize(at + JOB_STRIDE as usize, 0);

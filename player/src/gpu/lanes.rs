@@ -1,7 +1,10 @@
 //! Format 2's and 3's coefficient sections decoded on the GPU as the file codes them
 //! (`lanes.wgsl`): the decoder thread hands each section's words on as they are
-//! (`coded.rs`), and per plane five or six dispatches decode them into the dense plane that the
-//! keyframe and bubble passes read, as a parse of version 1's pairs leaves it. Once per
+//! (`coded.rs`), and five or six dispatches decode them into the dense plane that the
+//! keyframe and bubble passes read, as a parse of version 1's pairs leaves it: per batch
+//! of a keyframe's planes or of a segment's bubble planes (each at its own place in the
+//! dense plane, which holds a keyframe's planes side by side: [`lane_blocks`],
+//! `Gpu::lane_batches`). Once per
 //! section, `slots` builds the tables of the histograms the chunk sent itself; the file's
 //! histograms and context maps go to the GPU once, when the stream opens.
 //!
@@ -15,9 +18,19 @@ use vbim_format::plane2::{
 };
 use vbim_format::Header;
 
+use super::job::BATCH_PLANES;
 use super::ops::Op;
 use super::Gpu;
 use crate::coded::{LanePlane, PlaneSpan, SectionSpan};
+
+/// One plane of a batch decoded by the same dispatches ([`Gpu::lane_ops`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct LaneMember {
+    pub span: PlaneSpan,
+    pub lanes: LanePlane,
+    /// Where its block 0 lies in the dense plane (a multiple of 64 blocks).
+    pub dense_at: u32,
+}
 
 /// One pass of a lanes decode (an entry point of `lanes.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -84,6 +97,14 @@ pub(crate) struct Scratch {
     groups: u64,
     info: u64,
     lane_states: u64,
+    /// Words between two planes' groups in a batch: a plane's groups' flags, then its
+    /// tiles' ranks.
+    pub group_stride: u64,
+    /// The streams whose states the scratch holds: those of one plane of the most a
+    /// plane may have, shared by a batch's planes.
+    pub streams: u64,
+    /// Blocks of the dense plane the lanes decode into ([`lane_blocks`]).
+    pub dense: u32,
     fault: u64,
     words: u64,
     /// Histograms the tables hold room for: the file's, then a section's own (at most
@@ -98,16 +119,24 @@ impl Scratch {
     /// for any other (its planes go to the GPU as pairs).
     pub fn for_stream(h: &Header) -> Option<Scratch> {
         let (pw, ph) = vbim_format::chunk::padded_size(h);
-        let geometry = ([pw as u32, ph as u32], h.tile_size as u32);
+        let geometry = (
+            [pw as u32, ph as u32],
+            h.tile_size as u32,
+            h.channels as u32,
+        );
         Scratch::new(geometry, h.context_maps()?)
     }
 
-    /// The scratch for planes of `plane` texels in tiles of `tile`² coded with `maps`;
-    /// `None` if a plane is larger than the dense plane.
-    pub fn new((plane, tile): ([u32; 2], u32), maps: &[ContextMap]) -> Option<Scratch> {
+    /// The scratch for `channels` planes of `plane` texels in tiles of `tile`² coded with
+    /// `maps`; `None` if a plane is larger than the dense plane.
+    pub fn new(
+        (plane, tile, channels): ([u32; 2], u32, u32),
+        maps: &[ContextMap],
+    ) -> Option<Scratch> {
         if !crate::coded::fits_dense_plane(plane) {
             return None;
         }
+        let dense = lane_blocks(plane, channels);
         let [pw, ph] = plane;
         let (bw, bh) = (pw as u64 / 8, ph as u64 / 8);
         let file = file_histograms(maps).count() as u64;
@@ -121,13 +150,20 @@ impl Scratch {
         let ts = (tile as u64).max(1);
         let tiles = (pw as u64 / ts) * (ph as u64 / ts);
         let groups = (bw.div_ceil(GROUP as u64)) * bh.div_ceil(GROUP as u64);
-        // Version 3's lanes have up to MAX_STATES streams each (version 2's one).
-        let streams = bw.div_ceil(REGION as u64) * bh.div_ceil(REGION as u64) * MAX_STATES as u64;
+        // Version 3's lanes have up to MAX_STATES streams each (version 2's one): room for
+        // as many planes' as the dense plane holds.
+        let planes = (dense as u64).div_ceil((bw * bh).max(1));
+        let regions = bw.div_ceil(REGION as u64) * bh.div_ceil(REGION as u64);
+        let streams = regions * MAX_STATES as u64 * planes;
         let histograms = file + own;
         let slots = 2 * (FAMILIES * CONTEXTS) as u64;
         let tables = slots + histograms * 4096;
-        let info = groups + tiles;
-        let lane_states = info + 2 * bw * bh;
+        // A batch's planes (`BATCH_PLANES`, `Gpu::lane_batches`) each have their groups
+        // and ranks; their residuals and counts lie at their places in the dense plane
+        // and their states one after another.
+        let group_stride = groups + tiles;
+        let info = BATCH_PLANES as u64 * group_stride;
+        let lane_states = info + 2 * dense as u64;
         let fault = lane_states + 4 * streams;
         Some(Scratch {
             slots,
@@ -135,6 +171,9 @@ impl Scratch {
             groups: 0,
             info,
             lane_states,
+            group_stride,
+            streams,
+            dense,
             fault,
             words: fault + 1,
             histograms,
@@ -151,19 +190,33 @@ impl Scratch {
     /// coefficient start at byte `sets` of the mask buffer.
     fn constants(&self, sets: u64) -> String {
         format!(
-            "const CONTEXTS: u32 = {CONTEXTS}u;\nconst SLOTS: u32 = {}u;\nconst GROUPS: u32 = {}u;\n\
-             const INFO: u32 = {}u;\nconst LANE_STATES: u32 = {}u;\nconst FAULT: u32 = {}u;\n\
+            "const CONTEXTS: u32 = {CONTEXTS}u;\nconst SLOTS: u32 = {}u;\n\
+             const INFO: u32 = {}u;\nconst FAULT: u32 = {}u;\n\
              const HISTOGRAMS: u32 = {}u;\nconst FILE_HISTOGRAMS: u32 = {}u;\n\
-             const SETS: u32 = {}u;\n",
+             const SETS: u32 = {}u;\nconst BATCH_PLANES: u32 = {BATCH_PLANES}u;\n",
             self.slots,
-            self.groups,
             self.info,
-            self.lane_states,
             self.fault,
             self.histograms,
             self.file_histograms,
             sets / 4
         )
+    }
+
+    /// Where the lanes' sets of blocks with a coefficient start in the mask buffer, in
+    /// bytes: after the masks of the dense plane's blocks.
+    pub fn sets_offset(&self) -> u64 {
+        super::plan::groups_offset(self.dense)
+    }
+
+    /// The first word of the groups of plane `k` of a batch.
+    fn groups_at(&self, k: usize) -> u32 {
+        (self.groups + k as u64 * self.group_stride) as u32
+    }
+
+    /// The first word of the states of a batch's streams from its `first`.
+    fn states_at(&self, first: u32) -> u32 {
+        (self.lane_states + 4 * first as u64) as u32
     }
 
     /// Where the fault flag lies, in bytes.
@@ -173,9 +226,28 @@ impl Scratch {
     }
 }
 
-/// Bytes of the lanes' scratch buffer a stream needs (0 where it has none).
+/// Bytes the lanes need beside the rest of the GPU state (0 where a stream's planes go as
+/// pairs): their tables and scratch, and the dense plane's coefficients, masks and sets
+/// beyond one plane's ([`lane_blocks`]).
 pub(crate) fn lanes_bytes(h: &Header) -> u64 {
-    Scratch::for_stream(h).map_or(0, |s| s.bytes())
+    let Some(plan) = Scratch::for_stream(h) else {
+        return 0;
+    };
+    let (pw, ph) = vbim_format::chunk::padded_size(h);
+    let part = crate::coded::part_blocks([pw as u32, ph as u32]);
+    let more = plan.dense.saturating_sub(part) as u64;
+    plan.bytes() + more * 256 + super::plan::mask_bytes(plan.dense)
+}
+
+/// Blocks of the dense plane the lanes decode into, for planes of `plane` texels: as many
+/// as `channels` planes side by side (each from a multiple of 64 blocks), so that a
+/// keyframe's planes go in one batch ([`Gpu::lane_batches`]), or as many as one storage
+/// binding of WebGPU's default limits holds (two at 4096²); at least one plane's.
+pub fn lane_blocks(plane: [u32; 2], channels: u32) -> u32 {
+    let one = ((plane[0] / 8) as u64 * (plane[1] / 8) as u64).next_multiple_of(64);
+    let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
+    let planes = (binding / one.max(1)).clamp(1, channels.max(1) as u64);
+    (planes * one).min(u32::MAX as u64) as u32
 }
 
 super::job::uniform_struct! {
@@ -223,8 +295,18 @@ super::job::uniform_struct! {
     own: u32 => "u32",
     /// (See `own`.)
     own_count: u32 => "u32",
+    /// Where the plane's block 0 lies in the dense plane (its coefficients, masks, sets
+    /// and the scratch's residuals and counts), in blocks: 0, or its place among a
+    /// batch's planes (a multiple of 64).
+    dense_at: u32 => "u32",
+    /// The first word of its streams' states in the scratch.
+    states_at: u32 => "u32",
+    /// The first word of its groups' flags (then its tiles' ranks) in the scratch.
+    groups_at: u32 => "u32",
     /// (Padding.)
-    _pad: u32 => "u32",
+    _pad0: u32 => "u32",
+    /// (Padding.)
+    _pad1: u32 => "u32",
     /// `slots`: per family the first word of its clusters' histograms (NONE: not used).
     places: [u32; 8] => "array<vec4<u32>, 2>",
 }
@@ -238,7 +320,6 @@ pub(crate) struct LanesGpu {
     pipelines: Vec<wgpu::ComputePipeline>,
     tables: wgpu::Buffer,
     scratch: wgpu::Buffer,
-    #[cfg_attr(not(test), allow(dead_code))]
     pub plan: Scratch,
     /// Its bind groups over the jobs, streams, scratch, tables and dense plane (the lane
     /// passes'), and over the jobs, streams and tables (`slots`'): remade with the
@@ -247,18 +328,19 @@ pub(crate) struct LanesGpu {
 }
 
 impl LanesGpu {
-    /// The pipelines and scratch for planes of `geometry` (texels, and tile side) coded
-    /// with `maps` (`None` where they go as pairs, [`Scratch::new`]), with the file's maps
-    /// and histograms written; the sets of the dense plane start at byte `sets` of its
-    /// mask buffer. `shape` (as [`Gpu::set_decode_shape`] keeps it) gives the states a
+    /// The pipelines and scratch for planes of `geometry` (texels, tile side and
+    /// channels) coded with `maps` (`None` where they go as pairs, [`Scratch::new`]), with
+    /// the file's maps and histograms written; the sets of the dense plane start at byte
+    /// [`Scratch::sets_offset`] of its mask buffer. `shape` (as [`Gpu::set_decode_shape`] keeps it) gives the states a
     /// workgroup and where the job is read from.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        (geometry, maps, sets): (([u32; 2], u32), &[ContextMap], u64),
+        (geometry, maps): (([u32; 2], u32, u32), &[ContextMap]),
         shape: &crate::DecodeShape,
     ) -> Option<LanesGpu> {
         let plan = Scratch::new(geometry, maps)?;
+        let sets = plan.sets_offset();
         let group = shape.lane_group;
         let (job, space) = match shape.lane_job_storage {
             true => (
@@ -341,7 +423,7 @@ impl LanesGpu {
             wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                 buffer: jobs,
                 offset: 0,
-                size: wgpu::BufferSize::new(std::mem::size_of::<LaneJob>() as u64),
+                size: wgpu::BufferSize::new(super::job::JOB_BINDING),
             })
         };
         let lanes = [
@@ -416,89 +498,138 @@ fn layout(
 }
 
 impl Gpu {
-    /// The ops that decode version 2 plane `span` (of `lanes`) into the dense plane: its
-    /// section's tables first if the plane before was of another section
-    /// (`planned_section`), then the plane's five passes (six for a keyframe plane, whose
-    /// DC takes two scans).
+    /// The ops that decode version 2 or 3 planes `batch` (of one section, each at its
+    /// place in the dense plane) into the dense plane: the section's tables first if the
+    /// planes before were of another section (`planned_section`), then the five passes
+    /// (six for keyframe planes, whose DC takes two scans), each one dispatch over the
+    /// batch's planes (`workgroup_id.z`, each with its own job). A lane pass lasts as long
+    /// as the longest lane it runs, so planes side by side cost the longest of their
+    /// chains, not the sum, and a step's latency once.
     pub(super) fn lane_ops(
         &mut self,
         ops: &mut Vec<Op>,
-        (span, lanes): (&PlaneSpan, LanePlane),
+        batch: &[LaneMember],
         sections: &[SectionSpan],
         channel: u32,
     ) {
-        let Some(section) = sections.get(lanes.section as usize) else {
+        let Some(first) = batch.first() else {
+            return;
+        };
+        let Some(section) = sections.get(first.lanes.section as usize) else {
             debug_assert!(false, "a plane of no section");
             return;
         };
+        debug_assert!(batch.iter().all(|m| m.lanes.section == first.lanes.section));
+        let Some(plan) = self.lanes.as_ref().map(|l| l.plan) else {
+            return;
+        };
+        let group = self.lanes.as_ref().map_or(1, |l| l.group);
         let [pw, ph] = self.plane;
         let (bw, bh) = (pw / 8, ph / 8);
         let (gw, gh) = (bw.div_ceil(GROUP as u32), bh.div_ceil(GROUP as u32));
-        let ts = if lanes.tiled { self.per } else { 0 };
-        let (tiles_x, tiles_y) = if lanes.tiled {
-            (pw / 8 / ts, ph / 8 / ts)
-        } else {
-            (0, 0)
-        };
         let mut places = [crate::coded::NONE; 8];
         places[..FAMILIES].copy_from_slice(&section.places);
-        let job = LaneJob {
-            bw,
-            bh,
-            gw,
-            gh,
-            rw: bw.div_ceil(REGION as u32),
-            tile: ts,
-            lanes: lanes.count,
-            v3: section.v3 as u32,
-            words: section.words,
-            table: lanes.table,
-            family: lanes.family,
-            blocks: span.blocks,
-            tiles_x,
-            tiles_y,
-            spans: span.members,
-            span_count: span.member_count,
-            members: if ts > 0 { span.blocks / (ts * ts) } else { 0 },
-            own: section.own,
-            own_count: section.own_count,
-            _pad: 0,
-            places,
-        };
-        if self.planned_section != Some(lanes.section) {
-            self.planned_section = Some(lanes.section);
-            let at = self.push_job_bytes(bytemuck::bytes_of(&job));
+        let mut streams = 0;
+        let jobs: Vec<LaneJob> = batch
+            .iter()
+            .enumerate()
+            .map(|(k, m)| {
+                let (span, lanes) = (&m.span, &m.lanes);
+                let ts = if lanes.tiled { self.per } else { 0 };
+                let (tiles_x, tiles_y) = if lanes.tiled {
+                    (bw / ts, bh / ts)
+                } else {
+                    (0, 0)
+                };
+                let states_at = plan.states_at(streams);
+                streams += lanes.count;
+                LaneJob {
+                    bw,
+                    bh,
+                    gw,
+                    gh,
+                    rw: bw.div_ceil(REGION as u32),
+                    tile: ts,
+                    lanes: lanes.count,
+                    v3: section.v3 as u32,
+                    words: section.words,
+                    table: lanes.table,
+                    family: lanes.family,
+                    blocks: span.blocks,
+                    tiles_x,
+                    tiles_y,
+                    spans: span.members,
+                    span_count: span.member_count,
+                    members: if ts > 0 { span.blocks / (ts * ts) } else { 0 },
+                    own: section.own,
+                    own_count: section.own_count,
+                    dense_at: m.dense_at,
+                    states_at,
+                    groups_at: plan.groups_at(k),
+                    _pad0: 0,
+                    _pad1: 0,
+                    places,
+                }
+            })
+            .collect();
+        debug_assert!(streams as u64 <= plan.streams && jobs.len() <= BATCH_PLANES as usize);
+        if self.planned_section != Some(first.lanes.section) {
+            self.planned_section = Some(first.lanes.section);
+            let at = self.push_job_bytes(bytemuck::bytes_of(&jobs[0]));
             let n = (FAMILIES * CONTEXTS) as u32 + section.own_count * 1024;
-            let op = Op::lanes(LanePass::Slots, at, n.div_ceil(64), channel, n as u64 / 16);
+            let op = Op::lanes(
+                LanePass::Slots,
+                at,
+                [n.div_ceil(64), 1],
+                channel,
+                n as u64 / 16,
+            );
             ops.push(op);
         }
-        let at = self.push_job_bytes(bytemuck::bytes_of(&job));
+        // The batch's jobs one after another (the first may be the last one pushed).
+        let at = self.push_job_bytes(bytemuck::bytes_of(&jobs[0]));
+        for job in &jobs[1..] {
+            self.append_job(bytemuck::bytes_of(job));
+        }
+        let z = jobs.len() as u32;
+        // Per pass: the workgroups of its largest plane, and its units (the planes' work
+        // summed; for a lane pass its longest lane, the serial chain the others run
+        // beside).
+        let most = |f: &dyn Fn(&LaneJob, &LaneMember) -> u64| {
+            jobs.iter()
+                .zip(batch)
+                .map(|(j, m)| f(j, m))
+                .max()
+                .unwrap_or(0)
+        };
+        let sum = |f: &dyn Fn(&LaneJob, &LaneMember) -> u64| {
+            jobs.iter().zip(batch).map(|(j, m)| f(j, m)).sum::<u64>()
+        };
         // `prepare` also clears the dense plane's masks and sets (two words per group of
         // 64 blocks).
-        let sets = 2 * span.blocks.div_ceil(64);
-        let cells = (gw * gh).max(tiles_x * tiles_y).max(span.blocks);
-        let cells = cells.max(lanes.count).max(sets);
-        let by_lane = lanes
-            .count
-            .div_ceil(self.lanes.as_ref().map_or(1, |l| l.group));
-        let blocks = span.blocks as u64;
-        // A lane pass takes as long as its longest lane (a serial chain; the others run
-        // beside it).
-        let words = lanes.longest as u64;
+        let cells = most(&|j, _| {
+            let sets = 2 * j.blocks.div_ceil(64);
+            let cells = (gw * gh).max(j.tiles_x * j.tiles_y).max(j.blocks);
+            cells.max(j.lanes).max(sets) as u64
+        });
+        let by_lane = most(&|j, _| j.lanes.div_ceil(group) as u64) as u32;
+        let blocks = sum(&|j, _| j.blocks as u64);
+        let words = most(&|_, m| m.lanes.longest as u64);
         let mut passes = vec![
-            (LanePass::Prepare, cells.div_ceil(64), blocks),
+            (LanePass::Prepare, cells.div_ceil(64) as u32, blocks),
             (LanePass::Flags, by_lane, (gw * gh) as u64 / 2),
             (LanePass::Middle, by_lane, words / 2),
             (LanePass::Blocks, by_lane, words - words / 2),
         ];
-        if ts > 0 {
-            passes.push((LanePass::DcTiles, (tiles_x * tiles_y).div_ceil(64), blocks));
+        if first.lanes.tiled {
+            let tiles = most(&|j, _| (j.tiles_x * j.tiles_y) as u64) as u32;
+            passes.push((LanePass::DcTiles, tiles.div_ceil(64), blocks));
         } else {
             passes.push((LanePass::DcRows, bh.div_ceil(64), blocks));
             passes.push((LanePass::DcCols, bw.div_ceil(64), blocks));
         }
         for (pass, groups, units) in passes {
-            ops.push(Op::lanes(pass, at, groups, channel, units));
+            ops.push(Op::lanes(pass, at, [groups, z], channel, units));
         }
     }
 
@@ -514,7 +645,7 @@ impl Gpu {
         let group = &groups[(which == LanePass::Slots) as usize];
         pass.set_bind_group(0, group, &[op.job]);
         if op.groups[0] > 0 {
-            pass.dispatch_workgroups(op.groups[0], 1, 1);
+            pass.dispatch_workgroups(op.groups[0], 1, op.groups[2].max(1));
         }
         self.mark(pass, which.label());
     }

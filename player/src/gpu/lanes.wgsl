@@ -28,7 +28,20 @@
 // (player/src/gpu/lanes.rs, from the Rust struct's fields), in a uniform buffer on a GPU
 // and a storage one on a CPU adapter (`var<JOB>`: `DecodeShape::lane_job_storage` says
 // why).
-@group(0) @binding(0) var<JOB> prm: LaneJob;
+// A dispatch covers a batch of planes (player/src/gpu/lanes.rs, `lane_ops`), the plane
+// `workgroup_id.z`, each with its job, 256 bytes apart; an entry point first takes its own
+// (`take_job`) into `prm`, which everything else reads.
+struct LanePlaneJob {
+    job: LaneJob,
+    // (To 256 bytes: the 128 of a LaneJob and 128 more.)
+    pad: array<vec4<u32>, 8>,
+}
+@group(0) @binding(0) var<JOB> lane_jobs: array<LanePlaneJob, BATCH_PLANES>;
+var<private> prm: LaneJob;
+
+fn take_job(wg: vec3<u32>) {
+    prm = lane_jobs[wg.z].job;
+}
 // The segment's words (player/src/coded.rs).
 @group(0) @binding(1) var<storage, read> seg: array<u32>;
 // The decode's own state, at the offsets below (player/src/gpu/lanes.rs sizes it).
@@ -53,11 +66,13 @@ const MAPS: u32 = 0u;
 const HIST_OF: u32 = MAPS + FAMILIES * CONTEXTS;
 // ... per histogram (the file's, then a section's own) each of its 4096 slots' token |
 // the token's frequency << 7 | the slot's offset from the token's first slot << 20
-// (SLOTS: a symbol's one load). Scratch: per group its flags, then each tile's rank
-// (GROUPS); per block its DC residual and coefficient count (INFO); per lane its state
-// (LANE_STATES); and FAULT, set by a lane that read past its words or decoded a symbol
-// out of range. (Declared before this file: SLOTS, GROUPS, INFO, LANE_STATES, FAULT,
-// HISTOGRAMS, FILE_HISTOGRAMS, SETS, and CONTEXTS, a family's: `vbim_format::plane2`'s.)
+// (SLOTS: a symbol's one load). Scratch: per plane of a batch its groups' flags, then
+// its tiles' ranks (from the job's `groups_at`); per block of the dense plane its DC
+// residual and coefficient count (INFO, a plane's blocks from the job's `dense_at`); per
+// stream its state (from the job's `states_at`); and FAULT, set by a lane that read past
+// its words or decoded a symbol out of range. (Declared before this file: SLOTS, INFO,
+// FAULT, HISTOGRAMS, FILE_HISTOGRAMS, SETS, BATCH_PLANES, and CONTEXTS, a family's:
+// `vbim_format::plane2`'s.)
 
 const NONE: u32 = 0xFFFFFFFFu;
 // LANE_GROUP, the states per workgroup of the lane passes (`flags`, `middle`, `blocks`),
@@ -228,13 +243,13 @@ fn block_at(cx: i32, cy: i32) -> u32 {
     let x = u32(cx);
     let y = u32(cy);
     if (prm.tile == 0u) {
-        return y * prm.bw + x;
+        return prm.dense_at + y * prm.bw + x;
     }
-    let r = scratch[GROUPS + prm.gw * prm.gh + (y / prm.tile) * prm.tiles_x + x / prm.tile];
+    let r = scratch[prm.groups_at + prm.gw * prm.gh + (y / prm.tile) * prm.tiles_x + x / prm.tile];
     if (r == NONE) {
         return NONE;
     }
-    return (r * prm.tile + y % prm.tile) * prm.tile + x % prm.tile;
+    return prm.dense_at + (r * prm.tile + y % prm.tile) * prm.tile + x % prm.tile;
 }
 
 // The rank of tile t among a bubble plane's members, NONE if it is not one: the last
@@ -279,7 +294,11 @@ fn own_frequency(h: u32, t: u32) -> u32 {
 // Once per section: each family's histogram of each context (for the families the
 // section uses), then the slot tables of the histograms it sent itself.
 @compute @workgroup_size(64)
-fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
+fn slots(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    take_job(wg);
     let i = id.x;
     if (i < FAMILIES * CONTEXTS) {
         let f = i / CONTEXTS;
@@ -320,7 +339,11 @@ fn slots(@builtin(global_invocation_id) id: vec3<u32>) {
 // decoded, and their neighbours read them as zeros), and the dense plane's masks and
 // sets cleared (one dispatch, not a clear and a dispatch).
 @compute @workgroup_size(64)
-fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
+fn prepare(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    take_job(wg);
     let i = id.x;
     if (i < prm.lanes) {
         // A stream's words end where the next one's start, the last at the table's end.
@@ -331,24 +354,25 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
             state.x = (word(w0) << 16u) | word(w0 + 1u);
             state.w = select(0u, 1u, state.x < 65536u);
         }
-        let s = LANE_STATES + 4u * i;
+        let s = prm.states_at + 4u * i;
         scratch[s] = state.x;
         scratch[s + 1u] = state.y;
         scratch[s + 2u] = state.z;
         scratch[s + 3u] = state.w;
     }
     if (i < prm.blocks) {
-        scratch[INFO + 2u * i] = 0u;
-        scratch[INFO + 2u * i + 1u] = 0u;
-        atomicStore(&marks[2u * i], 0u);
-        atomicStore(&marks[2u * i + 1u], 0u);
+        let b = prm.dense_at + i;
+        scratch[INFO + 2u * b] = 0u;
+        scratch[INFO + 2u * b + 1u] = 0u;
+        atomicStore(&marks[2u * b], 0u);
+        atomicStore(&marks[2u * b + 1u], 0u);
     }
     // The sets, as the passes after read them: two words per group of 64 blocks.
     if (i < 2u * ((prm.blocks + 63u) / 64u)) {
-        atomicStore(&marks[SETS + i], 0u);
+        atomicStore(&marks[SETS + prm.dense_at / 32u + i], 0u);
     }
     if (prm.tile != 0u && i < prm.tiles_x * prm.tiles_y) {
-        scratch[GROUPS + prm.gw * prm.gh + i] = rank_of(i);
+        scratch[prm.groups_at + prm.gw * prm.gh + i] = rank_of(i);
     }
     if (i >= prm.gw * prm.gh) {
         return;
@@ -370,13 +394,13 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    scratch[GROUPS + i] = has;
+    scratch[prm.groups_at + i] = has;
 }
 
 // Stream `lane`'s state into the private variables; returns its lane's regions [first,
 // end).
 fn load(lane: u32) -> vec2<u32> {
-    let s = LANE_STATES + 4u * lane;
+    let s = prm.states_at + 4u * lane;
     x = scratch[s];
     at = scratch[s + 1u];
     end = scratch[s + 2u];
@@ -404,7 +428,7 @@ fn group_at(first: u32, place: u32) -> vec2<u32> {
 }
 
 fn save(lane: u32) {
-    let s = LANE_STATES + 4u * lane;
+    let s = prm.states_at + 4u * lane;
     scratch[s] = x;
     scratch[s + 1u] = at;
     scratch[s + 2u] = end;
@@ -419,7 +443,7 @@ fn group_bits(gx: i32, gy: i32) -> u32 {
     if (gx < 0 || gy < 0 || gx >= i32(prm.gw) || gy >= i32(prm.gh)) {
         return 0u;
     }
-    return scratch[GROUPS + u32(gy) * prm.gw + u32(gx)];
+    return scratch[prm.groups_at + u32(gy) * prm.gw + u32(gx)];
 }
 
 // The groups' flags of parity `parity` among the stream's groups of its lane's regions
@@ -433,7 +457,7 @@ fn flags_of(span: vec2<u32>, parity: u32) {
         if (gx >= prm.gw || gy >= prm.gh) {
             continue;
         }
-        let g = GROUPS + gy * prm.gw + gx;
+        let g = prm.groups_at + gy * prm.gw + gx;
         if ((scratch[g] & 1u) == 0u || (gx + gy) % 2u != parity) {
             continue;
         }
@@ -463,7 +487,9 @@ fn flags_of(span: vec2<u32>, parity: u32) {
 fn flags(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
 ) {
+    take_job(wg);
     load_contexts(local);
     let lane = id.x;
     if (lane >= prm.lanes) {
@@ -481,7 +507,9 @@ fn flags(
 fn middle(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
 ) {
+    take_job(wg);
     load_contexts(local);
     let lane = id.x;
     if (lane >= prm.lanes) {
@@ -633,7 +661,7 @@ fn blocks_of(span: vec2<u32>, parity: u32) {
         // row of groups that holds nothing costs one iteration (lavapipe's budget of
         // loop iterations), not one per block row.
         for (var gy = ry; gy < min(ry + per, prm.gh); gy = gy + 1u) {
-            let row = GROUPS + gy * prm.gw;
+            let row = prm.groups_at + gy * prm.gw;
             var full = 0u;
             if (rx < prm.gw && (scratch[row + rx] & 2u) != 0u) { full |= 1u; }
             if (rx + 1u < prm.gw && (scratch[row + rx + 1u] & 2u) != 0u) { full |= 2u; }
@@ -669,7 +697,7 @@ fn blocks_by_group(span: vec2<u32>, parity: u32) {
     for (var p = pick; p < places; p = p + picks) {
         let cell = group_at(span.x, p);
         if (cell.x >= prm.gw || cell.y >= prm.gh
-            || (scratch[GROUPS + cell.y * prm.gw + cell.x] & 2u) == 0u) {
+            || (scratch[prm.groups_at + cell.y * prm.gw + cell.x] & 2u) == 0u) {
             continue;
         }
         for (var cy = cell.y * GROUP; cy < min((cell.y + 1u) * GROUP, prm.bh); cy = cy + 1u) {
@@ -701,7 +729,9 @@ fn blocks_in(span: vec2<u32>, parity: u32) {
 fn blocks(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
+    @builtin(workgroup_id) wg: vec3<u32>,
 ) {
+    take_job(wg);
     load_contexts(local);
     let lane = id.x;
     if (lane >= prm.lanes) {
@@ -727,7 +757,11 @@ fn restarts(i: u32) -> bool {
 }
 
 @compute @workgroup_size(64)
-fn dc_rows(@builtin(global_invocation_id) id: vec3<u32>) {
+fn dc_rows(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    take_job(wg);
     let by = id.x;
     if (by >= prm.bh) {
         return;
@@ -746,7 +780,11 @@ fn dc_rows(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 @compute @workgroup_size(64)
-fn dc_cols(@builtin(global_invocation_id) id: vec3<u32>) {
+fn dc_cols(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    take_job(wg);
     let bx = id.x;
     if (bx >= prm.bw) {
         return;
@@ -782,17 +820,21 @@ fn finish_block(b: u32, dc: i32) {
 // invocation per member tile runs the specification's raster recurrence over the tile's
 // cells (left + up − up-left), in place of the two scans.
 @compute @workgroup_size(64)
-fn dc_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
+fn dc_tiles(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+) {
+    take_job(wg);
     let t = id.x;
     if (t >= prm.tiles_x * prm.tiles_y) {
         return;
     }
-    let rank = scratch[GROUPS + prm.gw * prm.gh + t];
+    let rank = scratch[prm.groups_at + prm.gw * prm.gh + t];
     if (rank == NONE) {
         return;
     }
     let n = prm.tile;
-    let first = rank * n * n;
+    let first = prm.dense_at + rank * n * n;
     for (var c = 0u; c < n * n; c = c + 1u) {
         let cx = c % n;
         let cy = c / n;

@@ -365,3 +365,123 @@ fn planes_beyond_one_invocations_loop_budget_decode_as_coded() {
     );
     lanes_match_pairs(&mut gpu, (&[(plane, &q[..])], &maps), v3, &|_| true);
 }
+
+/// A segment's bubble planes decoded as coded go in batches: one dispatch of each lane
+/// pass covers the planes of a section that fit the dense plane together
+/// (`workgroup_id.z`), each at its own place in the dense plane, with its own groups and
+/// states. Every plane's layer sums to its reference, with version 2's lanes and version
+/// 3's states, a state a workgroup (a GPU's shape) and eight (a CPU adapter's): four
+/// planes of 256, 64, 52 and 36 blocks in a dense plane of 256 go in two batches, the
+/// second of three planes, or in three where their states outgrow the scratch's.
+#[test]
+fn bubble_planes_decoded_as_coded_in_batches_match_the_reference() {
+    use super::tests::summed_bubble_layer;
+    use super::tests::{assert_members_match, bubble_reference, random_blocks};
+    let (device, queue, _) = headless_device().unwrap_or_else(|e| panic!("{e}"));
+    let (pw, ph, ts) = (256u32, 64u32, 16usize);
+    let (bw, bh, per) = (pw as usize / 8, ph as usize / 8, ts / 8);
+    let tiles_x = bw / per;
+    let tiles = tiles_x * (bh / per);
+    let members: [&dyn Fn(usize) -> bool; 4] =
+        [&|_| true, &|t| t % 4 == 0, &|t| t % 5 == 0, &|t| t % 7 == 1];
+    let mut orders = Vec::new();
+    let mut blocks = Vec::new();
+    for (n, member) in members.iter().enumerate() {
+        let mut order = Vec::new();
+        for t in (0..tiles).filter(|&t| member(t)) {
+            let (tx, ty) = (t % tiles_x, t / tiles_x);
+            for y in ty * per..ty * per + per {
+                for x in tx * per..tx * per + per {
+                    order.push((x, y));
+                }
+            }
+        }
+        blocks.push(random_blocks(order.len(), &mut (40 + n as u32)));
+        orders.push(order);
+    }
+    let planes: Vec<PlaneBlocks> = orders
+        .iter()
+        .zip(&blocks)
+        .map(|(order, q)| {
+            let geometry = Geometry {
+                grid: (bw, bh),
+                order,
+                tile: Some(per),
+            };
+            let plane = Plane {
+                family: 0,
+                geometry,
+            };
+            (plane, &q[..])
+        })
+        .collect();
+    let shapes: Vec<Plane> = planes.iter().map(|(p, _)| *p).collect();
+    let maps = [ContextMap::single()];
+    let file_count = plane2::file_histograms(&maps).count() as u32;
+    let steps: Vec<f32> = (0..members.len()).map(|n| 0.004 * (n + 1) as f32).collect();
+    for wide in [true, false] {
+        // (With a state per 40 symbols the planes' states outgrow the scratch's, a
+        // plane's most: the second batch is cut in two.)
+        let v3 = |per| LaneShape {
+            bytes: usize::MAX,
+            symbols_per_state: Some(per),
+        };
+        for (lanes, batches) in [
+            (version_2(64), &[1, 3][..]),
+            (v3(200), &[1, 3]),
+            (v3(40), &[1, 2, 1]),
+        ] {
+            let what = format!("GPU shape {wide}, lanes {lanes:?}");
+            let mut gpu = Gpu::new(&device, &queue, (pw, ph), [pw, ph], 5, 1, ts as u32);
+            gpu.set_decode_shape(shape(wide));
+            gpu.decode_lanes(&maps);
+            let bytes = plane2::encode(&planes, &maps, lanes).unwrap();
+            let section = Section::parse_layout(&bytes, &shapes, &maps, lanes.layout()).unwrap();
+            let mut data = Coded::default();
+            let span = data.push_section(&bytes, &section, file_count);
+            let mut seg = SegmentData::new();
+            seg.steps = Vec::new();
+            seg.bubbles = 1;
+            seg.layers = 2 + members.len();
+            for (n, member) in members.iter().enumerate() {
+                let sp = (&section.planes[n], 0, 0);
+                let bubble = Some((tiles, *member));
+                let plane = data.push_lane_plane(steps[n], sp, blocks[n].len(), bubble);
+                if n == 0 {
+                    // (The keyframe plane the segment has no step for.)
+                    seg.planes.push(plane);
+                }
+                seg.planes.push(plane);
+            }
+            seg.sections = vec![span];
+            seg.data = data;
+            let target = super::decode::Target {
+                pack_first: None,
+                pack_before_last: None,
+                set: Some(0),
+            };
+            let mut ops = Vec::new();
+            gpu.plan_decode(&seg, target, &mut ops);
+            let blocks_passes = ops
+                .iter()
+                .filter(|o| o.kind == super::ops::Kind::Lane(super::lanes::LanePass::Blocks));
+            let planes: Vec<u32> = blocks_passes.map(|o| o.groups[2]).collect();
+            assert_eq!(planes, batches, "{what}: planes of each batch");
+            decode(&mut gpu, &seg, true);
+            assert!(!gpu.lanes_faulted(), "{what}: a lane faulted");
+            for (n, member) in members.iter().enumerate() {
+                let mut c = Coded::default();
+                let (_, parsed) = coded_plane(&mut c, steps[n], &blocks[n], Some((tiles, member)));
+                let want = bubble_reference(&parsed, member, (pw, ph, ts), steps[n]);
+                let got = summed_bubble_layer(&gpu, n as u32, (pw, ph), steps[n]);
+                assert_members_match(
+                    &got,
+                    &want,
+                    *member,
+                    (pw, ts),
+                    &format!("{what}, plane {n}"),
+                );
+            }
+        }
+    }
+}

@@ -45,6 +45,8 @@ mod resources;
 mod tests;
 
 #[cfg(feature = "bench")]
+pub use batch::lane_batches;
+#[cfg(feature = "bench")]
 pub use bench::GpuDecoder;
 pub(crate) use decode::Target;
 #[cfg(feature = "bench")]
@@ -52,6 +54,8 @@ pub use decode::PASS_CHANGES;
 #[cfg(feature = "bench")]
 pub use device::timing_device;
 pub use device::{headless_device, headless_device_on, DeviceError, Headless};
+#[cfg(feature = "bench")]
+pub use lanes::lane_blocks;
 pub(crate) use lanes::lanes_bytes;
 pub(crate) use layouts::compute_pipeline;
 pub(crate) use ops::Op;
@@ -89,6 +93,10 @@ pub(crate) struct Gpu {
     batch: Vec<job::Job>,
     /// The batch being planned from those (`Gpu::batches`).
     batch_out: Vec<job::Job>,
+    /// A segment's bubble planes decoded as coded (`Gpu::lane_batches`), and the members
+    /// of a batch of them.
+    lane_planes: Vec<(job::Job, crate::coded::PlaneSpan)>,
+    lane_members: Vec<lanes::LaneMember>,
     /// A segment's streams, entry points and member spans; grows with the largest segment.
     words: wgpu::Buffer,
     /// Each slice's first workgroup (`resources::slice_buffer`); grows with the longest pass.

@@ -109,9 +109,16 @@ impl Op {
         }
     }
 
-    /// A lanes pass of `groups` workgroups over the lane job at `job`.
-    pub(super) fn lanes(pass: LanePass, job: u32, groups: u32, channel: u32, units: u64) -> Op {
-        Op::new(Kind::Lane(pass), job, [groups, 1, 1], channel, units)
+    /// A lanes pass of `groups` workgroups for each of `planes` planes, whose lane jobs
+    /// lie from `job` on.
+    pub(super) fn lanes(
+        pass: LanePass,
+        job: u32,
+        [groups, planes]: [u32; 2],
+        channel: u32,
+        units: u64,
+    ) -> Op {
+        Op::new(Kind::Lane(pass), job, [groups, 1, planes], channel, units)
     }
 
     /// The dense plane's masks and sets cleared: `bytes` of them.

@@ -52,14 +52,34 @@ impl Gpu {
     /// Decodes version 2 planes coded with `maps` as coded from now on (where they fit
     /// the dense plane whole, [`super::lanes::Scratch::new`]).
     pub(super) fn decode_lanes(&mut self, maps: &[vbim_format::plane2::ContextMap]) {
-        let geometry = (self.plane, self.per * 8);
-        let sets = groups_offset(self.part);
-        self.lanes = super::lanes::LanesGpu::new(
-            &self.device,
-            &self.queue,
-            (geometry, maps, sets),
-            &self.shape,
-        );
+        let geometry = (self.plane, self.per * 8, self.channels);
+        self.lanes =
+            super::lanes::LanesGpu::new(&self.device, &self.queue, (geometry, maps), &self.shape);
+        // The lanes' dense plane holds a keyframe's planes side by side
+        // (`lanes::lane_blocks`): the coefficients, masks and sets grown to hold them.
+        if let Some(dense) = self.lanes.as_ref().map(|l| l.plan.dense) {
+            let grow = |buffer: &mut wgpu::Buffer, bytes: u64, label| {
+                if bytes > buffer.size() {
+                    *buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some(label),
+                        size: bytes,
+                        usage: buffer.usage(),
+                        mapped_at_creation: false,
+                    });
+                }
+            };
+            grow(
+                &mut self.coefs,
+                dense as u64 * 256,
+                "vbim dense coefficients",
+            );
+            let masks = mask_bytes(dense);
+            grow(
+                &mut self.masks,
+                masks,
+                "vbim ring of coefficient masks and sets",
+            );
+        }
         self.bind_decode();
     }
 
@@ -291,6 +311,8 @@ impl Gpu {
             job_bytes: Vec::with_capacity(64 * JOB_STRIDE as usize),
             batch: Vec::with_capacity(64),
             batch_out: Vec::with_capacity(super::job::BATCH_PLANES as usize),
+            lane_planes: Vec::with_capacity(64),
+            lane_members: Vec::with_capacity(super::job::BATCH_PLANES as usize),
             // (Set from the adapter below.)
             shape: crate::DecodeShape::CPU,
             slice_span: 1,

@@ -62,7 +62,7 @@ pub(super) fn coded_plane(
 
 /// The reference decoder's bubble plane of `pw × ph` texels from `parsed`, the blocks of
 /// the tiles of `ts`² texels that `member` keeps, in rank order (zeros elsewhere).
-fn bubble_reference(
+pub(super) fn bubble_reference(
     parsed: &Blocks,
     member: &dyn Fn(usize) -> bool,
     (pw, ph, ts): (u32, u32, usize),
@@ -310,7 +310,12 @@ fn keyframe_passes_match_the_reference_kernel() {
 /// the set's terms (16-bit integers two to a word times the step, or f32 where the start's
 /// top bit says so), (c · T[ky][y]) · T[kx][x] in increasing zig-zag order, over a plane
 /// of `pw × ph`.
-fn summed_bubble_layer(gpu: &Gpu, layer: u32, (pw, ph): (u32, u32), step: f32) -> Vec<f32> {
+pub(super) fn summed_bubble_layer(
+    gpu: &Gpu,
+    layer: u32,
+    (pw, ph): (u32, u32),
+    step: f32,
+) -> Vec<f32> {
     let raw = read_texture_layer(&gpu.device, &gpu.queue, &gpu.bubble_blocks, 16, layer);
     let blocks: &[[u32; 4]] = bytemuck::cast_slice(&raw);
     let terms = read_buffer(&gpu.device, &gpu.queue, &gpu.terms[0]);
@@ -342,7 +347,7 @@ fn summed_bubble_layer(gpu: &Gpu, layer: u32, (pw, ph): (u32, u32), step: f32) -
 
 /// The texels of `got` in member tiles (of `ts`² texels, `pw` texels across) match
 /// `want` within 1e-5 of its peak; `what` names the case.
-fn assert_members_match(
+pub(super) fn assert_members_match(
     got: &[f32],
     want: &Plane,
     member: &dyn Fn(usize) -> bool,
