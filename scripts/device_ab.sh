@@ -11,7 +11,9 @@
 # GPU"), then B alone with each of EXTRA's flag sets (default: every frame deciding which
 # tiles to keep, `--reuse-probe 0`, and every tile every frame, `--reuse-share 0`), and
 # a segment's decode back to back with each build (`bench decode --gpu --fit --runs 2`:
-# its dispatches, their latency). Everything goes to OUT/ab.log, the adapter's name
+# its dispatches, their latency), once with each of DECODES's flag sets (default: the
+# build's own shape, and a format 2.0 or 3.0 file's sections decoded on the GPU as coded,
+# `--lanes true`, which a 1.1 file ignores). Everything goes to OUT/ab.log, the adapter's name
 # first. Prepare as scripts/device_bench.sh says, with both binaries in the carried
 # folder (`strip -o .dev/vbim-a …`, and xz them if the carry's 64 MiB needs it).
 set -euo pipefail
@@ -23,6 +25,7 @@ frames=${FRAMES:-240}
 rounds=${ROUNDS:-2}
 load=${GAME_LOAD:-8}
 extra=${EXTRA:-"--reuse-probe 0;--reuse-share 0"}
+decodes=${DECODES:-";--lanes true"}
 mkdir -p "$out"
 log="$out/ab.log"
 : >"$log"
@@ -49,11 +52,15 @@ for f in "${streams[@]}"; do
         read -ra flags <<<"$s"
         render B "$b" "$f" "${flags[@]}"
     done
-    for w in A B; do
-        bin=$a
-        [ "$w" = B ] && bin=$b
-        echo "-- $w decode $f" | tee -a "$log"
-        "$bin" bench decode "$f" --gpu --fit --runs 2 2>&1 |
-            grep -E "GPU decode|fit over|per unit|clears and" | tee -a "$log"
+    IFS=';' read -ra shapes <<<"$decodes"
+    for s in "${shapes[@]}"; do
+        read -ra flags <<<"$s"
+        for w in A B; do
+            bin=$a
+            [ "$w" = B ] && bin=$b
+            echo "-- $w decode $f ${flags[*]}" | tee -a "$log"
+            "$bin" bench decode "$f" --gpu --fit --runs 2 "${flags[@]}" 2>&1 |
+                grep -E "GPU decode|GPU memory|fit over|per unit|clears and|steps" | tee -a "$log"
+        done
     done
 done
