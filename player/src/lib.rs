@@ -94,7 +94,7 @@ pub mod bench {
     pub use crate::decoder::{DecoderCore, Event, KeyStep, SegmentData};
     pub use crate::fuzz::decoder as fuzz_decoder;
     pub use crate::gpu::PASS_CHANGES;
-    pub use crate::gpu::{lane_batches, lane_blocks, timing_device, GpuDecoder};
+    pub use crate::gpu::{lane_batches, lane_room, timing_device, GpuDecoder};
 }
 
 /// Why a player could not be opened or stopped.

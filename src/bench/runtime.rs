@@ -194,18 +194,9 @@ fn lane_symbols(
         shared: 0,
         player: 0,
     };
-    // The player's room for a batch: the lanes' dense plane, and as many planes' most
-    // states in the scratch.
-    let (pw, ph) = vbim_format::chunk::padded_size(h);
-    let (bw, bh) = (pw as u32 / 8, ph as u32 / 8);
-    let dense = vbim_player::bench::lane_blocks([pw as u32, ph as u32], h.channels as u32);
-    let region = vbim_format::plane2::REGION as u32;
-    let regions = (bw.div_ceil(region) * bh.div_ceil(region)) as u64;
-    let planes = (dense as u64).div_ceil((bw * bh).max(1) as u64);
-    let room = (
-        dense,
-        regions * vbim_format::plane2::MAX_STATES as u64 * planes,
-    );
+    // The player's room for a batch (where the planes go as pairs, none: each plane
+    // alone, as plane after plane).
+    let room = vbim_player::bench::lane_room(h).unwrap_or((0, 0));
     each_payload(h, entries, chunks, |what, bytes| {
         let mut planes =
             vbim_format::payload2::lane_symbols(h, what, bytes).map_err(|e| e.to_string())?;

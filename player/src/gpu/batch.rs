@@ -58,7 +58,7 @@ impl Gpu {
         let Some(&first) = batch.first() else {
             return;
         };
-        let slot = self.mask_slot(ops, first, false, ring);
+        let slot = self.mask_slot(ops, first, ring);
         let mut dense = 0;
         for job in batch.iter_mut() {
             job.dense_at = dense;
@@ -101,9 +101,12 @@ impl Gpu {
         ops: &mut Vec<Op>,
         planes: &mut [(Job, PlaneSpan)],
         sections: &[SectionSpan],
-        (then, ring): (Then, &mut u32),
+        then: Then,
     ) {
         let Some(plan) = self.lanes.as_ref().map(|l| l.plan) else {
+            // (The decoder thread hands planes on as coded only where the GPU has their
+            // decode: the same decode shape, `DecodeShape::lanes`.)
+            debug_assert!(planes.is_empty(), "planes as coded and no lanes decode");
             return;
         };
         let lanes = |s: &PlaneSpan| s.lanes.unwrap_or_default();
@@ -115,8 +118,7 @@ impl Gpu {
             let l = lanes(span);
             (job.hi - job.lo, l.count as u64, l.section)
         };
-        let room = (plan.dense, plan.streams);
-        lane_batches(planes.len(), size, room, |picked| {
+        lane_batches(planes.len(), size, plan.room(), |picked| {
             batch.clear();
             members.clear();
             let mut end = 0;
@@ -130,11 +132,14 @@ impl Gpu {
                 });
                 end = batch_end(end, job.hi - job.lo);
             }
-            let slot = self.mask_slot(ops, batch[0], true, ring);
+            // The lanes' dense plane: its masks from the mask buffer's start, its sets
+            // after them (a stream's planes are all decoded as coded or all parsed, so no
+            // parse's slot of the ring is in use), which the lanes' first pass clears.
+            let sets_at = (plan.sets_offset() / 4) as u32;
             for (job, m) in batch.iter_mut().zip(&members) {
                 job.dense_at = m.dense_at;
-                job.masks_at = slot.masks_at + 2 * m.dense_at;
-                job.sets_at = slot.sets_at + m.dense_at / 32;
+                job.masks_at = 2 * m.dense_at;
+                job.sets_at = sets_at + m.dense_at / 32;
             }
             match then {
                 Then::KeyAdd => {

@@ -5,7 +5,6 @@
 
 use super::batch::Then;
 use super::job::{Job, JOB_BINDING, JOB_STRIDE};
-use super::lanes::LaneMember;
 use super::ops::{Kind, Op};
 use super::plan::*;
 use super::resources::slice_buffer;
@@ -219,17 +218,17 @@ impl Gpu {
             for p in 0..ch {
                 let span = &seg.planes[st.plane + p as usize];
                 for job in self.part_jobs(span, p) {
-                    if span.lanes.is_some() && self.lanes.is_some() {
+                    if span.lanes.is_some() {
                         lanes.push((Job { intra, ..job }, *span));
                         continue;
                     }
-                    let job = self.mask_slot(ops, job, span.lanes.is_some(), &mut ring);
+                    let job = self.mask_slot(ops, job, &mut ring);
                     let blocks = job.hi - job.lo.min(job.hi);
-                    self.coef_ops(ops, (span, &seg.sections), job, p);
+                    self.parse_ops(ops, job, p);
                     self.key_add_pass(ops, Job { intra, ..job }, blocks, p);
                 }
             }
-            self.lane_batches(ops, &mut lanes, &seg.sections, (Then::KeyAdd, &mut ring));
+            self.lane_batches(ops, &mut lanes, &seg.sections, Then::KeyAdd);
             self.lane_planes = lanes;
         }
         if let Some(set) = target.set {
@@ -275,7 +274,7 @@ impl Gpu {
                     if blocks == 0 {
                         continue;
                     }
-                    if span.lanes.is_some() && self.lanes.is_some() {
+                    if span.lanes.is_some() {
                         lanes.push((job, *span));
                         continue;
                     }
@@ -283,15 +282,14 @@ impl Gpu {
                         batch.push(job);
                         continue;
                     }
-                    let job = self.mask_slot(ops, job, false, &mut ring);
-                    self.coef_ops(ops, (span, &seg.sections), job, 0);
+                    let job = self.mask_slot(ops, job, &mut ring);
+                    self.parse_ops(ops, job, 0);
                     let units = (blocks as u64, 64);
                     let groups = blocks.div_ceil(64);
                     self.sliced(ops, Kind::BubbleGather, job, groups, set, units);
                 }
             }
-            let then = Then::Gather(set);
-            self.lane_batches(ops, &mut lanes, &seg.sections, (then, &mut ring));
+            self.lane_batches(ops, &mut lanes, &seg.sections, Then::Gather(set));
             self.lane_planes = lanes;
             self.batches(ops, &mut batch, set, &mut ring);
             self.batch = batch;
@@ -468,53 +466,11 @@ impl Gpu {
         })
     }
 
-    /// The ops that put the part of `job` of plane `span` into the dense plane: its lanes
-    /// decoded (a version 2 plane, [`Gpu::lane_ops`]), or its pairs parsed.
-    fn coef_ops(
-        &mut self,
-        ops: &mut Vec<Op>,
-        (span, sections): (&crate::coded::PlaneSpan, &[crate::coded::SectionSpan]),
-        job: Job,
-        channel: u32,
-    ) {
-        match span.lanes {
-            Some(lanes) => {
-                let one = LaneMember {
-                    span: *span,
-                    lanes,
-                    dense_at: 0,
-                };
-                self.lane_ops(ops, &[one], sections, channel)
-            }
-            None => self.parse_ops(ops, job, channel),
-        }
-    }
-
     /// `job` with the slot of the ring of masks its part's parse fills and its block pass
     /// reads: the next one, the whole ring cleared first when `*ring` has come round to
-    /// the first. Planes decoded as coded (`lanes`) take the lanes' dense plane, from the
-    /// ring's start (its masks) and at [`Scratch::sets_offset`] (its sets), which their own
-    /// first pass clears (`lanes.wgsl`, `prepare`), and leave the ring where it was: a
-    /// stream's planes are all decoded as coded or all parsed, so no parse's slot is in
-    /// use then.
-    ///
-    /// [`Scratch::sets_offset`]: super::lanes::Scratch::sets_offset
-    pub(super) fn mask_slot(
-        &self,
-        ops: &mut Vec<Op>,
-        job: Job,
-        lanes: bool,
-        ring: &mut u32,
-    ) -> Job {
-        let lanes = self.lanes.as_ref().filter(|_| lanes);
-        if let Some(l) = lanes {
-            // The lanes' dense plane: its masks from the start, its sets after them.
-            return Job {
-                masks_at: 0,
-                sets_at: (l.plan.sets_offset() / 4) as u32,
-                ..job
-            };
-        }
+    /// the first. (Planes decoded as coded take the lanes' dense plane instead:
+    /// [`Gpu::lane_batches`].)
+    pub(super) fn mask_slot(&self, ops: &mut Vec<Op>, job: Job, ring: &mut u32) -> Job {
         if *ring == 0 {
             ops.push(Op::clear(self.masks.size(), 0));
         }
@@ -653,24 +609,9 @@ impl Gpu {
 
     /// Appends `job` to the jobs of the decode being planned; returns its offset.
     fn push_job(&mut self, job: Job) -> u32 {
-        self.push_job_bytes(bytemuck::bytes_of(&job))
-    }
-
-    /// Appends `jobs`, one after another [`JOB_STRIDE`] apart (a batch's, which its
-    /// dispatches read by `workgroup_id.z`); returns the first's offset.
-    pub(super) fn push_jobs(&mut self, jobs: &[Job]) -> u32 {
-        let at = self.job_bytes.len() as u32;
-        for job in jobs {
-            self.append_job(bytemuck::bytes_of(job));
-        }
-        at
-    }
-
-    /// Appends a job's bytes (a [`Job`] or a lanes job) to the jobs of the decode being
-    /// planned, [`JOB_STRIDE`] apart; returns its offset.
-    pub(super) fn push_job_bytes(&mut self, job: &[u8]) -> u32 {
         // The passes over one part share its job (first slices start at workgroup 0):
         // one upload of it, not one per pass.
+        let job = bytemuck::bytes_of(&job);
         if let Some(last) = self.job_bytes.len().checked_sub(JOB_STRIDE as usize) {
             if self.job_bytes[last..last + job.len()] == *job {
                 return last as u32;
@@ -679,8 +620,19 @@ impl Gpu {
         self.append_job(job)
     }
 
+    /// Appends `jobs` (a [`Job`]'s or a lanes job's), one after another [`JOB_STRIDE`]
+    /// apart (a batch's, which its dispatches read by `workgroup_id.z`); returns the
+    /// first's offset.
+    pub(super) fn push_jobs<T: bytemuck::Pod>(&mut self, jobs: &[T]) -> u32 {
+        let at = self.job_bytes.len() as u32;
+        for job in jobs {
+            self.append_job(bytemuck::bytes_of(job));
+        }
+        at
+    }
+
     /// Appends a job's bytes, padded to [`JOB_STRIDE`]; returns its offset.
-    pub(super) fn append_job(&mut self, job: &[u8]) -> u32 {
+    fn append_job(&mut self, job: &[u8]) -> u32 {
         let at = self.job_bytes.len();
         self.job_bytes.extend_from_slice(job);
         self.job_bytes.resize(at + JOB_STRIDE as usize, 0);

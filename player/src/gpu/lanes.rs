@@ -203,6 +203,14 @@ impl Scratch {
         )
     }
 
+    /// The room a batch of planes has ([`lane_batches`]): the dense plane's blocks, and
+    /// the scratch's states.
+    ///
+    /// [`lane_batches`]: super::batch::lane_batches
+    pub fn room(&self) -> (u32, u64) {
+        (self.dense, self.streams)
+    }
+
     /// Where the lanes' sets of blocks with a coefficient start in the mask buffer, in
     /// bytes: after the masks of the dense plane's blocks.
     pub fn sets_offset(&self) -> u64 {
@@ -227,8 +235,9 @@ impl Scratch {
 }
 
 /// Bytes the lanes need beside the rest of the GPU state (0 where a stream's planes go as
-/// pairs): their tables and scratch, and the dense plane's coefficients, masks and sets
-/// beyond one plane's ([`lane_blocks`]).
+/// pairs): their tables and scratch, the dense plane's coefficients beyond one plane's
+/// ([`lane_blocks`]), and its masks and sets (counted whole, though the ring of masks may
+/// already hold them).
 pub(crate) fn lanes_bytes(h: &Header) -> u64 {
     let Some(plan) = Scratch::for_stream(h) else {
         return 0;
@@ -239,11 +248,18 @@ pub(crate) fn lanes_bytes(h: &Header) -> u64 {
     plan.bytes() + more * 256 + super::plan::mask_bytes(plan.dense)
 }
 
+/// The room a batch of stream `h`'s planes decoded as coded has ([`Scratch::room`]);
+/// `None` where its planes go as pairs. (For `vbim bench decode`.)
+#[cfg(feature = "bench")]
+pub fn lane_room(h: &Header) -> Option<(u32, u64)> {
+    Scratch::for_stream(h).map(|s| s.room())
+}
+
 /// Blocks of the dense plane the lanes decode into, for planes of `plane` texels: as many
 /// as `channels` planes side by side (each from a multiple of 64 blocks), so that a
 /// keyframe's planes go in one batch ([`Gpu::lane_batches`]), or as many as one storage
 /// binding of WebGPU's default limits holds (two at 4096²); at least one plane's.
-pub fn lane_blocks(plane: [u32; 2], channels: u32) -> u32 {
+fn lane_blocks(plane: [u32; 2], channels: u32) -> u32 {
     let one = ((plane[0] / 8) as u64 * (plane[1] / 8) as u64).next_multiple_of(64);
     let binding = wgpu::Limits::default().max_storage_buffer_binding_size / 256;
     let planes = (binding / one.max(1)).clamp(1, channels.max(1) as u64);
@@ -520,10 +536,9 @@ impl Gpu {
             return;
         };
         debug_assert!(batch.iter().all(|m| m.lanes.section == first.lanes.section));
-        let Some(plan) = self.lanes.as_ref().map(|l| l.plan) else {
+        let Some((plan, group)) = self.lanes.as_ref().map(|l| (l.plan, l.group)) else {
             return;
         };
-        let group = self.lanes.as_ref().map_or(1, |l| l.group);
         let [pw, ph] = self.plane;
         let (bw, bh) = (pw / 8, ph / 8);
         let (gw, gh) = (bw.div_ceil(GROUP as u32), bh.div_ceil(GROUP as u32));
@@ -573,23 +588,19 @@ impl Gpu {
             })
             .collect();
         debug_assert!(streams as u64 <= plan.streams && jobs.len() <= BATCH_PLANES as usize);
+        // The batch's jobs one after another; `slots` reads the first's section.
+        let at = self.push_jobs(&jobs);
         if self.planned_section != Some(first.lanes.section) {
             self.planned_section = Some(first.lanes.section);
-            let at = self.push_job_bytes(bytemuck::bytes_of(&jobs[0]));
             let n = (FAMILIES * CONTEXTS) as u32 + section.own_count * 1024;
-            let op = Op::lanes(
+            let groups = [n.div_ceil(64), 1];
+            ops.push(Op::lanes(
                 LanePass::Slots,
                 at,
-                [n.div_ceil(64), 1],
+                groups,
                 channel,
                 n as u64 / 16,
-            );
-            ops.push(op);
-        }
-        // The batch's jobs one after another (the first may be the last one pushed).
-        let at = self.push_job_bytes(bytemuck::bytes_of(&jobs[0]));
-        for job in &jobs[1..] {
-            self.append_job(bytemuck::bytes_of(job));
+            ));
         }
         let z = jobs.len() as u32;
         // Per pass: the workgroups of its largest plane, and its units (the planes' work

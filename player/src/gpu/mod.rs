@@ -55,7 +55,7 @@ pub use decode::PASS_CHANGES;
 pub use device::timing_device;
 pub use device::{headless_device, headless_device_on, DeviceError, Headless};
 #[cfg(feature = "bench")]
-pub use lanes::lane_blocks;
+pub use lanes::lane_room;
 pub(crate) use lanes::lanes_bytes;
 pub(crate) use layouts::compute_pipeline;
 pub(crate) use ops::Op;
