@@ -25,6 +25,10 @@
 //! the window before `--frames N` quits. The window's title shows the time of day and the player's
 //! statistics. Keys: Space pause, ↑/↓ speed ×2 / ÷2, ←/→ one hour back /
 //! on, W next weather, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
+//! `--window WxH` sizes the window (default 1280x720). On a software adapter (lavapipe) the
+//! camera draws without multisampling: there a 4× MSAA frame costs twice as much, nearly
+//! all of it Bevy's PBR fragment shader, while the lightmap's own decode is a fraction of
+//! a millisecond.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -41,10 +45,10 @@ use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::pbr::AtmosphereSettings;
 use bevy::pbr::Lightmap;
 use bevy::prelude::*;
-use bevy::render::renderer::RenderDevice;
+use bevy::render::renderer::{RenderAdapterInfo, RenderDevice};
 use bevy::render::settings::WgpuFeatures;
 use bevy::render::view::screenshot::{save_to_disk, Screenshot};
-use bevy::window::PrimaryWindow;
+use bevy::window::{PrimaryWindow, WindowResolution};
 use bevy_vbim::{
     bake_sky, lux_per_unit, sky_light, sun_light, VbimEvent, VbimEventKind, VbimPlayback,
     VbimPlugin, VbimStats, VbimStream,
@@ -72,6 +76,8 @@ struct Args {
     screenshot: Option<PathBuf>,
     /// The package's weather to start in (`None`: its first).
     weather: Option<String>,
+    /// The window's size in pixels.
+    window: (u32, u32),
 }
 
 fn args() -> Result<Args, String> {
@@ -85,6 +91,7 @@ fn args() -> Result<Args, String> {
         atmosphere: false,
         screenshot: None,
         weather: None,
+        window: (1280, 720),
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -98,9 +105,17 @@ fn args() -> Result<Args, String> {
             "--atmosphere" => a.atmosphere = true,
             "--screenshot" => a.screenshot = Some(value()?.into()),
             "--weather" => a.weather = Some(value()?),
+            "--window" => {
+                let v = value()?;
+                a.window = v
+                    .split_once('x')
+                    .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+                    .filter(|&(w, h)| w > 0 && h > 0)
+                    .ok_or(format!("--window: {v} is not WIDTHxHEIGHT in pixels"))?;
+            }
             _ => {
                 return Err(format!(
-                    "unknown argument {flag} (--stream F.vbim|F.vbimpkg, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png, --weather NAME)"
+                    "unknown argument {flag} (--stream F.vbim|F.vbimpkg, --scene S.toml, --frames N, --hour H, --paused, --atmosphere, --screenshot F.png, --weather NAME, --window WxH)"
                 ))
             }
         }
@@ -204,11 +219,22 @@ fn main() {
     let stream = std::fs::canonicalize(&stream).unwrap_or(stream);
     let folder = stream.parent().unwrap_or(Path::new(".")).to_path_buf();
     let name = stream.file_name().unwrap().to_string_lossy().into_owned();
+    let (w, h) = a.window;
     App::new()
-        .add_plugins(DefaultPlugins.set(AssetPlugin {
-            file_path: folder.to_string_lossy().into_owned(),
-            ..default()
-        }))
+        .add_plugins(
+            DefaultPlugins
+                .set(AssetPlugin {
+                    file_path: folder.to_string_lossy().into_owned(),
+                    ..default()
+                })
+                .set(WindowPlugin {
+                    primary_window: Some(Window {
+                        resolution: WindowResolution::new(w, h),
+                        ..default()
+                    }),
+                    ..default()
+                }),
+        )
         .add_plugins(VbimPlugin)
         .insert_resource(ClearColor(Color::BLACK))
         .insert_resource(GlobalAmbientLight::NONE)
@@ -220,8 +246,16 @@ fn main() {
                   meshes: ResMut<Assets<Mesh>>,
                   materials: ResMut<Assets<StandardMaterial>>,
                   media: ResMut<Assets<ScatteringMedium>>,
-                  device: Res<RenderDevice>| {
-                let reflections = light_probes_in_arrays(&device);
+                  device: Res<RenderDevice>,
+                  info: Res<RenderAdapterInfo>| {
+                let adapter = AdapterChoices {
+                    reflections: light_probes_in_arrays(&device),
+                    msaa: if info.device_type == wgpu::DeviceType::Cpu {
+                        Msaa::Off
+                    } else {
+                        Msaa::default()
+                    },
+                };
                 setup(
                     commands,
                     assets,
@@ -231,7 +265,7 @@ fn main() {
                     media,
                     &a,
                     (&name, &stream),
-                    reflections,
+                    adapter,
                 )
             },
         )
@@ -240,6 +274,15 @@ fn main() {
             (keys, follow_sun, readout, report_events, exit_after),
         )
         .run();
+}
+
+/// What the example draws differently by adapter.
+struct AdapterChoices {
+    /// Specular light from the streamed sky (`light_probes_in_arrays`).
+    reflections: bool,
+    /// Bevy's 4× multisampling, except on a software adapter (lavapipe), where it doubles
+    /// the frame's cost.
+    msaa: Msaa,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -252,7 +295,7 @@ fn setup(
     mut media: ResMut<Assets<ScatteringMedium>>,
     a: &Args,
     (name, path): (&str, &Path),
-    reflections: bool,
+    adapter: AdapterChoices,
 ) {
     // The header and manifest now, for the mesh's size and the sun; the asset server
     // loads the same file for the player.
@@ -315,7 +358,7 @@ fn setup(
     ));
     // Reflections of the streamed sky: only with a sky track, under its Skybox (not Bevy's
     // atmosphere), and where Bevy can draw the lightmapped terrain with them.
-    let reflections = reflections && sky_cube.is_some() && !a.atmosphere;
+    let reflections = adapter.reflections && sky_cube.is_some() && !a.atmosphere;
     // Spheres standing on the terrain (the terrain scene's: on the highest and the lowest
     // ground and around the centre): ordinary meshes, lit by the irradiance volume and
     // the sun.
@@ -367,6 +410,7 @@ fn setup(
     }
     let mut camera = commands.spawn((
         Camera3d::default(),
+        adapter.msaa,
         Exposure { ev100: EV100 },
         // ACES needs no lookup table (the example builds Bevy without them).
         Tonemapping::AcesFitted,

@@ -32,7 +32,10 @@ fn the_terrain_example_runs_under_xvfb_and_shows_a_lit_terrain() {
     let o = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 640x360x24"])
         .arg(example())
-        .args(["--frames", "90", "--hour", "12", "--paused", "--screenshot"])
+        .args([
+            "--frames", "90", "--hour", "12", "--paused", "--window", "640x360",
+        ])
+        .arg("--screenshot")
         .arg(&shot)
         .output()
         .expect("xvfb-run runs");
