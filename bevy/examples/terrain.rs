@@ -26,9 +26,8 @@
 //! statistics. Keys: Space pause, ↑/↓ speed ×2 / ÷2, ←/→ one hour back /
 //! on, W next weather, Esc quit. `--frames N` quits after N frames (CI runs it under Xvfb).
 //! `--window WxH` sizes the window (default 1280x720). On a software adapter (lavapipe) the
-//! camera draws without multisampling: there a 4× MSAA frame costs twice as much, nearly
-//! all of it Bevy's PBR fragment shader, while the lightmap's own decode is a fraction of
-//! a millisecond.
+//! camera draws without multisampling: there a 4× MSAA frame costs about twice as much,
+//! nearly all of it Bevy's PBR fragment shader.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -1189,8 +1189,7 @@ fn every_frame_matches_the_reference(
             cfg.format = format;
             encode_bytes(&src, &cfg)
         });
-        let bytes = bytes.to_vec();
-        let r = Reader::open(Cursor::new(bytes.clone())).unwrap();
+        let r = Reader::open(Cursor::new(bytes.to_vec())).unwrap();
         // The longest run of predicted keyframes (the encoder may still code one intra
         // where that is cheaper).
         let (mut run, mut longest) = (0, 0);
@@ -1208,7 +1207,7 @@ fn every_frame_matches_the_reference(
             decode_shape,
             ..inline(Policy::Interpolate, Throttle::UNLIMITED)
         };
-        let mut player = Player::open(device, queue, Cursor::new(bytes), cfg).unwrap();
+        let mut player = Player::open(device, queue, Cursor::new(bytes.to_vec()), cfg).unwrap();
         let what = format!(
             "{format:?}, {kind:?}, {ch} channel(s), {w}×{h}, decode shape {decode_shape:?}"
         );
