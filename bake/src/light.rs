@@ -92,7 +92,7 @@ impl WeatherLight {
         }
     }
 
-    /// The sun of frame `i` through this weather's haze ([`crate::sun::hazed`]).
+    /// The sun of frame `i` through this weather's haze (`sun::hazed`).
     pub fn sun(&self, scene: &Scene, i: usize) -> SunState {
         crate::sun::hazed(sun_for_frame(scene, i), self.sky.turbidity)
     }

@@ -295,7 +295,7 @@ pub enum ConfigError {
     /// `band_tiles` of 0.
     #[error("bands must be at least 1 tile row high")]
     EmptyBands,
-    /// A value of `frame_raise_db` outside 0 to [`MAX_FRAME_RAISE_DB`].
+    /// A value of `frame_raise_db` outside 0 to `MAX_FRAME_RAISE_DB`.
     #[error("frame {frame}'s raise {raise} dB is outside 0 to {MAX_FRAME_RAISE_DB}")]
     FrameRaise {
         /// The frame.
@@ -314,7 +314,7 @@ pub enum ConfigError {
     /// `deadzone` outside 0 to 0.5 (not included).
     #[error("dead zone {0} is outside 0 to 0.5 steps")]
     Deadzone(f32),
-    /// `rate_lambda` outside 0 to [`MAX_RATE_LAMBDA`].
+    /// `rate_lambda` outside 0 to `MAX_RATE_LAMBDA`.
     #[error(
         "rate-aware quantiser's price {0} is outside 0 to {MAX_RATE_LAMBDA} squared steps a bit"
     )]

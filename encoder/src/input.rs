@@ -379,7 +379,7 @@ pub struct SourceInfo {
 pub trait FrameSource: Sync {
     /// The sequence's shape.
     fn info(&self) -> SourceInfo;
-    /// Frame `i`, interleaved; implementations check it with [`check`].
+    /// Frame `i`, interleaved; implementations check it with `input::check`.
     fn read(&self, i: usize) -> Result<Frame, EncodeError>;
     /// Rows `rows` of frame `i` (a frame `rows.len()` high), checked as [`Self::read`]
     /// checks a frame. Large frames are coded a band of rows at a time, so a source that

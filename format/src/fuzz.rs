@@ -74,7 +74,7 @@ pub fn container(data: &[u8]) {
 }
 
 /// Arbitrary bytes as a whole file (checksums made right: [`with_checksums`]), decoded
-/// frame by frame (the first [`MAX_FRAMES`], then the last) by the reference decoder
+/// frame by frame (the first `MAX_FRAMES` (64), then the last) by the reference decoder
 /// within [`FUZZ_LIMITS`].
 pub fn decode(data: &[u8]) {
     let data = with_checksums(data);
@@ -113,7 +113,7 @@ pub fn chunks(data: &[u8]) {
     }
 }
 
-/// [`chunks`]' version 2 or 3 header (as `layout` says): [`small_header`]'s, with context
+/// [`chunks`]' version 2 or 3 header (as `layout` says): `small_header`'s, with context
 /// maps of 1 to 3 clusters a family that `d` picks, the even clusters with a file-wide
 /// table of small tokens.
 pub fn small_header_2(a: u8, b: u8, c: u8, d: u8, layout: plane2::Layout) -> Header {
@@ -257,7 +257,7 @@ pub fn plane2(data: &[u8]) {
     }
 }
 
-/// The plane and map [`plane2`] decodes with, from its first four bytes: its blocks'
+/// The plane and map [`plane2()`] decodes with, from its first four bytes: its blocks'
 /// places, its geometry (places left empty) and the map.
 pub fn plane2_shape(
     a: u8,

@@ -1,6 +1,6 @@
 //! The format's hard maxima, checked before anything is allocated, and the bound on a
 //! payload's decompressed size. (The memory a decoder may spend on a stream is
-//! [`crate::memory`]'s.)
+//! the `memory` module's.)
 
 /// Largest width or height (the largest 2D texture wgpu guarantees on desktop is 16384).
 pub const MAX_DIMENSION: u32 = 16_384;

@@ -4,7 +4,7 @@
 //!
 //! A plane is a grid of 8×8 blocks (each 64 quantised coefficients in zig-zag order),
 //! whole for a keyframe, the member tiles' blocks for a bubble plane. Its symbols are
-//! hybrid-uint tokens ([`ans`](crate::ans)) coded by rANS lanes, in four passes, each of
+//! hybrid-uint tokens ([`ans`]) coded by rANS lanes, in four passes, each of
 //! which a GPU runs with one invocation per lane, every lane independent of the others
 //! within a pass:
 //! 1. **even groups**: per group of 4 × 4 blocks with a member (x + y even on the group

@@ -30,7 +30,7 @@ pub struct KeyStep {
     pub number: usize,
     /// Coded on its own.
     pub intra: bool,
-    /// Its first plane in [`SegmentData::planes`] (`channels` planes follow).
+    /// Its first plane in `SegmentData::planes` (`channels` planes follow).
     pub plane: usize,
 }
 

@@ -78,7 +78,7 @@ impl Gpu {
     }
 }
 
-/// What follows a batch of planes decoded as coded ([`Gpu::lane_batches`]).
+/// What follows a batch of planes decoded as coded (`Gpu::lane_batches`).
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Then {
     /// Keyframe planes: each added onto the head (`key_add`; its job's layer is its
@@ -162,10 +162,10 @@ impl Gpu {
 }
 
 /// The batches of planes decoded as coded, a keyframe's or a segment's bubble planes
-/// ([`Gpu::lane_batches`]): planes `0..n`, largest first within a section, plane k of `size(k)` = (blocks, rANS
-/// states, section), go in batches of one section's planes whose blocks fit `room.0`
+/// (`Gpu::lane_batches`): planes `0..n`, largest first within a section, plane k of
+/// `size(k)` = (blocks, rANS states, section), go in batches of one section's planes whose blocks fit `room.0`
 /// blocks of the dense plane together (each from a multiple of 64) and whose states fit
-/// `room.1` of the scratch, at most [`BATCH_PLANES`] a batch, first fit; `batch` gets each
+/// `room.1` of the scratch, at most `BATCH_PLANES` (16) a batch, first fit; `batch` gets each
 /// batch's planes. A plane that fits no batch alone goes alone (the player makes none).
 /// Allocates nothing. (`vbim bench decode` packs a file's planes with it too.)
 pub fn lane_batches(

@@ -61,7 +61,7 @@ impl GpuDecoder {
     }
 
     /// The GPU time between the marks of the last decode, each to the pass it ends (ns;
-    /// empty unless the device has timestamps inside passes: [`timing_device`]). Call it
+    /// empty unless the device has timestamps inside passes: [`timing_device`](super::timing_device)). Call it
     /// after each [`GpuDecoder::decode`]: the query set holds one decode's marks.
     pub fn pass_times(&mut self) -> Vec<(&'static str, f64)> {
         self.0.read_marks()

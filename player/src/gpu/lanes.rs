@@ -248,7 +248,7 @@ pub(crate) fn lanes_bytes(h: &Header) -> u64 {
     plan.bytes() + more * 256 + super::plan::mask_bytes(plan.dense)
 }
 
-/// The room a batch of stream `h`'s planes decoded as coded has ([`Scratch::room`]);
+/// The room a batch of stream `h`'s planes decoded as coded has (`Scratch::room`);
 /// `None` where its planes go as pairs. (For `vbim bench decode`.)
 #[cfg(feature = "bench")]
 pub fn lane_room(h: &Header) -> Option<(u32, u64)> {

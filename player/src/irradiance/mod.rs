@@ -21,7 +21,7 @@ const HEADER_BYTES: u64 = 96;
 /// Bytes of one cell in the buffer: the sun and nine coefficients, each a `vec4<f32>`.
 const CELL_BYTES: u64 = 160;
 
-/// What an object receives at the shown time: up to [`MAX_SLOTS`] decoded frames and
+/// What an object receives at the shown time: up to `MAX_SLOTS` (4) decoded frames and
 /// their weights.
 #[derive(Clone, Debug, Default)]
 pub struct Irradiance {
