@@ -115,12 +115,6 @@ pub fn write_sparse(
     terms: impl Iterator<Item = (u32, u8, i32)> + Clone,
     out: &mut Vec<u8>,
 ) {
-    let mut w = RunWriter::new(out);
-    let mut prev_dc = 0i32;
-    for &d in dc {
-        w.value(d.wrapping_sub(prev_dc));
-        prev_dc = d;
-    }
     let mut start = [0usize; N * N + 1];
     for (_, f, _) in terms.clone() {
         start[f as usize + 1] += 1;
@@ -133,6 +127,50 @@ pub fn write_sparse(
     for (b, f, v) in terms {
         by_f[at[f as usize]] = (b, v);
         at[f as usize] += 1;
+    }
+    write_runs(dc, &start, &by_f, out);
+}
+
+/// [`write_sparse`] for blocks whose terms are held block by block: block b's (zig-zag
+/// index, value) terms are `terms[first[b]..first[b] + count[b]]`, in increasing index
+/// (the blocks themselves in any order in `terms`). Walks the slices directly: through
+/// [`write_sparse`]'s iterator this was a fifth of a format 2 section's decode to pairs.
+pub(crate) fn write_block_terms(
+    dc: &[i32],
+    first: &[u32],
+    count: &[u8],
+    terms: &[(u8, i32)],
+    out: &mut Vec<u8>,
+) {
+    let mut start = [0usize; N * N + 1];
+    for &(f, _) in terms {
+        start[f as usize + 1] += 1;
+    }
+    for f in 1..=N * N {
+        start[f] += start[f - 1];
+    }
+    let mut at = start;
+    let mut by_f = vec![(0u32, 0i32); terms.len()];
+    for (b, (&first, &count)) in first.iter().zip(count).enumerate() {
+        let first = first as usize;
+        for &(f, v) in &terms[first..first + count as usize] {
+            by_f[at[f as usize]] = (b as u32, v);
+            at[f as usize] += 1;
+        }
+    }
+    write_runs(dc, &start, &by_f, out);
+}
+
+/// The pairs of blocks `dc` whose AC terms are `by_f`, (block, value) frequency by
+/// frequency (frequency f's from `start[f]`), each frequency's in block order.
+fn write_runs(dc: &[i32], start: &[usize; N * N + 1], by_f: &[(u32, i32)], out: &mut Vec<u8>) {
+    // A byte per DC and per run and value, most often.
+    out.reserve(2 * by_f.len() + dc.len() + N * N);
+    let mut w = RunWriter::new(out);
+    let mut prev_dc = 0i32;
+    for &d in dc {
+        w.value(d.wrapping_sub(prev_dc));
+        prev_dc = d;
     }
     let n = dc.len() as u32;
     for f in 1..N * N {
@@ -612,6 +650,47 @@ mod tests {
             assert_eq!(read_coefficients(&buf, &mut pos, bl.len()).unwrap(), bl);
             assert_eq!(pos, buf.len());
         }
+    }
+
+    /// Terms held block by block, the blocks listed out of order in the terms (as a
+    /// format 2 walk leaves them), write the same pairs as the dense blocks.
+    #[test]
+    fn block_terms_write_what_dense_blocks_do() {
+        let mut seed = 7u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed >> 8
+        };
+        let blocks: Vec<[i32; 64]> = (0..40)
+            .map(|b| {
+                let mut q = [0i32; 64];
+                q[0] = next() as i32 % 300 - 150;
+                // Every fifth block empty, the others from sparse to dense.
+                for v in q[1..].iter_mut().filter(|_| b % 5 != 0) {
+                    if next() % 64 < b as u32 {
+                        *v = next() as i32 % 41 - 20;
+                    }
+                }
+                q
+            })
+            .collect();
+        let mut dense = Vec::new();
+        write_coefficients(&blocks, &mut dense);
+        let (mut first, mut count, mut terms) = (vec![0u32; 40], vec![0u8; 40], Vec::new());
+        // Odd blocks' terms first, then the even ones'.
+        for b in (1..40).step_by(2).chain((0..40).step_by(2)) {
+            first[b] = terms.len() as u32;
+            for (i, &v) in blocks[b].iter().enumerate().skip(1) {
+                if v != 0 {
+                    terms.push((i as u8, v));
+                    count[b] += 1;
+                }
+            }
+        }
+        let dc: Vec<i32> = blocks.iter().map(|q| q[0]).collect();
+        let mut sparse = Vec::new();
+        write_block_terms(&dc, &first, &count, &terms, &mut sparse);
+        assert_eq!(sparse, dense);
     }
 
     /// Blocks of every density (empty, sparse, dense) added onto a plane of arbitrary

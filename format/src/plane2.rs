@@ -494,35 +494,53 @@ fn walk(
     // Passes 3 and 4: the blocks of the groups with something, each region's in raster
     // order (version 2) or group by group (version 3, so that a state visits only its own
     // groups).
-    let cells = match layout {
+    let order = match layout {
         Layout::OneState => &RASTER,
         Layout::States => &BY_GROUP,
     };
     for parity in 0..2 {
         coder.pass(2 + parity);
+        // A region's cells of this parity, in the order's turn (regions start on even
+        // cells), each with its group's place in the region.
+        let cells: Vec<(usize, usize, usize)> = (order.iter())
+            .map(|&(dx, dy)| (dx as usize, dy as usize))
+            .filter(|&(dx, dy)| (dx + dy) % 2 == parity)
+            .map(|(dx, dy)| (dx, dy, dy / GROUP * per + dx / GROUP))
+            .collect();
         for region in 0..regions {
             let (rx, ry) = ((region % rw) * REGION, (region / rw) * REGION);
-            for &(dx, dy) in cells {
-                let (x, y) = (rx + dx as usize, ry + dy as usize);
-                // Most groups of a day's planes are empty: their test comes first.
-                if x >= bw
-                    || y >= bh
-                    || (x + y) % 2 != parity
-                    || !full[(y / GROUP) * gw + x / GROUP]
-                {
+            // The region's groups that hold something, a bit each: most regions of a
+            // day's planes hold none, and their cells are then not visited.
+            let (gx0, gy0) = (rx / GROUP, ry / GROUP);
+            let mut busy = 0u32;
+            for k in 0..GROUPS {
+                let (gx, gy) = (gx0 + k % per, gy0 + k / per);
+                if gx < gw && gy < gh && full[gy * gw + gx] {
+                    busy |= 1 << k;
+                }
+            }
+            if busy == 0 {
+                continue;
+            }
+            for &(dx, dy, group) in &cells {
+                let (x, y) = (rx + dx, ry + dy);
+                if busy >> group & 1 == 0 || x >= bw || y >= bh {
                     continue;
                 }
                 let Some(b) = at(x as isize, y as isize) else {
                     continue;
                 };
                 debug_assert_eq!(region_of(x, y), region);
-                let stream = stream_of(region, (y - ry) / GROUP * per + (x - rx) / GROUP);
+                let stream = stream_of(region, group);
+                // The neighbours, which only an odd block's contexts read.
                 let mut four_at = [0usize; 4];
                 let mut len = 0;
-                for &(dx, dy) in &FOUR {
-                    if let Some(j) = at(x as isize + dx, y as isize + dy) {
-                        four_at[len] = j;
-                        len += 1;
+                if parity == 1 {
+                    for &(dx, dy) in &FOUR {
+                        if let Some(j) = at(x as isize + dx, y as isize + dy) {
+                            four_at[len] = j;
+                            len += 1;
+                        }
                     }
                 }
                 let four = &four_at[..len];
@@ -910,8 +928,9 @@ fn used_families<'a>(
     Ok(used)
 }
 
-/// The decoder's streams, those of every lane of the plane being decoded.
-struct Streams<'a, 'h> {
+/// The decoder's streams, those of every lane of the plane being decoded; `COUNT`: count
+/// each lane's steps ([`lane_symbols`]).
+struct Streams<'a, 'h, const COUNT: bool> {
     decoders: Vec<ans::Decoder<'a>>,
     /// The histogram of each context (`None`: the chunk sent none).
     of: Vec<Option<&'h Histogram>>,
@@ -922,9 +941,12 @@ struct Streams<'a, 'h> {
     lanes: Vec<(Range<usize>, u64)>,
 }
 
-impl Streams<'_, '_> {
+impl<const COUNT: bool> Streams<'_, '_, COUNT> {
     /// Ends a pass: each lane's steps grow by its busiest stream's symbols in it.
     fn end_pass(&mut self) {
+        if !COUNT {
+            return;
+        }
         for (streams, steps) in &mut self.lanes {
             *steps += self.symbols[streams.clone()]
                 .iter()
@@ -936,7 +958,7 @@ impl Streams<'_, '_> {
     }
 }
 
-impl Coder for Streams<'_, '_> {
+impl<const COUNT: bool> Coder for Streams<'_, '_, COUNT> {
     #[inline(always)]
     fn code(&mut self, stream: usize, ctx: usize, _: u32) -> Result<u32> {
         let Some(h) = self.of[ctx] else {
@@ -945,7 +967,9 @@ impl Coder for Streams<'_, '_> {
             )));
         };
         let d = &mut self.decoders[stream];
-        self.symbols[stream] += 1;
+        if COUNT {
+            self.symbols[stream] += 1;
+        }
         let t = d.token(h)?;
         let raw = d.raw(ans::raw_bits_of(t))?;
         Ok(ans::hybrid_value(t, raw))
@@ -1168,7 +1192,7 @@ pub fn decode_each(
     layout: Layout,
     mut each: impl FnMut(usize, &Decoded) -> Result<()>,
 ) -> Result<()> {
-    decode_counted(bytes, planes, maps, layout, |i, blocks, _| each(i, blocks))
+    decode_counted::<false>(bytes, planes, maps, layout, |i, blocks, _| each(i, blocks))
 }
 
 /// Each plane's lanes' serial steps, plane by plane: with one state a lane, its symbols
@@ -1183,15 +1207,16 @@ pub fn lane_symbols(
     layout: Layout,
 ) -> Result<Vec<Vec<(u64, usize)>>> {
     let mut out = Vec::with_capacity(planes.len());
-    decode_counted(bytes, planes, maps, layout, |_, _, lanes| {
+    decode_counted::<true>(bytes, planes, maps, layout, |_, _, lanes| {
         out.push(lanes.to_vec());
         Ok(())
     })?;
     Ok(out)
 }
 
-/// [`decode_each`], handing on each lane's steps and states too.
-fn decode_counted(
+/// [`decode_each`], handing on each lane's steps (counted with `COUNT`, else 0) and
+/// states too.
+fn decode_counted<const COUNT: bool>(
     bytes: &[u8],
     planes: &[Plane],
     maps: &[ContextMap],
@@ -1204,16 +1229,17 @@ fn decode_counted(
         for &(w0, w1) in &sp.streams {
             decoders.push(ans::Decoder::new(&section.words[w0..w1])?);
         }
-        // Each region's lane: its first region, first stream and states.
-        let mut of_region = Vec::new();
+        // Each region's groups' streams: group k of a lane (16 a region) is its state
+        // k mod s. (Made once: a division per block was 2.5% of a decode.)
+        let mut of_region: Vec<[u32; GROUPS]> = Vec::new();
         for &(r0, r1, s0, s1) in &sp.lanes {
-            of_region.extend(std::iter::repeat_n((r0, s0, s1 - s0), r1 - r0));
+            of_region.extend(
+                (0..r1 - r0)
+                    .map(|r| std::array::from_fn(|g| (s0 + (r * GROUPS + g) % (s1 - s0)) as u32)),
+            );
         }
-        let stream_of = |region: usize, group: usize| {
-            let (r0, s0, k) = of_region[region];
-            s0 + ((region - r0) * GROUPS + group) % k
-        };
-        let mut streams = Streams {
+        let stream_of = |region: usize, group: usize| of_region[region][group] as usize;
+        let mut streams = Streams::<COUNT> {
             symbols: vec![0; decoders.len()],
             lanes: (sp.lanes.iter())
                 .map(|&(_, _, s0, s1)| (s0..s1, 0))
