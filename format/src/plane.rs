@@ -73,14 +73,17 @@ impl Plane {
 }
 
 /// Block origins (in block units) of the blocks covering tile `t` of a plane, row by row.
+/// (One range, not rows of ranges: its exact length lets a `Vec` extend by it at once,
+/// where a flattened iterator pushed block by block — 7% of a 2048² format 2 decode,
+/// which lists every bubble plane's blocks.)
 pub fn tile_blocks(
     t: usize,
     tiles_x: usize,
     tile_size: usize,
-) -> impl Iterator<Item = (usize, usize)> {
+) -> impl ExactSizeIterator<Item = (usize, usize)> {
     let per = tile_size / N;
-    let (tx, ty) = (t % tiles_x, t / tiles_x);
-    (0..per).flat_map(move |y| (0..per).map(move |x| (tx * per + x, ty * per + y)))
+    let (x0, y0) = (t % tiles_x * per, t / tiles_x * per);
+    (0..per * per).map(move |j| (x0 + j % per, y0 + j / per))
 }
 
 /// Block origins of a whole plane, row by row.
