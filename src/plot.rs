@@ -8,6 +8,9 @@ use plotters::prelude::*;
 
 static FONT: Once = Once::new();
 
+/// A plot's size in pixels.
+const SIZE: (u32, u32) = (900, 560);
+
 fn font() {
     FONT.call_once(|| {
         let _ = plotters::style::register_font(
@@ -88,7 +91,10 @@ pub fn lines(
     log_x: bool,
 ) -> Result<(), String> {
     font();
-    let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
+    // Drawn into memory and written as one PNG through `write_atomic` (an interrupted run
+    // leaves no half-written plot), with the image crate the rest of `vbim` writes with.
+    let mut rgb = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let (x0, x1) = range(series, |p| p.0, log_x);
     let (y0, y1) = range(series, |p| p.1, false);
@@ -145,7 +151,16 @@ pub fn lines(
         draw!(chart.build_cartesian_2d(x0..x1, y0..y1));
     }
     root.present()
-        .map_err(|e| format!("{}: {e}", path.display()))
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    drop(root);
+    vbim_files::write_atomic(
+        path,
+        |tmp| {
+            image::save_buffer(tmp, &rgb, SIZE.0, SIZE.1, image::ExtendedColorType::Rgb8)
+                .map_err(|e| format!("{}: {e}", path.display()))
+        },
+        |e| format!("{}: {e}", path.display()),
+    )
 }
 
 #[cfg(test)]

@@ -166,7 +166,18 @@ fn bake_encode_inspect_decode_compare() {
     phases.sort();
     phases.dedup();
     assert_eq!(phases, ["0.200", "0.400"], "{csv}");
-    assert!(drift.join("drift.png").is_file() && drift.join("shown_error.png").is_file());
+    // The plots are whole PNGs of the plot's size, and nothing half-written is left beside them.
+    for plot in ["drift.png", "shown_error.png"] {
+        let img = image::open(drift.join(plot)).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (900, 560), "{plot}");
+        assert!(img.pixels().any(|p| p.0 != [255; 3]), "{plot} is blank");
+    }
+    let left: Vec<_> = std::fs::read_dir(&drift)
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with(".tmp-"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 
     // `bench changes`: at the file's own rate a day changes nearly every tile per displayed
     // frame; at a frame a day, nearly none (each mean is the table's fourth column).
