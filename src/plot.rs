@@ -91,7 +91,7 @@ pub fn lines(
     log_x: bool,
 ) -> Result<(), String> {
     font();
-    // Drawn into memory and written as one PNG through `write_atomic` (an interrupted run
+    // Drawn into memory and written as one PNG through `write_file` (an interrupted run
     // leaves no half-written plot), with the image crate the rest of `vbim` writes with.
     let mut rgb = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
     let root = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
@@ -153,14 +153,11 @@ pub fn lines(
     root.present()
         .map_err(|e| format!("{}: {e}", path.display()))?;
     drop(root);
-    vbim_files::write_atomic(
-        path,
-        |tmp| {
-            image::save_buffer(tmp, &rgb, SIZE.0, SIZE.1, image::ExtendedColorType::Rgb8)
-                .map_err(|e| format!("{}: {e}", path.display()))
-        },
-        |e| format!("{}: {e}", path.display()),
-    )
+    vbim_bake::write_file(path, |tmp| {
+        image::save_buffer(tmp, &rgb, SIZE.0, SIZE.1, image::ExtendedColorType::Rgb8)
+            .map_err(|e| e.to_string())
+    })
+    .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -66,8 +66,15 @@ fn bake_encode_inspect_decode_compare() {
         "24/1",
         "--report",
         s(&report),
+        "--degree-map",
+        s(&dir.path().join("degrees.png")),
     ]);
     assert!(out.contains("mean PSNR"), "{out}");
+    // The degree map is a whole PNG (written through a temporary file, as every output).
+    let map = image::open(dir.path().join("degrees.png"))
+        .unwrap()
+        .to_rgb8();
+    assert!(map.width() > 0 && map.pixels().any(|p| p.0 != [0; 3]));
     let rep: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let psnr = rep["mean_psnr"].as_f64().unwrap();

@@ -305,8 +305,16 @@ impl EncodeReport {
                 }
             }
         }
-        img.save(path)
-            .map_err(|e| format!("{}: {e}", path.display()))
+        // Through a temporary file, as every output: an interrupted run leaves no half
+        // of it.
+        vbim_files::write_atomic(
+            path,
+            |tmp| {
+                img.save(tmp)
+                    .map_err(|e| format!("{}: {e}", path.display()))
+            },
+            |e| format!("{}: {e}", path.display()),
+        )
     }
 }
 
