@@ -191,7 +191,7 @@ pub struct EncodeArgs {
     /// zstd level of the tile maps, and in format 1 of the keyframes and coefficients, 1–22 [default: preset's, 9].
     #[arg(long)]
     pub zstd_level: Option<i32>,
-    /// Format version to write: 1 (zero-run pairs through zstd), 2 (rANS lanes: 0.69–0.90× the bytes; the player's decoder thread spends 10–14× version 1's CPU time on them, decoding them to version 1's pairs for the GPU) or 3 (2 with several rANS states a lane, which a GPU decodes side by side: about 2% more bytes than 2).
+    /// Format version to write: 1 (zero-run pairs through zstd), 2 (rANS lanes: 0.69–0.90× the bytes; the player's decoder thread spends 9–12× version 1's CPU time on them, decoding them to version 1's pairs for the GPU) or 3 (2 with several rANS states a lane, which a GPU decodes side by side: about 2% more bytes than 2).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=3))]
     pub format_version: u16,
     /// Formats 2 and 3: the coded size at which a rANS lane is cut, bytes (0: a lane per region of 16 × 16 blocks). In format 2 shorter lanes shorten the serial chains a GPU decodes, for a few bytes each [default: 512 in format 2, 16384 in format 3].

@@ -59,7 +59,7 @@ pub enum FormatVersion {
     V1,
     /// Version 2 (2.0): rANS lanes with the file's context maps, 0.69–0.90× version 1's
     /// bytes (BENCHMARKS.md, "Format 2"). Players before version 2 refuse it. The player's
-    /// decoder thread decodes its sections to pairs, 10–14× the time of version 1's zstd
+    /// decoder thread decodes its sections to pairs, 9–12× the time of version 1's zstd
     /// (the GPU can decode them as coded, `DecodeShape::lanes`, off by default).
     V2,
     /// Version 3 (3.0): version 2's coding with several rANS states a lane, each taking
