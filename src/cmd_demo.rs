@@ -68,6 +68,9 @@ pub fn run(a: DemoArgs) -> Result<(), String> {
         rep.verify_file(&fs, &job.out, &progress)
             .map_err(|e| e.to_string())?;
         stages.finish();
+        for s in rep.shortfalls() {
+            eprintln!("warning: {}: {s}", job.out.display());
+        }
         tracks.push((job, fs, rep));
     }
     // The package last: it names only complete tracks.

@@ -183,13 +183,24 @@ fn encode_one(a: &EncodeArgs, input: &str, out: &Path) -> Result<(), String> {
         out.display()
     );
     println!("{rep}");
+    // What was asked and not delivered goes to stderr, where a script's log keeps it, and
+    // into the JSON report; the file is valid either way, so the command still succeeds.
+    let shortfalls = rep.shortfalls();
+    for s in &shortfalls {
+        eprintln!("warning: {s}");
+    }
     if let Some(p) = &a.degree_map {
         rep.write_degree_map(p)?;
         println!("degree map  {}", p.display());
     }
     if let Some(p) = &a.report {
-        std::fs::write(p, serde_json::to_string_pretty(&rep).unwrap())
-            .map_err(|e| format!("{}: {e}", p.display()))?;
+        let mut json = serde_json::to_value(&rep).map_err(|e| e.to_string())?;
+        json["shortfalls"] = shortfalls.into();
+        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+        vbim_bake::write_file(p, |tmp| {
+            std::fs::write(tmp, &text).map_err(|e| e.to_string())
+        })
+        .map_err(|e| e.to_string())?;
     }
     Ok(())
 }

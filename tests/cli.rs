@@ -1081,3 +1081,52 @@ fn a_bake_of_weathers_becomes_a_package_that_plays_and_switches() {
         "{out}{err}"
     );
 }
+
+#[test]
+fn a_tolerance_the_settings_cannot_reach_is_a_warning_not_a_silent_file_nor_a_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    bake(&frames, "64", "24", &[]);
+    // The default settings deliver what they promise: no warning.
+    let plain = dir.path().join("plain.vbim");
+    let o = vbim(&["encode", s(&frames), "-o", s(&plain)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("warning"), "{err}");
+    // A whole day in one segment cannot reach 45 dB at any budget: `--exact`'s search runs
+    // into the finest budget (it used to step past it and fail with a tolerance the user
+    // never gave), keeps the closest file and says why, in the log and in the report.
+    let out = dir.path().join("one.vbim");
+    let report = dir.path().join("one.json");
+    let o = vbim(&[
+        "encode",
+        s(&frames),
+        "-o",
+        s(&out),
+        "--segment",
+        "24",
+        "--exact",
+        "--report",
+        s(&report),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning: the mean PSNR is") && err.contains("the finest budget"),
+        "{err}"
+    );
+    assert!(err.contains("warning: the worst frame"), "{err}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let shortfalls = json["shortfalls"].as_array().unwrap();
+    assert_eq!(shortfalls.len(), 2, "{json}");
+    assert!(json["mean_psnr"].as_f64().unwrap() < 44.5, "{json}");
+    // Only the file and its report are left: no pass file.
+    let mut left: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(left, ["frames", "one.json", "one.vbim", "plain.vbim"]);
+    ok(&["inspect", s(&out)]);
+}

@@ -20,6 +20,7 @@
 use std::io::Cursor;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB};
 use crate::encode::CodedCache;
 use crate::report::Tally;
 use crate::secant::{bracket, next_tolerance, span_slope, Pass, FIRST_SLOPE};
@@ -47,7 +48,7 @@ const WORST_RAISE_DB: f64 = 0.2;
 /// A raised pass is taken for the encode with a mean this far above T at most, dB.
 const PICK_ABOVE_DB: f64 = 0.35;
 /// What `--tolerance` promises: the delivered mean within this of T, dB.
-const PROMISE_DB: f64 = 0.5;
+pub(crate) const PROMISE_DB: f64 = 0.5;
 /// Rounds of raising the frames below the worst-frame floor, at most.
 const RAISE_ROUNDS: usize = 3;
 /// The sample's worst frame is held this far above the floor: the full encode's lands
@@ -402,7 +403,7 @@ fn solve(
             false => next_tolerance(&pts, goal - CLOSE_DB, goal + CLOSE_DB),
         }
         // A budget outside what the encoder takes would fail the encode.
-        .clamp(10.0, 99.0);
+        .clamp(MIN_TOLERANCE_DB, MAX_TOLERANCE_DB);
         if passes.len() >= most || pts.iter().any(|q| q.0 == next) {
             return Ok(closest.expect("one pass at least").0);
         }

@@ -12,6 +12,7 @@ use std::path::Path;
 
 use vbim_files::Temporary;
 
+use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB};
 use crate::secant::{next_tolerance, Pass};
 use crate::{encode_file, EncodeError, EncodeReport, EncoderConfig, FrameSource, Progress};
 
@@ -93,7 +94,13 @@ pub fn encode_to_tolerance(
             if (target..=target + BAND_DB).contains(&p) {
                 break;
             }
-            let next = next_tolerance(&passes, target, target + BAND_DB);
+            // Within the budgets the encoder takes; where the search runs past them, the
+            // pass at the bound is the closest the settings come (the report says so).
+            let next = next_tolerance(&passes, target, target + BAND_DB)
+                .clamp(MIN_TOLERANCE_DB, MAX_TOLERANCE_DB);
+            if passes.iter().any(|q| q.0 == next) {
+                break;
+            }
             internal = next;
         }
         Ok::<(), EncodeError>(())

@@ -48,7 +48,7 @@ pub struct EncoderConfig {
     pub segment: SegmentMode,
     /// The format version written: version 1 (the default, every player reads it),
     /// version 2 (0.69–0.90× the bytes; the player's decoder thread decodes its sections
-    /// to version 1's pairs at 10–14× version 1's CPU time) or version 3 (version 2 with
+    /// to version 1's pairs at 9–12× version 1's CPU time) or version 3 (version 2 with
     /// several rANS states a lane, for a GPU decoder; about 2% more bytes than 2).
     pub format: FormatVersion,
     /// zstd level of the tile maps and, in version 1, of the keyframe and coefficient
@@ -103,6 +103,12 @@ pub struct EncoderConfig {
     pub frame_raise_db: Vec<f64>,
 }
 
+/// The tolerances (and internal budgets) the encoder takes, dB: 10 is coarser than any
+/// light is worth coding, 99 finer than a half float holds.
+pub(crate) const MIN_TOLERANCE_DB: f64 = 10.0;
+/// See [`MIN_TOLERANCE_DB`].
+pub(crate) const MAX_TOLERANCE_DB: f64 = 99.0;
+
 impl EncoderConfig {
     /// The settings of preset `p`.
     pub fn preset(p: Preset) -> EncoderConfig {
@@ -113,7 +119,7 @@ impl EncoderConfig {
             max_degree: 4,
             // Longer segments fit the budget but cost more than they save (measured).
             segment: SegmentMode::Auto { max: 32 },
-            // Version 1: version 2's sections cost the player's decoder thread 10–14×
+            // Version 1: version 2's sections cost the player's decoder thread 9–12×
             // version 1's CPU time (to pairs), and decoded on an H100 as coded they took
             // 10–18× the pairs' GPU time (BENCHMARKS.md, "Format 2 on the GPU").
             format: FormatVersion::V1,
@@ -154,7 +160,7 @@ impl EncoderConfig {
 
     /// Checks every knob's range; the error names the knob and its range.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if !(10.0..=99.0).contains(&self.tolerance_db) {
+        if !(MIN_TOLERANCE_DB..=MAX_TOLERANCE_DB).contains(&self.tolerance_db) {
             return Err(ConfigError::Tolerance(self.tolerance_db));
         }
         if self.worst_margin_db.is_nan() || self.worst_margin_db < 0.0 {

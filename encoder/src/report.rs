@@ -10,6 +10,8 @@ use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::{Metric, SequenceError};
 use vbim_format::{ColorEncoding, Header, Reader};
 
+use crate::aim::PROMISE_DB;
+use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB};
 use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress};
 
 /// What an encode did, as data: the stream's size and rate, how long it took, the budget it
@@ -45,6 +47,9 @@ pub struct EncodeReport {
     pub aim: Option<crate::Aim>,
     /// With `--exact`: every pass as (internal tolerance, delivered mean PSNR, bytes).
     pub calibration: Vec<(f64, f64, u64)>,
+    /// How far below the tolerance the aim holds every frame, dB
+    /// ([`EncoderConfig::worst_margin_db`]; infinite, `null` in JSON: no floor).
+    pub worst_margin_db: f64,
     /// The highest polynomial degree in time a tile could take.
     pub max_degree: usize,
     /// Tiles × segments per luma degree (index = degree).
@@ -151,6 +156,7 @@ impl EncodeReport {
             internal_tolerance_db: cfg.tolerance_db,
             aim: None,
             calibration: Vec::new(),
+            worst_margin_db: cfg.worst_margin_db,
             band_tiles: None,
             memory_estimate: 0,
             max_degree: cfg.max_degree,
@@ -244,6 +250,87 @@ impl EncodeReport {
         let seq = measure_parallel(src, &open, name, self.metric, tally, progress)?;
         self.take(seq);
         Ok(())
+    }
+
+    /// What the encode promised and did not deliver, a sentence each for the user: with
+    /// the aim (or `--exact`), a mean PSNR outside what the tolerance promises (within
+    /// ±0.5 dB of it; with `--exact` [T, T + 0.5]) and a worst frame below the floor
+    /// ([`EncodeReport::worst_margin_db`] under T), each with the reason where the budget
+    /// search ran into one of its bounds. Empty where everything holds, without the aim
+    /// (the budget as it is promises nothing), or before [`EncodeReport::verify`]. The
+    /// file is written either way: it is a valid stream, only not the one asked for.
+    pub fn shortfalls(&self) -> Vec<String> {
+        let Some(m) = &self.measured else {
+            return Vec::new();
+        };
+        let aim = self.aim.as_ref().filter(|a| a.skipped.is_none());
+        let exact = !self.calibration.is_empty();
+        if aim.is_none() && !exact {
+            return Vec::new();
+        }
+        let t = self.tolerance_db;
+        let budget = self.internal_tolerance_db;
+        // The budget search stops at the budgets the encoder takes. At the finest, what is
+        // left is what the curves in time miss (a segment too long for its degree: only
+        // the settings change that) or the coded values' own precision (beyond about 90 dB).
+        let finest = budget >= MAX_TOLERANCE_DB - 1e-6;
+        let why_finest = format!(
+            "the finest budget the encoder takes ({MAX_TOLERANCE_DB:.0} dB) delivers no more \
+             with these settings (segments of {} frames, degree {} at most: shorter segments \
+             or a higher `--max-degree` let the curves in time follow the light more closely)",
+            self.segment_span(),
+            self.max_degree
+        );
+        let mut out = Vec::new();
+        let (low, high) = match exact {
+            true => (t, t + crate::BAND_DB),
+            false => (t - PROMISE_DB, t + PROMISE_DB),
+        };
+        let mean = m.mean_psnr;
+        if mean < low || mean > high {
+            let mut s = format!(
+                "the mean PSNR is {mean:.2} dB against the {t:.2} dB asked ({}{:.2} dB)",
+                if mean > t { "+" } else { "−" },
+                (mean - t).abs()
+            );
+            if mean < low && finest {
+                s += &format!(": {why_finest}");
+            } else if mean > high && budget <= MIN_TOLERANCE_DB + 1e-6 {
+                s += &format!(
+                    ": even the coarsest budget ({MIN_TOLERANCE_DB:.0} dB) codes it this finely"
+                );
+            } else if let Some(a) = aim.filter(|_| !exact) {
+                s += &format!(
+                    ": the sample predicted {:.2} dB (`--exact` encodes again until the mean \
+                     holds)",
+                    a.predicted_db
+                );
+            }
+            out.push(s);
+        }
+        let floor = t - self.worst_margin_db;
+        if m.worst_psnr < floor {
+            let mut s = format!(
+                "the worst frame (frame {}) is {:.2} dB, below the floor of {floor:.2} dB \
+                 (`--worst-margin` {:.1} dB under the tolerance)",
+                m.worst_frame, m.worst_psnr, self.worst_margin_db
+            );
+            if finest && out.is_empty() {
+                s += &format!(": {why_finest}");
+            }
+            out.push(s);
+        }
+        out
+    }
+
+    /// The segments' lengths as a span: `72` or `8–32`.
+    fn segment_span(&self) -> String {
+        let lo = self.segment_lengths.iter().min().copied().unwrap_or(0);
+        let hi = self.segment_lengths.iter().max().copied().unwrap_or(0);
+        match lo == hi {
+            true => format!("{lo}"),
+            false => format!("{lo}–{hi}"),
+        }
     }
 
     /// The mean PSNR measured, dB (`None` before [`EncodeReport::verify`]).

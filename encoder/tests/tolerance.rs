@@ -216,3 +216,32 @@ fn raised_frames_come_out_more_accurate() {
     .unwrap_err();
     assert!(e.to_string().contains("frame 7's raise NaN dB"), "{e}");
 }
+
+#[test]
+fn what_the_aim_cannot_deliver_is_named_with_its_reason() {
+    // (A delivered promise, which says nothing, is the CLI test's real day.)
+    let src = day_and_night(64, 48, 48);
+    // 10 dB, the coarsest budget there is, still codes this smooth light far finer: the
+    // mean is above the promise, and the report says the budget can go no coarser.
+    let coarse = measured(
+        &src,
+        &EncoderConfig {
+            tolerance_db: 10.0,
+            ..EncoderConfig::preset(Preset::Default)
+        },
+    );
+    assert!(coarse.mean_psnr().unwrap() > 10.5);
+    let said = coarse.shortfalls();
+    assert_eq!(said.len(), 1, "{said:?}");
+    assert!(said[0].contains("coarsest budget"), "{said:?}");
+    // Without the aim the budget is used as it is and nothing is promised.
+    let as_is = measured(
+        &src,
+        &EncoderConfig {
+            tolerance_db: 10.0,
+            aim: false,
+            ..EncoderConfig::preset(Preset::Default)
+        },
+    );
+    assert_eq!(as_is.shortfalls(), Vec::<String>::new());
+}
