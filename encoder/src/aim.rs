@@ -51,8 +51,11 @@ const PICK_ABOVE_DB: f64 = 0.35;
 pub(crate) const PROMISE_DB: f64 = 0.5;
 /// Rounds of raising the frames below the worst-frame floor, at most.
 const RAISE_ROUNDS: usize = 3;
+/// How far the full encode's PSNR (mean or a frame's) lands from the sample's, about
+/// (BENCHMARKS.md, "The worst-frame floor"), dB: a report warns of a miss only beyond it.
+pub(crate) const SAMPLE_ERROR_DB: f64 = 0.3;
 /// The sample's worst frame is held this far above the floor: the full encode's lands
-/// within about ±0.3 dB of the sample's (BENCHMARKS.md), dB.
+/// within about ±[`SAMPLE_ERROR_DB`] of the sample's, dB.
 const FLOOR_GUARD_DB: f64 = 0.2;
 /// A frame below the floor is raised to this much above it (the sample's per-frame PSNR
 /// is an estimate, and the mean's budget is lowered again after each round), dB.
