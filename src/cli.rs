@@ -85,7 +85,7 @@ pub struct PlayArgs {
     #[arg(long, default_value = "500ms", value_parser = crate::units::parse_short_span)]
     pub catch_up: Span,
     /// Ring capacity in bytes, 1 kB to 100 GB (a ring larger than the file holds the file) [default: the header's read-ahead at the read rate].
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1000..=100_000_000_000))]
+    #[arg(long, value_parser = crate::units::parse_ring)]
     pub ring: Option<u64>,
     /// Added to the header's pre-roll, at most an hour: a reader stall this long while the ring first fills is survived (`500ms`).
     #[arg(long, default_value = "0s", value_parser = crate::units::parse_short_span)]

@@ -67,7 +67,7 @@ pub fn play(
     let mut player = s.open_player(device, queue, s.realtime)?;
     let h = player.header().clone();
     if s.start > 0 {
-        player.set_time(s.start * 1_000_000_000 * h.rate_den as u64 / h.rate_num as u64);
+        player.set_time(s.start_ns(&h)?);
     }
     let mut reference = s.reference()?;
     let metric = if s.check_every > 0 {
@@ -428,8 +428,7 @@ pub fn capture_scene(
     let total = s.display_frames();
     let n = n.max(1) as u64;
     if s.start > 0 {
-        let h = player.lightmap_player().header();
-        player.set_time(s.start * 1_000_000_000 * h.rate_den as u64 / h.rate_num as u64);
+        player.set_time(s.start_ns(player.lightmap_player().header())?);
     }
     let mut records = Vec::with_capacity(total.min(RESERVED_RECORDS) as usize);
     let mut frames = Vec::new();

@@ -52,6 +52,13 @@ pub struct Session {
 }
 
 impl Session {
+    /// The display clock's time of `--start`, ns, checked against the stream's frames
+    /// (`header` is the played track's): a frame past the last is a bad argument, not a
+    /// time that overflows.
+    pub fn start_ns(&self, header: &vbim_format::Header) -> Result<u64, String> {
+        start_ns(self.start, header).map_err(|e| format!("--start: {e} ({})", self.file.display()))
+    }
+
     /// Displayed frames in the session (duration × display rate, saturating).
     pub fn display_frames(&self) -> u64 {
         (self.duration_ns as u128 * self.display_hz as u128 / 1_000_000_000).min(u64::MAX as u128)
@@ -205,4 +212,21 @@ fn open_reference(file: &Path, limits: Limits) -> Result<Decoder<BufReader<File>
     let f = open_input(file)?;
     let r = Reader::open(BufReader::new(f)).map_err(|e| format!("{name}: {e}"))?;
     Decoder::with_limits(r, limits).map_err(|e| format!("{name}: {e}"))
+}
+
+/// Media frame `start`'s time on a player's clock, ns; an error if the stream has no such
+/// frame.
+pub fn start_ns(start: u64, header: &vbim_format::Header) -> Result<u64, String> {
+    let frames = header.frame_count as u64;
+    if start >= frames {
+        return Err(format!(
+            "frame {start} is past the stream's last, {} ({frames} frames)",
+            frames.saturating_sub(1)
+        ));
+    }
+    // Below 2^32 frames at a rate of at least 1/2^32 fps: within u128, and the result
+    // within u64 for any stream a player opens (its duration is checked in ns).
+    let ns =
+        start as u128 * 1_000_000_000 * header.rate_den as u128 / header.rate_num.max(1) as u128;
+    u64::try_from(ns).map_err(|_| format!("frame {start} is beyond the player's clock"))
 }

@@ -1,13 +1,15 @@
 //! Units on the command line (docs/CONVENTIONS.md, "Units, flags and exit codes"): SI sizes and rates,
-//! durations in ms, s or min, rationals for frame rates.
+//! durations in ms, s, min or h, rationals for frame rates.
 
-/// `500ms`, `4s`, `2min` or a bare number of seconds → seconds.
+/// `500ms`, `4s`, `2min`, `1h` or a bare number of seconds → seconds.
 pub fn parse_duration(s: &str) -> Result<f64, String> {
     let t = s.trim();
     let (num, scale) = if let Some(n) = t.strip_suffix("ms") {
         (n, 1e-3)
     } else if let Some(n) = t.strip_suffix("min") {
         (n, 60.0)
+    } else if let Some(n) = t.strip_suffix('h') {
+        (n, 3600.0)
     } else if let Some(n) = t.strip_suffix('s') {
         (n, 1.0)
     } else {
@@ -15,7 +17,9 @@ pub fn parse_duration(s: &str) -> Result<f64, String> {
     };
     match num.trim().parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v * scale),
-        _ => Err(format!("duration {s:?} (expected e.g. 300ms, 4s, 2min)")),
+        _ => Err(format!(
+            "duration {s:?} (expected e.g. 300ms, 4s, 2min, 1h)"
+        )),
     }
 }
 
@@ -46,6 +50,14 @@ pub fn parse_size(s: &str) -> Result<u64, String> {
         .filter(|v| v.is_finite() && *v >= 1.0 && *v <= 1e15)
         .map(|v| v as u64)
         .ok_or_else(|| format!("size {s:?} (expected e.g. 2GB, 512MB or 900kB)"))
+}
+
+/// `--ring`: a size from 1 kB to 100 GB (SI units, or bytes).
+pub fn parse_ring(s: &str) -> Result<u64, String> {
+    parse_size(s)
+        .ok()
+        .filter(|v| (1000..=100_000_000_000).contains(v))
+        .ok_or_else(|| format!("ring {s:?} (expected a size from 1kB to 100GB, e.g. 4MB)"))
 }
 
 /// `--memory-limit`: a size of at least 1 MB (SI units).
@@ -308,6 +320,7 @@ mod tests {
         assert_eq!(parse_duration("300ms").unwrap(), 0.3);
         assert_eq!(parse_duration("4s").unwrap(), 4.0);
         assert_eq!(parse_duration("2min").unwrap(), 120.0);
+        assert_eq!(parse_duration("1h").unwrap(), 3600.0);
         assert!(parse_duration("-1s").is_err());
         assert!(parse_duration("fast").is_err());
     }
@@ -349,6 +362,10 @@ mod tests {
     fn sizes_and_limits() {
         assert_eq!(parse_size("2GB").unwrap(), 2_000_000_000);
         assert_eq!(parse_size("900kB").unwrap(), 900_000);
+        // `--ring` says 1 kB to 100 GB, and takes them as written.
+        assert_eq!(parse_ring("1kB").unwrap(), 1000);
+        assert_eq!(parse_ring("4096").unwrap(), 4096);
+        assert!(parse_ring("999B").is_err() && parse_ring("101GB").is_err());
         assert_eq!(parse_size("4096").unwrap(), 4096);
         for bad in ["", "GB", "-1GB", "0", "1e30GB", "NaNMB", "2 GiB"] {
             assert!(parse_size(bad).is_err(), "{bad}");

@@ -477,6 +477,16 @@ fn values_that_are_not_numbers_and_absurd_rates_are_refused() {
     let o = vbim(&["play", s(&file), "--headless", "--display-hz", "4294967295"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--display-hz"));
+    // A start past the last frame names it (one this large used to overflow the clock).
+    for start in ["100000", "18446744073709551615"] {
+        let o = vbim(&["play", s(&file), "--headless", "--start", start]);
+        assert_eq!(o.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("--start") && err.contains("past the stream's last"),
+            "{err}"
+        );
+    }
 }
 
 #[test]

@@ -537,9 +537,7 @@ pub(super) fn bench_render(a: BenchRenderArgs) -> Result<(), String> {
         sums.clear();
         largest.clear();
         if a.start > 0 {
-            player.set_time(
-                a.start * 1_000_000_000 * header.rate_den as u64 / header.rate_num as u64,
-            );
+            player.set_time(crate::session::start_ns(a.start, &header)?);
         }
         let timer = FrameTimer::new(&device, &queue, (header.width, header.height));
         timed = timer.is_some();
