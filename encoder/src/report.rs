@@ -256,10 +256,10 @@ impl EncodeReport {
     /// the aim, a mean PSNR further from T than the promise (about ±0.5 dB: beyond it by
     /// more than the sample's own error, 0.3 dB) or a worst frame that far below the floor
     /// ([`EncodeReport::worst_margin_db`] under T, which the aim sets for `--exact` too);
-    /// with `--exact`, which measures the file itself, a mean below T; each with the reason where the budget search ran
-    /// into one of its bounds. Empty where everything holds, without the aim
-    /// (the budget as it is promises nothing), or before [`EncodeReport::verify`]. The
-    /// file is written either way: it is a valid stream, only not the one asked for.
+    /// with `--exact`, which measures the file itself, a mean below T. Each says why where
+    /// the budget search ran into one of its bounds. Empty where everything holds, without
+    /// the aim (the budget as it is promises nothing), or before [`EncodeReport::verify`].
+    /// The file is written either way: it is a valid stream, only not the one asked for.
     pub fn shortfalls(&self) -> Vec<String> {
         let Some(m) = &self.measured else {
             return Vec::new();
