@@ -20,7 +20,7 @@
 use std::io::Cursor;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB};
+use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB, PROMISE_DB};
 use crate::encode::CodedCache;
 use crate::report::Tally;
 use crate::secant::{bracket, next_tolerance, span_slope, Pass, FIRST_SLOPE};
@@ -47,15 +47,10 @@ const CLOSE_DB: f64 = 0.1;
 const WORST_RAISE_DB: f64 = 0.2;
 /// A raised pass is taken for the encode with a mean this far above T at most, dB.
 const PICK_ABOVE_DB: f64 = 0.35;
-/// What `--tolerance` promises: the delivered mean within this of T, dB.
-pub(crate) const PROMISE_DB: f64 = 0.5;
 /// Rounds of raising the frames below the worst-frame floor, at most.
 const RAISE_ROUNDS: usize = 3;
-/// How far the full encode's PSNR (mean or a frame's) lands from the sample's, about
-/// (BENCHMARKS.md, "The worst-frame floor"), dB: a report warns of a miss only beyond it.
-pub(crate) const SAMPLE_ERROR_DB: f64 = 0.3;
 /// The sample's worst frame is held this far above the floor: the full encode's lands
-/// within about ±[`SAMPLE_ERROR_DB`] of the sample's, dB.
+/// within about ±[`SAMPLE_ERROR_DB`](crate::config::SAMPLE_ERROR_DB) of the sample's, dB.
 const FLOOR_GUARD_DB: f64 = 0.2;
 /// A frame below the floor is raised to this much above it (the sample's per-frame PSNR
 /// is an estimate, and the mean's budget is lowered again after each round), dB.

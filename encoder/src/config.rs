@@ -108,6 +108,12 @@ pub struct EncoderConfig {
 pub(crate) const MIN_TOLERANCE_DB: f64 = 10.0;
 /// See [`MIN_TOLERANCE_DB`].
 pub(crate) const MAX_TOLERANCE_DB: f64 = 99.0;
+/// What `--tolerance` promises with the aim: the delivered mean within this of T, dB.
+pub(crate) const PROMISE_DB: f64 = 0.5;
+/// How far the full encode's PSNR (mean or a frame's) lands from the aim's sample's,
+/// about (BENCHMARKS.md, "The worst-frame floor"), dB: a report warns of a miss only
+/// beyond it.
+pub(crate) const SAMPLE_ERROR_DB: f64 = 0.3;
 
 impl EncoderConfig {
     /// The settings of preset `p`.

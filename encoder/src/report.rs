@@ -10,8 +10,7 @@ use vbim_format::decode::{Decoder, Output};
 use vbim_format::metrics::{Metric, SequenceError};
 use vbim_format::{ColorEncoding, Header, Reader};
 
-use crate::aim::{PROMISE_DB, SAMPLE_ERROR_DB};
-use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB};
+use crate::config::{MAX_TOLERANCE_DB, MIN_TOLERANCE_DB, PROMISE_DB, SAMPLE_ERROR_DB};
 use crate::{EncodeError, EncoderConfig, FrameSource, InputKind, Progress};
 
 /// What an encode did, as data: the stream's size and rate, how long it took, the budget it
