@@ -253,9 +253,16 @@ impl SequenceError {
         self.frames.push(f);
     }
     /// The 99.9th percentile of every value's error, in 8-bit levels (frames added with
-    /// [`SequenceError::add`]).
+    /// [`SequenceError::add`]): the histogram's bin edge, never above the largest error
+    /// (identical sequences read 0, not the first bin's edge of 1/16).
     pub fn p999_levels(&self) -> f64 {
-        self.levels.quantile_levels(0.999)
+        let q = self.levels.quantile_levels(0.999);
+        let max = self.max_abs() * 255.0;
+        if max.is_nan() {
+            q
+        } else {
+            q.min(max)
+        }
     }
     /// PSNR of the error pooled over all frames and values (the mean PSNR).
     pub fn mean_psnr(&self) -> f64 {
@@ -342,6 +349,12 @@ mod tests {
         near(0.999, 3.0);
         near(1.0, 40.0);
         assert_eq!(seq.p999_levels(), seq.levels.quantile_levels(0.999));
+        // Nothing differs: the largest error (next to nothing), not the first bin's upper
+        // edge.
+        let mut same = SequenceError::default();
+        same.add(Metric::Srgb8, &src, &src);
+        assert_eq!(same.p999_levels(), same.max_abs() * 255.0);
+        assert!(same.p999_levels() < 1e-3);
         assert_eq!(ErrorHistogram::default().quantile_levels(0.999), 0.0);
     }
 
