@@ -85,7 +85,10 @@ impl App {
             .find(|f| f.is_srgb())
             .unwrap_or(config.format);
         surface.configure(&device, &config);
-        let player = self.session.open_package(&device, &queue, true)?;
+        let mut player = self.session.open_package(&device, &queue, true)?;
+        if self.session.start > 0 {
+            player.set_time(self.session.start_ns(player.lightmap_player().header())?);
+        }
         let (mesh, hf) = scene_mesh(&self.scene_file)?;
         self.objects = vbim_scene::showcase(&mesh, &hf);
         let mut renderer = SceneRenderer::new(
