@@ -201,7 +201,12 @@ pub(crate) fn aim(
     // worst frame meets the floor costs a dB of mean or more (18% of the bytes), so only
     // the frames below it are raised — by what they miss, estimated from the sample — and
     // the mean's budget is found again with them raised, so that the mean stays at T.
-    let floor = target - cfg.worst_margin_db + FLOOR_GUARD_DB;
+    // A sequence too small to sample is its own sample: its passes are what an encode at
+    // their budgets delivers, so no guard is kept against a sample's error, and a pass
+    // anywhere within the tolerance's promise may be taken as it is.
+    let exact = matches!(sample, Draw::Whole);
+    let guard = if exact { 0.0 } else { FLOOR_GUARD_DB };
+    let floor = target - cfg.worst_margin_db + guard;
     let (for_the_mean, mean_passes) = (internal_db, passes.len());
     let mut raise = match start.is_empty() {
         true => vec![0.0; frames],
@@ -216,7 +221,11 @@ pub(crate) fn aim(
     // is one the pick below may take: a further round would buy its excess over T back
     // (on Jacksboro's clear day at 45 and 50 dB, 0.28 dB and 3% of the bytes) at two
     // passes, a third of the aim's time.
-    let near = |p: &SamplePass| (target - CLOSE_DB..=target + PICK_ABOVE_DB).contains(&p.mean_db);
+    let band = match exact {
+        true => target - PROMISE_DB..=target + PROMISE_DB,
+        false => target - CLOSE_DB..=target + PICK_ABOVE_DB,
+    };
+    let near = |p: &SamplePass| band.contains(&p.mean_db);
     let met = |at: &[SamplePass], t: f64, round: usize| {
         along(at, t, worst) >= floor
             || (round > 0 && at.iter().any(|p| near(p) && p.worst_db >= floor))
@@ -297,7 +306,11 @@ pub(crate) fn aim(
                 let plain = &passes[..mean_passes];
                 let t = interpolate(&points(plain, mean), target + WORST_RAISE_DB)
                     .map_or(for_the_mean, |t| t.max(for_the_mean));
-                match held(&passes, along(plain, t, worst), floor, target) {
+                let promised = match exact {
+                    true => target - PROMISE_DB..=target + PROMISE_DB,
+                    false => target - CLOSE_DB..=target + PROMISE_DB,
+                };
+                match held(&passes, along(plain, t, worst), floor, promised) {
                     Some(p) => (p.round, p.internal_db, p.mean_db),
                     None => (0, t, along(plain, t, mean)),
                 }
@@ -325,18 +338,23 @@ pub(crate) fn aim(
 
 /// Where the raising rounds ran out short of the floor and the line between the plain
 /// passes puts the worst frame at `line`, below `floor`, at the budget for the mean: a pass
-/// measured with a mean inside the tolerance's promise (T − `CLOSE_DB` to T +
-/// `PROMISE_DB`) whose worst frame was higher than the line's — the smallest that met the
-/// floor, else the one whose worst frame was highest. `None`: keep the line's budget.
+/// measured with a mean in `promised` (the tolerance's promise: T − `CLOSE_DB` to T +
+/// `PROMISE_DB` from a sample, T ± `PROMISE_DB` where the sample is the sequence) whose
+/// worst frame was higher than the line's — the smallest that met the floor, else the one
+/// whose worst frame was highest. `None`: keep the line's budget.
 ///
 /// A day whose mean and worst frame jump with the budget (a plane of DC terms alone has an
 /// error that is a sawtooth in its step) makes the line between two passes mislead, not
 /// the passes themselves (BENCHMARKS.md, "The worst-frame floor").
-fn held(passes: &[SamplePass], line: f64, floor: f64, target: f64) -> Option<&SamplePass> {
+fn held(
+    passes: &[SamplePass],
+    line: f64,
+    floor: f64,
+    promised: std::ops::RangeInclusive<f64>,
+) -> Option<&SamplePass> {
     if line >= floor {
         return None;
     }
-    let promised = target - CLOSE_DB..=target + PROMISE_DB;
     let within: Vec<&SamplePass> = (passes.iter())
         .filter(|p| promised.contains(&p.mean_db))
         .collect();
@@ -589,19 +607,52 @@ mod tests {
             pass(18.91, 2, 38.42, 29.01, 2413),
             pass(19.30, 3, 38.46, 30.26, 2733),
         ];
-        let got = held(&passes, 30.7, 31.2, 38.0).expect("a pass");
+        let got = held(&passes, 30.7, 31.2, sampled(38.0)).expect("a pass");
         assert_eq!(got.internal_db, 19.55);
         // Of passes that met the floor within the promise, the smallest.
         let mut more = passes.to_vec();
         more.push(pass(19.6, 0, 38.40, 31.5, 2600));
         more.push(pass(19.7, 0, 38.30, 31.3, 2550));
-        assert_eq!(held(&more, 30.7, 31.2, 38.0).unwrap().internal_db, 19.7);
+        assert_eq!(
+            held(&more, 30.7, 31.2, sampled(38.0)).unwrap().internal_db,
+            19.7
+        );
         // Never one whose mean leaves the promise, nor one worse than the line, and
         // nothing where the line meets the floor.
-        assert!(held(&passes[..1], 30.7, 31.2, 38.0).is_none());
-        assert!(held(&passes, 31.3, 31.2, 38.0).is_none());
-        assert!(held(&passes, 29.0, 31.2, 38.0).unwrap().worst_db > 29.0);
-        assert!(held(&passes[2..3], 30.7, 31.2, 38.0).is_none());
+        assert!(held(&passes[..1], 30.7, 31.2, sampled(38.0)).is_none());
+        assert!(held(&passes, 31.3, 31.2, sampled(38.0)).is_none());
+        assert!(held(&passes, 29.0, 31.2, sampled(38.0)).unwrap().worst_db > 29.0);
+        assert!(held(&passes[2..3], 30.7, 31.2, sampled(38.0)).is_none());
+    }
+
+    /// The promise `held` keeps a sampled day's passes to (T − 0.1 to T + 0.5).
+    fn sampled(t: f64) -> std::ops::RangeInclusive<f64> {
+        t - CLOSE_DB..=t + PROMISE_DB
+    }
+
+    #[test]
+    fn a_sequence_that_is_its_own_sample_may_take_any_pass_within_the_promise() {
+        // The demo's overcast sky track (128 × 32, 24 fps: its own sample), at 45 dB with
+        // a floor of 38: the plain passes' line put the worst frame at 36.1 where the
+        // mean is T + 0.2, and that budget's encode delivered 44.58 dB with a worst frame
+        // of 32.87 (the mean and the worst frame jump with the budget on a sequence this
+        // small). Its passes, measured on the sequence itself:
+        let passes = [
+            pass(45.0, 0, 57.42, 52.81, 2962),
+            pass(28.44, 0, 44.58, 35.33, 2361),
+            pass(30.93, 0, 46.47, 37.72, 2495),
+            pass(28.84, 1, 44.40, 36.33, 2386),
+            pass(29.63, 1, 45.71, 38.16, 2490),
+            pass(29.16, 2, 44.87, 37.72, 2431),
+            pass(29.33, 2, 45.70, 38.97, 2544),
+            pass(29.15, 3, 44.76, 37.64, 2436),
+            pass(29.47, 3, 45.92, 38.12, 2562),
+        ];
+        // A sample's band (T − 0.1 …) has none of them; the promise's whole band takes the
+        // one whose worst frame is highest, 0.28 dB under the floor instead of 5.
+        assert!(held(&passes, 36.1, 38.0, sampled(45.0)).is_none());
+        let got = held(&passes, 36.1, 38.0, 44.5..=45.5).expect("a pass");
+        assert_eq!((got.internal_db, got.round), (29.16, 2));
     }
 
     #[test]
