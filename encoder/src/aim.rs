@@ -295,9 +295,11 @@ pub(crate) fn aim(
             bytes: along(&at, internal_db, |p| p.bytes as f64) as u64,
             frame_db: Vec::new(),
         };
+        // (Not where the sample is the sequence: its passes are exact, and the line between
+        // two of them is what misleads on a sequence that small.)
         let pick = passes
             .iter()
-            .chain(std::iter::once(&interpolated))
+            .chain(std::iter::once(&interpolated).filter(|_| !exact))
             .filter(|p| near(p) && p.worst_db >= floor)
             .min_by_key(|p| p.bytes);
         (round, internal_db, predicted_db) = match pick {
