@@ -224,9 +224,14 @@ pub fn start_ns(start: u64, header: &vbim_format::Header) -> Result<u64, String>
             frames.saturating_sub(1)
         ));
     }
-    // Below 2^32 frames at a rate of at least 1/2^32 fps: within u128, and the result
-    // within u64 for any stream a player opens (its duration is checked in ns).
+    frame_ns(start, header).ok_or_else(|| format!("frame {start} is beyond the player's clock"))
+}
+
+/// Media frame `frame`'s time on a player's clock, ns (`None` past 2^64 − 1: the product
+/// is taken in u128, where 2^32 frames at a rate of 1/2^32 fps still fit; within u64 for
+/// any stream a player opens, whose duration is checked in ns).
+pub fn frame_ns(frame: u64, header: &vbim_format::Header) -> Option<u64> {
     let ns =
-        start as u128 * 1_000_000_000 * header.rate_den as u128 / header.rate_num.max(1) as u128;
-    u64::try_from(ns).map_err(|_| format!("frame {start} is beyond the player's clock"))
+        frame as u128 * 1_000_000_000 * header.rate_den as u128 / header.rate_num.max(1) as u128;
+    u64::try_from(ns).ok()
 }

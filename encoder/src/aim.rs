@@ -205,6 +205,7 @@ pub(crate) fn aim(
     // their budgets delivers, so no guard is kept against a sample's error, and a pass
     // anywhere within the tolerance's promise may be taken as it is.
     let exact = matches!(sample, Draw::Whole);
+    let promise = target - PROMISE_DB..=target + PROMISE_DB;
     let guard = if exact { 0.0 } else { FLOOR_GUARD_DB };
     let floor = target - cfg.worst_margin_db + guard;
     let (for_the_mean, mean_passes) = (internal_db, passes.len());
@@ -222,7 +223,7 @@ pub(crate) fn aim(
     // (on Jacksboro's clear day at 45 and 50 dB, 0.28 dB and 3% of the bytes) at two
     // passes, a third of the aim's time.
     let band = match exact {
-        true => target - PROMISE_DB..=target + PROMISE_DB,
+        true => promise.clone(),
         false => target - CLOSE_DB..=target + PICK_ABOVE_DB,
     };
     let near = |p: &SamplePass| band.contains(&p.mean_db);
@@ -309,7 +310,7 @@ pub(crate) fn aim(
                 let t = interpolate(&points(plain, mean), target + WORST_RAISE_DB)
                     .map_or(for_the_mean, |t| t.max(for_the_mean));
                 let promised = match exact {
-                    true => target - PROMISE_DB..=target + PROMISE_DB,
+                    true => promise,
                     false => target - CLOSE_DB..=target + PROMISE_DB,
                 };
                 match held(&passes, along(plain, t, worst), floor, promised) {

@@ -155,7 +155,8 @@ pub fn run_one(a: BenchScaleOneArgs) -> Result<(), String> {
     // One display frame every 1/hz s, in integer ns (never accumulated in floats).
     let hz = a.display_hz.max(1) as u64;
     let frame_at = |k: u64| k * 1_000_000_000 / hz;
-    let loop_ns = h.frame_count as u64 * 1_000_000_000 * h.rate_den as u64 / h.rate_num as u64;
+    let loop_ns = crate::session::frame_ns(h.frame_count as u64, &h)
+        .ok_or_else(|| format!("{name}: a loop longer than the player's clock"))?;
     let per_loop = loop_ns * hz / 1_000_000_000;
     let (mut k, mut prev) = (0u64, 0u64);
     let mut step = |player: &mut Player<_>, cpu: &mut Vec<u64>, gpu: &mut Vec<u64>| {
